@@ -1,0 +1,190 @@
+"""The dissertation's hand-motion detector (section 2.2.2), numpy only.
+
+At every frame T the detector compares the newest and the oldest frame of a
+200-frame (2 s) window on the wrist's x axis:
+
+    P3[T] = |ax[T] - ax[T - 199]|
+
+and triggers when P3 exceeds the threshold (5 m/s^2). A trigger at T captures
+frames T-100 ... T+599 (700 frames: 1 s before, 6 s after) for the classifier
+and pauses the detector until the capture ends: the next trigger can come at
+T+600 at the earliest.
+
+Two implementations with one meaning:
+
+* :func:`detect_triggers` scans a whole recording at once (the reference);
+* :class:`StreamingDetector` is fed samples one by one or in blocks of any
+  size, as a firmware loop would, and gives exactly the same triggers and
+  captures (``tests/test_detector.py`` checks this over random block splits).
+
+Sample indices are absolute: frame 0 is the first sample since the stream
+started. :meth:`StreamingDetector.reset` marks a loss of continuity (a gap,
+NaNs): the window must fill again before the next trigger.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    window_frames: int = 200
+    """Length of the sliding window; P3 spans window_frames - 1 samples."""
+    threshold_mps2: float = 5.0
+    """Trigger when |ax[T] - ax[T - window + 1]| exceeds this (m/s^2)."""
+    pre_frames: int = 100
+    """Frames captured before the trigger frame."""
+    post_frames: int = 600
+    """Frames captured from the trigger frame on (T ... T+599)."""
+    axis: int = 0
+    """Accelerometer axis watched (0 = x, roughly perpendicular to the wheel axis)."""
+
+    @property
+    def capture_frames(self) -> int:
+        return self.pre_frames + self.post_frames
+
+    @property
+    def lag(self) -> int:
+        return self.window_frames - 1
+
+    def __post_init__(self) -> None:
+        if self.window_frames < 2:
+            raise ValueError("window_frames must be at least 2")
+        if not self.threshold_mps2 > 0:
+            raise ValueError("threshold_mps2 must be positive")
+        if not 0 <= self.pre_frames <= self.window_frames - 1:
+            raise ValueError("pre_frames must lie within the window (0 ... window_frames-1)")
+        if self.post_frames < 1:
+            raise ValueError("post_frames must be at least 1")
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One detector capture: frames ``start_index ... start_index + 699``."""
+
+    trigger_index: int
+    start_index: int
+    data: np.ndarray  # (capture_frames, 3) float32, m/s^2
+
+
+def p3_series(ax: np.ndarray, cfg: DetectorConfig = DetectorConfig()) -> np.ndarray:
+    """P3[T] for every frame (NaN for the first window_frames-1 frames)."""
+    ax = np.asarray(ax, dtype=np.float64)
+    out = np.full(ax.shape, np.nan)
+    out[cfg.lag :] = np.abs(ax[cfg.lag :] - ax[: ax.size - cfg.lag])
+    return out
+
+
+def _greedy_triggers(candidates: np.ndarray, first_allowed: int, post: int) -> list[int]:
+    """Take candidates in order, each pausing the detector for ``post`` frames."""
+    out: list[int] = []
+    allowed = first_allowed
+    pos = int(np.searchsorted(candidates, allowed))
+    while pos < candidates.size:
+        t = int(candidates[pos])
+        out.append(t)
+        allowed = t + post
+        pos = int(np.searchsorted(candidates, allowed, side="left"))
+    return out
+
+
+def detect_triggers(x: np.ndarray, cfg: DetectorConfig = DetectorConfig()) -> np.ndarray:
+    """Trigger frames of a whole recording. ``x`` is (n, 3) or the watched axis (n,)."""
+    x = np.asarray(x)
+    ax = x[:, cfg.axis] if x.ndim == 2 else x
+    with np.errstate(invalid="ignore"):
+        candidates = np.flatnonzero(p3_series(ax, cfg) > cfg.threshold_mps2)
+    return np.asarray(_greedy_triggers(candidates, cfg.lag, cfg.post_frames), dtype=np.int64)
+
+
+def extract_captures(x: np.ndarray, triggers: np.ndarray, cfg: DetectorConfig = DetectorConfig()) -> list[Capture]:
+    """The complete capture windows of ``triggers`` in recording ``x`` (n, 3)."""
+    x = np.asarray(x, dtype=np.float32)
+    caps = []
+    for t in np.asarray(triggers, dtype=np.int64):
+        lo, hi = int(t) - cfg.pre_frames, int(t) + cfg.post_frames
+        if lo >= 0 and hi <= len(x):
+            caps.append(Capture(int(t), lo, x[lo:hi].copy()))
+    return caps
+
+
+class StreamingDetector:
+    """Sample-by-sample (or block) version of :func:`detect_triggers`.
+
+    ``push(block)`` takes an (n, 3) block of m/s^2 samples and returns the
+    captures that completed inside it; ``triggers`` lists every trigger so
+    far, including one whose capture is still filling.
+    """
+
+    def __init__(self, cfg: DetectorConfig = DetectorConfig()):
+        self.cfg = cfg
+        self.n_seen = 0
+        self.triggers: list[int] = []
+        self._hist = np.zeros((0, 3), dtype=np.float32)
+        self._valid_from = 0  # first sample of the current continuous stretch
+        self._allowed_from = cfg.lag  # earliest frame that may trigger
+        self._open: tuple[int, list[np.ndarray], int] | None = None  # (trigger, chunks, frames so far)
+
+    @property
+    def capturing(self) -> bool:
+        return self._open is not None
+
+    def reset(self) -> None:
+        """Continuity lost: drop the window and any capture in progress."""
+        self._hist = self._hist[:0]
+        self._open = None
+        self._valid_from = self.n_seen
+        self._allowed_from = self.n_seen + self.cfg.lag
+
+    def push(self, block: np.ndarray) -> list[Capture]:
+        cfg = self.cfg
+        block = np.asarray(block, dtype=np.float32).reshape(-1, 3)
+        n = len(block)
+        if n == 0:
+            return []
+        done: list[Capture] = []
+        buf = np.concatenate([self._hist, block]) if len(self._hist) else block
+        s0 = self.n_seen - len(self._hist)  # absolute index of buf[0]
+
+        # Candidates T in this block with a full window behind them.
+        t_first = max(self.n_seen, self._valid_from + cfg.lag)
+        if t_first < self.n_seen + n:
+            i = np.arange(t_first - s0, len(buf))
+            ax = buf[:, cfg.axis].astype(np.float64)
+            with np.errstate(invalid="ignore"):
+                hit = np.abs(ax[i] - ax[i - cfg.lag]) > cfg.threshold_mps2
+            candidates = i[hit] + s0
+        else:
+            candidates = np.zeros(0, dtype=np.int64)
+
+        # Finish a capture that was already filling.
+        if self._open is not None:
+            done += self._fill(buf, s0)
+        for t in _greedy_triggers(candidates, self._allowed_from, cfg.post_frames):
+            self.triggers.append(t)
+            self._allowed_from = t + cfg.post_frames
+            self._open = (t, [], 0)
+            done += self._fill(buf, s0)
+
+        self.n_seen += n
+        keep = max(cfg.lag, cfg.pre_frames)
+        self._hist = buf[-keep:].copy() if len(buf) > keep else buf.copy()
+        if self.n_seen - len(self._hist) < self._valid_from:  # never look back across a reset
+            self._hist = self._hist[self._valid_from - (self.n_seen - len(self._hist)) :]
+        return done
+
+    def _fill(self, buf: np.ndarray, s0: int) -> list[Capture]:
+        t, chunks, have = self._open
+        start = t - self.cfg.pre_frames + have  # next absolute frame the capture needs
+        stop = t + self.cfg.post_frames
+        lo, hi = start - s0, min(stop - s0, len(buf))
+        if hi > lo:
+            chunks.append(buf[lo:hi])
+            have += hi - lo
+        if have == self.cfg.capture_frames:
+            self._open = None
+            return [Capture(t, t - self.cfg.pre_frames, np.concatenate(chunks).astype(np.float32))]
+        self._open = (t, chunks, have)
+        return []
