@@ -73,7 +73,8 @@ def p3_series(ax: np.ndarray, cfg: DetectorConfig = DetectorConfig()) -> np.ndar
     """P3[T] for every frame (NaN for the first window_frames-1 frames)."""
     ax = np.asarray(ax, dtype=np.float64)
     out = np.full(ax.shape, np.nan)
-    out[cfg.lag :] = np.abs(ax[cfg.lag :] - ax[: ax.size - cfg.lag])
+    if ax.size > cfg.lag:
+        out[cfg.lag :] = np.abs(ax[cfg.lag :] - ax[: ax.size - cfg.lag])
     return out
 
 

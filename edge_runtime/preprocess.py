@@ -33,18 +33,21 @@ def _kaiser_lowpass(num_taps: int, cutoff: float, beta: float) -> np.ndarray:
     return h / h.sum()
 
 
-@lru_cache(maxsize=8)
-def resample_matrix(n_in: int = CAPTURE_FRAMES, up: int = UP, down: int = DOWN) -> np.ndarray:
-    """The (n_out, n_in) float64 matrix of the polyphase resampler up/down."""
+def polyphase_filter(up: int, down: int) -> tuple[np.ndarray, int]:
+    """scipy.signal.resample_poly's FIR for up/down, pre-padded, and the number
+    of leading output samples to drop (its group delay in output samples)."""
     max_rate = max(up, down)
     half_len = 10 * max_rate
     h = _kaiser_lowpass(2 * half_len + 1, 1.0 / max_rate, 5.0) * up
-    n_out = -(-n_in * up // down)
-    # Same alignment as scipy: pre-pad h so that the group delay lands on a
-    # whole output sample, then drop the first n_pre_remove outputs.
     n_pre_pad = down - half_len % down
-    h = np.concatenate([np.zeros(n_pre_pad), h])
-    n_pre_remove = (half_len + n_pre_pad) // down
+    return np.concatenate([np.zeros(n_pre_pad), h]), (half_len + n_pre_pad) // down
+
+
+@lru_cache(maxsize=8)
+def resample_matrix(n_in: int = CAPTURE_FRAMES, up: int = UP, down: int = DOWN) -> np.ndarray:
+    """The (n_out, n_in) float64 matrix of the polyphase resampler up/down."""
+    h, n_pre_remove = polyphase_filter(up, down)
+    n_out = -(-n_in * up // down)
     k = np.arange(n_out)[:, None] + n_pre_remove
     j = np.arange(n_in)[None, :]
     idx = k * down - j * up  # upfirdn: y[i] = sum_j x[j] h[i*down - j*up]
@@ -52,6 +55,24 @@ def resample_matrix(n_in: int = CAPTURE_FRAMES, up: int = UP, down: int = DOWN) 
     mat = np.where(valid, h[np.clip(idx, 0, h.size - 1)], 0.0)
     mat.setflags(write=False)
     return mat
+
+
+def resample_poly(x: np.ndarray, up: int, down: int) -> np.ndarray:
+    """Resample a long (n, C) stream by up/down along axis 0, mean-padded;
+    equal to ``scipy.signal.resample_poly(x, up, down, axis=0, padtype="mean")``."""
+    x = np.asarray(x, dtype=np.float64)
+    if up == down:
+        return x.copy()
+    h, n_pre_remove = polyphase_filter(up, down)
+    n_out = -(-len(x) * up // down)
+    mean = x.mean(axis=0, keepdims=True)
+    stuffed = np.zeros((len(x) * up, x.shape[1]))
+    stuffed[::up] = x - mean
+    y = np.stack([np.convolve(stuffed[:, c], h)[::down] for c in range(x.shape[1])], axis=1)
+    y = y[n_pre_remove : n_pre_remove + n_out]
+    if len(y) < n_out:  # the filter tail ran out: scipy pads with zeros after the mean
+        y = np.concatenate([y, np.zeros((n_out - len(y), x.shape[1]))])
+    return y + mean
 
 
 def resample_capture(x: np.ndarray) -> np.ndarray:

@@ -1,0 +1,131 @@
+"""``python -m edge_runtime <command>``: the programs that run on the box.
+
+wearable   IMU -> detector -> ConvLSTM -> alert decisions (DESIGN.md section 7)
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+ASSETS_DIR = Path(__file__).resolve().parent / "assets"
+
+
+class CliError(Exception):
+    """A one-line error for the user; the process exits with status 2."""
+
+
+def _add_wearable(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("wearable", help="run the wearable distraction loop")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--replay", metavar="FILE.csv", help="a recording t,ax,ay,az (s, m/s^2), processed as fast as possible")
+    p.add_argument("--alerts", metavar="OUT.jsonl", help="write one JSON object per classifier decision")
+    p.add_argument("--assets", metavar="DIR", default=str(ASSETS_DIR), help="model directory with manifest.json")
+    p.add_argument("--model", default="int8", help="manifest entry: a name, or a precision (int8, fp32)")
+    p.add_argument("--threads", type=int, default=1, help="onnxruntime intra-op threads (default 1)")
+    p.add_argument("--min-confidence", type=float, default=0.6, help="below this the decision is 'uncertain' and not alerted")
+    p.add_argument("--threshold", type=float, default=5.0, help="detector threshold on |ax[T]-ax[T-199]| (m/s^2)")
+    p.add_argument("--realtime", action="store_true", help="pace a replay at its own sample rate")
+    p.add_argument("--quiet", action="store_true", help="print only the summary")
+    p.set_defaults(func=run_wearable)
+
+
+def run_wearable(args: argparse.Namespace) -> int:
+    from .detector import DetectorConfig
+    from .engine import Engine
+    from .sources import ReplayStats, read_imu_csv
+    from .wearable import AlertPolicy, WearableLoop
+
+    if args.threads < 1:
+        raise CliError(f"--threads must be at least 1, got {args.threads}")
+    try:
+        policy = AlertPolicy(min_confidence=args.min_confidence)
+        det_cfg = DetectorConfig(threshold_mps2=args.threshold)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    engine = Engine.from_manifest(args.assets, args.model, threads=args.threads)
+    stats = ReplayStats()
+    blocks = read_imu_csv(args.replay, stats)
+    for note in stats.notices:
+        print(f"notice: {note}", file=sys.stderr)
+
+    out = open(args.alerts, "w") if args.alerts else None
+
+    def handle(d):
+        if out:
+            out.write(json.dumps(d.to_json()) + "\n")
+        if not args.quiet:
+            mark = "ALERT" if d.alerted else d.status
+            print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}")
+
+    loop = WearableLoop(engine, det_cfg, policy, on_decision=handle)
+    t_wall = time.perf_counter()
+    try:
+        for block in blocks:
+            if args.realtime:
+                _feed_paced(loop, block)
+            else:
+                loop.feed(block)
+    finally:
+        if out:
+            out.close()
+    wall = time.perf_counter() - t_wall
+    s = loop.stats
+    stream_s = s.samples / loop.rate_hz
+    print(
+        f"summary: {stream_s:.1f} s of IMU data ({s.samples} samples) in {wall:.3f} s "
+        f"({stream_s / max(wall, 1e-9):,.0f}x real time); model {engine.name} ({engine.precision})\n"
+        f"  captures {s.captures}: alerts {s.statuses['alert']}, uncertain {s.statuses['uncertain']}, "
+        f"not alerted {s.statuses['not_alerted']}\n"
+        f"  by class: " + (", ".join(f"{k} {v}" for k, v in sorted(s.labels.items())) or "none") + "\n"
+        f"  bad samples: non-finite {s.non_finite}, dropped (time not advancing) {stats.dropped_non_monotonic}, "
+        f"gaps {stats.gaps}, detector restarts {s.detector_resets}"
+    )
+    return 0
+
+
+def _feed_paced(loop, block) -> None:
+    """Feed one sample period at a time on a monotonic clock (no busy waiting)."""
+    start = time.monotonic()
+    step = max(1, loop.rate_hz // 10)  # 100 ms chunks
+    from .sources import ImuBlock
+
+    for i in range(0, len(block.acc_mps2), step):
+        due = start + i / loop.rate_hz
+        delay = due - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        loop.feed(ImuBlock(block.t0_s + i / loop.rate_hz, block.acc_mps2[i : i + step], block.continuous or i > 0))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m edge_runtime", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_wearable(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .sources import InputError
+
+    args = build_parser().parse_args(argv)
+    known = (CliError, InputError)
+    try:
+        from .engine import ModelIntegrityError
+
+        known = known + (ModelIntegrityError,)
+    except ImportError:
+        pass
+    try:
+        return args.func(args)
+    except known as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
