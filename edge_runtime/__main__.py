@@ -34,7 +34,6 @@ def _add_wearable(sub: argparse._SubParsersAction) -> None:
 
 def run_wearable(args: argparse.Namespace) -> int:
     from .detector import DetectorConfig
-    from .engine import Engine
     from .sources import ReplayStats, read_imu_csv
     from .wearable import AlertPolicy, WearableLoop
 
@@ -45,9 +44,11 @@ def run_wearable(args: argparse.Namespace) -> int:
         det_cfg = DetectorConfig(threshold_mps2=args.threshold)
     except ValueError as e:
         raise CliError(str(e)) from None
-    engine = Engine.from_manifest(args.assets, args.model, threads=args.threads)
     stats = ReplayStats()
-    blocks = read_imu_csv(args.replay, stats)
+    blocks = read_imu_csv(args.replay, stats)  # bad input is reported before the model loads
+    from .engine import Engine
+
+    engine = Engine.from_manifest(args.assets, args.model, threads=args.threads)
     for note in stats.notices:
         print(f"notice: {note}", file=sys.stderr)
 
