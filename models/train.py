@@ -1,0 +1,202 @@
+"""Training: one loop for every neural architecture, readable in one sitting.
+
+    model = fit("convlstm", X, y, n_classes=6, epochs=40, seed=0)
+
+* Input: capture windows ``X`` (N, 700, 3) m/s^2 at 100 Hz and labels ``y``.
+  Each batch goes through :func:`edge_runtime.preprocess.preprocess`, the one
+  preprocessing path the product also runs (700 -> 200 frames, 6 x 33 x 3).
+* Loss: cross-entropy with class-balanced weights (N / (K * count)), so the
+  rare "Other" class counts as much as a distraction. Adam, lr 1e-3, cosine
+  decay to lr/10 over the run, gradient norm clipped at 5.
+* Augmentation (training windows only, on the raw 700 frames, before
+  preprocessing), modelling what differs between a ground-truth window and a
+  detector capture, and between wrists:
+    - time shift: the window starts up to ``SHIFT_BACK`` frames earlier or
+      ``SHIFT_FWD`` frames later (edge frames repeated). A detector trigger
+      comes after the truth onset, so captures start later than the truth
+      window: the shift is skewed that way;
+    - gain x U(0.95, 1.05) (sensor scale error);
+    - rotation by up to ``ROT_DEG`` degrees about a random axis (strap fit);
+    - Gaussian noise 0.05 m/s^2.
+* Determinism: for a given seed and thread count, two runs give identical
+  weights (torch.manual_seed, a seeded numpy Generator for shuffling and
+  augmentation, torch.use_deterministic_algorithms, one intra-op thread by
+  default).
+* Data parallel: when a torch.distributed process group is up (``torchrun
+  --nproc_per_node=2 -m models train ...``), the model is wrapped in
+  DistributedDataParallel and a DistributedSampler gives each rank its shard;
+  every rank ends with the same weights; only rank 0 writes files.
+
+The LDA baseline (``arch="lda"``) is fitted in closed form by :mod:`models.lda`.
+
+Checkpoint (export/ relies on it):
+``torch.save({"arch", "state_dict", "classes", "n_classes", "seed", "epochs",
+"metrics", "data"}, DIR/"model.pt")``; the LDA baseline is pickled to
+``DIR/"model.pkl"`` (``{"arch": "lda", "model", "classes", "n_classes", ...}``).
+"""
+from __future__ import annotations
+
+import math
+import os
+import pickle
+import random
+from pathlib import Path
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+from torch import nn
+from torch.nn.parallel import DistributedDataParallel as DDP
+from torch.utils.data.distributed import DistributedSampler
+from tqdm import tqdm
+
+from edge_runtime.preprocess import preprocess
+from models.lda import LDAClassifier
+from models.nets import ARCHS, build
+
+SHIFT_BACK, SHIFT_FWD = 10, 60  # frames (100 Hz)
+GAIN = 0.05
+ROT_DEG = 8.0
+NOISE_MPS2 = 0.05
+DEFAULT_EPOCHS = {"convlstm": 40, "cnn": 40, "lstm": 40, "lda": 0}
+
+
+# --------------------------------------------------------------------------- helpers
+
+def seed_everything(seed: int, threads: int | None = 1) -> None:
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    if threads:
+        torch.set_num_threads(threads)
+
+
+def dist_info() -> tuple[bool, int, int]:
+    """(distributed?, rank, world size)."""
+    if torch.distributed.is_available() and torch.distributed.is_initialized():
+        return True, torch.distributed.get_rank(), torch.distributed.get_world_size()
+    return False, 0, 1
+
+
+def is_main_process() -> bool:
+    return dist_info()[1] == 0
+
+
+def class_weights(y: np.ndarray, n_classes: int) -> torch.Tensor:
+    counts = np.bincount(y, minlength=n_classes).astype(np.float64)
+    w = np.where(counts > 0, len(y) / (n_classes * np.maximum(counts, 1)), 0.0)
+    return torch.tensor(w, dtype=torch.float32)
+
+
+def augment(x: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Random shift / gain / rotation / noise of raw windows (B, 700, 3) (see the module docstring)."""
+    b, n, _ = x.shape
+    shift = rng.integers(-SHIFT_BACK, SHIFT_FWD + 1, size=b)
+    idx = np.clip(np.arange(n)[None, :] + shift[:, None], 0, n - 1)
+    x = np.take_along_axis(x, idx[:, :, None], axis=1)
+    axis = rng.normal(size=(b, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    angle = np.deg2rad(rng.uniform(-ROT_DEG, ROT_DEG, size=(b, 1)))
+    rot = Rotation.from_rotvec(axis * angle).as_matrix()  # (b, 3, 3)
+    x = np.einsum("bij,bnj->bni", rot, x) * rng.uniform(1 - GAIN, 1 + GAIN, size=(b, 1, 1))
+    x = x + rng.normal(scale=NOISE_MPS2, size=x.shape)
+    return x.astype(np.float32)
+
+
+# --------------------------------------------------------------------------- the loop
+
+def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int, seed: int,
+        batch_size: int = 64, lr: float = 1e-3, val: tuple[np.ndarray, np.ndarray] | None = None,
+        progress: bool = True, augmentation: bool = True, threads: int | None = 1, desc: str = ""):
+    """Train ``arch`` on windows X (N, 700, 3) m/s^2, labels y; returns the model in eval mode."""
+    y = np.asarray(y, dtype=np.int64)
+    if arch == "lda":
+        return LDAClassifier(n_classes).fit(X, y)
+    if arch not in ARCHS:
+        raise ValueError(f"unknown architecture {arch!r}; choose one of {sorted(ARCHS) + ['lda']}")
+    X = np.asarray(X, dtype=np.float32)
+    distributed, rank, world = dist_info()
+    seed_everything(seed, threads)
+    model = build(arch, n_classes)  # same init on every rank (same seed); DDP also broadcasts it
+    net = DDP(model) if distributed else model
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    loss_fn = nn.CrossEntropyLoss(weight=class_weights(y, n_classes))
+    sampler = DistributedSampler(range(len(X)), num_replicas=world, rank=rank, shuffle=True, seed=seed)
+    rng = np.random.default_rng([seed, rank])  # augmentation differs per rank
+    steps_per_epoch = math.ceil(len(sampler) / batch_size)
+    total = max(1, epochs * steps_per_epoch)
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda s: 0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * min(s, total) / total)))
+
+    bar = tqdm(range(epochs), desc=desc or arch, unit="epoch", disable=not (progress and rank == 0),
+               leave=False, dynamic_ncols=True)
+    for epoch in bar:
+        net.train()
+        sampler.set_epoch(epoch)
+        order = np.fromiter(iter(sampler), dtype=np.int64)
+        running, seen = 0.0, 0
+        for i in range(0, len(order), batch_size):
+            idx = order[i:i + batch_size]
+            xb = augment(X[idx], rng) if augmentation else X[idx]
+            xb, yb = torch.from_numpy(preprocess(xb)), torch.from_numpy(y[idx])
+            loss = loss_fn(net(xb), yb)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            nn.utils.clip_grad_norm_(model.parameters(), 5.0)
+            opt.step()
+            sched.step()
+            running += loss.item() * len(idx)
+            seen += len(idx)
+        post = {"loss": f"{running / max(seen, 1):.3f}"}
+        if val is not None and rank == 0 and (epoch == epochs - 1 or epoch % 5 == 4):
+            from models.evaluate import predict
+            post["val_acc"] = f"{np.mean(predict(model, val[0]).argmax(1) == np.asarray(val[1])):.3f}"
+        bar.set_postfix(post)
+    bar.close()
+    return model.eval()
+
+
+# --------------------------------------------------------------------------- checkpoints
+
+def save_checkpoint(out_dir, model, *, arch: str, classes, seed: int, epochs: int, metrics: dict,
+                    data: dict) -> Path:
+    """DIR/model.pt (neural) or DIR/model.pkl (LDA); see the module docstring for the layout."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    meta = {"arch": arch, "classes": list(classes), "n_classes": len(classes), "seed": int(seed),
+            "epochs": int(epochs), "metrics": metrics, "data": data}
+    if arch == "lda":
+        path = out / "model.pkl"
+        with open(path, "wb") as f:
+            pickle.dump({**meta, "model": model}, f)
+        return path
+    path = out / "model.pt"
+    torch.save({**meta, "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()}}, path)
+    return path
+
+
+def load_checkpoint(path):
+    """(model in eval mode, meta dict) from DIR/model.pt, DIR/model.pkl or a directory holding one."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / "model.pt" if (p / "model.pt").exists() else p / "model.pkl"
+    if not p.exists():
+        from models.dataset import DataError
+        raise DataError(f"{p}: checkpoint not found")
+    if p.suffix == ".pkl":
+        with open(p, "rb") as f:
+            meta = pickle.load(f)
+        return meta.pop("model"), meta
+    ckpt = torch.load(p, map_location="cpu", weights_only=False)
+    model = build(ckpt["arch"], ckpt["n_classes"])
+    model.load_state_dict(ckpt["state_dict"])
+    meta = {k: v for k, v in ckpt.items() if k != "state_dict"}
+    return model.eval(), meta
+
+
+def init_distributed_from_env() -> bool:
+    """Join the torchrun process group (gloo, CPU) when launched by torchrun with WORLD_SIZE > 1."""
+    if int(os.environ.get("WORLD_SIZE", "1")) > 1 and not torch.distributed.is_initialized():
+        torch.distributed.init_process_group("gloo")
+        return True
+    return False
