@@ -1,0 +1,164 @@
+"""python -m export {onnx,quantize,assets,compare-int8} ...
+
+  onnx          --checkpoint DIR/model.pt --out F.onnx [--opset 17]
+                torch checkpoint -> ONNX (input imu (N,6,33,3) m/s^2, outputs probs, logits), parity checked
+  quantize      --onnx F.onnx --calib WINDOWS.npz --out F.int8.onnx [--variants a,b,...] [--json REPORT.json]
+                int8 via onnxruntime.quantization; the fastest variant (1 thread) that keeps fp32's predictions
+  assets        --seed S [--subjects 20] [--epochs 40] [--minutes 15] [--out edge_runtime/assets]
+                [--train TRAIN.npz --test TEST.npz] [--loso-dir DIR | --no-loso] [--work DIR]
+                simulate, train the ConvLSTM, export fp32 + int8, score, write manifest.json
+  compare-int8  --loso-dir DIR [--method NAME] [--train TRAIN.npz] [--test TEST.npz] [--json OUT.json]
+                per LOSO fold (DIR/folds/*/model.pt): fp32 vs int8 on the held-out subject; pooled macro-F1
+
+Bad input exits with status 2 and one line on stderr naming the file and field.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise SystemExit(2)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="python -m export", description="torch checkpoints -> ONNX, int8 ONNX and the shipped assets.")
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
+
+    o = sub.add_parser("onnx", help="export a checkpoint to ONNX")
+    o.add_argument("--checkpoint", required=True, help="DIR/model.pt written by python -m models train")
+    o.add_argument("--out", required=True, help="output .onnx")
+    o.add_argument("--opset", type=int, default=17)
+
+    q = sub.add_parser("quantize", help="int8 ONNX, calibrated on capture windows")
+    q.add_argument("--onnx", required=True, help="fp32 .onnx from `python -m export onnx`")
+    q.add_argument("--calib", required=True, help="dataset NPZ of capture windows (X (N,700,3), y, subject, classes)")
+    q.add_argument("--out", required=True, help="output int8 .onnx")
+    q.add_argument("--variants", default=None, help="comma-separated candidates (default: all)")
+    q.add_argument("--calib-windows", type=int, default=1000)
+    q.add_argument("--json", default=None, help="write the quantisation report here")
+
+    a = sub.add_parser("assets", help="rebuild edge_runtime/assets from a seed")
+    a.add_argument("--seed", type=int, required=True)
+    a.add_argument("--subjects", type=int, default=20)
+    a.add_argument("--epochs", type=int, default=None, help="default: models.train's default (40)")
+    a.add_argument("--minutes", type=float, default=15.0, help="minutes per simulated trial")
+    a.add_argument("--out", default=None, help="assets directory (default: edge_runtime/assets)")
+    a.add_argument("--work", default=None, help="scratch directory (default: runs/assets-seed<S>)")
+    a.add_argument("--train", default=None, help="use this training NPZ instead of simulating")
+    a.add_argument("--test", default=None, help="use this test NPZ instead of simulating")
+    a.add_argument("--loso-dir", default=None, help="also report LOSO fp32 vs int8 over this "
+                                                    "`python -m models train --loso` directory")
+    a.add_argument("--no-loso", action="store_true", help="do not look for reports/wearable/convlstm/loso")
+    a.add_argument("--variants", default=None, help="comma-separated quantisation candidates (default: all)")
+    a.add_argument("--no-progress", action="store_true")
+
+    c = sub.add_parser("compare-int8", help="LOSO folds: fp32 vs int8 macro-F1 on held-out subjects")
+    c.add_argument("--loso-dir", required=True)
+    c.add_argument("--method", default=None, help="quantisation variant (default: the shipped model's)")
+    c.add_argument("--train", default=None, help="training NPZ (default: from DIR/metrics.json)")
+    c.add_argument("--test", default=None, help="test NPZ (default: from DIR/metrics.json)")
+    c.add_argument("--json", default=None)
+    return p
+
+
+def _variants(s: str | None):
+    return [v.strip() for v in s.split(",") if v.strip()] if s else None
+
+
+def _check_onnx_file(path: str) -> None:
+    from export.onnx_export import ExportError
+
+    p = Path(path)
+    if not p.is_file():
+        raise ExportError(f"{p}: file not found")
+    import onnx
+
+    try:
+        m = onnx.load(str(p))
+    except Exception as e:
+        raise ExportError(f"{p}: not a readable ONNX model ({type(e).__name__})") from None
+    names = [i.name for i in m.graph.input]
+    if "imu" not in names:
+        raise ExportError(f"{p}: field 'graph.input': expected an input named 'imu', got {names}")
+    if "probs" not in [o.name for o in m.graph.output]:
+        raise ExportError(f"{p}: field 'graph.output': expected an output named 'probs'")
+
+
+def cmd_onnx(a) -> int:
+    from export.onnx_export import export_checkpoint
+
+    r = export_checkpoint(a.checkpoint, a.out, opset=a.opset)
+    par = r["parity"]
+    print(f"{r['path']}: {r['meta'].get('arch')} opset {a.opset}, ops {r['ops']}; parity with torch "
+          f"max |d| logits {par['max_abs_logits']:.2e} probs {par['max_abs_probs']:.2e}")
+    return 0
+
+
+def cmd_quantize(a) -> int:
+    from export.onnx_export import ExportError
+    from export.quantize import quantize_file
+
+    _check_onnx_file(a.onnx)
+    if a.calib_windows < 1:
+        raise ExportError(f"--calib-windows: must be at least 1, got {a.calib_windows}")
+    rep = quantize_file(a.onnx, a.calib, a.out, n_calib=a.calib_windows, variants=_variants(a.variants), log=print)
+    print(f"{a.out}: {rep['method']} ({rep['description']}); int8 operators {rep['int8_operators']}, "
+          f"fp32 {rep['fp32_operators']}; agreement with fp32 {rep['agreement_with_fp32']:.4f}")
+    if a.json:
+        Path(a.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(a.json).write_text(json.dumps(rep, indent=2))
+    return 0
+
+
+def cmd_assets(a) -> int:
+    from export.assets import DEFAULT_ASSETS, build_assets
+
+    build_assets(seed=a.seed, subjects=a.subjects, epochs=a.epochs, minutes=a.minutes,
+                 out=a.out or DEFAULT_ASSETS, work=a.work, train_npz=a.train, test_npz=a.test,
+                 loso_dir=a.loso_dir, variants=_variants(a.variants), progress=not a.no_progress,
+                 auto_loso=not a.no_loso)
+    return 0
+
+
+def cmd_compare(a) -> int:
+    from export.assets import compare_int8
+
+    r = compare_int8(a.loso_dir, method=a.method, train_npz=a.train, test_npz=a.test, log=print)
+    print(f"LOSO over {r['folds']} folds, {r['n']} windows ({r['method']}): macro-F1 fp32 {r['fp32_macro_f1']:.4f}, "
+          f"int8 {r['int8_macro_f1']:.4f}, difference {r['macro_f1_delta']:+.4f} "
+          f"({'within' if r['holds'] else 'OUTSIDE'} 0.01); argmax agreement {r['agreement']:.4f}")
+    if a.json:
+        Path(a.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(a.json).write_text(json.dumps(r, indent=2))
+    return 0 if r["holds"] else 1
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    from edge_runtime.manifest import ModelIntegrityError
+    from export.onnx_export import ExportError
+    from export.quantize import QuantizeError
+    from models.dataset import DataError
+
+    cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "compare-int8": cmd_compare}
+    try:
+        return cmds[args.cmd](args)
+    except (ExportError, QuantizeError, DataError, ModelIntegrityError) as e:
+        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    except (OSError, ValueError, KeyError) as e:
+        print(f"error: {type(e).__name__}: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,323 @@
+"""Rebuild ``edge_runtime/assets/`` from a seed, and check int8 against fp32 fold by fold.
+
+``build_assets`` (``python -m export assets --seed S``):
+
+1. simulate the cohort (``models.dataset.build_cohort_datasets``: ground-truth
+   training windows and detector-captured test windows of every subject);
+2. train the ConvLSTM on all subjects' ground-truth windows (``models.train.fit``,
+   deterministic for a seed);
+3. export fp32 ONNX (parity with torch < 1e-4 checked on the test captures);
+4. quantise to int8, calibrated on training windows, variant chosen by
+   measured latency under an accuracy gate (``export.quantize.choose``);
+5. score fp32 and int8 on the detector-captured test windows and, when a LOSO
+   directory is given (``--loso-dir``; by default ``reports/wearable/convlstm/loso``
+   when ``python -m models report`` has written it), pooled over its folds
+   (``compare_int8``: each fold's checkpoint exported and quantised with the
+   chosen recipe, scored on the held-out subject's captures);
+6. write the models and ``manifest.json`` (entries for other models already in
+   the manifest, e.g. a pose lifter, are kept).
+
+No timestamps go into the files: the same seed on the same commit rebuilds
+byte-identical models (training is deterministic with one thread).
+"""
+from __future__ import annotations
+
+import json
+import platform
+import shlex
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from edge_runtime.manifest import (ManifestError, SCHEMA_VERSION, load_manifest, sha256_file, write_manifest)
+from edge_runtime.preprocess import preprocess
+from export.onnx_export import (DEFAULT_OPSET, INPUT_LAYOUT, INPUT_NAME, LOGITS, PROBS, ExportError,
+                                check_parity, git_commit, package_version, save_onnx, to_onnx)
+from export.quantize import QuantizeError, VARIANTS, build_variant, choose, pick_windows, probs_of
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_ASSETS = REPO_ROOT / "edge_runtime" / "assets"
+ARCH = "convlstm"
+N_CALIB = 1000
+DEFAULT_LOSO = REPO_ROOT / "reports" / "wearable" / ARCH / "loso"  # where `python -m models report` puts it
+
+
+def versions() -> dict:
+    import numpy
+    import onnx
+    import onnxruntime
+    import torch
+
+    return {"python": platform.python_version(), "torch": torch.__version__, "onnx": onnx.__version__,
+            "onnxruntime": onnxruntime.__version__, "numpy": numpy.__version__,
+            "edge_safety": package_version()}
+
+
+def _metrics(y_true, probs, classes, subject=None) -> dict:
+    from models.evaluate import compute_metrics
+
+    m = compute_metrics(y_true, np.asarray(probs).argmax(1), classes, subject)
+    keep = ("n", "accuracy", "macro_f1", "macro_f1_distractions", "macro_precision", "macro_recall",
+            "weighted_f1", "per_class", "confusion")
+    return {k: m[k] for k in keep if k in m}
+
+
+def io_spec(k: int) -> tuple[list, list]:
+    inputs = [{"name": INPUT_NAME, "shape": ["N", 6, 33, 3], "dtype": "float32", "layout": INPUT_LAYOUT,
+               "units": "m/s^2", "preprocess": "edge_runtime.preprocess.preprocess(capture (N, 700, 3) at 100 Hz)"}]
+    outputs = [{"name": PROBS, "shape": ["N", k], "dtype": "float32", "meaning": "softmax, classes order"},
+               {"name": LOGITS, "shape": ["N", k], "dtype": "float32", "meaning": "pre-softmax scores"}]
+    return inputs, outputs
+
+
+# --------------------------------------------------------------------------- LOSO: fp32 vs int8
+
+def _loso_sources(loso_dir: Path, train_npz: str | None, test_npz: str | None) -> tuple[str, str | None]:
+    mpath = loso_dir / "metrics.json"
+    meta = {}
+    if mpath.exists():
+        try:
+            meta = json.loads(mpath.read_text())
+        except json.JSONDecodeError:
+            raise ExportError(f"{mpath}: not valid JSON") from None
+    train = train_npz or meta.get("train")
+    test = test_npz or meta.get("test")
+    if not train:
+        raise ExportError(f"{mpath}: field 'train': unknown training NPZ (pass --train)")
+
+    def resolve(p):  # paths in metrics.json are as the trainer saw them (often relative to the repo)
+        if p and not Path(p).exists() and (REPO_ROOT / p).exists():
+            return str(REPO_ROOT / p)
+        return p
+
+    return resolve(train), resolve(test)
+
+
+def compare_int8(loso_dir: str | Path, *, method: str | None = None, train_npz: str | None = None,
+                 test_npz: str | None = None, n_calib: int = N_CALIB, seed: int = 0,
+                 log: Callable[[str], None] = lambda s: None) -> dict:
+    """For every fold checkpoint DIR/folds/*/model.pt: export, quantise (``method``; default the
+    shipped recipe), score fp32 and int8 on the held-out subject's test windows; pooled macro-F1."""
+    from models.dataset import load_npz
+    from models.train import load_checkpoint
+
+    loso_dir = Path(loso_dir)
+    if not loso_dir.is_dir():
+        raise ExportError(f"{loso_dir}: LOSO directory not found")
+    ckpts = sorted((loso_dir / "folds").glob("*/model.pt"), key=lambda p: (len(p.parent.name), p.parent.name))
+    if not ckpts:
+        raise ExportError(f"{loso_dir}: no fold checkpoints (folds/*/model.pt); run "
+                          "`python -m models train --loso ...` first")
+    method = method or _shipped_method() or "qdq_conv"
+    if method not in VARIANTS:
+        raise ExportError(f"--method: unknown quantisation variant {method!r}; choose from {', '.join(VARIANTS)}")
+    train_src, test_src = _loso_sources(loso_dir, train_npz, test_npz)
+    train = load_npz(train_src)
+    test = load_npz(test_src) if test_src else None
+    X_train = preprocess(train.X)
+    X_test = preprocess(test.X) if test is not None else None
+    y_true, p32, p8, subj, rows = [], [], [], [], []
+    max_parity = 0.0
+    with tempfile.TemporaryDirectory() as td:
+        for ck in ckpts:
+            model, meta = load_checkpoint(ck)
+            if list(meta["classes"]) != list(train.classes):
+                raise ExportError(f"{ck}: field 'classes': {meta['classes']} differ from {train_src}'s {train.classes}")
+            name = str(meta.get("metrics", {}).get("fold") or ck.parent.name)
+            try:
+                s = int(name.lstrip("s"))
+            except ValueError:
+                raise ExportError(f"{ck}: cannot tell the held-out subject from fold name {name!r}") from None
+            ev_set, ev_x = (test, X_test) if test is not None else (train, X_train)
+            ev = np.flatnonzero(ev_set.subject == s)
+            cal = np.flatnonzero(train.subject != s)
+            cal = cal[pick_windows(train.y[cal], n_calib, seed)]
+            fp = Path(td) / f"{name}.onnx"
+            q = Path(td) / f"{name}.int8.onnx"
+            onx = to_onnx(model, meta["classes"], commit="")
+            save_onnx(onx, fp)
+            par = check_parity(model, onx, ev_x[ev[:64]] if len(ev) else None)
+            max_parity = max(max_parity, par["max_abs_logits"], par["max_abs_probs"])
+            build_variant(fp, q, method, X_train[cal])
+            a = probs_of(fp, ev_x[ev]) if len(ev) else np.zeros((0, len(train.classes)))
+            b = probs_of(q, ev_x[ev]) if len(ev) else np.zeros((0, len(train.classes)))
+            y_true.append(ev_set.y[ev]); p32.append(a); p8.append(b); subj.append(ev_set.subject[ev])
+            agree = float(np.mean(a.argmax(1) == b.argmax(1))) if len(ev) else float("nan")
+            rows.append({"fold": name, "n": int(len(ev)), "agreement": agree})
+            log(f"  fold {name}: n {len(ev)}, int8/fp32 agreement {agree:.3f}")
+    y = np.concatenate(y_true)
+    P32, P8, S = np.concatenate(p32), np.concatenate(p8), np.concatenate(subj)
+    m32 = _metrics(y, P32, train.classes, S)
+    m8 = _metrics(y, P8, train.classes, S)
+    delta = m8["macro_f1"] - m32["macro_f1"]
+    return {
+        "protocol": "leave-one-subject-out: per fold, the fold's checkpoint exported (fp32) and quantised "
+                    f"({method}, calibrated on the fold's training subjects), scored on the held-out "
+                    "subject's " + ("detector-captured test windows" if test is not None else "training windows"),
+        "loso_dir": str(loso_dir), "train": train_src, "test": test_src, "method": method,
+        "folds": len(ckpts), "n": int(len(y)),
+        "fp32_macro_f1": m32["macro_f1"], "int8_macro_f1": m8["macro_f1"], "macro_f1_delta": delta,
+        "fp32_accuracy": m32["accuracy"], "int8_accuracy": m8["accuracy"],
+        "agreement": float(np.mean(P32.argmax(1) == P8.argmax(1))),
+        "max_parity_torch_onnx": max_parity,
+        "holds": bool(abs(delta) <= 0.01), "per_fold": rows,
+        "fp32": m32, "int8": m8,
+    }
+
+
+def _shipped_method() -> str | None:
+    try:
+        m = load_manifest(DEFAULT_ASSETS)
+    except ManifestError:
+        return None
+    for e in m["models"]:
+        if e.get("precision") == "int8" and e.get("arch") == ARCH:
+            return (e.get("quantization") or {}).get("method")
+    return None
+
+
+# --------------------------------------------------------------------------- the shipped assets
+
+def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None, minutes: float = 15.0,
+                 out: str | Path = DEFAULT_ASSETS, work: str | Path | None = None,
+                 train_npz: str | None = None, test_npz: str | None = None, loso_dir: str | None = None,
+                 variants: Sequence[str] | None = None, command: str | None = None, auto_loso: bool = True,
+                 log: Callable[[str], None] = print, progress: bool = True) -> dict:
+    from models.dataset import build_cohort_datasets, load_npz
+    from models.nets import keras_param_count, torch_param_count
+    from models.train import DEFAULT_EPOCHS, fit, save_checkpoint
+
+    t0 = time.time()
+    out = Path(out)
+    work = Path(work) if work else REPO_ROOT / "runs" / f"assets-seed{seed}"
+    epochs = DEFAULT_EPOCHS[ARCH] if epochs is None else epochs
+    if epochs < 1:
+        raise ExportError(f"--epochs: must be at least 1, got {epochs}")
+    if subjects < 1:
+        raise ExportError(f"--subjects: must be at least 1, got {subjects}")
+    command = command or "python -m export " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+
+    # 1. data
+    if train_npz or test_npz:
+        if not (train_npz and test_npz):
+            raise ExportError("--train and --test go together")
+        detector = None
+        data_info = {"source": "given NPZ files", "train": str(train_npz), "test": str(test_npz)}
+    else:
+        log(f"[1/5] simulating {subjects} subjects (seed {seed}, {minutes:g} min per trial) -> {work / 'data'}")
+        d = build_cohort_datasets(subjects, seed, minutes, work / "data", progress=progress)
+        train_npz, test_npz, detector = d["train"], d["test"], d["detector"]
+        data_info = {"source": "firmware_sim.wrist.simulate_cohort via models.dataset.build_cohort_datasets",
+                     "subjects": subjects, "seed": seed, "minutes_per_trial": minutes,
+                     "detector": {k: detector[k] for k in ("recall", "precision", "distractions", "captures",
+                                                           "false_alarms")}}
+    train, test = load_npz(train_npz), load_npz(test_npz)
+    if list(train.classes) != list(test.classes):
+        raise ExportError(f"{test_npz}: field 'classes': {test.classes} differ from {train_npz}'s {train.classes}")
+    classes = list(train.classes)
+    data_info.update(train_windows=len(train), test_windows=len(test), train_counts=train.counts(),
+                     test_counts=test.counts(),
+                     train_kind="ground-truth segments (1 s before each truth event, 700 frames)",
+                     test_kind="detector captures (false alarms labelled Other)")
+
+    # 2. train
+    log(f"[2/5] training {ARCH} on {len(train)} ground-truth windows of all subjects ({epochs} epochs, seed {seed})")
+    t = time.time()
+    model = fit(ARCH, train.X, train.y, len(classes), epochs=epochs, seed=seed, progress=progress,
+                desc=f"{ARCH} assets")
+    train_s = time.time() - t
+    save_checkpoint(work / ARCH, model, arch=ARCH, classes=classes, seed=seed, epochs=epochs, metrics={},
+                    data={"train": str(train_npz), "test": str(test_npz)})
+
+    # 3. export fp32 (models are staged in the work directory and copied next to the manifest
+    #    only when everything passed: a failed build never leaves half-updated assets)
+    stage = work / "stage"
+    stage.mkdir(parents=True, exist_ok=True)
+    X_test = preprocess(test.X)
+    X_train = preprocess(train.X)
+    version = f"{package_version()}+{ARCH}.seed{seed}"
+    commit = git_commit()
+    onx = to_onnx(model, classes, opset=DEFAULT_OPSET, model_version=version, commit=commit,
+                  extra_meta={"training": {"seed": seed, "epochs": epochs, "windows": len(train)}})
+    fp32_path = save_onnx(onx, stage / f"{ARCH}.fp32.onnx")
+    parity = check_parity(model, onx, X_test[:512])
+    log(f"[3/5] {fp32_path.name}: parity with torch max |d| logits {parity['max_abs_logits']:.2e}, "
+        f"probs {parity['max_abs_probs']:.2e}")
+    if not parity["ok"]:
+        raise ExportError(f"{fp32_path}: torch/onnxruntime parity exceeds {parity['tol']:g}")
+
+    # 4. int8
+    log(f"[4/5] quantising: candidates timed with 1 thread, gated on the test captures")
+    calib_idx = pick_windows(train.y, N_CALIB, seed)
+    int8_path = stage / f"{ARCH}.int8.onnx"
+    quant = choose(fp32_path, int8_path, X_train[calib_idx], eval_x=X_test, eval_y=test.y, variants=variants,
+                   log=log)
+    quant["calibration"].update(source="training windows (ground-truth segments), stratified by class",
+                                seed=seed)
+    log(f"      chose {quant['method']}: int8 operators {quant['int8_operators']}")
+
+    # 5. metrics
+    p32 = probs_of(fp32_path, X_test)
+    p8 = probs_of(int8_path, X_test)
+    m32 = _metrics(test.y, p32, classes)
+    m8 = _metrics(test.y, p8, classes)
+    delta = m8["macro_f1"] - m32["macro_f1"]
+    eval_note = ("detector-captured test windows of the training subjects (all subjects are in training: "
+                 "an in-sample-subject figure; between-subject figures are under 'loso')")
+    loso = None
+    if loso_dir is None and auto_loso and (DEFAULT_LOSO / "folds").is_dir() and (DEFAULT_LOSO / "metrics.json").exists():
+        loso_dir = str(DEFAULT_LOSO)  # the report's LOSO folds (python -m models report) are there: use them
+    if loso_dir:
+        log(f"      LOSO fp32 vs int8 over {loso_dir}")
+        loso = compare_int8(loso_dir, method=quant["method"], log=log)
+        loso = {k: v for k, v in loso.items() if k not in ("fp32", "int8")}
+    log(f"[5/5] test captures: fp32 macro-F1 {m32['macro_f1']:.4f}, int8 {m8['macro_f1']:.4f} (d {delta:+.4f})"
+        + (f"; LOSO fp32 {loso['fp32_macro_f1']:.4f} int8 {loso['int8_macro_f1']:.4f}" if loso else ""))
+    if abs(delta) > 0.01:
+        raise QuantizeError(f"{int8_path}: int8 macro-F1 differs from fp32 by {delta:+.4f} (> 0.01)")
+
+    params = {"torch": torch_param_count(model), "keras": keras_param_count(model)}
+    inputs, outputs = io_spec(len(classes))
+    provenance = {"command": command, "seed": seed, "data": data_info,
+                  "training": {"arch": ARCH, "epochs": epochs, "seed": seed, "windows": len(train),
+                               "function": "models.train.fit", "threads": 1, "seconds": round(train_s, 1)},
+                  "git_commit": commit, "versions": versions(), "opset": DEFAULT_OPSET,
+                  "exporter": "torch.onnx.export(dynamo=False) via export.onnx_export.to_onnx"}
+    common = {"arch": ARCH, "model_version": version, "parameters": params, "inputs": inputs,
+              "outputs": outputs, "classes": classes, "provenance": provenance}
+    entries = [
+        {"name": f"{ARCH}-fp32", "file": fp32_path.name, "sha256": sha256_file(fp32_path), "precision": "fp32",
+         "size_bytes": fp32_path.stat().st_size, **common,
+         "metrics": {"test_captures": m32, "evaluated_on": eval_note, "parity_vs_torch": parity,
+                     **({"loso": {"macro_f1": loso["fp32_macro_f1"], "accuracy": loso["fp32_accuracy"],
+                                  "folds": loso["folds"], "n": loso["n"]}} if loso else {})}},
+        {"name": f"{ARCH}-int8", "file": int8_path.name, "sha256": sha256_file(int8_path), "precision": "int8",
+         "size_bytes": int8_path.stat().st_size, **common,
+         "metrics": {"test_captures": m8, "evaluated_on": eval_note,
+                     "macro_f1_delta_vs_fp32": delta,
+                     "agreement_with_fp32": float(np.mean(p32.argmax(1) == p8.argmax(1))),
+                     **({"loso": {"macro_f1": loso["int8_macro_f1"], "fp32_macro_f1": loso["fp32_macro_f1"],
+                                  "macro_f1_delta_vs_fp32": loso["macro_f1_delta"], "folds": loso["folds"],
+                                  "n": loso["n"], "method": loso["method"], "holds": loso["holds"]}}
+                        if loso else {})},
+         "quantization": quant},
+    ]
+    names = {e["name"] for e in entries}
+    kept = []
+    try:
+        kept = [e for e in load_manifest(out)["models"] if e["name"] not in names]
+    except ManifestError:
+        pass
+    manifest = {"version": SCHEMA_VERSION, "created_by": f"{command} (edge-safety {package_version()})",
+                "models": entries + kept}
+    out.mkdir(parents=True, exist_ok=True)
+    for p in (fp32_path, int8_path):
+        shutil.copyfile(p, out / p.name)
+    path = write_manifest(out, manifest)
+    log(f"wrote {out / fp32_path.name}, {out / int8_path.name}, {path} in {time.time() - t0:.0f} s")
+    return manifest

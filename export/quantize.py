@@ -1,0 +1,421 @@
+"""int8 quantisation with onnxruntime.quantization, chosen by measurement.
+
+Calibration: a :class:`WindowReader` (``CalibrationDataReader``) over
+preprocessed capture windows (N, 6, 33, 3) m/s^2 -- simulated ground-truth
+windows of the training subjects, never the test windows. MinMax ranges.
+
+Candidates (:data:`VARIANTS`), each built from the same fp32 graph after
+``quant_pre_process`` (shape inference + ORT basic graph clean-up):
+
+* ``dynamic``            quantize_dynamic on every supported op: Conv -> ConvInteger,
+                         LSTM -> DynamicQuantizeLSTM, Gemm/MatMul -> MatMulInteger;
+* ``qdq_conv``           static QDQ, per-channel int8 weights, uint8 activations, on the
+                         conv stack (Conv, ReLU, MaxPool and the reshuffles up to the LSTM);
+                         LSTM and the dense head stay fp32;
+* ``qdq_conv_pt``        the same with per-tensor weights;
+* ``qdq_conv_s8``        the same with int8 activations (S8S8);
+* ``qdq_conv2``          static QDQ on the second conv only (first conv sees raw m/s^2);
+* ``qdq_conv+dyn_lstm``  qdq_conv, then the LSTM dynamic (DynamicQuantizeLSTM);
+* ``qdq_all``            static QDQ on the conv stack and the dense head (QGemm);
+* ``qdq_all+dyn_lstm``   qdq_all, then DynamicQuantizeLSTM.
+
+Choice (:func:`choose`): every candidate is timed on onnxruntime with one
+intra-op thread at batch 1, interleaved in rounds so that they share the
+machine's noise; candidates whose predictions drift from fp32 (argmax
+agreement < ``MIN_AGREEMENT`` on held-back windows, or macro-F1 moved by more
+than ``MAX_F1_DELTA`` when labels are given) are refused; the fastest of the
+rest wins; candidates within 3 % of the fastest count as tied and the first
+of them in :data:`VARIANTS` order wins (so timing noise does not flip the
+choice between equally fast variants). The report
+records every candidate's latency and drift, and which operators ended up
+int8: graph op types, the op types onnxruntime actually runs after its
+optimisations (QLinearConv, QGemm, DynamicQuantizeLSTM, ...), and per source
+op type whether it computes in int8 or fp32.
+"""
+from __future__ import annotations
+
+import contextlib
+import gc
+import logging
+import json
+import os
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType,
+                                      quantize_dynamic, quantize_static)
+from onnxruntime.quantization.shape_inference import quant_pre_process
+
+from edge_runtime.engine import session_options
+from export.onnx_export import INPUT_NAME, PROBS, get_metadata, op_counts, set_metadata
+
+MIN_AGREEMENT = 0.98
+MAX_F1_DELTA = 0.01
+TIE = 0.03  # candidates within 3 % of the fastest count as equally fast (timing noise)
+
+INTEGER_OPS = {"ConvInteger", "MatMulInteger", "DynamicQuantizeLSTM", "DynamicQuantizeMatMul",
+               "MatMulIntegerToFloat", "QLinearConv", "QLinearMatMul", "QGemm", "QLinearAdd",
+               "QLinearMul", "QLinearSoftmax", "QLinearGlobalAveragePool", "QLinearAveragePool",
+               "QLinearConcat", "QLinearLeakyRelu", "QLinearSigmoid", "DynamicQuantizeLinear",
+               "QuantizeLinear", "DequantizeLinear", "NhwcMaxPool", "QLinearReduceMean"}
+_QUANT_IO = {"QuantizeLinear", "DequantizeLinear", "DynamicQuantizeLinear"}
+
+
+class QuantizeError(ValueError):
+    """Quantisation failed in a way the user can act on (one line)."""
+
+
+# --------------------------------------------------------------------------- calibration data
+
+class WindowReader(CalibrationDataReader):
+    """Calibration batches of preprocessed windows (N, 6, 33, 3) float32 m/s^2."""
+
+    def __init__(self, windows: np.ndarray, batch_size: int = 64, input_name: str = INPUT_NAME):
+        self.windows = np.ascontiguousarray(windows, dtype=np.float32)
+        self.batch_size = batch_size
+        self.input_name = input_name
+        self._i = 0
+
+    def get_next(self):
+        if self._i >= len(self.windows):
+            return None
+        b = self.windows[self._i:self._i + self.batch_size]
+        self._i += self.batch_size
+        return {self.input_name: b}
+
+    def rewind(self):
+        self._i = 0
+
+    def __len__(self):
+        return -(-len(self.windows) // self.batch_size)
+
+
+def pick_windows(y: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
+    """Indices of up to n windows, stratified by class (every class represented)."""
+    y = np.asarray(y)
+    rng = np.random.default_rng(seed)
+    if len(y) <= n:
+        return np.arange(len(y))
+    classes, counts = np.unique(y, return_counts=True)
+    quota = np.maximum(1, np.round(counts / counts.sum() * n)).astype(int)
+    idx = []
+    for c, q in zip(classes, quota):
+        members = np.flatnonzero(y == c)
+        idx.append(rng.choice(members, size=min(q, len(members)), replace=False))
+    return np.sort(np.concatenate(idx))[:n]
+
+
+# --------------------------------------------------------------------------- variants
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    description: str
+    static_ops: tuple[str, ...] = ()
+    dynamic_ops: tuple[str, ...] = ()
+    per_channel: bool = True
+    activation: QuantType = QuantType.QUInt8
+    exclude_first_conv: bool = False
+
+
+_CONV_STACK = ("Conv", "Relu", "MaxPool", "Squeeze", "Transpose", "Reshape", "Flatten")
+VARIANTS: dict[str, Variant] = {v.name: v for v in (
+    Variant("dynamic", "dynamic int8 on every supported op (ConvInteger, DynamicQuantizeLSTM, MatMulInteger)",
+            dynamic_ops=("Conv", "LSTM", "MatMul", "Gemm")),
+    Variant("qdq_conv", "static QDQ conv stack (per-channel int8 weights, uint8 activations); LSTM, head fp32",
+            static_ops=_CONV_STACK),
+    Variant("qdq_conv_pt", "static QDQ conv stack, per-tensor weights; LSTM, head fp32",
+            static_ops=_CONV_STACK, per_channel=False),
+    Variant("qdq_conv_s8", "static QDQ conv stack, int8 activations (S8S8); LSTM, head fp32",
+            static_ops=_CONV_STACK, activation=QuantType.QInt8),
+    Variant("qdq_conv2", "static QDQ on the second conv only; first conv, LSTM, head fp32",
+            static_ops=_CONV_STACK, exclude_first_conv=True),
+    Variant("qdq_conv+dyn_lstm", "static QDQ conv stack + dynamic LSTM (DynamicQuantizeLSTM); head fp32",
+            static_ops=_CONV_STACK, dynamic_ops=("LSTM",)),
+    Variant("qdq_all", "static QDQ conv stack and dense head (QGemm); LSTM fp32",
+            static_ops=_CONV_STACK + ("Gemm", "MatMul")),
+    Variant("qdq_all+dyn_lstm", "static QDQ conv stack and head + dynamic LSTM",
+            static_ops=_CONV_STACK + ("Gemm", "MatMul"), dynamic_ops=("LSTM",)),
+)}
+
+
+def _first_conv(model: onnx.ModelProto) -> list[str]:
+    return [n.name for n in model.graph.node if n.op_type == "Conv"][:1]
+
+
+def _preprocess_model(src: Path, dst: Path) -> Path:
+    try:
+        quant_pre_process(str(src), str(dst), skip_symbolic_shape=False)
+    except Exception:  # symbolic shape inference can fail on exotic graphs: fall back
+        quant_pre_process(str(src), str(dst), skip_symbolic_shape=True)
+    return dst
+
+
+@contextlib.contextmanager
+def _quiet_root_logger():
+    """onnxruntime.quantization logs advice on the root logger; keep the CLI output clean."""
+    root = logging.getLogger()
+    level = root.level
+    root.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        root.setLevel(level)
+
+
+def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant | str,
+                  calib: np.ndarray, *, pre_processed: str | Path | None = None) -> Path:
+    """Quantise ``fp32_path`` with ``variant`` into ``out_path``; metadata carried over."""
+    v = VARIANTS[variant] if isinstance(variant, str) else variant
+    fp32_path, out_path = Path(fp32_path), Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as td:
+        src = Path(pre_processed) if pre_processed else _preprocess_model(fp32_path, Path(td) / "pre.onnx")
+        cur = src
+        with warnings.catch_warnings(), _quiet_root_logger():
+            warnings.simplefilter("ignore")
+            if v.static_ops:
+                model = onnx.load(str(src))
+                present = {n.op_type for n in model.graph.node}
+                ops = [o for o in v.static_ops if o in present]
+                stage = Path(td) / "static.onnx"
+                quantize_static(str(cur), str(stage), WindowReader(calib), quant_format=QuantFormat.QDQ,
+                                op_types_to_quantize=ops, per_channel=v.per_channel,
+                                activation_type=v.activation, weight_type=QuantType.QInt8,
+                                calibrate_method=CalibrationMethod.MinMax,
+                                nodes_to_exclude=_first_conv(model) if v.exclude_first_conv else None,
+                                extra_options={"CalibTensorRangeSymmetric": False})
+                cur = stage
+            if v.dynamic_ops:
+                stage = Path(td) / "dynamic.onnx"
+                quantize_dynamic(str(cur), str(stage), op_types_to_quantize=list(v.dynamic_ops),
+                                 per_channel=False, weight_type=QuantType.QInt8)
+                cur = stage
+        q = onnx.load(str(cur))
+    meta = get_metadata(fp32_path)
+    meta.update(precision="int8", quantization=v.name)
+    set_metadata(q, meta)
+    q.doc_string = onnx.load(str(fp32_path), load_external_data=False).doc_string + f" [int8: {v.description}]"
+    out_path.write_bytes(q.SerializeToString(deterministic=True))
+    return out_path
+
+
+# --------------------------------------------------------------------------- what became int8
+
+def runtime_op_types(model_path: str | Path) -> dict[str, int]:
+    """Op types onnxruntime runs after its graph optimisations (level ALL, CPU provider)."""
+    with tempfile.TemporaryDirectory() as td:
+        so = session_options(1)
+        so.optimized_model_filepath = str(Path(td) / "opt.onnx")
+        ort.InferenceSession(str(model_path), so, providers=["CPUExecutionProvider"])
+        return op_counts(onnx.load(so.optimized_model_filepath))
+
+
+def int8_report(model_path: str | Path) -> dict:
+    """Which source operators compute in int8, which stay fp32, and what onnxruntime runs."""
+    m = onnx.load(str(model_path))
+    g = m.graph
+    producers = {o: n for n in g.node for o in n.output}
+    consumers: dict[str, list] = {}
+    for n in g.node:
+        for i in n.input:
+            consumers.setdefault(i, []).append(n)
+    inits = {i.name for i in g.initializer}
+    graph_outputs = {o.name for o in g.output}
+    int8: dict[str, int] = {}
+    fp32: dict[str, int] = {}
+    integer_map = {"ConvInteger": "Conv", "MatMulInteger": "MatMul", "DynamicQuantizeLSTM": "LSTM",
+                   "DynamicQuantizeMatMul": "MatMul", "QLinearConv": "Conv", "QLinearMatMul": "MatMul",
+                   "QGemm": "Gemm"}
+    for n in g.node:
+        if n.op_type in _QUANT_IO:
+            continue
+        if n.op_type in integer_map or n.op_type.startswith("QLinear"):
+            key = integer_map.get(n.op_type, n.op_type.replace("QLinear", ""))
+            int8[key] = int8.get(key, 0) + 1
+            continue
+        if n.op_type in ("Cast", "Mul", "Add") and any(
+                p is not None and p.op_type in ("ConvInteger", "MatMulInteger", "DynamicQuantizeLinear")
+                for p in (producers.get(i) for i in n.input)):
+            continue  # rescaling glue of dynamic quantisation
+        data_in = [i for i in n.input if i and i not in inits and
+                   not (producers.get(i) is not None and producers[i].op_type == "Constant")]
+        ins_q = bool(data_in) and all(producers.get(i) is not None and producers[i].op_type == "DequantizeLinear"
+                                      for i in data_in)
+        outs_q = all(o not in graph_outputs and consumers.get(o) and
+                     all(c.op_type == "QuantizeLinear" for c in consumers[o]) for o in n.output if o)
+        if ins_q and outs_q:
+            int8[n.op_type] = int8.get(n.op_type, 0) + 1
+        else:
+            fp32[n.op_type] = fp32.get(n.op_type, 0) + 1
+    return {"int8_operators": dict(sorted(int8.items())), "fp32_operators": dict(sorted(fp32.items())),
+            "graph_op_types": op_counts(m), "runtime_op_types": runtime_op_types(model_path)}
+
+
+# --------------------------------------------------------------------------- measurement
+
+def make_session(model: str | Path | bytes, threads: int = 1) -> ort.InferenceSession:
+    data = model if isinstance(model, bytes) else Path(model).read_bytes()
+    return ort.InferenceSession(data, session_options(threads), providers=["CPUExecutionProvider"])
+
+
+def interleaved_latency(runners: dict[str, Callable[[], object]], n: int = 2000, rounds: int = 5,
+                        warmup: int = 200) -> dict[str, np.ndarray]:
+    """Per-call wall times (ns) of each runner, measured in interleaved rounds."""
+    for f in runners.values():
+        for _ in range(warmup):
+            f()
+    per = max(1, n // rounds)
+    times = {k: np.empty(per * rounds, np.int64) for k in runners}
+    clock = time.perf_counter_ns
+    gc_was = gc.isenabled()
+    gc.disable()
+    try:
+        for r in range(rounds):
+            for k, f in runners.items():
+                buf = times[k]
+                for i in range(r * per, (r + 1) * per):
+                    t0 = clock()
+                    f()
+                    buf[i] = clock() - t0
+    finally:
+        if gc_was:
+            gc.enable()
+    return times
+
+
+def _macro_f1(y_true: np.ndarray, y_pred: np.ndarray) -> float:
+    labels = np.union1d(y_true, y_pred)
+    f1 = []
+    for c in labels:
+        tp = np.sum((y_pred == c) & (y_true == c))
+        fp = np.sum((y_pred == c) & (y_true != c))
+        fn = np.sum((y_pred != c) & (y_true == c))
+        f1.append(2 * tp / (2 * tp + fp + fn) if tp + fp + fn else 0.0)
+    return float(np.mean(f1)) if f1 else float("nan")
+
+
+def probs_of(model: str | Path | ort.InferenceSession, x: np.ndarray, batch: int = 512) -> np.ndarray:
+    s = model if isinstance(model, ort.InferenceSession) else make_session(model)
+    return np.concatenate([s.run([PROBS], {INPUT_NAME: x[i:i + batch]})[0] for i in range(0, len(x), batch)])
+
+
+def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, eval_x: np.ndarray,
+           eval_y: np.ndarray | None = None, variants: Sequence[str] | None = None, threads: int = 1,
+           n_timing: int = 3000, log: Callable[[str], None] = lambda s: None) -> dict:
+    """Build every candidate, time and check each, keep the fastest faithful one at ``out_path``.
+
+    Returns the quantisation report (JSON-ready)."""
+    fp32_path, out_path = Path(fp32_path), Path(out_path)
+    names = list(variants or VARIANTS)
+    for v in names:
+        if v not in VARIANTS:
+            raise QuantizeError(f"unknown quantisation variant {v!r}; choose from {', '.join(VARIANTS)}")
+    eval_x = np.ascontiguousarray(eval_x, np.float32)
+    x1 = np.ascontiguousarray(eval_x[:1])
+    ref = probs_of(fp32_path, eval_x)
+    ref_pred = ref.argmax(1)
+    f1_fp32 = _macro_f1(np.asarray(eval_y), ref_pred) if eval_y is not None else None
+    results: dict[str, dict] = {}
+    sessions: dict[str, ort.InferenceSession] = {"fp32": make_session(fp32_path, threads)}
+    with tempfile.TemporaryDirectory() as td:
+        pre = _preprocess_model(fp32_path, Path(td) / "pre.onnx")
+        paths = {}
+        for name in names:
+            p = Path(td) / f"{name}.onnx"
+            try:
+                build_variant(fp32_path, p, name, calib, pre_processed=pre)
+            except Exception as e:  # a variant the graph does not support is skipped, not fatal
+                results[name] = {"error": f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"}
+                log(f"  {name}: failed ({results[name]['error']})")
+                continue
+            rep = int8_report(p)
+            if not rep["int8_operators"]:
+                results[name] = {"error": "no operator was quantised"}
+                continue
+            paths[name] = p
+            sessions[name] = make_session(p, threads)
+            pr = probs_of(sessions[name], eval_x)
+            pred = pr.argmax(1)
+            r = {"description": VARIANTS[name].description, "agreement": float(np.mean(pred == ref_pred)),
+                 "max_abs_probs": float(np.abs(pr - ref).max()), "size_bytes": p.stat().st_size, **rep}
+            if eval_y is not None:
+                r["macro_f1"] = _macro_f1(np.asarray(eval_y), pred)
+                r["macro_f1_delta"] = r["macro_f1"] - f1_fp32
+            results[name] = r
+        runners = {k: (lambda s=s: s.run([PROBS], {INPUT_NAME: x1})) for k, s in sessions.items()}
+        times = interleaved_latency(runners, n=n_timing)
+        for k, t in times.items():
+            stats = {"p50_us": float(np.median(t) / 1e3), "p99_us": float(np.percentile(t, 99) / 1e3),
+                     "mean_us": float(t.mean() / 1e3), "n": int(len(t))}
+            if k == "fp32":
+                fp32_lat = stats
+            else:
+                results[k].update(stats)
+        ok = [k for k in paths if results[k]["agreement"] >= MIN_AGREEMENT and
+              (eval_y is None or abs(results[k]["macro_f1_delta"]) <= MAX_F1_DELTA)]
+        for k in paths:
+            results[k]["accepted"] = k in ok
+            log(f"  {k:18s} p50 {results[k]['p50_us']:7.1f} us  agreement {results[k]['agreement']:.4f}"
+                + (f"  dF1 {results[k]['macro_f1_delta']:+.4f}" if eval_y is not None else "")
+                + ("" if k in ok else "  (refused)"))
+        if not ok:
+            raise QuantizeError(f"{fp32_path}: no int8 variant keeps predictions within "
+                                f"agreement {MIN_AGREEMENT} / macro-F1 {MAX_F1_DELTA} of fp32")
+        best = min(results[k]["p50_us"] for k in ok)
+        tied = [k for k in ok if results[k]["p50_us"] <= best * (1 + TIE)]
+        chosen = next(k for k in names if k in tied)
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        out_path.write_bytes(paths[chosen].read_bytes())
+    c = results[chosen]
+    return {
+        "method": chosen,
+        "description": c["description"],
+        "format": "QDQ" if VARIANTS[chosen].static_ops else "dynamic",
+        "dynamic_ops": list(VARIANTS[chosen].dynamic_ops),
+        "per_channel": VARIANTS[chosen].per_channel if VARIANTS[chosen].static_ops else False,
+        "activation_type": "uint8" if VARIANTS[chosen].activation == QuantType.QUInt8 else "int8",
+        "weight_type": "int8",
+        "calibration": {"method": "MinMax", "windows": int(len(calib)),
+                        "reader": "export.quantize.WindowReader (preprocessed capture windows)"},
+        "pre_process": "onnxruntime.quantization.shape_inference.quant_pre_process",
+        "int8_operators": c["int8_operators"],
+        "fp32_operators": c["fp32_operators"],
+        "graph_op_types": c["graph_op_types"],
+        "runtime_op_types": c["runtime_op_types"],
+        "agreement_with_fp32": c["agreement"],
+        "selection": {"rule": f"fastest p50 at batch 1 with {threads} thread(s) among variants with argmax "
+                              f"agreement >= {MIN_AGREEMENT}" + (f" and |dF1| <= {MAX_F1_DELTA}" if eval_y is not None else "")
+                              + f"; variants within {TIE:.0%} of the fastest are tied and the first in the "
+                              "candidate order wins",
+                      "eval_windows": int(len(eval_x)), "threads": threads, "fp32": fp32_lat,
+                      "candidates": {k: {f: v for f, v in r.items() if f not in ("graph_op_types", "fp32_operators")}
+                                     for k, r in results.items()}},
+        "onnxruntime": ort.__version__,
+    }
+
+
+def quantize_file(fp32_path: str | Path, calib_npz: str | Path, out_path: str | Path, *,
+                  n_calib: int = 1000, seed: int = 0, variants: Sequence[str] | None = None,
+                  log: Callable[[str], None] = lambda s: None) -> dict:
+    """CLI path: calibrate on part of an NPZ of capture windows, check on the rest, choose."""
+    from edge_runtime.preprocess import preprocess
+    from models.dataset import load_npz
+
+    ws = load_npz(calib_npz)
+    meta = get_metadata(fp32_path)
+    if "classes" in meta and json.loads(meta["classes"]) != list(ws.classes):
+        raise QuantizeError(f"{calib_npz}: field 'classes': {list(ws.classes)} differ from the model's "
+                            f"{json.loads(meta['classes'])}")
+    X = preprocess(ws.X)
+    idx = pick_windows(ws.y, n_calib, seed)
+    rest = np.setdiff1d(np.arange(len(X)), idx)
+    held = rest if len(rest) >= 50 else np.arange(len(X))
+    return choose(fp32_path, out_path, X[idx], eval_x=X[held], eval_y=ws.y[held], variants=variants, log=log)
