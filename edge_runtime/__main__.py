@@ -10,11 +10,9 @@ import sys
 import time
 from pathlib import Path
 
+from .cli import CliError, make_parser, run
+
 ASSETS_DIR = Path(__file__).resolve().parent / "assets"
-
-
-class CliError(Exception):
-    """A one-line error for the user; the process exits with status 2."""
 
 
 def _add_wearable(sub: argparse._SubParsersAction) -> None:
@@ -102,30 +100,17 @@ def _feed_paced(loop, block) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m edge_runtime", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser, sub = make_parser("python -m edge_runtime", __doc__.splitlines()[0])
     _add_wearable(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .manifest import ModelIntegrityError
     from .sources import InputError
 
     args = build_parser().parse_args(argv)
-    known = (CliError, InputError)
-    try:
-        from .engine import ModelIntegrityError
-
-        known = known + (ModelIntegrityError,)
-    except ImportError:
-        pass
-    try:
-        return args.func(args)
-    except known as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
+    return run(lambda: args.func(args), bad_input=(InputError, ModelIntegrityError))
 
 
 if __name__ == "__main__":

@@ -20,15 +20,11 @@ import sys
 from pathlib import Path
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        raise SystemExit(2)
+from edge_runtime.cli import make_parser, run
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="python -m export", description="torch checkpoints -> ONNX, int8 ONNX and the shipped assets.")
-    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
+    p, sub = make_parser("python -m export", "torch checkpoints -> ONNX, int8 ONNX and the shipped assets.")
 
     o = sub.add_parser("onnx", help="export a checkpoint to ONNX")
     o.add_argument("--checkpoint", required=True, help="DIR/model.pt written by python -m models train")
@@ -147,17 +143,8 @@ def main(argv=None) -> int:
     from models.dataset import DataError
 
     cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "compare-int8": cmd_compare}
-    try:
-        return cmds[args.cmd](args)
-    except (ExportError, QuantizeError, DataError, ModelIntegrityError) as e:
-        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
-        return 2
-    except (OSError, ValueError, KeyError) as e:
-        print(f"error: {type(e).__name__}: {' '.join(str(e).split())}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    return run(lambda: cmds[args.command](args),
+               bad_input=(ExportError, QuantizeError, DataError, ModelIntegrityError, OSError, ValueError, KeyError))
 
 
 if __name__ == "__main__":

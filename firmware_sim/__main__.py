@@ -15,14 +15,7 @@ import sys
 from pathlib import Path
 
 
-class CliError(Exception):
-    """A user error: printed as one line, exit status 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, no usage dump
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        raise SystemExit(2)
+from edge_runtime.cli import CliError, make_parser, run
 
 
 def _positive_float(s: str) -> float:
@@ -110,9 +103,7 @@ def cmd_cohort(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = _Parser(prog="python -m firmware_sim", description="Simulated devices and world.")
-    sub = ap.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    sub.required = True
+    ap, sub = make_parser("python -m firmware_sim", "Simulated devices and world.")
 
     d = sub.add_parser("drive", help="a simulated drive of the wrist IMU with its ground truth")
     d.add_argument("--minutes", type=_positive_float, required=True, help="length of the drive (min)")
@@ -136,19 +127,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = build_parser()
-    args = ap.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except CliError as e:
-        sys.stderr.write(f"{ap.prog} {args.command}: error: {e}\n")
-        return 2
-    except ValueError as e:
-        sys.stderr.write(f"{ap.prog} {args.command}: error: {e}\n")
-        return 2
-    except KeyboardInterrupt:
-        sys.stderr.write("interrupted\n")
-        return 130
+    args = build_parser().parse_args(argv)
+    return run(lambda: args.func(args), bad_input=(ValueError,))
 
 
 if __name__ == "__main__":
