@@ -85,7 +85,7 @@ def resample_capture(x: np.ndarray) -> np.ndarray:
     if x.shape[-2] != CAPTURE_FRAMES:
         raise ValueError(f"capture must have {CAPTURE_FRAMES} frames, got {x.shape[-2]}")
     mean = x.mean(axis=-2, keepdims=True)
-    y = np.einsum("kj,...jc->...kc", resample_matrix(), x - mean) + mean
+    y = np.matmul(resample_matrix(), x - mean) + mean  # (200, 700) @ (..., 700, C); einsum is ~50x slower here
     return y.astype(np.float32)
 
 

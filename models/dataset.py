@@ -10,6 +10,9 @@ NPZ format (DESIGN.md section 7; extend, never rename)
 Optional fields, validated when present (all length N):
 ``trial``    str (N,)             trial name ("baseline", "exp1", ...): within-subject folds
 ``t_s``      float (N,)           window start time in its recording (s)
+``repeat``   int (N,)             1 = a detector capture of a truth event that an earlier
+                                  capture already caught (e.g. the return-to-wheel motion of a
+                                  long Phone call); 0 otherwise (onsets, false alarms, train windows)
 
 Train and test windows (dissertation section 2.2.4)
 ---------------------------------------------------
@@ -60,6 +63,7 @@ class WindowSet:
     trial: np.ndarray | None = None
     t_s: np.ndarray | None = None
     source: str = ""
+    repeat: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.y)
@@ -67,7 +71,7 @@ class WindowSet:
     def subset(self, mask_or_idx) -> "WindowSet":
         pick = lambda a: None if a is None else a[mask_or_idx]  # noqa: E731
         return WindowSet(self.X[mask_or_idx], self.y[mask_or_idx], self.subject[mask_or_idx],
-                         list(self.classes), pick(self.trial), pick(self.t_s), self.source)
+                         list(self.classes), pick(self.trial), pick(self.t_s), self.source, pick(self.repeat))
 
     def counts(self) -> dict[str, int]:
         c = np.bincount(self.y, minlength=len(self.classes))
@@ -92,7 +96,7 @@ def concat(sets: Iterable[WindowSet]) -> WindowSet:
     return WindowSet(np.concatenate([s.X for s in sets]).astype(np.float32, copy=False),
                      np.concatenate([s.y for s in sets]).astype(np.int64),
                      np.concatenate([s.subject for s in sets]).astype(np.int64),
-                     classes, opt("trial"), opt("t_s"), sets[0].source)
+                     classes, opt("trial"), opt("t_s"), sets[0].source, opt("repeat"))
 
 
 # --------------------------------------------------------------------------- NPZ I/O
@@ -106,6 +110,8 @@ def save_npz(path: str | os.PathLike, ws: WindowSet) -> Path:
         arrays["trial"] = np.asarray(ws.trial, dtype=str)
     if ws.t_s is not None:
         arrays["t_s"] = np.asarray(ws.t_s, np.float64)
+    if ws.repeat is not None:
+        arrays["repeat"] = np.asarray(ws.repeat, np.int8)
     with open(path, "wb") as f:  # np.savez would append ".npz" to other suffixes
         np.savez_compressed(f, **arrays)
     return path
@@ -164,9 +170,13 @@ def load_npz(path: str | os.PathLike) -> WindowSet:
     t_s = data.get("t_s")
     if t_s is not None and (t_s.ndim != 1 or t_s.shape[0] != n or t_s.dtype.kind not in "fiu"):
         raise DataError(f"{p}: field 't_s': expected {n} numbers, got dtype {t_s.dtype} shape {t_s.shape}")
+    repeat = data.get("repeat")
+    if repeat is not None and (repeat.ndim != 1 or repeat.shape[0] != n or repeat.dtype.kind not in "iub"):
+        raise DataError(f"{p}: field 'repeat': expected {n} 0/1 flags, got dtype {repeat.dtype} shape {repeat.shape}")
     return WindowSet(X.astype(np.float32, copy=False), y.astype(np.int64), subject.astype(np.int64),
                      classes, None if trial is None else trial.astype(str),
-                     None if t_s is None else t_s.astype(np.float64), source=p)
+                     None if t_s is None else t_s.astype(np.float64), source=p,
+                     repeat=None if repeat is None else repeat.astype(np.int8))
 
 
 # --------------------------------------------------------------------------- recordings -> windows
@@ -182,11 +192,12 @@ class DetectorStats:
     triggers: int = 0
     other_events: int = 0
     skipped_train: int = 0
+    repeats: int = 0
     per_label: dict = field(default_factory=dict)  # label -> [events, detected]
 
     def add(self, o: "DetectorStats") -> "DetectorStats":
         for k in ("distractions", "detected", "captures", "captures_distraction", "triggers",
-                  "other_events", "skipped_train"):
+                  "other_events", "skipped_train", "repeats"):
             setattr(self, k, getattr(self, k) + getattr(o, k))
         for lab, (n, d) in o.per_label.items():
             a = self.per_label.setdefault(lab, [0, 0])
@@ -202,8 +213,16 @@ class DetectorStats:
     def precision(self) -> float:
         return self.captures_distraction / self.captures if self.captures else float("nan")
 
+    @property
+    def precision_per_event(self) -> float:
+        """The dissertation's count: detected distractions / (detected distractions + false alarms)."""
+        fa = self.captures - self.captures_distraction
+        return self.detected / (self.detected + fa) if self.detected + fa else float("nan")
+
     def as_dict(self) -> dict:
-        return {"recall": self.recall, "precision": self.precision, "distractions": self.distractions,
+        return {"recall": self.recall, "precision": self.precision,
+                "precision_per_event": self.precision_per_event, "repeat_captures": self.repeats,
+                "distractions": self.distractions,
                 "detected": self.detected, "captures": self.captures,
                 "captures_distraction": self.captures_distraction,
                 "false_alarms": self.captures - self.captures_distraction, "triggers": self.triggers,
@@ -260,16 +279,22 @@ def windows_from_stream(acc: np.ndarray, events: Sequence, *, subject: int, tria
     stats.triggers = len(trig)
     trig_s = trig / rate_hz
     caps = extract_captures(acc, trig, cfg)
-    cx, cy, ct = [], [], []
+    cx, cy, ct, cr = [], [], [], []
+    caught: set[int] = set()
     for c in caps:
         t = c.trigger_index / rate_hz
         hit = np.flatnonzero((starts - 1.0 <= t) & (t <= ends))
-        k = other if hit.size == 0 else ev_idx[int(hit[np.argmin(np.abs(starts[hit] - t))])]
+        j = None if hit.size == 0 else int(hit[np.argmin(np.abs(starts[hit] - t))])
+        k = other if j is None else ev_idx[j]
         cx.append(c.data)
         cy.append(k)
         ct.append(c.start_index / rate_hz)
+        cr.append(int(j is not None and j in caught))
+        if j is not None:
+            caught.add(j)
         stats.captures += 1
         stats.captures_distraction += int(k != other)
+        stats.repeats += cr[-1]
 
     for e, k in zip(ev, ev_idx):
         if k == other:
@@ -282,13 +307,14 @@ def windows_from_stream(acc: np.ndarray, events: Sequence, *, subject: int, tria
         a[0] += 1
         a[1] += int(found)
 
-    def mk(xs, ys, ts) -> WindowSet:
+    def mk(xs, ys, ts, rep) -> WindowSet:
         m = len(ys)
         X = np.stack(xs).astype(np.float32) if m else np.zeros((0, cfg.capture_frames, 3), np.float32)
         return WindowSet(X, np.asarray(ys, np.int64), np.full(m, subject, np.int64), classes,
-                         np.full(m, trial, dtype="<U16"), np.asarray(ts, np.float64), source)
+                         np.full(m, trial, dtype="<U16"), np.asarray(ts, np.float64), source,
+                         np.asarray(rep, np.int8))
 
-    return mk(tx, ty, tt), mk(cx, cy, ct), stats
+    return mk(tx, ty, tt, [0] * len(ty)), mk(cx, cy, ct, cr), stats
 
 
 def windows_from_recording(rec, classes: Sequence[str] = CLASSES, cfg: DetectorConfig = DetectorConfig()

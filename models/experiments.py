@@ -1,0 +1,254 @@
+"""Evaluation protocols: train/test, leave-one-subject-out, within-subject.
+
+``run_train_test`` trains on a TRAIN set and scores a TEST set.
+
+``run_loso`` (between-participant, Table 2.2): one fold per subject of the
+TRAIN set. The fold trains on every other subject's training windows and is
+scored on the held-out subject's detector captures from the TEST set when one
+is given (the dissertation's protocol), else on the held-out subject's own
+training windows. Each fold's checkpoint goes to DIR/folds/s<K>/; pooled
+predictions to DIR/predictions.npz; a final model trained on all subjects to
+DIR/model.pt (its ``metrics`` are the LOSO figures).
+
+``run_within`` (within-participant, Table 2.1): per subject, leave-one-trial-out
+when the NPZ carries ``trial`` (train on the subject's other trials, score the
+held-out trial's captures from TEST when given, else its training windows);
+without ``trial``, stratified 5-fold cross-validation of the subject's
+training windows. The dissertation used leave-one-out within each participant;
+with a ~6-trial session, leaving out one trial is the cheaper analogue.
+
+Folds run in ``jobs`` worker processes (one thread each); results do not
+depend on ``jobs``: every fold is seeded with the same ``seed``.
+"""
+from __future__ import annotations
+
+import json
+import os
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+from models.dataset import DataError, WindowSet, load_npz
+from models.evaluate import compute_metrics, predict, save_confusion_png
+from models.train import DEFAULT_EPOCHS, fit, is_main_process, preprocess_all, save_checkpoint
+
+
+def _json(path: Path, obj) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(obj, indent=2, allow_nan=True))
+
+
+def _check_compatible(train: WindowSet, test: WindowSet | None) -> None:
+    if test is not None and list(test.classes) != list(train.classes):
+        raise DataError(f"{test.source}: field 'classes': {list(test.classes)} differs from the training "
+                        f"set's {list(train.classes)} ({train.source})")
+
+
+def _finish(out: Path, arch: str, classes, y_true, y_pred, probs, subject, extra: dict, title: str,
+            repeat=None) -> dict:
+    m = compute_metrics(y_true, y_pred, classes, subject)
+    m.update(arch=arch, **extra)
+    if repeat is not None and np.any(repeat):
+        on = np.asarray(repeat) == 0  # one capture per truth event (+ false alarms): the dissertation's count
+        m["onset_only"] = compute_metrics(np.asarray(y_true)[on], np.asarray(y_pred)[on], classes,
+                                          np.asarray(subject)[on])
+        m["repeat_captures"] = int((~on).sum())
+    if is_main_process():
+        _json(out / "metrics.json", m)
+        save_confusion_png(m["confusion"], classes, out / "confusion.png",
+                           title=f"{title}: macro-F1 {m['macro_f1']:.3f}, acc {m['accuracy']:.3f}")
+        np.savez_compressed(out / "predictions.npz", y_true=np.asarray(y_true), y_pred=np.asarray(y_pred),
+                            probs=np.asarray(probs, dtype=np.float32), subject=np.asarray(subject),
+                            classes=np.asarray(classes, dtype=str))
+    return m
+
+
+def run_train_test(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, epochs: int | None = None,
+                   seed: int = 0, progress: bool = True, threads: int | None = 1) -> dict:
+    """Train on ``train``; score ``test`` (or the training set itself when no test set is given)."""
+    _check_compatible(train, test)
+    epochs = DEFAULT_EPOCHS[arch] if epochs is None else epochs
+    out = Path(out_dir)
+    k = len(train.classes)
+    model = fit(arch, train.X, train.y, k, epochs=epochs, seed=seed, progress=progress, threads=threads)
+    ev = test if test is not None else train
+    probs = predict(model, ev.X)
+    m = _finish(out, arch, train.classes, ev.y, probs.argmax(1), probs, ev.subject, repeat=ev.repeat,
+                extra=
+                {"protocol": "train/test" if test is not None else "training set (no --test)",
+                 "epochs": epochs, "seed": seed, "n_train": len(train),
+                 **({"ddp": model.ddp_info} if hasattr(model, "ddp_info") else {})},
+                title=f"{arch} {'test' if test is not None else 'train'}")
+    if is_main_process():
+        save_checkpoint(out, model, arch=arch, classes=train.classes, seed=seed, epochs=epochs, metrics=_summary(m),
+                        data={"train": train.source, "test": test.source if test is not None else None})
+    return m
+
+
+def _summary(m: dict) -> dict:
+    keys = ("accuracy", "macro_f1", "macro_f1_distractions", "macro_precision", "macro_recall", "n", "protocol")
+    return {k: m[k] for k in keys if k in m}
+
+
+# --------------------------------------------------------------------------- fold workers
+
+_CACHE: dict = {}
+_TEST_CACHE: dict = {}
+
+
+def _cached(ws_or_path):
+    """(WindowSet, its preprocessed inputs or None): each process loads and preprocesses a set once."""
+    key = ws_or_path if isinstance(ws_or_path, str) else id(ws_or_path)
+    if key not in _CACHE:
+        ws = ws_or_path if isinstance(ws_or_path, WindowSet) else load_npz(ws_or_path)
+        _CACHE.clear()
+        _CACHE[key] = (ws, None)
+    return _CACHE[key]
+
+
+def _inputs(key, arch):
+    ws, pre = _CACHE[key]
+    if pre is None and arch != "lda":
+        pre = preprocess_all(ws.X).numpy()
+        _CACHE[key] = (ws, pre)
+    return ws.X if arch == "lda" else pre
+
+
+def _fold(job: dict) -> dict:
+    """Train one fold and score it (runs in a worker process or inline)."""
+    test = job.get("test")
+    if isinstance(test, str):
+        if _TEST_CACHE.get("path") != test:
+            _TEST_CACHE.update(path=test, ws=load_npz(test))
+        test = _TEST_CACHE["ws"]
+    train, _ = _cached(job["train"])
+    key = job["train"] if isinstance(job["train"], str) else id(job["train"])
+    ev = (test if job["eval_from"] == "test" else train).subset(job["eval_idx"])
+    model = fit(job["arch"], _inputs(key, job["arch"])[job["train_idx"]], train.y[job["train_idx"]],
+                len(train.classes), epochs=job["epochs"], seed=job["seed"], progress=job["progress"],
+                threads=job["threads"], desc=job["desc"])
+    probs = predict(model, ev.X) if len(ev) else np.zeros((0, len(train.classes)))
+    res = {"name": job["name"], "y_true": ev.y, "y_pred": probs.argmax(1) if len(ev) else ev.y[:0],
+           "probs": probs, "subject": ev.subject,
+           "repeat": ev.repeat if ev.repeat is not None else np.zeros(len(ev), np.int8)}
+    if job.get("ckpt_dir") and is_main_process():
+        fm = compute_metrics(ev.y, res["y_pred"], train.classes) if len(ev) else {}
+        save_checkpoint(job["ckpt_dir"], model, arch=job["arch"], classes=train.classes, seed=job["seed"],
+                        epochs=job["epochs"], metrics={**_summary(fm), "fold": job["name"]},
+                        data={"train": f"{train.source} minus {job['name']}",
+                              "test": f"{(test or train).source} {job['name']}"})
+    return res
+
+
+def _run_jobs(jobs: list[dict], n_workers: int) -> list[dict]:
+    from tqdm import tqdm
+
+    if n_workers <= 1 or len(jobs) <= 1:
+        return [_fold(j) for j in jobs]
+    with ProcessPoolExecutor(max_workers=n_workers, mp_context=get_context("spawn")) as ex:
+        futs = [ex.submit(_fold, j) for j in jobs]
+        out = []
+        for f in tqdm(futs, desc=jobs[0]["arch"] + " folds", unit="fold", leave=False,
+                      disable=not jobs[0]["progress_folds"]):
+            out.append(f.result())
+        return out
+
+
+def _job_data(ws: WindowSet | None, n_workers: int):
+    """Workers re-load the NPZ from disk (cheap) instead of receiving pickled arrays."""
+    if ws is None:
+        return None
+    return ws.source if n_workers > 1 and ws.source and os.path.exists(ws.source) else ws
+
+
+# --------------------------------------------------------------------------- LOSO
+
+def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, epochs: int | None = None,
+             seed: int = 0, jobs: int = 1, progress: bool = True, final_model: bool = True) -> dict:
+    _check_compatible(train, test)
+    epochs = DEFAULT_EPOCHS[arch] if epochs is None else epochs
+    out = Path(out_dir)
+    subjects = np.unique(train.subject)
+    if len(subjects) < 2:
+        raise DataError(f"{train.source}: field 'subject': leave-one-subject-out needs at least 2 subjects, "
+                        f"got {len(subjects)}")
+    from models.train import dist_info
+    distributed = dist_info()[0]
+    n_workers = 1 if distributed else max(1, jobs)
+    job_list = []
+    for s in subjects:
+        ev_idx = (np.flatnonzero(test.subject == s) if test is not None else np.flatnonzero(train.subject == s))
+        job_list.append(dict(
+            name=f"s{int(s)}", arch=arch, epochs=epochs, seed=seed, threads=1,
+            train=_job_data(train, n_workers), test=_job_data(test, n_workers),
+            train_idx=np.flatnonzero(train.subject != s), eval_idx=ev_idx,
+            eval_from="test" if test is not None else "train",
+            ckpt_dir=str(out / "folds" / f"s{int(s)}"), desc=f"{arch} LOSO s{int(s)}",
+            progress=progress and n_workers == 1, progress_folds=progress))
+    results = _run_jobs(job_list, n_workers)
+    cat = lambda key: np.concatenate([r[key] for r in results])  # noqa: E731
+    m = _finish(out, arch, train.classes, cat("y_true"), cat("y_pred"), cat("probs"), cat("subject"),
+                {"protocol": "leave-one-subject-out", "evaluated_on": "test captures" if test is not None
+                 else "held-out training windows", "folds": [r["name"] for r in results],
+                 "epochs": epochs, "seed": seed, "train": train.source,
+                 "test": test.source if test is not None else None},
+                f"{arch} LOSO", repeat=cat("repeat"))
+    if final_model:
+        _cached(train)
+        model = fit(arch, _inputs(id(train), arch), train.y, len(train.classes), epochs=epochs, seed=seed,
+                    progress=progress, desc=f"{arch} final")
+        if is_main_process():
+            save_checkpoint(out, model, arch=arch, classes=train.classes, seed=seed, epochs=epochs,
+                            metrics=_summary(m) | {"per_subject_mean": m.get("per_subject_mean")},
+                            data={"train": train.source, "test": test.source if test is not None else None,
+                                  "protocol": "final model on all subjects; metrics = LOSO"})
+    return m
+
+
+# --------------------------------------------------------------------------- within-subject
+
+def run_within(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, epochs: int | None = None,
+               seed: int = 0, jobs: int = 1, progress: bool = True, min_train: int = 5) -> dict:
+    _check_compatible(train, test)
+    from sklearn.model_selection import StratifiedKFold
+
+    epochs = DEFAULT_EPOCHS[arch] if epochs is None else epochs
+    out = Path(out_dir)
+    n_workers = max(1, jobs)
+    by_trial = train.trial is not None and (test is None or test.trial is not None)
+    job_list = []
+    for s in np.unique(train.subject):
+        own = np.flatnonzero(train.subject == s)
+        if by_trial:
+            for t in np.unique(train.trial[own]):
+                tr_idx = own[train.trial[own] != t]
+                if test is not None:
+                    ev_idx = np.flatnonzero((test.subject == s) & (test.trial == t))
+                else:
+                    ev_idx = own[train.trial[own] == t]
+                if len(tr_idx) >= min_train and len(ev_idx):
+                    job_list.append((f"s{int(s)}-{t}", tr_idx, ev_idx, "test" if test is not None else "train"))
+        else:
+            counts = np.bincount(train.y[own])
+            k = int(min(5, counts[counts > 0].min())) if len(own) else 0
+            if k < 2:
+                continue
+            skf = StratifiedKFold(n_splits=k, shuffle=True, random_state=seed)
+            for f, (a, b) in enumerate(skf.split(own, train.y[own])):
+                job_list.append((f"s{int(s)}-f{f}", own[a], own[b], "train"))
+    if not job_list:
+        raise DataError(f"{train.source}: field 'subject': no subject has enough windows for within-subject folds")
+    jobs_ = [dict(name=name, arch=arch, epochs=epochs, seed=seed, threads=1,
+                  train=_job_data(train, n_workers), test=_job_data(test, n_workers),
+                  train_idx=tr, eval_idx=ev, eval_from=src, ckpt_dir=None, desc=f"{arch} within {name}",
+                  progress=False, progress_folds=progress)
+             for name, tr, ev, src in job_list]
+    results = _run_jobs(jobs_, n_workers)
+    cat = lambda key: np.concatenate([r[key] for r in results])  # noqa: E731
+    return _finish(out, arch, train.classes, cat("y_true"), cat("y_pred"), cat("probs"), cat("subject"),
+                   {"protocol": "within-subject " + ("leave-one-trial-out" if by_trial else "stratified 5-fold"),
+                    "folds": len(results), "epochs": epochs, "seed": seed, "train": train.source,
+                    "test": test.source if test is not None else None},
+                   f"{arch} within-subject", repeat=cat("repeat"))
