@@ -17,17 +17,29 @@ ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 
 def _add_wearable(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("wearable", help="run the wearable distraction loop")
-    src = p.add_mutually_exclusive_group(required=True)
+    src = p.add_mutually_exclusive_group()
     src.add_argument("--replay", metavar="FILE.csv", help="a recording t,ax,ay,az (s, m/s^2), processed as fast as possible")
     p.add_argument("--alerts", metavar="OUT.jsonl", help="write one JSON object per classifier decision")
-    p.add_argument("--assets", metavar="DIR", default=str(ASSETS_DIR), help="model directory with manifest.json")
-    p.add_argument("--model", default="int8", help="manifest entry: a name, or a precision (int8, fp32)")
-    p.add_argument("--threads", type=int, default=1, help="onnxruntime intra-op threads (default 1)")
-    p.add_argument("--min-confidence", type=float, default=0.6, help="below this the decision is 'uncertain' and not alerted")
-    p.add_argument("--threshold", type=float, default=5.0, help="detector threshold on |ax[T]-ax[T-199]| (m/s^2)")
+    p.add_argument("--config", metavar="BOX.toml", help="the box configuration (see edge_runtime/box.example.toml)")
+    p.add_argument("--print-config", action="store_true", help="print the effective configuration as TOML and exit")
+    p.add_argument("--assets", metavar="DIR", help="model directory with manifest.json [model] assets")
+    p.add_argument("--model", help="manifest entry: a name, or a precision (int8, fp32) [model] name")
+    p.add_argument("--threads", type=int, help="onnxruntime intra-op threads [model] threads")
+    p.add_argument("--min-confidence", type=float, help="below this the decision is 'uncertain' [alerts] min_confidence")
+    p.add_argument("--threshold", type=float, help="detector threshold (m/s^2) [detector] threshold_mps2")
     p.add_argument("--realtime", action="store_true", help="pace a replay at its own sample rate")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
     p.set_defaults(func=run_wearable)
+
+
+def effective_config(args: argparse.Namespace):
+    """The config file, then the command-line flags on top, validated as one."""
+    from . import config
+
+    cfg = config.load(args.config)
+    cfg = config.override(cfg, "model", assets=args.assets, name=args.model, threads=args.threads)
+    cfg = config.override(cfg, "alerts", min_confidence=args.min_confidence)
+    return config.override(cfg, "detector", threshold_mps2=args.threshold)
 
 
 def run_wearable(args: argparse.Namespace) -> int:
@@ -35,18 +47,26 @@ def run_wearable(args: argparse.Namespace) -> int:
     from .sources import ReplayStats, read_imu_csv
     from .wearable import AlertPolicy, WearableLoop
 
-    if args.threads < 1:
-        raise CliError(f"--threads must be at least 1, got {args.threads}")
-    try:
-        policy = AlertPolicy(min_confidence=args.min_confidence)
-        det_cfg = DetectorConfig(threshold_mps2=args.threshold)
-    except ValueError as e:
-        raise CliError(str(e)) from None
+    cfg = effective_config(args)
+    if args.print_config:
+        print(cfg.to_toml(), end="")
+        return 0
+    if not args.replay:
+        raise CliError("wearable: give a source: --replay FILE.csv")
+    policy = AlertPolicy(min_confidence=cfg.alerts.min_confidence, never_alert=cfg.alerts.never_alert)
+    d = cfg.detector
+    det_cfg = DetectorConfig(window_frames=d.window_frames, threshold_mps2=d.threshold_mps2,
+                             pre_frames=d.pre_frames, post_frames=d.post_frames)
     stats = ReplayStats()
     blocks = read_imu_csv(args.replay, stats)  # bad input is reported before the model loads
     from .engine import Engine
 
-    engine = Engine.from_manifest(args.assets, args.model, threads=args.threads)
+    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
+    unknown = sorted(set(cfg.alerts.never_alert) - set(engine.classes))
+    if unknown:
+        from .config import ConfigError
+
+        raise ConfigError(f"[alerts] never_alert: {unknown} are not classes of {engine.name} ({', '.join(engine.classes)})")
     for note in stats.notices:
         print(f"notice: {note}", file=sys.stderr)
 
@@ -59,7 +79,7 @@ def run_wearable(args: argparse.Namespace) -> int:
             mark = "ALERT" if d.alerted else d.status
             print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}")
 
-    loop = WearableLoop(engine, det_cfg, policy, on_decision=handle)
+    loop = WearableLoop(engine, det_cfg, policy, on_decision=handle, sample_rate_hz=cfg.imu.sample_rate_hz)
     t_wall = time.perf_counter()
     try:
         for block in blocks:
@@ -106,11 +126,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .config import ConfigError
     from .manifest import ModelIntegrityError
     from .sources import InputError
 
     args = build_parser().parse_args(argv)
-    return run(lambda: args.func(args), bad_input=(InputError, ModelIntegrityError))
+    return run(lambda: args.func(args), bad_input=(InputError, ModelIntegrityError, ConfigError))
 
 
 if __name__ == "__main__":
