@@ -19,6 +19,10 @@ def _add_wearable(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("wearable", help="run the wearable distraction loop")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--replay", metavar="FILE.csv", help="a recording t,ax,ay,az (s, m/s^2), processed as fast as possible")
+    src.add_argument("--imu", metavar="serial:PATH[?key=HEX]",
+                     help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line (key: MAVLink 2 signing key)")
+    p.add_argument("--duration", type=float, metavar="S", help="stop a live source after S seconds")
+    p.add_argument("--can-log", metavar="OUT.log|.asc|.blf|.csv", help="write every CAN frame sent (python-can formats)")
     p.add_argument("--alerts", metavar="OUT.jsonl", help="write one JSON object per classifier decision")
     p.add_argument("--config", metavar="BOX.toml", help="the box configuration (see edge_runtime/box.example.toml)")
     p.add_argument("--print-config", action="store_true", help="print the effective configuration as TOML and exit")
@@ -44,21 +48,25 @@ def effective_config(args: argparse.Namespace):
 
 def run_wearable(args: argparse.Namespace) -> int:
     from .detector import DetectorConfig
-    from .sources import ReplayStats, read_imu_csv
+    from .sources import ImuBlock, ReplayStats, read_imu_csv
     from .wearable import AlertPolicy, WearableLoop
 
     cfg = effective_config(args)
     if args.print_config:
         print(cfg.to_toml(), end="")
         return 0
-    if not args.replay:
-        raise CliError("wearable: give a source: --replay FILE.csv")
+    if not (args.replay or args.imu):
+        raise CliError("wearable: give a source: --replay FILE.csv or --imu serial:PATH")
     policy = AlertPolicy(min_confidence=cfg.alerts.min_confidence, never_alert=cfg.alerts.never_alert)
     d = cfg.detector
     det_cfg = DetectorConfig(window_frames=d.window_frames, threshold_mps2=d.threshold_mps2,
                              pre_frames=d.pre_frames, post_frames=d.post_frames)
     stats = ReplayStats()
-    blocks = read_imu_csv(args.replay, stats)  # bad input is reported before the model loads
+    if args.replay:
+        blocks = read_imu_csv(args.replay, stats)  # bad input is reported before the model loads
+    else:
+        live = _open_live_source(args.imu, cfg)
+        blocks = live.blocks(args.duration)
     from .engine import Engine
 
     engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
@@ -71,8 +79,12 @@ def run_wearable(args: argparse.Namespace) -> int:
         print(f"notice: {note}", file=sys.stderr)
 
     out = open(args.alerts, "w") if args.alerts else None
+    health = {"sensor": "ok", "non_finite": 0, "gaps": 0}
 
     def handle(d):
+        if d.alerted:  # 'alerted' means: a DISTRACTION_ALERT frame went out for it
+            d.alerted = pub.on_decision(d)
+            d.status = "alert" if d.alerted else "alert_not_sent"
         if out:
             out.write(json.dumps(d.to_json()) + "\n")
         if not args.quiet:
@@ -80,16 +92,34 @@ def run_wearable(args: argparse.Namespace) -> int:
             print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}")
 
     loop = WearableLoop(engine, det_cfg, policy, on_decision=handle, sample_rate_hz=cfg.imu.sample_rate_hz)
+    pub = _open_publisher(cfg, args.can_log, engine, lambda: _status(loop, health))
+    sensor_state = "ok"
+    pub.set_status(state="running")
     t_wall = time.perf_counter()
     try:
         for block in blocks:
-            if args.realtime:
+            if not isinstance(block, ImuBlock):  # a live source's status event
+                if block.state != sensor_state:
+                    print(f"sensor: {block.state} ({block.since_s:.2f} s since the last sample)", file=sys.stderr)
+                    sensor_state = health["sensor"] = block.state
+                if block.state == "disconnected":
+                    break
+                continue
+            if sensor_state != "ok":
+                print("sensor: ok", file=sys.stderr)
+                sensor_state = health["sensor"] = "ok"
+            if args.realtime and args.replay:
                 _feed_paced(loop, block)
             else:
                 loop.feed(block)
+    except KeyboardInterrupt:
+        pass
     finally:
+        pub.close()
         if out:
             out.close()
+        if not args.replay:
+            live.close()
     wall = time.perf_counter() - t_wall
     s = loop.stats
     stream_s = s.samples / loop.rate_hz
@@ -102,7 +132,71 @@ def run_wearable(args: argparse.Namespace) -> int:
         f"  bad samples: non-finite {s.non_finite}, dropped (time not advancing) {stats.dropped_non_monotonic}, "
         f"gaps {stats.gaps}, detector restarts {s.detector_resets}"
     )
+    c = pub.summary()
+    print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']}, "
+          f"heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, reconnects {c['reconnects']}"
+          + (f"; logged to {args.can_log}" if args.can_log else ""))
+    if not args.replay:
+        print("  serial link: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in vars(live.stats).items()))
     return 0
+
+
+def _open_publisher(cfg, can_log, engine, status_provider):
+    """The CAN side: the configured python-can bus, alerts and the WEARABLE_STATUS heartbeat."""
+    from .can_link import AlertPublisher, open_bus
+
+    c = cfg.can
+    extra = {"host": c.host, "port": c.port} if c.interface == "socketcand" else {}
+
+    def bus_factory():
+        return open_bus(c.interface, c.channel, c.bitrate, **extra)
+
+    try:
+        pub = AlertPublisher(bus_factory(), heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
+                             bus_factory=bus_factory, status_provider=status_provider)
+    except ValueError as e:  # python-can's Logger: unknown file suffix
+        raise CliError(f"--can-log {can_log}: {e}") from None
+    # ModelVersion (8 bits): the first byte of the model file's sha256, as listed in manifest.json
+    pub.set_status(model_version=int(engine.entry.get("sha256", "00")[:2], 16))
+    return pub.start()
+
+
+def _status(loop, health: dict) -> dict:
+    """WEARABLE_STATUS fields from the loop's counters; called by the heartbeat thread."""
+    s = loop.stats
+    if health["sensor"] != "ok":
+        state, sensor = "sensor_silent", "silent"
+    elif s.non_finite > health["non_finite"]:
+        state, sensor = "degraded", "nan_samples"
+    elif s.detector_resets > health["gaps"]:
+        state, sensor = "degraded", "gaps"
+    else:
+        state, sensor = "running", "ok"
+    health["non_finite"], health["gaps"] = s.non_finite, s.detector_resets
+    return {"state": state, "sensor_health": sensor, "dropped_samples": min(s.non_finite, 65535)}
+
+
+def _open_live_source(spec: str, cfg):
+    """``serial:PATH[?key=HEX]`` -> a MAVLink IMU source on that serial line."""
+    kind, _, rest = spec.partition(":")
+    if kind != "serial" or not rest:
+        raise CliError(f"--imu {spec}: expected serial:PATH[?key=HEX]")
+    path, _, query = rest.partition("?")
+    key = None
+    if query:
+        name, _, value = query.partition("=")
+        try:
+            key = bytes.fromhex(value) if name == "key" else None
+        except ValueError:
+            key = None
+        if key is None or len(key) != 32:
+            raise CliError(f"--imu {spec}: key must be key=<64 hex digits> (a 32-byte MAVLink 2 signing key)")
+    from .mavlink_source import MavlinkImuSource
+
+    try:
+        return MavlinkImuSource(path, signing_key=key, silence_timeout_s=cfg.imu.silence_timeout_s)
+    except ValueError as e:
+        raise CliError(str(e)) from None
 
 
 def _feed_paced(loop, block) -> None:
@@ -131,7 +225,9 @@ def main(argv: list[str] | None = None) -> int:
     from .sources import InputError
 
     args = build_parser().parse_args(argv)
-    return run(lambda: args.func(args), bad_input=(InputError, ModelIntegrityError, ConfigError))
+    from .can_link import CanLinkError
+
+    return run(lambda: args.func(args), bad_input=(InputError, ModelIntegrityError, ConfigError, CanLinkError))
 
 
 if __name__ == "__main__":

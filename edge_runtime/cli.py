@@ -45,3 +45,28 @@ def run(func: Callable[[], int | None], bad_input: Iterable[type[BaseException]]
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+def _number(s: str, cast, what: str, ok) -> float:
+    try:
+        v = cast(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not {what}: {s!r}") from None
+    if not ok(v):
+        raise argparse.ArgumentTypeError(f"must be {what}, got {s}")
+    return v
+
+
+def positive_float(s: str) -> float:
+    """argparse type: a finite number > 0."""
+    return _number(s, float, "a positive number", lambda v: 0 < v < float("inf"))
+
+
+def positive_int(s: str) -> int:
+    """argparse type: an integer >= 1."""
+    return _number(s, int, "an integer of at least 1", lambda v: v >= 1)
+
+
+def probability(s: str) -> float:
+    """argparse type: a number in [0, 1]."""
+    return _number(s, float, "a probability in [0, 1]", lambda v: 0.0 <= v <= 1.0)

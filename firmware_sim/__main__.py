@@ -10,32 +10,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
 
-from edge_runtime.cli import CliError, make_parser, run
-
-
-def _positive_float(s: str) -> float:
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {s!r}") from None
-    if not (v > 0) or not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {s}")
-    return v
-
-
-def _positive_int(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {s}")
-    return v
+from edge_runtime.cli import CliError, make_parser, positive_float, positive_int, run
 
 
 def _out_dir(path: str) -> Path:
@@ -106,23 +85,35 @@ def build_parser() -> argparse.ArgumentParser:
     ap, sub = make_parser("python -m firmware_sim", "Simulated devices and world.")
 
     d = sub.add_parser("drive", help="a simulated drive of the wrist IMU with its ground truth")
-    d.add_argument("--minutes", type=_positive_float, required=True, help="length of the drive (min)")
+    d.add_argument("--minutes", type=positive_float, required=True, help="length of the drive (min)")
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--out", required=True, help="output directory (imu.csv, truth.json, drive.png)")
-    d.add_argument("--subject", type=_positive_int, default=None,
+    d.add_argument("--subject", type=positive_int, default=None,
                    help="subject K (1-based) of the cohort of --cohort-seed; default: a subject outside it")
     d.add_argument("--cohort-seed", type=int, default=0, help="cohort that --subject picks from (default 0)")
     d.add_argument("--plot", action="store_true", help="also write DIR/drive.png")
     d.set_defaults(func=cmd_drive)
 
     c = sub.add_parser("cohort", help="the simulated cohort: baseline + exp1..exp5 per subject")
-    c.add_argument("--subjects", type=_positive_int, default=20)
+    c.add_argument("--subjects", type=positive_int, default=20)
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--out", required=True, help="output directory (one .npz per trial + cohort.json)")
-    c.add_argument("--trial-minutes", type=_positive_float, default=15.0)
+    c.add_argument("--trial-minutes", type=positive_float, default=15.0)
     c.add_argument("--json", default=None, help="also write the detector figures to this JSON file")
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_cohort)
+
+    from .imu_firmware import add_arguments as imu_arguments, cmd_imu
+
+    i = sub.add_parser("imu", help="simulated wrist IMU firmware: MAVLink at 100 Hz over a pseudo-terminal")
+    imu_arguments(i)
+    i.set_defaults(func=cmd_imu)
+
+    from .can_hub import add_arguments as hub_arguments, cmd_can_hub
+
+    h = sub.add_parser("can-hub", help="simulated CAN bus: a socketcand-protocol hub on 127.0.0.1")
+    hub_arguments(h)
+    h.set_defaults(func=cmd_can_hub)
     return ap
 
 
