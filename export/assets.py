@@ -252,7 +252,7 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
         raise ExportError(f"{fp32_path}: torch/onnxruntime parity exceeds {parity['tol']:g}")
 
     # 4. int8
-    log(f"[4/5] quantising: candidates timed with 1 thread, gated on the test captures")
+    log("[4/5] quantising: candidates timed with 1 thread, gated on the test captures")
     calib_idx = pick_windows(train.y, N_CALIB, seed)
     int8_path = stage / f"{ARCH}.int8.onnx"
     quant = choose(fp32_path, int8_path, X_train[calib_idx], eval_x=X_test, eval_y=test.y, variants=variants,

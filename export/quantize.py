@@ -38,7 +38,6 @@ import contextlib
 import gc
 import logging
 import json
-import os
 import tempfile
 import time
 import warnings
