@@ -102,12 +102,14 @@ def run_wearable(args: argparse.Namespace) -> int:
                 if block.state != sensor_state:
                     print(f"sensor: {block.state} ({block.since_s:.2f} s since the last sample)", file=sys.stderr)
                     sensor_state = health["sensor"] = block.state
+                    pub.send_heartbeat()  # a change of state is reported at once, not at the next period
                 if block.state == "disconnected":
                     break
                 continue
             if sensor_state != "ok":
                 print("sensor: ok", file=sys.stderr)
                 sensor_state = health["sensor"] = "ok"
+                pub.send_heartbeat()
             if args.realtime and args.replay:
                 _feed_paced(loop, block)
             else:
@@ -166,6 +168,8 @@ def _status(loop, health: dict) -> dict:
     s = loop.stats
     if health["sensor"] != "ok":
         state, sensor = "sensor_silent", "silent"
+    elif s.samples == 0:
+        state, sensor = "starting", "ok"  # no sample yet: nothing to vouch for
     elif s.non_finite > health["non_finite"]:
         state, sensor = "degraded", "nan_samples"
     elif s.detector_resets > health["gaps"]:

@@ -29,8 +29,9 @@ class ImuSection:
     """Rate the detector and model expect; recordings at other rates are resampled to it."""
     range_mps2: float = 156.9
     """Accelerometer full scale (m/s^2, 16 g); readings at or beyond it count as saturated."""
-    silence_timeout_s: float = 0.2
-    """No sample for this long: the sensor is reported silent in WEARABLE_STATUS."""
+    silence_timeout_s: float = 0.15
+    """No sample for this long: the sensor is silent. WEARABLE_STATUS says so at once (an
+    extra heartbeat on every change of state), so within 200 ms of the last sample."""
 
 
 @dataclass(frozen=True)
