@@ -79,7 +79,7 @@ def run_wearable(args: argparse.Namespace) -> int:
         print(f"notice: {note}", file=sys.stderr)
 
     out = open(args.alerts, "w") if args.alerts else None
-    health = {"sensor": "ok", "non_finite": 0, "gaps": 0}
+    health = {"sensor": "ok", "non_finite": 0, "gaps": 0, "saturated": 0}
 
     def handle(d):
         if d.alerted:  # 'alerted' means: a DISTRACTION_ALERT frame went out for it
@@ -92,7 +92,8 @@ def run_wearable(args: argparse.Namespace) -> int:
             print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}")
 
     loop = WearableLoop(engine, det_cfg, policy, on_decision=handle, sample_rate_hz=cfg.imu.sample_rate_hz)
-    pub = _open_publisher(cfg, args.can_log, engine, lambda: _status(loop, health))
+    source_stats = None if args.replay else live.stats
+    pub = _open_publisher(cfg, args.can_log, engine, lambda: _status(loop, health, source_stats))
     sensor_state = "ok"
     pub.set_status(state="running")
     t_wall = time.perf_counter()
@@ -163,21 +164,27 @@ def _open_publisher(cfg, can_log, engine, status_provider):
     return pub.start()
 
 
-def _status(loop, health: dict) -> dict:
-    """WEARABLE_STATUS fields from the loop's counters; called by the heartbeat thread."""
+def _status(loop, health: dict, source_stats=None) -> dict:
+    """WEARABLE_STATUS fields from the loop's (and the live source's) counters; called by
+    the heartbeat thread. A counter that grew since the last heartbeat marks the sensor
+    degraded for that period."""
     s = loop.stats
+    saturated = getattr(source_stats, "saturated", 0)
+    dropped = s.non_finite + getattr(source_stats, "dropped", 0)
     if health["sensor"] != "ok":
         state, sensor = "sensor_silent", "silent"
     elif s.samples == 0:
         state, sensor = "starting", "ok"  # no sample yet: nothing to vouch for
     elif s.non_finite > health["non_finite"]:
         state, sensor = "degraded", "nan_samples"
+    elif saturated > health["saturated"]:
+        state, sensor = "degraded", "saturated"
     elif s.detector_resets > health["gaps"]:
         state, sensor = "degraded", "gaps"
     else:
         state, sensor = "running", "ok"
-    health["non_finite"], health["gaps"] = s.non_finite, s.detector_resets
-    return {"state": state, "sensor_health": sensor, "dropped_samples": min(s.non_finite, 65535)}
+    health["non_finite"], health["gaps"], health["saturated"] = s.non_finite, s.detector_resets, saturated
+    return {"state": state, "sensor_health": sensor, "dropped_samples": min(dropped, 65535)}
 
 
 def _open_live_source(spec: str, cfg):
