@@ -23,6 +23,8 @@ import can
 import cantools
 import e2e.p01 as p01
 
+from .config import BUS_INTERFACES
+
 log = logging.getLogger(__name__)
 
 DBC_PATH = Path(__file__).resolve().parent / "assets" / "vehicle_alerts.dbc"
@@ -164,8 +166,8 @@ class E2EChecker:
 
 def open_bus(interface: str, channel: str | None = None, bitrate: int | None = None, **kw) -> can.BusABC:
     """``can.Bus`` with a one-line error (CanLinkError) instead of a traceback."""
-    if interface == "udp_multicast":
-        raise CanLinkError("CAN interface udp_multicast is not allowed (it leaves loopback); use socketcand")
+    if interface not in BUS_INTERFACES:
+        raise CanLinkError(f"CAN interface {interface!r} is not allowed; use one of {', '.join(BUS_INTERFACES)}")
     args = dict(kw)
     if bitrate is not None and interface not in ("socketcand", "virtual"):
         args["bitrate"] = bitrate

@@ -19,6 +19,12 @@ from pathlib import Path
 from typing import Any
 
 
+BUS_INTERFACES = ("virtual", "socketcand", "socketcan", "slcan", "pcan", "kvaser", "vector", "ixxat", "gs_usb",
+                  "canalystii", "seeedstudio", "serial")
+"""python-can interfaces a box may use: a vehicle bus adapter, the socketcand hub, or the
+in-process virtual bus. Interfaces that are not a CAN bus (network broadcasts) are refused."""
+
+
 class ConfigError(ValueError):
     """An invalid configuration; the message names the file and the key."""
 
@@ -105,7 +111,7 @@ _CHECKS: dict[tuple[str, str], tuple[str, Any]] = {
     ("model", "threads"): ("an integer of at least 1", lambda v: v >= 1),
     ("model", "name"): ("a non-empty string", lambda v: bool(v)),
     ("alerts", "min_confidence"): ("a number in [0, 1]", lambda v: 0.0 <= v <= 1.0),
-    ("can", "interface"): ("a non-empty string", lambda v: bool(v)),
+    ("can", "interface"): ("one of " + ", ".join(BUS_INTERFACES), lambda v: v in BUS_INTERFACES),
     ("can", "bitrate"): ("a positive integer", lambda v: v > 0),
     ("can", "port"): ("an integer in 1..65535", lambda v: 1 <= v <= 65535),
     ("can", "heartbeat_period_s"): ("a number in [0.01, 10]", lambda v: 0.01 <= v <= 10),

@@ -139,6 +139,11 @@ class StreamingDetector:
         self._valid_from = self.n_seen
         self._allowed_from = self.n_seen + self.cfg.lag
 
+    def skip(self, n: int) -> None:
+        """``n`` unusable samples (NaN, inf): count them in the stream index and reset."""
+        self.n_seen += int(n)
+        self.reset()
+
     def push(self, block: np.ndarray) -> list[Capture]:
         cfg = self.cfg
         block = np.asarray(block, dtype=np.float32).reshape(-1, 3)

@@ -126,8 +126,9 @@ class WearableLoop:
         good_start = 0
         for a, b in zip(edges[::2], edges[1::2]):
             decisions += self._push(acc[good_start:a])
-            self.detector.n_seen += b - a  # keep indices in step with stream time
-            self._restart(block.t0_s + b / self.rate_hz)
+            self.detector.skip(b - a)  # the hole keeps its place in stream time
+            self.stats.detector_resets += 1
+            self._seg_index0, self._seg_t0 = self.detector.n_seen, block.t0_s + b / self.rate_hz
             good_start = b
         decisions += self._push(acc[good_start:])
         return decisions

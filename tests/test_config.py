@@ -25,6 +25,7 @@ def test_example_file_is_the_defaults_and_print_config_round_trips(tmp_path):
         ("[can]\nbitrat = 5\n", r"box.toml: \[can\] bitrat: unknown key"),
         ("[cann]\n", r"box.toml: \[cann\]: unknown section"),
         ("[can]\nbitrate = \"fast\"\n", r"\[can\] bitrate: expected an integer"),
+        ("[can]\ninterface = \"udp\"\n", r"\[can\] interface: must be one of virtual, socketcand"),
         ("[alerts]\nmin_confidence = 1.5\n", r"\[alerts\] min_confidence: must be a number in \[0, 1\]"),
         ("[model]\nthreads = 0\n", r"\[model\] threads: must be an integer of at least 1"),
         ("[imu]\nsample_rate_hz = 50\n", r"\[imu\] sample_rate_hz: must be 100"),

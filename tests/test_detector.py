@@ -119,3 +119,13 @@ def test_reset_drops_capture_and_refills_window():
 def test_config_is_validated(bad):
     with pytest.raises(ValueError):
         DetectorConfig(**bad)
+
+
+def test_skip_keeps_stream_indices_and_refills_the_window():
+    det = StreamingDetector()
+    det.push(np.zeros((300, 3), np.float32))
+    det.skip(50)  # 50 unusable samples: frames 300..349
+    y = np.zeros((700, 3), np.float32)
+    y[250:, 0] = 8.0  # stream frame 600; a full window after the hole starts at 350 + 199 = 549
+    det.push(y)
+    assert det.n_seen == 1050 and det.triggers == [600]
