@@ -1,10 +1,17 @@
 """``python -m edge_runtime <command>``: the programs that run on the box.
 
-wearable   IMU -> detector -> ConvLSTM -> alert decisions (DESIGN.md section 7)
+wearable   IMU -> detector -> ConvLSTM -> alert decisions on CAN (DESIGN.md section 7)
+lift       2D keypoints -> streaming pose lifter -> 3D joints
+robot      camera keypoints -> lifter -> hazard zones -> commands to the arm (CAN or MAVLink)
+
+Commands other than ``wearable`` live in their own module, which defines
+``add_arguments(parser)``, ``cmd(args)`` and ``BAD_INPUT`` (the exception types
+that mean "the user's input was bad": one line, exit 2).
 """
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 import time
@@ -227,7 +234,18 @@ def _feed_paced(loop, block) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser, sub = make_parser("python -m edge_runtime", __doc__.splitlines()[0])
     _add_wearable(sub)
+    for name, module, help_text in _MODULE_COMMANDS:
+        mod = importlib.import_module(f".{module}", __package__)
+        p = sub.add_parser(name, help=help_text)
+        mod.add_arguments(p)
+        p.set_defaults(func=mod.cmd, bad_input=tuple(getattr(mod, "BAD_INPUT", ())))
     return parser
+
+
+_MODULE_COMMANDS = (
+    ("lift", "lift_cli", "lift 2D keypoints (JSON lines, camera or simulator) to 3D joints"),
+    ("robot", "robot_cli", "the robot-side safety loop against a real or simulated arm"),
+)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -238,7 +256,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from .can_link import CanLinkError
 
-    return run(lambda: args.func(args), bad_input=(InputError, ModelIntegrityError, ConfigError, CanLinkError))
+    bad = (InputError, ModelIntegrityError, ConfigError, CanLinkError, *getattr(args, "bad_input", ()))
+    return run(lambda: args.func(args), bad_input=bad)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ Bad input exits with status 2 and one line on stderr naming the file and field.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 from pathlib import Path
@@ -60,7 +61,20 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--train", default=None, help="training NPZ (default: from DIR/metrics.json)")
     c.add_argument("--test", default=None, help="test NPZ (default: from DIR/metrics.json)")
     c.add_argument("--json", default=None)
+
+    for name, module, help_text in _MODULE_COMMANDS:
+        mod = importlib.import_module(f".{module}", __package__)
+        m = sub.add_parser(name, help=help_text)
+        mod.add_arguments(m)
+        m.set_defaults(module_cmd=mod.cmd)
     return p
+
+
+# Commands that live in their own module: each module defines ``add_arguments(parser)`` and ``cmd(args)``.
+_MODULE_COMMANDS = (
+    ("lifter", "lifter_assets", "train, export and quantise the pose lifter into edge_runtime/assets"),
+    ("bundle", "bundle", "build what goes onto a box: runtime wheel, assets, default config, checksums"),
+)
 
 
 def _variants(s: str | None):
@@ -143,7 +157,8 @@ def main(argv=None) -> int:
     from models.dataset import DataError
 
     cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "compare-int8": cmd_compare}
-    return run(lambda: cmds[args.command](args),
+    func = getattr(args, "module_cmd", None) or cmds[args.command]
+    return run(lambda: func(args),
                bad_input=(ExportError, QuantizeError, DataError, ModelIntegrityError, OSError, ValueError, KeyError))
 
 

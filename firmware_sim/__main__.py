@@ -9,6 +9,7 @@ Further commands register themselves through :func:`build_parser` (one subparser
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 from pathlib import Path
@@ -103,18 +104,22 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_cohort)
 
-    from .imu_firmware import add_arguments as imu_arguments, cmd_imu
-
-    i = sub.add_parser("imu", help="simulated wrist IMU firmware: MAVLink at 100 Hz over a pseudo-terminal")
-    imu_arguments(i)
-    i.set_defaults(func=cmd_imu)
-
-    from .can_hub import add_arguments as hub_arguments, cmd_can_hub
-
-    h = sub.add_parser("can-hub", help="simulated CAN bus: a socketcand-protocol hub on 127.0.0.1")
-    hub_arguments(h)
-    h.set_defaults(func=cmd_can_hub)
+    for name, module, help_text in _MODULE_COMMANDS:
+        mod = importlib.import_module(f".{module}", __package__)
+        p = sub.add_parser(name, help=help_text)
+        mod.add_arguments(p)
+        p.set_defaults(func=mod.cmd)
     return ap
+
+
+# Commands that live in their own module: each module defines ``add_arguments(parser)`` and ``cmd(args)``.
+_MODULE_COMMANDS = (
+    ("imu", "imu_firmware", "simulated wrist IMU firmware: MAVLink at 100 Hz over a pseudo-terminal"),
+    ("can-hub", "can_hub", "simulated CAN bus: a socketcand-protocol hub on 127.0.0.1"),
+    ("sawyer", "sawyer_firmware", "simulated Sawyer controller on a CAN or signed MAVLink link"),
+    ("hrc", "hrc", "closed-loop collision-avoidance scenarios: worker, camera, runtime, Sawyer"),
+    ("gola", "gola_experiment", "chapter 4's posture experiment: GOLA-HRC on a simulated cohort"),
+)
 
 
 def main(argv: list[str] | None = None) -> int:

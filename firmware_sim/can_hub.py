@@ -221,7 +221,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: until SIGINT/SIGTERM)")
 
 
-def cmd_can_hub(a: argparse.Namespace) -> int:
+def cmd(a: argparse.Namespace) -> int:
     if not 0 <= a.port <= 65535:
         raise ValueError(f"can-hub: --port must be 0..65535, got {a.port}")
     try:
@@ -246,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
                       description="simulated CAN bus: a socketcand-protocol hub on 127.0.0.1")
     add_arguments(p)
     a = p.parse_args(argv)
-    return run(lambda: cmd_can_hub(a), bad_input=(ValueError,))
+    return run(lambda: cmd(a), bad_input=(ValueError,))
 
 
 if __name__ == "__main__":

@@ -311,7 +311,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--linger", type=float, default=1.0, help="keep the line open this long after the data (s)")
 
 
-def cmd_imu(args) -> int:
+def cmd(args) -> int:
     from .wrist import simulate_drive
 
     if not args.pty and not args.port:
@@ -350,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
     p = OneLineParser(prog="python -m firmware_sim imu", description="Simulated wrist IMU firmware (MAVLink).")
     add_arguments(p)
     args = p.parse_args(argv)
-    return run(lambda: cmd_imu(args), bad_input=(ValueError,))
+    return run(lambda: cmd(args), bad_input=(ValueError,))
 
 
 if __name__ == "__main__":
