@@ -26,8 +26,9 @@ def _add_wearable(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("wearable", help="run the wearable distraction loop")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--replay", metavar="FILE.csv", help="a recording t,ax,ay,az (s, m/s^2), processed as fast as possible")
-    src.add_argument("--imu", metavar="serial:PATH[?key=HEX]",
-                     help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line (key: MAVLink 2 signing key)")
+    src.add_argument("--imu", metavar="serial:PATH[?key=HEX] | sim[?minutes=M&seed=S&...]",
+                     help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line (key: MAVLink 2 signing "
+                          "key), or 'sim': the simulated IMU firmware on a pseudo-terminal (development checkouts)")
     p.add_argument("--duration", type=float, metavar="S", help="stop a live source after S seconds")
     p.add_argument("--can-log", metavar="OUT.log|.asc|.blf|.csv", help="write every CAN frame sent (python-can formats)")
     p.add_argument("--alerts", metavar="OUT.jsonl", help="write one JSON object per classifier decision")
@@ -63,7 +64,7 @@ def run_wearable(args: argparse.Namespace) -> int:
         print(cfg.to_toml(), end="")
         return 0
     if not (args.replay or args.imu):
-        raise CliError("wearable: give a source: --replay FILE.csv or --imu serial:PATH")
+        raise CliError("wearable: give a source: --replay FILE.csv, --imu serial:PATH or --imu sim")
     policy = AlertPolicy(min_confidence=cfg.alerts.min_confidence, never_alert=cfg.alerts.never_alert)
     d = cfg.detector
     det_cfg = DetectorConfig(window_frames=d.window_frames, threshold_mps2=d.threshold_mps2,
@@ -87,11 +88,15 @@ def run_wearable(args: argparse.Namespace) -> int:
 
     out = open(args.alerts, "w") if args.alerts else None
     health = {"sensor": "ok", "non_finite": 0, "gaps": 0, "saturated": 0}
+    latencies_ms: list[float] = []
 
     def handle(d):
         if d.alerted:  # 'alerted' means: a DISTRACTION_ALERT frame went out for it
             d.alerted = pub.on_decision(d)
             d.status = "alert" if d.alerted else "alert_not_sent"
+            if d.alerted and d.rx_monotonic_s is not None:
+                d.latency_ms = (time.monotonic() - d.rx_monotonic_s) * 1e3
+                latencies_ms.append(d.latency_ms)
         if out:
             out.write(json.dumps(d.to_json()) + "\n")
         if not args.quiet:
@@ -146,6 +151,12 @@ def run_wearable(args: argparse.Namespace) -> int:
     print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']}, "
           f"heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, reconnects {c['reconnects']}"
           + (f"; logged to {args.can_log}" if args.can_log else ""))
+    if latencies_ms:
+        import numpy as np
+
+        print(f"  alert latency (last capture sample arrived -> frame handed to the bus): median "
+              f"{np.median(latencies_ms):.2f} ms, p99 {np.percentile(latencies_ms, 99):.2f} ms, "
+              f"max {max(latencies_ms):.2f} ms over {len(latencies_ms)} alerts")
     if not args.replay:
         print("  serial link: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in vars(live.stats).items()))
     return 0
@@ -195,7 +206,15 @@ def _status(loop, health: dict, source_stats=None) -> dict:
 
 
 def _open_live_source(spec: str, cfg):
-    """``serial:PATH[?key=HEX]`` -> a MAVLink IMU source on that serial line."""
+    """``serial:PATH[?key=HEX]`` -> a MAVLink IMU source on that serial line;
+    ``sim[?options]`` -> the simulated IMU firmware as a child process on a pseudo-terminal."""
+    if spec == "sim" or spec.startswith("sim?"):
+        from .sim_imu import SimImuSource, SimSourceError
+
+        try:
+            return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s)
+        except SimSourceError as e:
+            raise CliError(str(e)) from None
     kind, _, rest = spec.partition(":")
     if kind != "serial" or not rest:
         raise CliError(f"--imu {spec}: expected serial:PATH[?key=HEX]")
@@ -220,15 +239,14 @@ def _open_live_source(spec: str, cfg):
 def _feed_paced(loop, block) -> None:
     """Feed one sample period at a time on a monotonic clock (no busy waiting)."""
     start = time.monotonic()
-    step = max(1, loop.rate_hz // 10)  # 100 ms chunks
     from .sources import ImuBlock
 
-    for i in range(0, len(block.acc_mps2), step):
-        due = start + i / loop.rate_hz
-        delay = due - time.monotonic()
+    for i in range(len(block.acc_mps2)):
+        delay = start + (i + 1) / loop.rate_hz - time.monotonic()  # sample i is complete one period later
         if delay > 0:
             time.sleep(delay)
-        loop.feed(ImuBlock(block.t0_s + i / loop.rate_hz, block.acc_mps2[i : i + step], block.continuous or i > 0))
+        loop.feed(ImuBlock(block.t0_s + i / loop.rate_hz, block.acc_mps2[i : i + 1], block.continuous or i > 0,
+                           rx_monotonic_s=time.monotonic()))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,7 +1,8 @@
 """Live wrist-IMU source: MAVLink 2 HIGHRES_IMU / SCALED_IMU over a serial line.
 
-``MavlinkImuSource(path).blocks()`` yields :class:`ImuBlock` objects of about 10
-samples (100 ms) and :class:`SourceStatus` events (the sensor went silent / came
+``MavlinkImuSource(path).blocks()`` yields :class:`ImuBlock` objects -- whatever
+arrived in one read of the serial line (usually one sample at 100 Hz, at most
+``block_samples``), stamped with the host arrival time -- and :class:`SourceStatus` events (the sensor went silent / came
 back). It never blocks for longer than the read timeout (50 ms), so a silent
 sensor is reported within ``silence_timeout_s`` + 50 ms, and the "silent" status is
 repeated every read timeout while it lasts (the caller keeps control for its heartbeat).
@@ -110,6 +111,7 @@ class MavlinkImuSource:
         self._pending_continuous = False  # the first block of a stream is not continuous
         self._next_continuous = False
         self._last_rx = time.monotonic()
+        self._rx: float | None = None
         self._silent = False
 
     # -- public --------------------------------------------------------------------------
@@ -135,10 +137,11 @@ class MavlinkImuSource:
                 break
             got = self._read()
             if got:
+                self._rx = time.monotonic()
                 for m in self.mav.parse_buffer(got) or ():
                     self._handle(m, out)
-            elif self._pending:  # nothing arrived for a read timeout: hand over what we have
-                self._flush(out)
+            # hand over at once what this read brought: a capture's last sample waits for nothing
+            self._flush(out)
             now = time.monotonic()
             if now - self._last_rx >= self.silence_timeout_s and not out:
                 # repeated every read timeout while silent, so that the caller keeps control
@@ -234,7 +237,7 @@ class MavlinkImuSource:
         if not self._pending:
             return
         out.append(ImuBlock(self._pending_t0, np.asarray(self._pending, dtype=np.float32),
-                            self._pending_continuous))
+                            self._pending_continuous, rx_monotonic_s=self._rx))
         self.stats.blocks += 1
         self._pending = []
         self._pending_t0 = None

@@ -38,6 +38,9 @@ class ImuBlock:
     """(n, 3) float32, specific force in the sensor frame, m/s^2, 100 Hz."""
     continuous: bool = True
     """False when this block does not follow the previous one without a gap."""
+    rx_monotonic_s: float | None = None
+    """Host ``time.monotonic()`` when the block's last sample arrived (live sources; None for a
+    file). The loop carries it to the decision so alert latency is measured from arrival."""
 
 
 @dataclass

@@ -64,9 +64,16 @@ class Decision:
     probs: dict[str, float]
     compute_us: float
     """Wall time from the completed capture to the decision (preprocess + inference), microseconds."""
+    rx_monotonic_s: float | None = None
+    """Host ``time.monotonic()`` when the capture's last sample arrived (live sources only)."""
+    latency_ms: float | None = None
+    """Set by whoever sends the alert: arrival of the capture's last sample -> frame handed to the bus."""
 
     def to_json(self) -> dict:
         d = asdict(self)
+        del d["rx_monotonic_s"]  # host clock, meaningless outside this process
+        if d["latency_ms"] is not None:
+            d["latency_ms"] = round(d["latency_ms"], 3)
         d["probs"] = {k: round(v, 5) for k, v in self.probs.items()}
         d["confidence"] = round(self.confidence, 5)
         d["compute_us"] = round(self.compute_us, 1)
@@ -101,6 +108,7 @@ class WearableLoop:
         self.stats = LoopStats()
         self._seg_index0 = 0  # detector index of the current continuous stretch ...
         self._seg_t0 = 0.0  # ... and its stream time
+        self._rx: float | None = None  # arrival time of the block being fed
 
     def _time_of(self, index: int) -> float:
         return self._seg_t0 + (index - self._seg_index0) / self.rate_hz
@@ -115,6 +123,7 @@ class WearableLoop:
         acc = np.asarray(block.acc_mps2, dtype=np.float32).reshape(-1, 3)
         if not block.continuous or self.stats.samples == 0:
             self._restart(block.t0_s)
+        self._rx = block.rx_monotonic_s
         self.stats.samples += len(acc)
         bad = ~np.isfinite(acc).all(axis=1)
         if not bad.any():
@@ -152,6 +161,7 @@ class WearableLoop:
             status=status,
             probs={c: float(p) for c, p in zip(self.classes, probs)},
             compute_us=compute_us,
+            rx_monotonic_s=self._rx,
         )
         self.stats.captures += 1
         self.stats.statuses[status] += 1

@@ -125,15 +125,19 @@ class _FaultyWriter:
 class ImuFirmware:
     def __init__(self, recording_or_acc, port_path_or_fd, message: str = "highres",
                  signing_key: bytes | None = None, faults: FaultConfig | None = None,
-                 link_id: int = 0):
+                 link_id: int = 0, speed: float = 1.0):
         acc = getattr(recording_or_acc, "acc_mps2", recording_or_acc)
         acc = np.asarray(acc, dtype=np.float64)
         if acc.ndim != 2 or acc.shape[1] != 3:
             raise ValueError(f"IMU data must be (n, 3) m/s^2, got shape {acc.shape}")
         if message not in ("highres", "scaled"):
             raise ValueError(f"message must be 'highres' or 'scaled', got {message!r}")
+        if not speed > 0:
+            raise ValueError(f"speed must be positive, got {speed}")
         self.acc = acc
         self.message = message
+        self.speed = float(speed)
+        """Time-lapse factor: samples leave every 10 ms / speed but keep their 100 Hz timestamps."""
         self.faults = faults or FaultConfig()
         self.stats = FirmwareStats()
         self._rng = np.random.default_rng(self.faults.seed)
@@ -218,12 +222,12 @@ class ImuFirmware:
     # -- running -------------------------------------------------------------------------
     def run(self, duration_s: float | None = None, linger_s: float = 0.0) -> FirmwareStats:
         """Stream until the data ends (then idle ``linger_s``), ``duration_s`` passes, or stop()."""
-        period = 1.0 / SAMPLE_RATE_HZ
+        period = 1.0 / SAMPLE_RATE_HZ / self.speed
         start = time.monotonic()
         # sample 0 is stamped on the 10 ms grid of the boot clock
         self.t0_boot_s = round((start - self.boot_mono) * SAMPLE_RATE_HZ) / SAMPLE_RATE_HZ
         end = start + duration_s if duration_s is not None else None
-        stop_at = start + self.faults.stop_after_s if self.faults.stop_after_s is not None else None
+        stop_at = start + self.faults.stop_after_s / self.speed if self.faults.stop_after_s is not None else None
         n = len(self.acc)
         k = 0
         while k < n and not self._stop.is_set():
@@ -309,6 +313,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--saturate", type=positive_float, default=None, metavar="G", help="clip every axis to +-G g")
     p.add_argument("--stop-after", type=positive_float, default=None, metavar="S", help="go silent after S seconds")
     p.add_argument("--linger", type=float, default=1.0, help="keep the line open this long after the data (s)")
+    p.add_argument("--csv", default=None, metavar="FILE.csv",
+                   help="stream this recording (t,ax,ay,az at 100 Hz) instead of simulating a drive")
+    p.add_argument("--speed", type=positive_float, default=1.0,
+                   help="time-lapse factor: send N times faster than real time (timestamps stay 100 Hz)")
 
 
 def cmd(args) -> int:
@@ -316,7 +324,12 @@ def cmd(args) -> int:
 
     if not args.pty and not args.port:
         raise ValueError("give --pty or --port PATH")
-    rec = simulate_drive(args.minutes, args.seed)
+    if args.csv:
+        from edge_runtime.sources import read_imu_csv
+
+        rec = np.concatenate([b.acc_mps2 for b in read_imu_csv(args.csv)])  # InputError names the line
+    else:
+        rec = simulate_drive(args.minutes, args.seed)
     faults = FaultConfig(drop_prob=args.drop, drop_burst=max(1, args.drop_burst), corrupt_prob=args.corrupt,
                          nan_prob=args.nan_burst, saturate_g=args.saturate, stop_after_s=args.stop_after,
                          seed=args.seed)
@@ -326,11 +339,13 @@ def cmd(args) -> int:
     else:
         master, path, target = None, args.port, args.port
     try:
-        fw = ImuFirmware(rec, target, message=args.message, signing_key=args.sign_key, faults=faults)
+        fw = ImuFirmware(rec, target, message=args.message, signing_key=args.sign_key, faults=faults,
+                         speed=args.speed)
     except OSError as e:
         raise ValueError(f"cannot open {path!r}: {e.strerror or e}") from None
     print(path, flush=True)
-    print(f"imu: {len(rec.acc_mps2)} samples at 100 Hz as {args.message.upper()}_IMU"
+    n = len(getattr(rec, "acc_mps2", rec))
+    print(f"imu: {n} samples at 100 Hz as {args.message.upper()}_IMU"
           f"{' (signed)' if args.sign_key else ''} on {path}", file=sys.stderr, flush=True)
     try:
         st = fw.run(linger_s=args.linger)

@@ -66,7 +66,7 @@ def index_of(fw, t):
 
 def test_highres_roundtrip_exact_in_order(pty):
     acc = ramp()
-    fw, src, events, _ = stream(acc, pty)
+    fw, src, events, arrival = stream(acc, pty)
     blocks, t, a = samples(events)
     assert src.stats.samples == len(acc) and len(a) == len(acc)
     assert a.dtype == np.float32 and np.array_equal(a, acc)  # exact to float32
@@ -75,7 +75,12 @@ def test_highres_roundtrip_exact_in_order(pty):
     assert t[0] == pytest.approx(fw.t0_boot_s)  # boot-relative, not wall clock
     assert t[0] < 60.0
     assert blocks[0].continuous is False and all(b.continuous for b in blocks[1:])
-    assert max(len(b.acc_mps2) for b in blocks) == 10
+    # each read is handed over at once (a capture's last sample must not wait for a full block),
+    # stamped with its host arrival time, which precedes the moment the caller gets it
+    assert max(len(b.acc_mps2) for b in blocks) <= 10
+    got = [when for e, when in zip(events, arrival) if isinstance(e, ImuBlock)]
+    assert all(b.rx_monotonic_s is not None and b.rx_monotonic_s <= when for b, when in zip(blocks, got))
+    assert all(b2.rx_monotonic_s >= b1.rx_monotonic_s for b1, b2 in zip(blocks, blocks[1:]))
     assert src.stats.crc_errors == src.stats.dropped == src.stats.out_of_order == 0
     assert src.stats.heartbeats >= 1
 
