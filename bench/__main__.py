@@ -1,56 +1,115 @@
-"""python -m bench [--threads N [N ...]] [--json OUT.json] [--n N] [--warmup W] [--assets DIR] [--no-torch]
+"""python -m bench [--threads N ...] [--cpus 0,1] [--quick] [--json OUT.json] [--markdown OUT.md] [--compare OLD.json]
 
-Per-inference ConvLSTM latency at batch 1: torch eager, onnxruntime fp32 and
-int8 (and the edge_runtime Engine around them), measured side by side in one
-run. Prints a table; ``--json`` writes
-``{"machine": {...}, "results": [{"model", "precision", "runtime", "threads",
-"p50_us", "p99_us", "mean_us", "n", ...}], ...}``. See bench/latency.py for the method.
+What the box will do, per shipped model and per loop:
+
+* every entry of the assets' manifest.json (ConvLSTM, lifter, baselines) x runtime
+  (onnxruntime; torch eager for fp32 when torch is installed and can rebuild the
+  model) x threads: a warm-up, then at least 1,000 timed single inferences
+  (batch 1): p50, p99, mean (us), model file size, peak resident memory (each
+  configuration in a child process of its own);
+* loop costs: the wearable loop at 100 Hz in real time (CPU share of one core,
+  deadline misses, peak memory), the detector per sample, the alert latency
+  (last sample of a capture -> alert frame on the CAN bus), the robot cycle at 30 Hz;
+* a per-model profile: int8 against fp32 (file size, memory, latency, ratios).
+
+Prints a table; ``--json`` writes {"machine", "method", "results", "skipped",
+"loops", "profiles"}; ``--markdown`` the README tables; ``--compare OLD.json``
+prints new/old ratios per row and exits 1 if a figure regressed by more than
+``--tolerance`` (or a configuration failed). The machine is shared and noisy: compare runs of one machine only.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
+from edge_runtime.cli import CliError, OneLineParser, positive_float, positive_int, run
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        raise SystemExit(2)
+QUICK = {"n": 100, "warmup": 5, "rounds": 1, "drive_minutes": 2.0, "realtime_s": 1.0, "robot_s": 1.0}
+"""--quick: enough to exercise every path (tests), not to measure."""
+
+
+def _name_list(s: str) -> tuple[str, ...]:
+    return tuple(p.strip() for p in s.split(",") if p.strip())
+
+
+def build_parser() -> OneLineParser:
+    p = OneLineParser(prog="python -m bench", description="Per-inference latency and memory of every shipped "
+                      "model, and the loops' costs, on this machine.")
+    p.add_argument("--threads", type=positive_int, nargs="+", default=[1, 2], help="intra-op threads (default 1 2)")
+    p.add_argument("--cpus", default=None, help="pin to these CPUs, e.g. 0,1 or 0-1 (os.sched_setaffinity)")
+    p.add_argument("--n", type=positive_int, default=2000, help="timed calls per configuration (default 2000)")
+    p.add_argument("--warmup", type=positive_int, default=200, help="untimed calls per configuration and round")
+    p.add_argument("--rounds", type=positive_int, default=2, help="sweeps over all configurations (default 2)")
+    p.add_argument("--quick", action="store_true", help="few iterations and a short drive: for tests, not figures")
+    p.add_argument("--assets", default=None, help="assets directory with manifest.json (default: the shipped one)")
+    p.add_argument("--models", type=_name_list, default=(), help="only these archs or entry names, comma-separated")
+    p.add_argument("--no-torch", action="store_true", help="skip the torch eager rows")
+    p.add_argument("--no-loops", action="store_true", help="skip the loop costs")
+    p.add_argument("--realtime", type=positive_float, default=None, metavar="S",
+                   help="seconds of the real-time wearable and robot loops (default 15 and 10)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the simulated drive and the inputs (default 1)")
+    p.add_argument("--json", default=None, metavar="OUT.json", help="write the report here")
+    p.add_argument("--markdown", default=None, metavar="OUT.md", help="write the README tables here")
+    p.add_argument("--compare", default=None, metavar="OLD.json", help="print new/old ratios against this report")
+    p.add_argument("--tolerance", type=positive_float, default=0.10,
+                   help="--compare: a ratio above 1 + this is a regression (default 0.10)")
+    return p
+
+
+def _load_report(path: str) -> dict:
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise CliError(f"--compare {path}: not a readable JSON report ({type(e).__name__})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("results"), list):
+        raise CliError(f"--compare {path}: field 'results': missing; not a python -m bench report")
+    return data
+
+
+def _write(path: str, text: str) -> None:
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    print(f"wrote {out}")
+
+
+def cmd(a) -> int:
+    from bench.machine import parse_cpus, pin_cpus
+    from bench.report import compare, format_markdown, format_table
+    from bench.sweep import BenchOptions, run_bench
+
+    old = _load_report(a.compare) if a.compare else None  # bad input before minutes of measuring
+    if a.cpus:
+        pin_cpus(parse_cpus(a.cpus))
+    sizes = {"n": a.n, "warmup": a.warmup, "rounds": a.rounds, **(QUICK if a.quick else {})}
+    if a.realtime:
+        sizes.update(realtime_s=a.realtime, robot_s=a.realtime)
+    opts = BenchOptions(assets=a.assets or "", threads=tuple(a.threads), use_torch=not a.no_torch,
+                        models=a.models, loops=not a.no_loops, seed=a.seed,
+                        command="python -m bench " + " ".join(sys.argv[1:]), **sizes)
+    report = run_bench(opts)
+    print(format_table(report))
+    if a.json:
+        _write(a.json, json.dumps(report, indent=2))
+    if a.markdown:
+        _write(a.markdown, format_markdown(report))
+    status = 0
+    if report["failures"]:
+        print(f"{report['failures']} configuration(s) FAILED (see 'skipped')", file=sys.stderr)
+        status = 1
+    if old is not None:
+        lines, regressions = compare(report, old, a.tolerance)
+        print("\n".join(lines))
+        status = status or (1 if regressions else 0)
+    return status
 
 
 def main(argv=None) -> int:
-    p = _Parser(prog="python -m bench", description=__doc__.splitlines()[0])
-    p.add_argument("--threads", type=int, nargs="+", default=[1], help="intra-op threads (one or more; default 1)")
-    p.add_argument("--json", default=None, help="write the results here")
-    p.add_argument("--n", type=int, default=5000, help="timed calls per runner (default 5000)")
-    p.add_argument("--warmup", type=int, default=300, help="untimed calls per runner first (default 300)")
-    p.add_argument("--rounds", type=int, default=10, help="interleaving rounds (default 10)")
-    p.add_argument("--assets", default=None, help="assets directory with manifest.json (default: the shipped one)")
-    p.add_argument("--no-torch", action="store_true", help="skip the torch eager rows")
-    a = p.parse_args(argv)
-    if any(t < 1 for t in a.threads):
-        p.error(f"--threads: must be at least 1, got {a.threads}")
-    if a.n < 1 or a.warmup < 0 or a.rounds < 1:
-        p.error("--n and --rounds must be at least 1, --warmup at least 0")
-
-    from bench.latency import format_table, run
     from edge_runtime.manifest import ModelIntegrityError
 
-    try:
-        report = run(a.threads, n=a.n, warmup=a.warmup, assets=a.assets, use_torch=not a.no_torch,
-                     rounds=a.rounds, log=lambda s: print(s, file=sys.stderr))
-    except (ModelIntegrityError, FileNotFoundError, ValueError) as e:
-        print(f"error: {' '.join(str(e).split())}", file=sys.stderr)
-        return 2
-    print(format_table(report))
-    if a.json:
-        out = Path(a.json)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(report, indent=2))
-        print(f"wrote {out}")
-    return 0
+    args = build_parser().parse_args(argv)
+    return run(lambda: cmd(args), bad_input=(ModelIntegrityError, ValueError))
 
 
 if __name__ == "__main__":

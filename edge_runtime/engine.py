@@ -26,11 +26,11 @@ from typing import Sequence
 import numpy as np
 import onnxruntime as ort
 
-from .manifest import (ManifestError, ModelIntegrityError, load_manifest, manifest_path, read_verified,
-                       select_model)
+from .manifest import CLASSIFIER_ARCHS, ManifestError, ModelIntegrityError, load_manifest, load_verified
 from .preprocess import preprocess
 
-__all__ = ["Engine", "ModelIntegrityError", "ManifestError", "ASSETS_DIR", "session_options"]
+__all__ = ["Engine", "ModelIntegrityError", "ManifestError", "ASSETS_DIR", "session_options", "open_session",
+           "session_from_manifest"]
 
 ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 INPUT_NAME = "imu"
@@ -52,6 +52,34 @@ def session_options(threads: int = 1) -> ort.SessionOptions:
     return so
 
 
+def open_session(model: bytes | str | os.PathLike, threads: int = 1, source: str = "") -> ort.InferenceSession:
+    """An onnxruntime CPU session for a model file or its bytes, with :func:`session_options`.
+
+    An unreadable file or a model onnxruntime refuses raises :class:`ModelIntegrityError`
+    naming ``source`` (default: the path)."""
+    source = source or (str(model) if not isinstance(model, bytes) else "<model bytes>")
+    so = session_options(threads)
+    if not isinstance(model, bytes):
+        try:
+            model = Path(model).read_bytes()
+        except OSError as e:
+            raise ModelIntegrityError(f"{source}: cannot read model file ({e.strerror or e})") from None
+    try:
+        return ort.InferenceSession(model, so, providers=["CPUExecutionProvider"])
+    except Exception as e:  # onnxruntime raises its own exception types
+        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise ModelIntegrityError(f"{source}: onnxruntime cannot load the model ({msg})") from None
+
+
+def session_from_manifest(assets_dir: str | os.PathLike = ASSETS_DIR, name_or_precision: str = "int8",
+                          arch: str | tuple[str, ...] | None = None, threads: int = 1
+                          ) -> tuple[ort.InferenceSession, dict, str]:
+    """(session, manifest entry, model path) for the entry ``name_or_precision`` of ``arch``,
+    loaded from the bytes whose sha256 was checked against the manifest."""
+    entry, data, path = load_verified(assets_dir, name_or_precision, arch=arch)
+    return open_session(data, threads, str(path)), entry, str(path)
+
+
 class Engine:
     """One ONNX classifier on onnxruntime's CPU provider."""
 
@@ -61,17 +89,7 @@ class Engine:
         source = source or (str(model) if not isinstance(model, bytes) else "<model bytes>")
         self.source = source
         self.threads = threads
-        so = session_options(threads)
-        if not isinstance(model, bytes):
-            try:
-                model = Path(model).read_bytes()
-            except OSError as e:
-                raise ModelIntegrityError(f"{source}: cannot read model file ({e.strerror or e})") from None
-        try:
-            self.session = ort.InferenceSession(model, so, providers=["CPUExecutionProvider"])
-        except Exception as e:  # onnxruntime raises its own exception types
-            msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-            raise ModelIntegrityError(f"{source}: onnxruntime cannot load the model ({msg})") from None
+        self.session = open_session(model, threads, source)
         self.metadata: dict[str, str] = dict(self.session.get_modelmeta().custom_metadata_map)
         inputs = self.session.get_inputs()
         outputs = [o.name for o in self.session.get_outputs()]
@@ -104,15 +122,13 @@ class Engine:
 
     @classmethod
     def from_manifest(cls, assets_dir: str | os.PathLike = ASSETS_DIR, name_or_precision: str = "int8",
-                      threads: int = 1) -> "Engine":
-        """The manifest entry named ``name_or_precision`` (or the first of that precision),
-        hash-checked, on onnxruntime with ``threads`` intra-op threads."""
-        manifest = load_manifest(assets_dir)
-        mpath = manifest_path(assets_dir)
-        entry = select_model(manifest, name_or_precision, str(mpath))
-        data = read_verified(mpath.parent, entry)
+                      threads: int = 1, arch: str | tuple[str, ...] | None = CLASSIFIER_ARCHS) -> "Engine":
+        """The manifest entry named ``name_or_precision`` (or the first of that precision)
+        among the ``arch`` entries (default: the classifiers; None: any), hash-checked, on
+        onnxruntime with ``threads`` intra-op threads."""
+        entry, data, path = load_verified(assets_dir, name_or_precision, arch=arch)
         return cls(data, classes=entry["classes"], name=entry["name"], precision=entry["precision"],
-                   threads=threads, entry=entry, source=str(mpath.parent / entry["file"]))
+                   threads=threads, entry=entry, source=str(path))
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, threads: int = 1, classes: Sequence[str] | None = None

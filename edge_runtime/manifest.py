@@ -19,7 +19,9 @@ Schema (``SCHEMA_VERSION`` 1; ``python -m export assets`` writes it)::
           "inputs":  [{"name": "imu", "shape": ["N", 6, 33, 3], "dtype": "float32",
                        "layout": "...", "units": "m/s^2"}],
           "outputs": [{"name": "probs", "shape": ["N", 6], "dtype": "float32"}, ...],
-          "classes": ["Phone", ...],    # model-output order
+          "classes": ["Phone", ...],    # model-output order; [] for a model that is not a
+                                        # classifier (arch "lifter", which adds "receptive_field",
+                                        # "joints" and "camera": see edge_runtime/lifter.py)
           "metrics": {...},             # how well it does, and on what
           "quantization": {...},        # int8 only: method, calibration, int8 operators, candidates
           "provenance": {"command", "seed", "data", "git_commit", "versions": {...}}
@@ -42,6 +44,9 @@ from typing import Any
 SCHEMA_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 PRECISIONS = ("fp32", "int8")
+CLASSIFIER_ARCHS = ("convlstm", "cnn", "lstm", "lda")
+"""Architectures whose entries must list their ``classes``; other models (the pose
+lifter) list ``[]``."""
 _REQUIRED_MODEL_KEYS = ("name", "file", "sha256", "precision", "arch", "parameters", "inputs",
                         "outputs", "classes")
 
@@ -90,9 +95,12 @@ def _check_model(entry: Any, i: int, where: str) -> None:
         raise ManifestError(f"{where}: field 'models[{i}].precision': {entry['precision']!r} "
                             f"not one of {PRECISIONS}")
     classes = entry["classes"]
-    if not (isinstance(classes, list) and classes and all(isinstance(c, str) and c for c in classes)
+    if not (isinstance(classes, list) and all(isinstance(c, str) and c for c in classes)
             and len(set(classes)) == len(classes)):
         raise ManifestError(f"{where}: field 'models[{i}].classes': expected unique non-empty strings")
+    if not classes and entry["arch"] in CLASSIFIER_ARCHS:
+        raise ManifestError(f"{where}: field 'models[{i}].classes': a {entry['arch']} classifier needs its "
+                            "class list")
     for key in ("inputs", "outputs"):
         io = entry[key]
         if not (isinstance(io, list) and io and all(isinstance(t, dict) and "name" in t for t in io)):
@@ -124,9 +132,17 @@ def load_manifest(assets_dir: str | os.PathLike) -> dict:
     return data
 
 
-def select_model(manifest: dict, name_or_precision: str = "int8", where: str = MANIFEST_NAME) -> dict:
-    """The entry named ``name_or_precision``; else the first entry with that precision."""
-    models = manifest["models"]
+def select_model(manifest: dict, name_or_precision: str = "int8", where: str = MANIFEST_NAME,
+                 arch: str | tuple[str, ...] | None = None) -> dict:
+    """The entry named ``name_or_precision``; else the first entry with that precision.
+
+    With ``arch`` (a name or a tuple of names), only entries of that architecture are
+    candidates (a manifest may ship a classifier and the pose lifter side by side)."""
+    archs = (arch,) if isinstance(arch, str) else arch
+    models = [m for m in manifest["models"] if archs is None or m["arch"] in archs]
+    if not models:
+        raise ManifestError(f"{where}: field 'models': no model of arch {arch!r} (the manifest lists "
+                            f"{', '.join(sorted({m['arch'] for m in manifest['models']}))})")
     for m in models:
         if m["name"] == name_or_precision:
             return m
@@ -155,6 +171,15 @@ def read_verified(assets_dir: str | os.PathLike, entry: dict) -> bytes:
         raise ModelIntegrityError(f"{path}: sha256 mismatch (manifest {entry['sha256'][:12]}..., "
                                   f"file {got[:12]}...): refusing to load a model that is not the one shipped")
     return data
+
+
+def load_verified(assets_dir: str | os.PathLike, name_or_precision: str = "int8",
+                  arch: str | tuple[str, ...] | None = None) -> tuple[dict, bytes, Path]:
+    """(manifest entry, hash-checked model bytes, model path) for ``name_or_precision``
+    (a name or a precision), optionally among the entries of one ``arch``."""
+    mpath = manifest_path(assets_dir)
+    entry = select_model(load_manifest(assets_dir), name_or_precision, str(mpath), arch=arch)
+    return entry, read_verified(mpath.parent, entry), mpath.parent / entry["file"]
 
 
 def verify_file(assets_dir: str | os.PathLike, entry: dict) -> None:

@@ -1,10 +1,528 @@
-"""Placeholder: being built this session (see the issue that owns it)."""
-from edge_runtime.cli import CliError
+"""``python -m export lifter``: simulate, train, evaluate, export and ship the pose lifter.
+
+    python -m export lifter --seed S [--channels 256] [--sweep 256,512,1024] [--epochs N]
+                            [--out edge_runtime/assets] [--report reports/lifter] [--work runs/lifter-seed<S>]
+
+1. Simulate the data (:func:`models.pose_data.build_splits`): train subjects x train camera
+   placements; held-out subjects (``test_subjects``) and held-out subjects x held-out
+   placements (``test``).
+2. For the shipped size first, then every other size of ``--sweep``: train
+   (:func:`models.lifter_train.fit`; a checkpoint in the work directory is reused with
+   ``--reuse`` when its settings match), evaluate in torch on both held-out splits.
+3. Export the strided model to ONNX (opset 17; input ``keypoints_2d`` (N, 27, 17, 2),
+   outputs ``pose_3d`` (N, 1, 17, 3) and ``root_3d`` (N, 1, 3)); parity with torch checked.
+4. int8 with onnxruntime.quantization: candidates :data:`CANDIDATES` (dynamic, and static
+   QDQ calibrated on training-subject windows); each is scored on held-out windows and timed
+   per frame on one thread against fp32; the fastest whose MPJPE stays within
+   :data:`MAX_INT8_LOSS_MM` (or :data:`MAX_INT8_LOSS_REL`) of fp32 wins, else the most accurate.
+5. The shipped size's ``lifter.fp32.onnx`` and ``lifter.int8.onnx`` go into ``--out``, and
+   their manifest entries are MERGED into ``manifest.json``: every entry whose arch is not
+   "lifter" (the ConvLSTM) is kept untouched; the lifter entries are replaced.
+6. ``--report DIR/report.json`` and ``report.md`` (the channels table) and
+   ``lifter_errors.png`` are rewritten after every size, so a long sweep reports as it goes.
+
+Reproducible: the same seed and settings give the same data and the same weights (torch
+with a fixed thread count on CPU).
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from edge_runtime.cli import CliError, positive_int
+from edge_runtime.manifest import SCHEMA_VERSION, ManifestError, load_manifest, sha256_file, write_manifest
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_ASSETS = REPO_ROOT / "edge_runtime" / "assets"
+DEFAULT_REPORT = REPO_ROOT / "reports" / "lifter"
+ARCH = "lifter"
+INPUT_NAME, POSE_OUTPUT, ROOT_OUTPUT = "keypoints_2d", "pose_3d", "root_3d"
+OPSET = 17
+PARITY_TOL_M = 1e-4
+MAX_INT8_LOSS_MM = 2.0        # int8 may add this much MPJPE over fp32 ...
+MAX_INT8_LOSS_REL = 0.03      # ... or this fraction of it, whichever is larger
+MAX_INT8_BYTES = 10 * 1024 * 1024
+N_CALIB = 1000
 
 
-def add_arguments(parser) -> None:
-    pass
+class LifterExportError(ValueError):
+    """A lifter export that cannot go ahead (one line)."""
 
 
-def cmd(args) -> int:
-    raise CliError("this command is not built yet")
+def add_arguments(p) -> None:
+    p.add_argument("--seed", type=int, required=True, help="seeds the simulation and the training")
+    p.add_argument("--channels", type=positive_int, default=256, help="the size to ship (default 256)")
+    p.add_argument("--sweep", default=None, help="comma-separated sizes to train and report as well, "
+                                                 "e.g. 256,512,1024")
+    p.add_argument("--epochs", type=positive_int, default=4)
+    p.add_argument("--epochs-by-size", default=None, help="per-size epochs, e.g. 1024=1,512=3")
+    p.add_argument("--frames-per-epoch", type=positive_int, default=None,
+                   help="training windows per epoch (default: every valid training frame)")
+    p.add_argument("--batch-size", type=positive_int, default=512)
+    p.add_argument("--trajectory-channels", type=positive_int, default=256)
+    p.add_argument("--subjects", type=positive_int, default=32, help="training subjects")
+    p.add_argument("--test-subjects", type=positive_int, default=8)
+    p.add_argument("--seconds", type=float, default=90.0, help="seconds of activity per subject")
+    p.add_argument("--cameras", type=positive_int, default=24, help="training camera placements")
+    p.add_argument("--test-cameras", type=positive_int, default=8)
+    p.add_argument("--views", type=positive_int, default=3, help="placements that see each session")
+    p.add_argument("--eval-frames", type=positive_int, default=20000, help="held-out frames scored per split")
+    p.add_argument("--latency-runs", type=positive_int, default=500, help="timed batch-1 calls per model")
+    p.add_argument("--threads", type=positive_int, default=2, help="torch threads for training")
+    p.add_argument("--out", default=None, help="assets directory (default: edge_runtime/assets)")
+    p.add_argument("--report", default=None, help="report directory (default: reports/lifter)")
+    p.add_argument("--work", default=None, help="scratch directory (default: runs/lifter-seed<S>)")
+    p.add_argument("--reuse", action="store_true", help="reuse matching checkpoints in the work directory")
+    p.add_argument("--no-progress", action="store_true")
+
+
+BAD_INPUT = (LifterExportError, ManifestError)
+
+
+def _sizes(a) -> list[int]:
+    sizes = [a.channels]
+    if a.sweep:
+        try:
+            extra = [int(s) for s in a.sweep.split(",") if s.strip()]
+        except ValueError:
+            raise CliError(f"--sweep: expected comma-separated integers, got {a.sweep!r}") from None
+        if any(s < 1 for s in extra):
+            raise CliError(f"--sweep: channel counts must be positive, got {a.sweep!r}")
+        sizes += [s for s in extra if s not in sizes]
+    return sizes
+
+
+def _epochs_by_size(a) -> dict[int, int]:
+    out = {}
+    for part in (a.epochs_by_size or "").split(","):
+        if not part.strip():
+            continue
+        try:
+            c, e = part.split("=")
+            out[int(c)] = int(e)
+        except ValueError:
+            raise CliError(f"--epochs-by-size: expected C=E pairs like 1024=1, got {part!r}") from None
+        if out[int(c)] < 1:
+            raise CliError(f"--epochs-by-size: epochs must be positive, got {part!r}")
+    return out
+
+
+# --------------------------------------------------------------------------- ONNX
+def export_onnx(model, path: str | Path, meta: dict | None = None) -> Path:
+    """The strided model (eval) -> ONNX at ``path``: keypoints_2d (N, 27, 17, 2) -> pose_3d, root_3d."""
+    import io
+    import warnings
+
+    import onnx
+    import torch
+
+    from export.onnx_export import set_metadata
+
+    model = model.eval()
+    rf = model.config.receptive_field
+    x = torch.zeros(2, rf, model.config.joints, 2)
+    buf = io.BytesIO()
+    with warnings.catch_warnings(), torch.no_grad():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(model, (x,), buf, dynamo=False, opset_version=OPSET, do_constant_folding=True,
+                          input_names=[INPUT_NAME], output_names=[POSE_OUTPUT, ROOT_OUTPUT],
+                          dynamic_axes={INPUT_NAME: {0: "N"}, POSE_OUTPUT: {0: "N"}, ROOT_OUTPUT: {0: "N"}})
+    onx = onnx.load_from_string(buf.getvalue())
+    onx.producer_name = "edge-safety-export"
+    onx.doc_string = (f"VideoPose3D-style causal pose lifter, {model.config.channels} channels: {INPUT_NAME} "
+                      f"(N,{rf},17,2) normalised canonical pixels -> {POSE_OUTPUT} (N,1,17,3) root-relative m, "
+                      f"{ROOT_OUTPUT} (N,1,3) m, camera frame, last input frame")
+    set_metadata(onx, {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in (meta or {}).items()})
+    onnx.checker.check_model(onx)
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_bytes(onx.SerializeToString(deterministic=True))
+    return p
+
+
+def onnx_runner(path: str | Path, threads: int = 1):
+    """``runner(windows (N, 27, 17, 2)) -> (pose (N, 1, 17, 3), root (N, 1, 3))`` on onnxruntime."""
+    from export.quantize import make_session
+
+    sess = make_session(path, threads)
+    return lambda x: sess.run([POSE_OUTPUT, ROOT_OUTPUT], {INPUT_NAME: np.ascontiguousarray(x, np.float32)})
+
+
+def check_parity(model, path: str | Path, windows: np.ndarray, tol: float = PARITY_TOL_M) -> dict:
+    """Max |torch - onnxruntime| (metres) of pose and root on ``windows``, and on batch 1."""
+    import torch
+
+    run = onnx_runner(path)
+    with torch.no_grad():
+        tp, tr = (t.numpy() for t in model.eval()(torch.from_numpy(windows)))
+    op, orr = run(windows)
+    op1, or1 = run(windows[:1])
+    d_pose = float(max(np.abs(op - tp).max(), np.abs(op1 - tp[:1]).max()))
+    d_root = float(max(np.abs(orr - tr).max(), np.abs(or1 - tr[:1]).max()))
+    return {"max_abs_pose_m": d_pose, "max_abs_root_m": d_root, "n": int(len(windows)), "tol_m": tol,
+            "ok": bool(max(d_pose, d_root) < tol)}
+
+
+# --------------------------------------------------------------------------- int8
+@dataclass(frozen=True)
+class QuantCandidate:
+    """One way to make the lifter int8."""
+
+    name: str
+    description: str
+    static: bool = True                  #: static QDQ (calibrated) or dynamic
+    per_channel: bool = True             #: per-channel weight scales (static)
+    keep_last_fp32: bool = False         #: leave the two output convolutions (shrink) in fp32
+
+
+CANDIDATES: tuple[QuantCandidate, ...] = (
+    QuantCandidate("qdq", "static QDQ on every op, per-channel int8 weights, uint8 activations (MinMax)"),
+    QuantCandidate("qdq_fp32_out", "static QDQ, per-channel, output convolutions kept fp32", keep_last_fp32=True),
+    QuantCandidate("qdq_pt", "static QDQ on every op, per-tensor weights", per_channel=False),
+    QuantCandidate("dynamic", "dynamic int8 convolutions (ConvInteger), activations quantised per call",
+                   static=False),
+)
+
+
+def _output_convs(model) -> list[str]:
+    """Names of the Conv nodes not followed by a ReLU: the shrink layers (BatchNorm is fused by then)."""
+    relu_inputs = {i for n in model.graph.node if n.op_type == "Relu" for i in n.input}
+    return [n.name for n in model.graph.node if n.op_type == "Conv" and n.output[0] not in relu_inputs]
+
+
+def build_int8(fp32_path: Path, out_path: Path, cand: QuantCandidate, calib: np.ndarray) -> Path:
+    """Quantise ``fp32_path`` as ``cand`` says into ``out_path`` (metadata carried over)."""
+    import tempfile
+    import warnings
+
+    import onnx
+    from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_dynamic, quantize_static
+
+    from export.onnx_export import get_metadata, set_metadata
+    from export.quantize import WindowReader, _preprocess_model, _quiet_root_logger
+
+    with tempfile.TemporaryDirectory() as td:
+        pre = _preprocess_model(fp32_path, Path(td) / "pre.onnx")
+        with warnings.catch_warnings(), _quiet_root_logger():
+            warnings.simplefilter("ignore")
+            if cand.static:
+                exclude = _output_convs(onnx.load(str(pre))) if cand.keep_last_fp32 else None
+                quantize_static(str(pre), str(out_path), WindowReader(calib, 64, INPUT_NAME),
+                                quant_format=QuantFormat.QDQ, per_channel=cand.per_channel,
+                                activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+                                calibrate_method=CalibrationMethod.MinMax, nodes_to_exclude=exclude,
+                                extra_options={"CalibTensorRangeSymmetric": False})
+            else:
+                quantize_dynamic(str(pre), str(out_path), op_types_to_quantize=["Conv"], weight_type=QuantType.QInt8)
+    q = onnx.load(str(out_path))
+    meta = get_metadata(fp32_path)
+    meta.update(precision="int8", quantization=cand.name)
+    set_metadata(q, meta)
+    out_path.write_bytes(q.SerializeToString(deterministic=True))
+    return out_path
+
+
+def latency_us(paths: dict[str, Path], runs: int, rf: int = 27) -> dict[str, dict]:
+    """Per-frame (batch 1) latency on one onnxruntime thread, interleaved: {name: {p50_us, mean_us, p99_us}}."""
+    from export.quantize import make_session, interleaved_latency
+
+    x = np.random.default_rng(0).normal(0, 0.3, (1, rf, 17, 2)).astype(np.float32)
+    sessions = {k: make_session(p, 1) for k, p in paths.items()}
+    runners = {k: (lambda s=s: s.run(None, {INPUT_NAME: x})) for k, s in sessions.items()}
+    t = interleaved_latency(runners, n=runs, rounds=5, warmup=max(20, runs // 10))
+    return {k: {"p50_us": float(np.median(v) / 1e3), "mean_us": float(v.mean() / 1e3),
+                "p99_us": float(np.percentile(v, 99) / 1e3), "n": int(v.size)} for k, v in t.items()}
+
+
+def choose_int8(fp32_mm: float, cands: dict[str, dict]) -> str:
+    """The fastest candidate within the allowed MPJPE loss; else the most accurate."""
+    allowed = fp32_mm + max(MAX_INT8_LOSS_MM, MAX_INT8_LOSS_REL * fp32_mm)
+    ok = [k for k, c in cands.items() if c["mpjpe_mm"] <= allowed]
+    if ok:
+        return min(ok, key=lambda k: cands[k]["latency"]["p50_us"])
+    return min(cands, key=lambda k: cands[k]["mpjpe_mm"])
+
+
+# --------------------------------------------------------------------------- manifest
+def merge_manifest(out: str | Path, entries: list[dict], created_by: str) -> Path:
+    """Write ``entries`` (arch "lifter") into ``out/manifest.json``, keeping every non-lifter entry untouched."""
+    out = Path(out)
+    kept: list[dict] = []
+    try:
+        old = load_manifest(out)
+        kept = [e for e in old["models"] if e.get("arch") != ARCH]
+        created_by = old.get("created_by", created_by) if kept else created_by
+    except ManifestError as e:
+        if (out / "manifest.json").exists():
+            raise LifterExportError(f"refusing to overwrite an unreadable manifest: {e}") from None
+    manifest = {"version": SCHEMA_VERSION, "created_by": created_by, "models": kept + entries}
+    return write_manifest(out, manifest)
+
+
+def _entry(precision: str, file: str, path: Path, row: dict, common: dict, metrics: dict, extra: dict) -> dict:
+    return {"name": f"lifter-{precision}", "file": file, "sha256": sha256_file(path), "precision": precision,
+            "arch": ARCH, "size_bytes": path.stat().st_size, **common, "metrics": metrics, **extra}
+
+
+def manifest_entries(row: dict, fp32: Path, int8: Path, provenance: dict) -> list[dict]:
+    """The two lifter manifest entries (the model contract) for a trained size."""
+    from firmware_sim.camera import CANONICAL
+
+    cam = CANONICAL
+    rf = row["config"]["filter_widths"]
+    rfield = int(np.prod(rf))
+    common = {
+        "model_version": f"{provenance['version']}+lifter.c{row['channels']}.seed{provenance['seed']}",
+        "parameters": row["parameters"],
+        "config": row["config"],
+        "classes": [],
+        "receptive_field": rfield,
+        "joints": "h36m-17",
+        "camera": {"width_px": cam.width_px, "height_px": cam.height_px, "fx_px": cam.fx_px, "fy_px": cam.fy_px,
+                   "cx_px": cam.cx_px, "cy_px": cam.cy_px},
+        "inputs": [{"name": INPUT_NAME, "shape": ["N", rfield, 17, 2], "dtype": "float32",
+                    "layout": f"N,{rfield},17,2: the last {rfield} frames oldest first, H36M-17 joints "
+                              "(edge_runtime.skeleton), x/y",
+                    "units": "canonical-camera pixels normalised as u/w*2-1, v/w*2-h/w (w=1280, h=720)"}],
+        "outputs": [{"name": POSE_OUTPUT, "shape": ["N", 1, 17, 3], "dtype": "float32",
+                     "meaning": "root-relative joints (joint 0 = 0) of the LAST input frame, camera frame "
+                                "(OpenCV axes: x right, y down, z forward)", "units": "m"},
+                    {"name": ROOT_OUTPUT, "shape": ["N", 1, 3], "dtype": "float32",
+                     "meaning": "the pelvis of the LAST input frame in the camera frame; absolute joints = "
+                                "pose_3d + root_3d", "units": "m"}],
+        "provenance": provenance,
+    }
+    fp32_metrics = {"held_out": row["fp32"], "parity_vs_torch": row["parity"],
+                    "latency_1thread_us": row["latency"]["fp32"]}
+    int8_metrics = {"held_out": row["int8"], "mpjpe_delta_vs_fp32_mm":
+                    row["int8"]["test"]["mpjpe_mm"] - row["fp32"]["test"]["mpjpe_mm"],
+                    "latency_1thread_us": row["latency"]["int8"]}
+    return [_entry("fp32", "lifter.fp32.onnx", fp32, row, common, fp32_metrics, {}),
+            _entry("int8", "lifter.int8.onnx", int8, row, common, int8_metrics, {"quantization": row["quantization"]})]
+
+
+# --------------------------------------------------------------------------- one size
+def _slim(m: dict) -> dict:
+    return {k: (round(v, 2) if isinstance(v, float) else v) for k, v in m.items()
+            if not isinstance(v, dict) or k in ("per_joint_mm", "per_activity_mpjpe_mm")}
+
+
+def run_size(channels: int, epochs: int, splits: dict, a, work: Path, log) -> tuple[dict, Path, Path, object]:
+    """Train (or reuse), evaluate, export and quantise one size; returns (row, fp32 path, int8 path, model)."""
+    import torch
+
+    from models.lifter import LifterConfig
+    from models.lifter_train import (TrainConfig, eval_frames, evaluate, fit, fmt_metrics, load_checkpoint,
+                                     save_checkpoint, state_digest)
+
+    d = work / f"c{channels}"
+    d.mkdir(parents=True, exist_ok=True)
+    mcfg = LifterConfig(channels=channels, trajectory_channels=a.trajectory_channels)
+    tcfg = TrainConfig(epochs=epochs, frames_per_epoch=a.frames_per_epoch, batch_size=a.batch_size, seed=a.seed,
+                       threads=a.threads)
+    data_key = splits["train"].meta["config"]
+    ck_path = d / "model.pt"
+    model, history, t_train = None, None, 0.0
+    if a.reuse and ck_path.is_file():
+        m, ck = load_checkpoint(ck_path)
+        if ck.get("config") == mcfg.to_dict() and ck.get("train_config") == tcfg.to_dict() and ck.get("data") == data_key:
+            model, history, t_train = m, ck.get("history"), ck.get("train_seconds", 0.0)
+            log(f"c{channels}: reusing {ck_path}")
+    if model is None:
+        t0 = time.time()
+        model, history = fit(splits["train"], mcfg, tcfg, progress=not a.no_progress, log=lambda s: log(f"c{channels}: {s}"))
+        t_train = time.time() - t0
+        save_checkpoint(ck_path, model, tcfg, data=data_key, history=history, train_seconds=t_train)
+    torch.set_num_threads(a.threads)
+    fp32_torch = {s: evaluate(model, splits[s], a.eval_frames) for s in ("test_subjects", "test")}
+    log(f"c{channels}: torch held-out subjects+cameras: {fmt_metrics(fp32_torch['test'])}")
+    meta = {"arch": ARCH, "channels": str(channels), "receptive_field": str(mcfg.receptive_field),
+            "joints": "h36m-17", "seed": str(a.seed), "precision": "fp32"}
+    fp32_path = export_onnx(model, d / "lifter.fp32.onnx", meta)
+    test = splits["test"]
+    probe = test.windows(eval_frames(test, 256)).astype(np.float32)
+    parity = check_parity(model, fp32_path, probe)
+    if not parity["ok"]:
+        raise LifterExportError(f"{fp32_path}: onnxruntime differs from torch by {max(parity['max_abs_pose_m'], parity['max_abs_root_m']):.2e} m")
+    calib_idx = eval_frames(splits["train"], N_CALIB)
+    calib = splits["train"].windows(calib_idx).astype(np.float32)
+    quick = max(1000, a.eval_frames // 4)
+    fp32_quick = evaluate(model, test, quick, runner=onnx_runner(fp32_path))
+    cands = {}
+    for c in CANDIDATES:
+        p = build_int8(fp32_path, d / f"lifter.int8.{c.name}.onnx", c, calib)
+        cands[c.name] = {"path": p, "description": c.description, "bytes": p.stat().st_size,
+                         "mpjpe_mm": evaluate(model, test, quick, runner=onnx_runner(p))["mpjpe_mm"]}
+    lat = latency_us({"fp32": fp32_path, **{k: v["path"] for k, v in cands.items()}}, a.latency_runs)
+    for k, v in cands.items():
+        v["latency"] = lat[k]
+    best = choose_int8(fp32_quick["mpjpe_mm"], cands)
+    int8_path = d / "lifter.int8.onnx"
+    shutil.copyfile(cands[best]["path"], int8_path)
+    log(f"c{channels}: int8 candidates (MPJPE on {quick} frames, fp32 {fp32_quick['mpjpe_mm']:.1f} mm): " +
+        ", ".join(f"{k} {v['mpjpe_mm']:.1f} mm {v['latency']['p50_us']:.0f} us" for k, v in cands.items()) +
+        f"; fp32 {lat['fp32']['p50_us']:.0f} us -> {best}")
+    runners = {"fp32": onnx_runner(fp32_path), "int8": onnx_runner(int8_path)}
+    res = {prec: {s: evaluate(model, splits[s], a.eval_frames, runner=r) for s in ("test_subjects", "test")}
+           for prec, r in runners.items()}
+    from export.quantize import int8_report
+
+    row = {
+        "channels": channels, "config": mcfg.to_dict(), "parameters": model.parameter_counts(),
+        "epochs": epochs, "train": {"history": history, "seconds": round(t_train, 1), "config": tcfg.to_dict(),
+                                    "weights_sha256_16": state_digest(model)},
+        "torch": {s: _slim(m) for s, m in fp32_torch.items()},
+        "fp32": {s: _slim(m) for s, m in res["fp32"].items()},
+        "int8": {s: _slim(m) for s, m in res["int8"].items()},
+        "parity": parity,
+        "latency": {"fp32": lat["fp32"], "int8": lat[best]},
+        "bytes": {"fp32": fp32_path.stat().st_size, "int8": int8_path.stat().st_size},
+        "quantization": {"method": best, "description": cands[best]["description"],
+                         "calibration": f"{len(calib)} windows of training subjects and cameras (MinMax)",
+                         "rule": f"fastest candidate within max({MAX_INT8_LOSS_MM} mm, {MAX_INT8_LOSS_REL:.0%}) "
+                                 "MPJPE of fp32, else the most accurate",
+                         "candidates": {k: {"mpjpe_mm": round(v["mpjpe_mm"], 2), "bytes": v["bytes"],
+                                            "p50_us": round(v["latency"]["p50_us"], 1),
+                                            "description": v["description"]} for k, v in cands.items()},
+                         "scored_on_frames": quick, **int8_report(int8_path)},
+    }
+    log(f"c{channels}: fp32 {fmt_metrics(res['fp32']['test'])}; int8 MPJPE {res['int8']['test']['mpjpe_mm']:.1f} mm; "
+        f"{lat['fp32']['p50_us']:.0f} / {lat[best]['p50_us']:.0f} us per frame; int8 {row['bytes']['int8'] / 1e6:.2f} MB")
+    return row, fp32_path, int8_path, model
+
+
+# --------------------------------------------------------------------------- report
+def write_report(report_dir: Path, rows: dict[int, dict], shipped: int, info: dict, splits: dict, model) -> None:
+    """report.json, report.md (the channels table) and lifter_errors.png."""
+    report_dir.mkdir(parents=True, exist_ok=True)
+    rep = {**info, "shipped_channels": shipped, "sizes": {str(k): v for k, v in rows.items()}}
+    (report_dir / "report.json").write_text(json.dumps(rep, indent=2, sort_keys=True, default=float))
+    (report_dir / "report.md").write_text(_markdown(rows, shipped, info))
+    if model is not None and shipped in rows:
+        _figure(report_dir / "lifter_errors.png", rows[shipped], splits["test"], model)
+
+
+def _markdown(rows: dict[int, dict], shipped: int, info: dict) -> str:
+    lines = ["# Pose lifter: channels sweep", "",
+             f"Command: `{info['command']}`", "",
+             "Held-out subjects seen from held-out camera placements (split `test`), with the detector noise model "
+             "of firmware_sim/camera.py; errors in mm over the frames the streaming runtime would lift. "
+             "Latency: one frame (batch 1, 27 x 17 x 2) on onnxruntime with 1 thread, median.", "",
+             "| channels | parameters (pose + trajectory) | epochs | MPJPE | P-MPJPE | int8 MPJPE | root error | "
+             "held-out subjects only MPJPE | latency fp32 | latency int8 | int8 size |",
+             "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for c in sorted(rows):
+        r = rows[c]
+        t, t8, ts = r["fp32"]["test"], r["int8"]["test"], r["fp32"]["test_subjects"]
+        mark = " (shipped)" if c == shipped else ""
+        lines.append(f"| {c}{mark} | {r['parameters']['pose']:,} + {r['parameters']['trajectory']:,} | {r['epochs']} | "
+                     f"{t['mpjpe_mm']:.1f} | {t['p_mpjpe_mm']:.1f} | {t8['mpjpe_mm']:.1f} | {t['root_error_mm']:.0f} | "
+                     f"{ts['mpjpe_mm']:.1f} | {r['latency']['fp32']['p50_us']:.0f} us | "
+                     f"{r['latency']['int8']['p50_us']:.0f} us | {r['bytes']['int8'] / 1e6:.2f} MB |")
+    if shipped in rows:
+        r = rows[shipped]
+        lines += ["", f"Shipped: {shipped} channels, int8 method `{r['quantization']['method']}` "
+                      f"({r['quantization']['description']}).", "",
+                  "Per activity (shipped, fp32, mm): " + ", ".join(
+                      f"{k} {v:.1f}" for k, v in r["fp32"]["test"]["per_activity_mpjpe_mm"].items()), "",
+                  "![errors](lifter_errors.png)"]
+    lines += ["", "Data: " + json.dumps(info.get("data", {})), ""]
+    return "\n".join(lines)
+
+
+def _figure(path: Path, row: dict, test, model) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from edge_runtime.skeleton import bones
+    from models.lifter_train import eval_frames, predict
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
+    pj32, pj8 = row["fp32"]["test"]["per_joint_mm"], row["int8"]["test"]["per_joint_mm"]
+    names = list(pj32)
+    x = np.arange(len(names))
+    axes[0].bar(x - 0.2, [pj32[n] for n in names], 0.4, label="fp32")
+    axes[0].bar(x + 0.2, [pj8[n] for n in names], 0.4, label="int8")
+    axes[0].set_xticks(x, names, rotation=70, fontsize=7)
+    axes[0].set_ylabel("MPJPE (mm)")
+    axes[0].set_title(f"{row['channels']} channels: error per joint (held-out)")
+    axes[0].legend()
+    idx = eval_frames(test, 400)
+    pose, _ = predict(model, test, idx)
+    err = np.linalg.norm(pose - test.pose3d[idx], axis=-1).mean(1)
+    k = idx[int(np.argsort(err)[len(err) // 2])]           # a median-error frame
+    pred = pose[int(np.argsort(err)[len(err) // 2])]
+    true = test.pose3d[k]
+    for ax, (i, j), title in ((axes[1], (0, 1), "front (x, -y)"), (axes[2], (2, 1), "side (z, -y)")):
+        for p_, c_ in bones():
+            ax.plot(true[[p_, c_], i], -true[[p_, c_], j], "k-", lw=2, label="true" if (p_, c_) == (0, 1) else None)
+            ax.plot(pred[[p_, c_], i], -pred[[p_, c_], j], "r--", lw=1.5, label="predicted" if (p_, c_) == (0, 1) else None)
+        ax.set_aspect("equal")
+        ax.set_title(f"median-error frame, {title}")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- command
+def _rel(p: Path) -> str:
+    """``p`` relative to the repository when it lies inside it (portable provenance), else absolute."""
+    p = p.resolve()
+    return str(p.relative_to(REPO_ROOT)) if p.is_relative_to(REPO_ROOT) else str(p)
+
+
+def cmd(a) -> int:
+    import sys
+
+    from export.assets import versions
+    from export.onnx_export import git_commit, package_version
+    from models.pose_data import DataConfig, build_splits, summary
+
+    if not np.isfinite(a.seconds) or a.seconds < 2.0:
+        raise CliError(f"--seconds: expected at least 2 s of activity per subject, got {a.seconds}")
+    sizes = _sizes(a)
+    ebs = _epochs_by_size(a)
+    out = Path(a.out) if a.out else DEFAULT_ASSETS
+    report_dir = Path(a.report) if a.report else DEFAULT_REPORT
+    work = Path(a.work) if a.work else REPO_ROOT / "runs" / f"lifter-seed{a.seed}"
+    work.mkdir(parents=True, exist_ok=True)
+    log = print
+    command = "python -m export lifter " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["lifter"] else \
+        f"python -m export lifter --seed {a.seed} --channels {a.channels}"
+    dcfg = DataConfig(train_subjects=a.subjects, test_subjects=a.test_subjects, seconds_per_subject=a.seconds,
+                      train_cameras=a.cameras, test_cameras=a.test_cameras, views=a.views, seed=a.seed)
+    t0 = time.time()
+    splits = build_splits(dcfg, progress=not a.no_progress)
+    info = {"command": command, "data": dcfg.to_dict(), "splits": {k: summary(v) for k, v in splits.items()}}
+    log(f"simulated in {time.time() - t0:.0f} s: " + ", ".join(
+        f"{k} {v['valid_frames']} valid frames" for k, v in info["splits"].items()))
+    provenance = {"command": command, "seed": a.seed, "data": dcfg.to_dict(), "git_commit": git_commit(),
+                  "versions": versions(), "version": package_version()}
+    rows: dict[int, dict] = {}
+    shipped_model = None
+    for c in sizes:
+        row, fp32, int8, model = run_size(c, ebs.get(c, a.epochs), splits, a, work, log)
+        rows[c] = row
+        if c == a.channels:
+            shipped_model = model
+            if row["bytes"]["int8"] > MAX_INT8_BYTES:
+                raise LifterExportError(f"--channels {c}: the int8 lifter is {row['bytes']['int8'] / 1e6:.1f} MB, "
+                                        f"over the {MAX_INT8_BYTES / 2**20:.0f} MB edge budget; ship a smaller size")
+            prov = dict(provenance, checkpoint=_rel(work / f"c{c}" / "model.pt"))
+            out.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(fp32, out / "lifter.fp32.onnx")
+            shutil.copyfile(int8, out / "lifter.int8.onnx")
+            mpath = merge_manifest(out, manifest_entries(row, out / "lifter.fp32.onnx", out / "lifter.int8.onnx", prov),
+                                   f"{command} (edge-safety {package_version()})")
+            log(f"shipped c{c}: {out / 'lifter.fp32.onnx'}, {out / 'lifter.int8.onnx'}, {mpath}")
+        write_report(report_dir, rows, a.channels, info, splits, shipped_model)
+        log(f"report: {report_dir / 'report.md'}")
+    return 0

@@ -73,3 +73,46 @@ def test_never_alert_must_name_model_classes(tmp_path):
     p.write_text('[alerts]\nnever_alert = ["Othr"]\n')
     r = _cli("--config", str(p), "--replay", str(csv))
     assert r.returncode == 2 and "never_alert" in r.stderr and "Othr" in r.stderr
+
+
+def test_every_section_and_key_is_in_the_example_file():
+    example = tomllib.loads(EXAMPLE.read_text())
+    cfg = BoxConfig()
+    from dataclasses import asdict, fields
+
+    regen = "regenerate it: python -m edge_runtime.config > edge_runtime/box.example.toml"
+    for sec in fields(cfg):
+        assert sec.name in example, f"[{sec.name}] missing from box.example.toml; {regen}"
+        assert set(example[sec.name]) == set(asdict(getattr(cfg, sec.name))), f"[{sec.name}]: {regen}"
+    # the robot-side sections are registered, and so are the other modules' when present
+    assert {"robot_link", "camera", "calibration", "tracker", "zones", "robot_loop"} <= set(config.SECTION_TYPES)
+    assert set(config.SECTION_TYPES) | set(config.MISSING_SECTIONS) == {name for name, _ in config.SECTIONS}
+
+
+@pytest.mark.parametrize(
+    "toml, match",
+    [
+        ("[zones]\nR2 = 1\n", r"\[zones\] R2: unknown key"),
+        ("[zones]\nsizing = \"big\"\n", r"\[zones\] sizing: must be eq45 or iso15066"),
+        ("[zones]\nstale_after_s = 2.0\n", r"\[zones\] stale_after_s: must be a number in \(0, 1\]"),
+        ("[robot_loop]\ntask_waypoints_m = [[0.1, 0.2]]\n", r"\[robot_loop\] task_waypoints_m: expected a list of "
+                                                            r"\[number, number, number\] lists"),
+        ("[robot_loop]\ntask_waypoints_m = []\n", r"\[robot_loop\] task_waypoints_m: must be at least one"),
+        ("[calibration]\nmarkers_xz_m = [[0, 1], [1, 1]]\n", r"\[calibration\] markers_xz_m: must be three"),
+        ("[robot_link]\nserial = \"/dev/ttyS0\"\n", r"\[robot_link\] serial: must be empty or serial:PATH"),
+    ],
+)
+def test_robot_sections_are_validated_like_the_rest(tmp_path, toml, match):
+    p = tmp_path / "box.toml"
+    p.write_text(toml)
+    with pytest.raises(ConfigError, match=match):
+        config.load(p)
+
+
+def test_robot_sections_round_trip_through_print_config():
+    cfg = config.from_dict({"robot_loop": {"task_waypoints_m": [[0.3, 0.1, 0.6], [0, 0.1, 0.9]]},
+                            "calibration": {"markers_xz_m": [[0, 1], [2, 1], [0, 3]], "method": "eq2"}})
+    again = config.from_dict(tomllib.loads(cfg.to_toml()))
+    assert again == cfg and again.robot_loop.task_waypoints_m == ((0.3, 0.1, 0.6), (0.0, 0.1, 0.9))
+    assert again.calibration.markers_xz_m[1] == (2.0, 1.0)
+    assert config.override(cfg, "zones", sizing="iso15066").zones.r1_m == pytest.approx(cfg.zones.protective_distance_m)

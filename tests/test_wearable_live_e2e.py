@@ -98,9 +98,12 @@ def test_signed_live_imu_through_a_hub_outage(hub, tmp_path):
     assert rt.returncode == 0, err
     got = _decisions(live)
 
-    # the live path decides exactly what the replay decides (same captures, same classes)
-    key = lambda d: (d["t_trigger_s"], d["label"])  # noqa: E731
-    assert [key(d) for d in got] == [key(d) for d in expected]
+    # the live path decides exactly what the replay decides (same captures, same classes); its
+    # stream time is the firmware's boot clock, which starts 0-2 periods before the recording
+    assert [d["label"] for d in got] == [d["label"] for d in expected]
+    offset = got[0]["t_trigger_s"] - expected[0]["t_trigger_s"]
+    assert 0 <= offset < 0.5
+    assert all(abs(g["t_trigger_s"] - e["t_trigger_s"] - offset) < 0.005 for g, e in zip(got, expected))
     assert "reconnects 0" not in out and "reconnects" in out
     assert "signature failures 0" in out and "crc errors 0" in out  # every signed packet verified
 
@@ -117,6 +120,6 @@ def test_signed_live_imu_through_a_hub_outage(hub, tmp_path):
     heartbeats = [enc.decode(m) for m in ours if m.arbitration_id == 0x3A1]
     alerts = [enc.decode(m) for m in ours if m.arbitration_id == 0x3A0]
     assert len(heartbeats) >= 10
-    late = [d for d in sent if d["t_trigger_s"] > 48 + 10]  # decided well after the outage
+    late = [d for d in sent if d["t_trigger_s"] - offset > 48 + 10]  # decided well after the outage
     assert len(alerts) >= len(late) >= 1
     assert [str(a["Class"]) for a in alerts][-len(late):] == [d["label"] for d in late]

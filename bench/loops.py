@@ -1,0 +1,181 @@
+"""Wearable loop costs: the loop at 100 Hz in real time, the detector per sample, the alert latency.
+
+The wearable measurements run in one child process (``bench.worker``) that
+imports what a box imports for a replay (numpy, onnxruntime, python-can,
+cantools, autosar-e2e and ``edge_runtime``), never firmware_sim or torch, so
+its peak resident memory is the runtime's. The simulated drive is made by the
+parent (:func:`prepare_drive`, firmware_sim) and handed over as a ``.npy`` file.
+
+``wearable_100hz``
+    ``edge_runtime.wearable.WearableLoop`` with the int8 model on 1 thread and an
+    ``AlertPublisher`` (alerts + the 10 Hz WEARABLE_STATUS heartbeat thread) on an
+    in-process python-can ``virtual`` bus, fed one sample at a time at a real
+    100 Hz on absolute deadlines (sleeping in between) for ``realtime_s``
+    seconds. The stretch starts 2.5 s before a detector trigger of the drive so
+    that a capture is classified inside it. CPU share = process CPU time (all
+    threads) / wall time, in % of one core. A deadline miss is a sample whose
+    processing ends after the next sample is due (10 ms).
+``detector``
+    ``edge_runtime.detector.StreamingDetector.push`` of one sample, timed per call
+    over the drive (captures included, classification not).
+``alert_latency``
+    The same loop fed one sample at a time as fast as it goes over the whole
+    drive: from the arrival of the capture's last sample (the block's
+    ``rx_monotonic_s``, stamped as it is handed to ``feed``) to the return of
+    ``AlertPublisher.on_decision`` (the DISTRACTION_ALERT frame handed to the
+    bus), for every alerted decision, as ``python -m edge_runtime wearable``
+    measures its ``latency_ms``; ``decision`` rows measure the same up to
+    the decision handler for every decision, alerted or not. The loop is
+    synchronous, so this is the whole latency of the product on that path.
+The robot cycle at 30 Hz is in :mod:`bench.robot_cycle`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bench.timing import CpuShare, peak_rss_mb, sleep_until, summarize, time_calls
+from edge_runtime.sources import SAMPLE_RATE_HZ
+
+PRE_TRIGGER_S = 2.5
+"""The real-time stretch starts this long before a trigger (the detector window is 2 s)."""
+
+
+@dataclass(frozen=True)
+class WearableConfig:
+    drive_npy: str
+    """(n, 3) float32 m/s^2 at 100 Hz (a simulated drive)."""
+    start_index: int = 0
+    """First sample of the real-time stretch."""
+    realtime_s: float = 15.0
+    """Length of the real-time stretch (s)."""
+    assets: str = ""
+    """Assets directory ('' = the shipped ones)."""
+    model: str = "int8"
+    """Manifest entry: a name or a precision."""
+    threads: int = 1
+    """onnxruntime intra-op threads."""
+
+
+def prepare_drive(minutes: float, seed: int, out_npy: str | Path) -> tuple[Path, int]:
+    """A simulated drive saved as ``out_npy``, and a real-time start index 2.5 s before its
+    first trigger (0 when it has none). Uses firmware_sim (parent process only)."""
+    from edge_runtime.detector import detect_triggers
+    from firmware_sim.wrist import simulate_drive
+
+    acc = np.ascontiguousarray(simulate_drive(minutes, seed=seed).acc_mps2, dtype=np.float32)
+    np.save(out_npy, acc)
+    pre = int(PRE_TRIGGER_S * SAMPLE_RATE_HZ)
+    triggers = [int(t) for t in detect_triggers(acc) if t >= pre]
+    return Path(out_npy), (triggers[0] - pre if triggers else 0)
+
+
+class _Wearable:
+    """WearableLoop + AlertPublisher on a virtual bus, as ``python -m edge_runtime wearable`` wires them."""
+
+    def __init__(self, cfg: WearableConfig):
+        import os
+
+        from edge_runtime.can_link import AlertPublisher, open_bus
+        from edge_runtime.engine import ASSETS_DIR, Engine
+        from edge_runtime.wearable import WearableLoop
+
+        self.engine = Engine.from_manifest(cfg.assets or ASSETS_DIR, cfg.model, threads=cfg.threads)
+        self.pub = AlertPublisher(open_bus("virtual", f"bench-{os.getpid()}"), heartbeat_period_s=0.1)
+        self.loop = WearableLoop(self.engine, on_decision=self._handle)
+        self.t_fed = 0.0
+        self.decision_s: list[float] = []
+        self.alert_s: list[float] = []
+
+    def _since_rx(self, d) -> float:
+        """Seconds since the capture's last sample arrived: the decision's own ``rx_monotonic_s``
+        (as ``python -m edge_runtime wearable`` measures it), else when it was fed."""
+        rx = getattr(d, "rx_monotonic_s", None)
+        return time.monotonic() - (rx if rx is not None else self.t_fed)
+
+    def _handle(self, d) -> None:
+        if d.alerted:
+            d.alerted = self.pub.on_decision(d)
+            if d.alerted:
+                self.alert_s.append(self._since_rx(d))
+        self.decision_s.append(self._since_rx(d))
+
+    def feed_one(self, i: int, acc: np.ndarray) -> None:
+        from edge_runtime.sources import ImuBlock
+
+        self.t_fed = time.monotonic()
+        block = ImuBlock(i / SAMPLE_RATE_HZ, acc[i : i + 1], continuous=i > 0)
+        if hasattr(block, "rx_monotonic_s"):
+            block.rx_monotonic_s = self.t_fed  # the sample "arrives" now
+        self.loop.feed(block)
+
+
+def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float) -> dict:
+    n = min(int(seconds * SAMPLE_RATE_HZ), len(acc) - start)
+    period = 1.0 / SAMPLE_RATE_HZ
+    busy = np.empty(n, np.float64)
+    late = np.empty(n, np.float64)
+    misses = 0
+    captures0 = w.loop.stats.captures
+    w.pub.start()
+    with CpuShare() as cpu:
+        t_start = time.perf_counter()
+        for k in range(n):
+            due = t_start + k * period
+            sleep_until(due)
+            t0 = time.perf_counter()
+            w.feed_one(start + k, acc)
+            t1 = time.perf_counter()
+            busy[k], late[k] = t1 - t0, t0 - due
+            misses += t1 > due + period
+    return {"name": "wearable_100hz", "rate_hz": SAMPLE_RATE_HZ, "seconds": round(cpu.wall_s, 2), "samples": n,
+            "captures": w.loop.stats.captures - captures0, "cpu_share_pct": cpu.pct,
+            "deadline_misses": int(misses), "start_late_p99_us": round(float(np.percentile(late, 99)) * 1e6, 1),
+            **summarize(busy * 1e9), "peak_rss_mb": peak_rss_mb(),
+            "what": "per-sample feed (detector + classify on capture + CAN), real time, int8 1 thread, "
+                    "heartbeat thread running"}
+
+
+def _detector(acc: np.ndarray) -> dict:
+    from edge_runtime.detector import StreamingDetector
+
+    det = StreamingDetector()
+    rows = iter([acc[i : i + 1] for i in range(len(acc))])
+    times = time_calls(lambda: det.push(next(rows)), len(acc), 0)
+    return {"name": "detector", "rate_hz": SAMPLE_RATE_HZ, "samples": len(acc), "triggers": len(det.triggers),
+            **summarize(times), "what": "StreamingDetector.push, one sample per call"}
+
+
+def _latency(w: _Wearable, acc: np.ndarray) -> list[dict]:
+    w.decision_s.clear()
+    w.alert_s.clear()
+    w.loop = type(w.loop)(w.engine, on_decision=w._handle)
+    for i in range(len(acc)):
+        w.feed_one(i, acc)
+    what = "from handing a capture's last sample to the loop to "
+    return [{"name": "alert_latency", **summarize(np.asarray(w.alert_s) * 1e9),
+             "what": what + "the DISTRACTION_ALERT frame handed to the CAN bus (alerted decisions)"},
+            {"name": "decision_latency", **summarize(np.asarray(w.decision_s) * 1e9),
+             "what": what + "the decision handler (every decision)"}]
+
+
+def measure_wearable(cfg: WearableConfig) -> list[dict]:
+    """Run in a child process: the real-time stretch first (its peak RSS is the runtime's), then
+    the detector per sample and the alert latency over the whole drive."""
+    acc = np.load(cfg.drive_npy).astype(np.float32)
+    w = _Wearable(cfg)
+    try:
+        rows = [_realtime(w, acc, cfg.start_index, cfg.realtime_s)]
+        rows.append(_detector(acc))
+        rows += _latency(w, acc)
+    finally:
+        w.pub.close()
+    return rows
+
+
+def not_available(name: str, why: str) -> dict:
+    """A loop row that could not be measured, and why."""
+    return {"name": name, "available": False, "note": why}

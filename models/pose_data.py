@@ -1,0 +1,209 @@
+"""The pose lifter's data: simulated workers seen by simulated cameras (firmware_sim).
+
+Recipe (:func:`build_splits`)
+-----------------------------
+* Subjects: heights ~ N(172, 11) cm (the dissertation's cohort), clipped to 145-200 cm,
+  half "F", half "M"; every segment length is then scaled by N(1, 3 %) on its own, so
+  proportions differ between people too. TRAIN subjects and HELD-OUT subjects are disjoint.
+* Motions: each subject performs a random working session
+  (:func:`firmware_sim.motions.random_activity`: walking at 0.5-2.0 m/s with turns and
+  curves, standing, working at a point, looking down, bending, squatting, turning) around the
+  Sawyer's work cell, at 30 Hz.
+* Cameras: placements as in the dissertation (3-8 m from the cell, 1-3 m high, aimed at it;
+  :func:`firmware_sim.camera.random_placement`), in the canonical 100 deg pinhole camera the
+  lifter serves (a distorted real camera is undistorted into it by the runtime). A pool of
+  TRAIN placements and a disjoint pool of HELD-OUT placements; each session is seen from
+  ``views`` placements of its pool.
+* Inputs: the 2D detector model (:func:`firmware_sim.camera.detect`: noise scaling with
+  distance, jitter, outliers, left/right swaps, missed joints, joints out of the image),
+  then the runtime's policy for missing joints: a missed joint is HELD at its last value;
+  a frame is ``valid`` when every joint was seen within the last ``hold_frames`` (3)
+  frames -- the frames the streaming runtime would lift -- and only valid frames are
+  trained on and scored. Normalised as the model contract says (``u/w*2 - 1``, ``v/w*2 - h/w``).
+* Targets: camera-frame joints (OpenCV axes, metres): ``pose3d`` root-relative (joint 0 = 0)
+  and ``root3d`` the pelvis.
+
+Splits: ``train`` (train subjects x train cameras), ``test_subjects`` (held-out subjects x
+train cameras) and ``test`` (held-out subjects x held-out cameras: both unseen).
+
+Windows (:meth:`PoseSet.windows`): frame i's causal 27-frame window, padded at the start of
+its sequence by repeating the first frame, as the streaming runtime does.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from edge_runtime import skeleton as sk
+from firmware_sim import camera as cam_sim
+from firmware_sim import motions as mo
+from firmware_sim.human import Body
+
+LENGTH_FIELDS = ("upper_arm_m", "forearm_m", "hand_m", "thigh_m", "shank_m", "head_m", "shoulder_width_m",
+                 "hip_width_m", "trunk_m", "neck_m", "crown_m")
+ACTIVITY_NAMES = ("walk", "stand", "work", "look_down", "bend", "squat", "turn")
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """How much to simulate, and how."""
+
+    train_subjects: int = 32                 #: subjects in the training split
+    test_subjects: int = 8                   #: held-out subjects
+    seconds_per_subject: float = 90.0        #: length of each subject's session (s)
+    train_cameras: int = 24                  #: pool of training placements
+    test_cameras: int = 8                    #: pool of held-out placements
+    views: int = 3                           #: placements that see each session
+    rate_hz: float = 30.0                    #: camera frame rate
+    hold_frames: int = 3                     #: the runtime's hold for missed joints (frames)
+    noise_scale: float = 1.0                 #: multiplies the detector's noise and error rates
+    seed: int = 0                            #: everything follows from it
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class PoseSet:
+    """Frames of several sequences, concatenated (F frames)."""
+
+    kp2d: np.ndarray          #: (F, 17, 2) float32 normalised canonical-camera keypoints, missing joints held
+    pose3d: np.ndarray        #: (F, 17, 3) float32 root-relative camera-frame joints (m)
+    root3d: np.ndarray        #: (F, 3) float32 pelvis in the camera frame (m)
+    valid: np.ndarray         #: (F,) bool: the runtime would lift this frame
+    seq_start: np.ndarray     #: (F,) int64 global index of the first frame of the frame's sequence
+    subject: np.ndarray       #: (F,) int16 subject id
+    camera: np.ndarray        #: (F,) int16 camera id
+    activity: np.ndarray      #: (F,) int8 index into ACTIVITY_NAMES
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.kp2d)
+
+    def windows(self, idx: np.ndarray, receptive_field: int = 27) -> np.ndarray:
+        """(len(idx), rf, 17, 2) causal windows ending at the frames ``idx``, start-padded per sequence."""
+        idx = np.asarray(idx)
+        g = idx[:, None] - (receptive_field - 1) + np.arange(receptive_field)[None]
+        g = np.maximum(g, self.seq_start[idx][:, None])
+        return self.kp2d[g]
+
+    def save(self, path: str | Path) -> None:
+        np.savez_compressed(path, **{k: getattr(self, k) for k in _ARRAYS}, meta=np.array(repr(self.meta)))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "PoseSet":
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in _ARRAYS}
+            meta = eval(str(z["meta"]), {"__builtins__": {}})   # our own repr of a dict of plain values
+        return cls(**arrays, meta=meta)
+
+
+_ARRAYS = ("kp2d", "pose3d", "root3d", "valid", "seq_start", "subject", "camera", "activity")
+
+
+def make_subject(rng: np.random.Generator, sex: str) -> Body:
+    """A body of height ~ N(172, 11) cm (clipped 145-200) with every length scaled by N(1, 3 %)."""
+    h = float(np.clip(rng.normal(1.72, 0.11), 1.45, 2.00))
+    body = Body.from_height(h, sex)
+    return dataclasses.replace(body, **{f: getattr(body, f) * float(np.clip(rng.normal(1.0, 0.03), 0.9, 1.1))
+                                        for f in LENGTH_FIELDS})
+
+
+def held_joints(det: np.ndarray, hold_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Detector output (T, 17, 3) -> (pixels (T, 17, 2) with missed joints held at their last value and
+    never-seen joints at their first later value, valid (T,): every joint seen within ``hold_frames``)."""
+    px = det[..., :2].copy()
+    seen = np.isfinite(px).all(-1)
+    T = len(px)
+    idx = np.where(seen, np.arange(T)[:, None], -1)
+    last = np.maximum.accumulate(idx, axis=0)                      # last seen frame per joint
+    age = np.where(last >= 0, np.arange(T)[:, None] - last, T + 1)
+    valid = (age <= hold_frames).all(1)
+    nxt = np.where(seen, np.arange(T)[:, None], T)
+    nxt = np.minimum.accumulate(nxt[::-1], axis=0)[::-1]           # next seen frame (for the start)
+    src = np.where(last >= 0, last, np.minimum(nxt, T - 1))
+    px = px[src, np.arange(17)[None]]
+    px = np.nan_to_num(px, nan=0.0)                                # joints never seen at all (frames invalid)
+    return px, valid
+
+
+def _sequence(body: Body, motion: mo.Motion, camera: cam_sim.Camera, rng: np.random.Generator,
+              noise: cam_sim.DetectorNoise, hold_frames: int) -> dict:
+    det = cam_sim.detect(camera, motion.joints_m, rng, noise)
+    px, valid = held_joints(det, hold_frames)
+    joints_cam = camera.to_camera(motion.joints_m)
+    valid &= joints_cam[:, :, 2].min(1) > 0.3                       # the whole body in front of the camera
+    act = np.array([ACTIVITY_NAMES.index(a) for a in motion.labels], np.int8)
+    return {"kp2d": cam_sim.to_model_input(px), "pose3d": (joints_cam - joints_cam[:, :1]).astype(np.float32),
+            "root3d": joints_cam[:, 0].astype(np.float32), "valid": valid, "activity": act}
+
+
+def simulate(subject_ids, camera_ids, bodies: dict, cameras: dict, cfg: DataConfig, rng: np.random.Generator,
+             progress: bool = False) -> PoseSet:
+    """Each subject's session seen from ``cfg.views`` cameras drawn from ``camera_ids``."""
+    from tqdm import tqdm
+
+    noise = cam_sim.DetectorNoise().scaled(cfg.noise_scale)
+    parts, start = [], 0
+    for s in tqdm(subject_ids, desc="simulate", unit="subject", disable=not progress, leave=False):
+        motion = mo.random_activity(bodies[s], rng, cfg.seconds_per_subject, cfg.rate_hz)
+        views = rng.choice(camera_ids, size=min(cfg.views, len(camera_ids)), replace=False)
+        for c in views:
+            d = _sequence(bodies[s], motion, cameras[int(c)], rng, noise, cfg.hold_frames)
+            n = len(d["kp2d"])
+            d.update(seq_start=np.full(n, start, np.int64), subject=np.full(n, s, np.int16),
+                     camera=np.full(n, c, np.int16))
+            parts.append(d)
+            start += n
+    arrays = {k: np.concatenate([p[k] for p in parts]) for k in _ARRAYS}
+    return PoseSet(**arrays)
+
+
+def build_splits(cfg: DataConfig = DataConfig(), progress: bool = False) -> dict[str, PoseSet]:
+    """{"train", "test_subjects", "test"} as the module docstring describes; deterministic in ``cfg.seed``."""
+    rng = np.random.default_rng(cfg.seed)
+    n_sub = cfg.train_subjects + cfg.test_subjects
+    sexes = ["F" if i % 2 else "M" for i in range(n_sub)]
+    bodies = {i: make_subject(rng, sexes[i]) for i in range(n_sub)}
+    n_cam = cfg.train_cameras + cfg.test_cameras
+    cameras = {i: cam_sim.random_placement(rng, rate_hz=cfg.rate_hz) for i in range(n_cam)}
+    train_s, test_s = list(range(cfg.train_subjects)), list(range(cfg.train_subjects, n_sub))
+    train_c, test_c = list(range(cfg.train_cameras)), list(range(cfg.train_cameras, n_cam))
+    meta = {"config": cfg.to_dict(),
+            "subjects": {i: {"height_m": round(b.height_m, 4), "sex": b.sex} for i, b in bodies.items()},
+            "cameras": {i: [round(float(v), 4) for v in c.position_m] for i, c in cameras.items()},
+            "train_subjects": train_s, "test_subjects": test_s, "train_cameras": train_c, "test_cameras": test_c}
+    out = {"train": simulate(train_s, train_c, bodies, cameras, cfg, rng, progress),
+           "test_subjects": simulate(test_s, train_c, bodies, cameras, cfg, rng, progress),
+           "test": simulate(test_s, test_c, bodies, cameras, cfg, rng, progress)}
+    for name, ps in out.items():
+        ps.meta = dict(meta, split=name)
+    return out
+
+
+def flip(kp2d: np.ndarray, pose3d: np.ndarray, root3d: np.ndarray):
+    """Mirror image augmentation (VideoPose3D's): x -> -x in the normalised image and in the camera frame,
+    left and right joints swapped. Exact for the canonical camera (principal point at the centre)."""
+    perm = np.arange(sk.N_JOINTS)
+    perm[list(sk.JOINTS_LEFT)] = sk.JOINTS_RIGHT
+    perm[list(sk.JOINTS_RIGHT)] = sk.JOINTS_LEFT
+    sign = np.array([-1.0, 1.0], np.float32)
+    k = kp2d[..., perm, :] * sign
+    p = pose3d[..., perm, :] * np.array([-1.0, 1.0, 1.0], np.float32)
+    r = root3d * np.array([-1.0, 1.0, 1.0], np.float32)
+    return k, p, r
+
+
+def summary(ps: PoseSet) -> dict:
+    """Frames, valid frames, subjects, cameras and the activity mix of a split."""
+    acts = {ACTIVITY_NAMES[i]: int((ps.activity[ps.valid] == i).sum()) for i in range(len(ACTIVITY_NAMES))}
+    depth = ps.root3d[ps.valid, 2]
+    return {"frames": len(ps), "valid_frames": int(ps.valid.sum()), "subjects": sorted({int(s) for s in ps.subject}),
+            "cameras": sorted({int(c) for c in ps.camera}), "activities": acts,
+            "root_depth_m": {"median": float(np.median(depth)) if depth.size else math.nan,
+                             "p5": float(np.percentile(depth, 5)) if depth.size else math.nan,
+                             "p95": float(np.percentile(depth, 95)) if depth.size else math.nan}}
