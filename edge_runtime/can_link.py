@@ -52,6 +52,24 @@ def e2e_data_id(message) -> int:
     return int(attr.value) if attr is not None else int(message.frame_id)
 
 
+class E2EProtector:
+    """Send side of E2E Profile 1 for any DBC message: cantools encodes the signals, then
+    the alive counter (one per frame ID, wrapping at COUNTER_MAX) and the CRC go in.
+    Thread-safe: a heartbeat thread and the main loop may send at once."""
+
+    def __init__(self):
+        self._counters: dict[int, int] = {}
+        self._lock = threading.Lock()
+
+    def protect(self, message, signals: dict) -> can.Message:
+        with self._lock:
+            counter = self._counters.get(message.frame_id, 0)
+            self._counters[message.frame_id] = (counter + 1) % (COUNTER_MAX + 1)
+        data = bytearray(message.encode(dict(signals, E2E_CRC=0, AliveCounter=counter), strict=True))
+        p01.e2e_p01_protect(data, e2e_data_id(message), length=len(data), increment_counter=False)
+        return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
+
+
 class AlertEncoder:
     """Encodes decisions and status with cantools from the DBC, then E2E-protects them.
 
@@ -62,18 +80,12 @@ class AlertEncoder:
         self.db = db if db is not None else load_dbc()
         self.alert_msg = self.db.get_message_by_name(ALERT)
         self.status_msg = self.db.get_message_by_name(STATUS)
-        self._counters = {self.alert_msg.frame_id: 0, self.status_msg.frame_id: 0}
+        self._e2e = E2EProtector()
         self._alert_seq = 0
         self._lock = threading.Lock()
 
     def _protect(self, message, signals: dict) -> can.Message:
-        with self._lock:
-            counter = self._counters[message.frame_id]
-            self._counters[message.frame_id] = 0 if counter >= COUNTER_MAX else counter + 1
-        values = dict(signals, E2E_CRC=0, AliveCounter=counter)
-        data = bytearray(message.encode(values, strict=True))
-        p01.e2e_p01_protect(data, e2e_data_id(message), length=len(data), increment_counter=False)
-        return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
+        return self._e2e.protect(message, signals)
 
     def encode_alert(self, decision: Any) -> can.Message:
         """A DISTRACTION_ALERT for a decision (t_trigger_s, t_alert_s, label, confidence, status, compute_us)."""

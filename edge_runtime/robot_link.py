@@ -78,13 +78,12 @@ from pathlib import Path
 from typing import Callable, ClassVar
 
 import can
-import e2e.p01 as p01
 import numpy as np
 import serial
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.quaternion import QuaternionBase
 
-from .can_link import COUNTER_MAX, CanLinkError, E2EChecker, e2e_data_id, load_dbc, open_bus
+from .can_link import CanLinkError, E2EChecker, E2EProtector, load_dbc, open_bus
 from .config import BUS_INTERFACES
 
 DBC_PATH = Path(__file__).resolve().parent / "assets" / "robot_link.dbc"
@@ -290,18 +289,11 @@ class RobotCanCodec:
         self.db = db if db is not None else load_dbc(DBC_PATH)
         self.checker = E2EChecker(db=self.db)
         self._by_name = {m.name: m for m in self.db.messages}
-        self._counters = {m.frame_id: 0 for m in self.db.messages}
-        self._lock = threading.Lock()
+        self._e2e = E2EProtector()
 
     def encode(self, name: str, **signals) -> can.Message:
         """A protected frame: signals by cantools, then alive counter and CRC (Profile 1)."""
-        message = self._by_name[name]
-        with self._lock:
-            counter = self._counters[message.frame_id]
-            self._counters[message.frame_id] = (counter + 1) % (COUNTER_MAX + 1)
-        data = bytearray(message.encode(dict(signals, E2E_CRC=0, AliveCounter=counter), strict=True))
-        p01.e2e_p01_protect(data, e2e_data_id(message), length=len(data), increment_counter=False)
-        return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
+        return self._e2e.protect(self._by_name[name], signals)
 
     def decode(self, msg: can.Message) -> tuple[str, str, dict | None]:
         """(E2E status, message name, signals). Signals is None unless the frame is valid."""

@@ -26,6 +26,7 @@ import threading
 from urllib.parse import parse_qsl
 
 from .mavlink_source import MavlinkImuSource, SourceStatus
+from .robot_link import parse_signing_key
 
 FIRMWARE_OPTIONS = ("minutes", "seed", "csv", "speed", "message", "key", "drop", "drop_burst", "corrupt",
                     "nan_burst", "saturate", "stop_after")
@@ -67,9 +68,9 @@ class SimImuSource(MavlinkImuSource):
         key = None
         if "key" in opts:
             try:
-                key = bytes.fromhex(opts["key"])
-            except ValueError:
-                raise SimSourceError(f"--imu {spec}: key is not hex") from None
+                key = parse_signing_key(opts["key"], f"--imu {spec}: key")
+            except ValueError as e:
+                raise SimSourceError(str(e)) from None
         self.proc = subprocess.Popen(firmware_command(opts), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, bufsize=1)
         path = self._first_line()

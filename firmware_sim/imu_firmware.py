@@ -287,13 +287,12 @@ class ImuFirmware:
 # `python -m firmware_sim imu ...` (the lead registers it with add_imu_parser)
 
 def _hex_key(s: str) -> bytes:
+    from edge_runtime.robot_link import parse_signing_key
+
     try:
-        key = bytes.fromhex(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--sign-key is not hex: {s!r}") from None
-    if len(key) != 32:
-        raise argparse.ArgumentTypeError(f"--sign-key must be 32 bytes (64 hex digits), got {len(key)}")
-    return key
+        return parse_signing_key(s, "--sign-key")
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
