@@ -215,19 +215,12 @@ def _open_live_source(spec: str, cfg):
             return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s)
         except SimSourceError as e:
             raise CliError(str(e)) from None
-    kind, _, rest = spec.partition(":")
-    if kind != "serial" or not rest:
-        raise CliError(f"--imu {spec}: expected serial:PATH[?key=HEX]")
-    path, _, query = rest.partition("?")
-    key = None
-    if query:
-        name, _, value = query.partition("=")
-        try:
-            key = bytes.fromhex(value) if name == "key" else None
-        except ValueError:
-            key = None
-        if key is None or len(key) != 32:
-            raise CliError(f"--imu {spec}: key must be key=<64 hex digits> (a 32-byte MAVLink 2 signing key)")
+    from .serial_line import parse_serial_spec
+
+    try:
+        path, key = parse_serial_spec(spec)
+    except ValueError as e:
+        raise CliError(f"--imu: {e}") from None
     from .mavlink_source import MavlinkImuSource
 
     try:

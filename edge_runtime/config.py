@@ -113,7 +113,8 @@ class CameraSection:
     """The camera and keypoint input of the robot loop."""
 
     device: str = ""
-    """Camera device (e.g. /dev/video0); empty = none configured."""
+    """The robot loop's camera when no input flag is given: an OpenCV device index ("0"), a
+    video file or a stream URL; empty = none configured."""
     rate_hz: float = 30.0
     """Frames per second the camera delivers and the loop expects."""
     keypoint_format: str = "coco"
@@ -249,6 +250,10 @@ _CHECKS: dict[tuple[str, str], tuple[str, Any]] = {
     ("robot_loop", "task_waypoints_m"): ("at least one [x, y, z] waypoint", lambda v: len(v) >= 1),
     ("robot_loop", "waypoint_tolerance_m"): ("a positive number", lambda v: v > 0),
     ("robot_loop", "records"): ("an integer of at least 1", lambda v: v >= 1),
+    ("robot_loop", "retract_min_radius_m"): ("a non-negative number", lambda v: v >= 0),
+    ("robot_loop", "retract_max_turn_deg"): ("a number in [0, 180]", lambda v: 0 <= v <= 180),
+    ("robot_loop", "re_retract_m"): ("a positive number", lambda v: v > 0),
+    ("robot_loop", "retract_max_radius_m"): ("a positive number", lambda v: v > 0),
 }
 
 

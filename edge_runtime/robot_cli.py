@@ -75,7 +75,8 @@ BAD_INPUT = (CalibrationError, JointsInputError, ManifestError)
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     src = parser.add_mutually_exclusive_group()
     src.add_argument("--keypoints", metavar="FILE.jsonl", help="2D keypoints per frame, lifted by the shipped lifter")
-    src.add_argument("--camera", metavar="DEV", help="a camera (device index, file or URL) through --pose-model")
+    src.add_argument("--camera", metavar="DEV",
+                     help="a camera (device index, file or URL) through --pose-model [camera] device")
     src.add_argument("--joints", metavar="FILE.jsonl", help="3D joints per frame (joints_cam_m or joints_robot_m)")
     parser.add_argument("--pose-model", metavar="M.onnx", help="2D pose ONNX model for --camera [camera] pose_model")
     parser.add_argument("--config", metavar="BOX.toml", help="the box configuration (edge_runtime/box.example.toml)")
@@ -499,6 +500,8 @@ def cmd(args) -> int:
         return 0
     if args.calibrate:
         return run_calibrate(args, cfg)
+    if not (args.keypoints or args.camera or args.joints) and cfg.camera.device:
+        args.camera = cfg.camera.device  # the box's own camera ([camera] device)
     if not (args.keypoints or args.camera or args.joints):
         raise CliError("robot: give an input: --keypoints FILE.jsonl, --camera DEV --pose-model M.onnx "
                        "or --joints FILE.jsonl")

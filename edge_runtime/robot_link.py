@@ -84,6 +84,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.quaternion import QuaternionBase
 
 from .can_link import CanLinkError, E2EChecker, E2EProtector, load_dbc, open_bus
+from .serial_line import parse_serial_spec, parse_signing_key  # noqa: F401 - re-exported
 from .config import BUS_INTERFACES
 
 DBC_PATH = Path(__file__).resolve().parent / "assets" / "robot_link.dbc"
@@ -519,30 +520,6 @@ class SignedMAVLink(mavlink2.MAVLink):
         self.signing.stream_timestamps[stream] = timestamp
         self.signing.timestamp = max(self.signing.timestamp, timestamp)
         return True
-
-
-def parse_signing_key(text: str, what: str = "signing key") -> bytes:
-    """A MAVLink 2 signing key from 64 hex digits; ValueError names ``what``."""
-    try:
-        key = bytes.fromhex(text)
-    except ValueError:
-        raise ValueError(f"{what} is not hex: {text!r}") from None
-    if len(key) != 32:
-        raise ValueError(f"{what} must be 32 bytes (64 hex digits), got {len(key)}")
-    return key
-
-
-def parse_serial_spec(spec: str, signing_key: bytes | None = None) -> tuple[str, bytes | None]:
-    """``serial:PATH[?key=HEX]`` (the box configuration's form) -> (path, signing key)."""
-    if not spec.startswith("serial:") or len(spec) == len("serial:"):
-        raise ValueError(f"serial line must be serial:PATH[?key=HEX], got {spec!r}")
-    path, _, query = spec[len("serial:"):].partition("?")
-    for item in filter(None, query.split("&")):
-        name, _, value = item.partition("=")
-        if name != "key":
-            raise ValueError(f"serial line {spec!r}: unknown option {name!r} (only key=HEX)")
-        signing_key = parse_signing_key(value, "serial line key")
-    return path, signing_key
 
 
 def make_mavlink(writer, src_system: int, src_component: int, signing_key: bytes | None, link_id: int) -> SignedMAVLink:

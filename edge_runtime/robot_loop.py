@@ -24,12 +24,13 @@ state      motion                                                 beacon
 =========  =====================================================  ==================
 NORMAL     the task: cycle through ``task_waypoints_m``            green
 LEVEL1     ``stop()``                                              red, 2000 Hz 70 dB
-LEVEL2     ``retract(P_eff + L)`` once per entry (Eq. 6), tool     red, 4000 Hz 80 dB
-           turned toward the base, the target kept 0.3-0.7 m
-           (``retract_min/max_radius_m``) off the base's axis; if
-           the controller reports it unreachable, one retraction
-           straight toward the base, and if that is refused too:
-           ``stop()`` (reason ``retract_unreachable``)
+LEVEL2     ``retract(P_eff + L)`` on entry (Eq. 6; again when it  red, 4000 Hz 80 dB
+           is done and the worker still comes closer), the tool
+           turned toward the base by up to 45 deg, the target
+           kept 0.3-0.7 m (``retract_min/max_radius_m``) off the
+           base's axis; if the controller reports it unreachable,
+           one retraction straight toward the base, and if that
+           is refused too: ``stop()`` (``retract_unreachable``)
 FAULT      ``stop()`` (pose stale / invalid / no pose yet)          yellow
 =========  =====================================================  ==================
 
@@ -93,15 +94,33 @@ class LoopParams:
     retract_min_radius_m: float = 0.3
     """A retraction stops short of this ground distance from the base's axis (m): closer in,
     the Sawyer cannot hold its tool pointed at the base (its IK refuses the target)."""
+    re_retract_m: float = 0.15
+    """In level 2, the arm retracts again (Eq. 6 from where it is) once its retraction is done
+    and the worker has come this much closer (m) since it began."""
+    retract_max_turn_deg: float = 45.0
+    """The tool turns toward the base while retracting (the dissertation's Sec. 3.2.4.4) by
+    at most this much (deg); 180 turns it all the way. A large turn makes the hand swing
+    through joint space: in the simulated Sawyer a full turn swept it 0.3 m toward the
+    worker, which 45 deg avoids."""
     retract_max_radius_m: float = 0.7
     """Retraction targets further than this from the base's axis (ground distance, m) are
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
     records: int = 100_000
     """Frame records kept in memory (the oldest are dropped)."""
 
+    def __post_init__(self):
+        if not 0 <= self.retract_min_radius_m < self.retract_max_radius_m:
+            raise ValueError("retract_max_radius_m: must be above retract_min_radius_m (and both >= 0)")
+
 
 class RobotLinkLike(Protocol):
-    """What the loop uses of ``edge_runtime.robot_link.RobotLink``."""
+    """What the loop uses of ``edge_runtime.robot_link.RobotLink``.
+
+    Optional, used when present: ``state`` (``ee_position_m``, ``yaw_rad``, ``watchdog``;
+    a link without ``result`` may flag ``unreachable`` here), ``link_ok`` and
+    ``last_error``, ``result(seq)`` (the controller's answer to a command whose call
+    returned ``seq``), ``config.heartbeat_period_s`` (the link heartbeats by itself) and
+    ``set_runtime_state(state)``."""
 
     def move_to(self, position_m, pitch_rad: float, yaw_rad: float) -> Any: ...
     def retract(self, position_m, pitch_rad: float, yaw_rad: float) -> Any: ...
@@ -208,12 +227,14 @@ class RobotLoop:
         self._retract: Motion | None = None
         self._retract_seq = None
         self._retract_fallback = False
+        self._retract_distance_m = math.inf
         self._move_seq = None
         self._unreachable = False
         self._last_hb_s = -math.inf
         self._next_retry_s = -math.inf
         self._last_watchdog_fix_s = -math.inf
         self._last_effector: np.ndarray | None = None
+        self._last_yaw: float | None = None
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -233,12 +254,14 @@ class RobotLoop:
         persons = np.empty((0, 17, 3)) if joints_m is None else np.asarray(joints_m, float)
         if persons.ndim == 2:
             persons = persons[None]
-        heads = persons[:, HEAD, :] if persons.size else np.empty((0, 3))
+        shaped = persons.ndim == 3 and persons.shape[1:] == (17, 3)
+        heads = persons[:, HEAD, :] if shaped and len(persons) else np.empty((0, 3))
         if self.calibration is not None and len(heads):
             heads = self.calibration.apply(heads)
-        if not valid or not np.isfinite(heads).all():
+        if not valid or not shaped or not np.isfinite(heads).all():
             self.counters.invalid += 1
-            decision = self.monitor.invalid(t_in, reason if not valid else "non-finite joints")
+            why = reason if not valid else "non-finite joints" if shaped else f"joints of shape {persons.shape}"
+            decision = self.monitor.invalid(t_in, why)
         else:
             keys = list(range(len(heads))) if ids is None else list(ids)
             decision = self.monitor.observe(t_in, dict(zip(keys, heads)), self.effector_m())
@@ -305,6 +328,8 @@ class RobotLoop:
         pos = getattr(state, "ee_position_m", None)
         if pos is not None and np.isfinite(np.asarray(pos, float)).all():
             self._last_effector = np.asarray(pos, float).reshape(3)
+        yaw = getattr(state, "yaw_rad", None)
+        self._last_yaw = float(yaw) if yaw is not None and math.isfinite(yaw) else None
         now = self.clock()
         if getattr(state, "watchdog", False) and self._sent_motion is not None and self._sent_motion.kind == "move" \
                 and now - self._last_watchdog_fix_s >= self.params.link_retry_s:
@@ -354,9 +379,10 @@ class RobotLoop:
             self._retract, self._retract_seq, self._unreachable = None, None, False
             return self._task_motion()
         if state == State.LEVEL2:
-            if self._retract is None:
+            if self._retract is None or self._retract_again(decision):
                 self._retract = self._retract_motion(decision)
                 self._retract_fallback = False
+                self._retract_distance_m = decision.distance_m
             return self._retract
         self._retract, self._retract_seq, self._unreachable = None, None, False
         return STOP
@@ -370,6 +396,20 @@ class RobotLoop:
             self._waypoint = (self._waypoint + 1) % len(p.task_waypoints_m)
             target = p.task_waypoints_m[self._waypoint]
         return Motion("move", _vec3(target), p.task_pitch_rad, p.task_yaw_rad)
+
+    def _retract_again(self, decision) -> bool:
+        """Retract once more when the last retraction is done and the worker has come
+        ``re_retract_m`` closer since it began (he keeps walking at the arm), and there is
+        still room to go (the new target differs from where the hand is)."""
+        r = self._retract
+        if r is None or r.kind != "retract" or self._last_effector is None or decision.head is None:
+            return False
+        done = np.linalg.norm(self._last_effector - r.position_m) <= self.params.waypoint_tolerance_m
+        closer = decision.distance_m < self._retract_distance_m - self.params.re_retract_m
+        if not (done and closer):
+            return False
+        nxt = self._retract_motion(decision)
+        return nxt.kind == "retract" and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
 
     def _retract_motion(self, decision) -> Motion:
         """Eq. 6's step from the effector, kept between ``retract_min_radius_m`` and
@@ -385,9 +425,15 @@ class RobotLoop:
         return self._retract_to(target)
 
     def _retract_to(self, target: np.ndarray) -> Motion:
+        """A retraction to ``target`` with the tool turned toward the base, by at most
+        ``retract_max_turn_deg`` from where it points now."""
         target = np.array(target, float)
         target[1] = max(target[1], self.params.min_height_m)
-        return Motion("retract", _vec3(target), self.params.task_pitch_rad, tool_yaw_toward_base(target))
+        yaw = tool_yaw_toward_base(target)
+        if self._last_yaw is not None:
+            turn = math.radians(self.params.retract_max_turn_deg)
+            yaw = self._last_yaw + max(-turn, min(turn, math.remainder(yaw - self._last_yaw, 2 * math.pi)))
+        return Motion("retract", _vec3(target), self.params.task_pitch_rad, yaw)
 
     def _radial_retract(self) -> Motion:
         """The fallback retraction: straight toward the base's axis (away from anyone in

@@ -26,7 +26,7 @@ import threading
 from urllib.parse import parse_qsl
 
 from .mavlink_source import MavlinkImuSource, SourceStatus
-from .robot_link import parse_signing_key
+from .serial_line import parse_signing_key
 
 FIRMWARE_OPTIONS = ("minutes", "seed", "csv", "speed", "message", "key", "drop", "drop_burst", "corrupt",
                     "nan_burst", "saturate", "stop_after")

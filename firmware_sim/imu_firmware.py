@@ -287,7 +287,7 @@ class ImuFirmware:
 # `python -m firmware_sim imu ...` (the lead registers it with add_imu_parser)
 
 def _hex_key(s: str) -> bytes:
-    from edge_runtime.robot_link import parse_signing_key
+    from edge_runtime.serial_line import parse_signing_key
 
     try:
         return parse_signing_key(s, "--sign-key")
