@@ -198,6 +198,7 @@ PERFECT = DetectorNoise().scaled(0.0)
 _SWAP = np.arange(17)
 _SWAP[list(sk.JOINTS_LEFT)] = sk.JOINTS_RIGHT
 _SWAP[list(sk.JOINTS_RIGHT)] = sk.JOINTS_LEFT
+_COCO_SWAP = np.array([0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15])   # COCO-17 left <-> right
 
 
 def _bursts(rng: np.random.Generator, shape: tuple[int, int], p_start: float, mean_len: int) -> np.ndarray:
@@ -256,8 +257,6 @@ def detect(camera: Camera, joints_m: np.ndarray, rng: np.random.Generator, noise
     score[missed] = 0.0
     return np.concatenate([det, score[..., None]], axis=-1)
 
-
-_COCO_SWAP = np.array([0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15])
 
 
 def to_model_input(keypoints_px: np.ndarray, camera: Camera | None = None) -> np.ndarray:

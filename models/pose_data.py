@@ -32,6 +32,7 @@ its sequence by repeating the first frame, as the streaming runtime does.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -92,13 +93,14 @@ class PoseSet:
         return self.kp2d[g]
 
     def save(self, path: str | Path) -> None:
-        np.savez_compressed(path, **{k: getattr(self, k) for k in _ARRAYS}, meta=np.array(repr(self.meta)))
+        """NPZ with the arrays and ``meta`` as JSON (integer keys become strings)."""
+        np.savez_compressed(path, **{k: getattr(self, k) for k in _ARRAYS}, meta=np.array(json.dumps(self.meta)))
 
     @classmethod
     def load(cls, path: str | Path) -> "PoseSet":
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in _ARRAYS}
-            meta = eval(str(z["meta"]), {"__builtins__": {}})   # our own repr of a dict of plain values
+            meta = json.loads(str(z["meta"]))
         return cls(**arrays, meta=meta)
 
 
@@ -176,6 +178,7 @@ def build_splits(cfg: DataConfig = DataConfig(), progress: bool = False) -> dict
     meta = {"config": cfg.to_dict(),
             "subjects": {i: {"height_m": round(b.height_m, 4), "sex": b.sex} for i, b in bodies.items()},
             "cameras": {i: [round(float(v), 4) for v in c.position_m] for i, c in cameras.items()},
+            "extrinsics": {i: {"R": c.R.tolist(), "t": c.t.tolist()} for i, c in cameras.items()},
             "train_subjects": train_s, "test_subjects": test_s, "train_cameras": train_c, "test_cameras": test_c}
     out = {"train": simulate(train_s, train_c, bodies, cameras, cfg, rng, progress),
            "test_subjects": simulate(test_s, train_c, bodies, cameras, cfg, rng, progress),

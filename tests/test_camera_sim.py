@@ -7,7 +7,7 @@ import pytest
 from edge_runtime import skeleton as sk
 from edge_runtime.keypoints import CameraModel, coco_to_h36m, read_keypoints_jsonl
 from firmware_sim import motions as mo
-from firmware_sim.camera import (CANONICAL, CELL_TARGET_M, F_PX, PERFECT, TYPICAL_WEBCAM_DIST, Camera,
+from firmware_sim.camera import (CELL_TARGET_M, F_PX, PERFECT, TYPICAL_WEBCAM_DIST, Camera,
                                  DetectorNoise, detect, random_placement, resample, to_model_input, write_jsonl)
 from firmware_sim.human import Body, Posture, joints
 
