@@ -119,6 +119,7 @@ _MODULE_COMMANDS = (
     ("sawyer", "sawyer_firmware", "simulated Sawyer controller on a CAN or signed MAVLink link"),
     ("hrc", "hrc", "closed-loop collision-avoidance scenarios: worker, camera, runtime, Sawyer"),
     ("gola", "gola_experiment", "chapter 4's posture experiment: GOLA-HRC on a simulated cohort"),
+    ("head-error", "head_error", "head position error in the robot frame after calibration, through the lifter"),
 )
 
 
