@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test venv clean assets report bench
+.PHONY: demo test venv clean assets report bench bundle
 
 $(STAMP): setup.cfg pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -32,6 +32,10 @@ report: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m bench
+
+## what goes onto a box: runtime wheel (no torch), assets, default config, checksums
+bundle: $(STAMP)
+	$(PY) -m export bundle --out dist/box --measure-install
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache

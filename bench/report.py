@@ -117,7 +117,8 @@ def format_markdown(report: dict) -> str:
     """The README's tables: per-inference latency, then loop costs."""
     m = report["machine"]
     lines = [f"Measured with `{report['method']['command']}` on {m['cpu']} ({m['cores']} cores, CPUs "
-             f"{m['cpus_used']}), python {m['python']}, onnxruntime {m['onnxruntime']}, torch "
+             f"{m['cpus_used']}, load average {m['load_avg_1_5_15']} at the start), python {m['python']}, "
+             f"onnxruntime {m['onnxruntime']}, torch "
              f"{m['torch'] or 'absent'}; batch 1, {report['method']['n']} timed calls per row after "
              f"{report['method']['warmup']} warm-up calls. A shared machine: expect noise.", "",
              "| model | precision | runtime | threads | p50 µs | p99 µs | mean µs | file KiB | peak RSS MiB |",
