@@ -25,6 +25,15 @@ Two fits, both giving ``p_robot = A @ p_cam + b``:
   cameras with keypoint noise; the rigid fit's head error is the lower, hence the
   default. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
   transform).
+* ``"pnp"`` -- the camera pose from the directions of the six points only
+  (``cv2.solvePnP`` with identity intrinsics on ``(x/z, y/z)``, started from the rigid
+  fit): ignores the lifter's depth. Scale 1, so use it with the ground anchoring.
+
+Ground anchoring (``ground_anchor``, :func:`anchor_factor`, :meth:`Calibration.to_robot`):
+the lifter's weak part is the root's depth (from apparent body size). Once the floor is
+known, each lifted skeleton is scaled about the camera centre (every 2D projection is
+kept) so that its lower ankle rests ``ankle_height_m`` above the floor; guarded against
+flat rays and low cameras, the factor clamped. reports/robot/head_error.md measures it.
 
 ``L_y`` is the height of the head joint above the ankle midpoint: the worker's height
 as the skeleton measures it (``worker_height_m``; 0 means: measure it from the
@@ -46,7 +55,7 @@ import numpy as np
 from .skeleton import BASE_HEIGHT_M, HEAD, L_ANKLE, R_ANKLE
 
 FORMAT_VERSION = 1
-METHODS = ("rigid", "eq2")
+METHODS = ("rigid", "eq2", "pnp")
 
 
 class CalibrationError(ValueError):
@@ -69,7 +78,8 @@ class CalibrationParams:
     """Height of the ankle joints above the floor (m; 0.039 of body height). The
     dissertation puts the ankle midpoint on the marker (0); this lifts it to the joint."""
     method: str = "rigid"
-    """"rigid" (SVD similarity over six points, the default) or "eq2" (the dissertation's)."""
+    """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
+    "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1)."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = 10
@@ -80,12 +90,28 @@ class CalibrationParams:
     """Recording segmentation: the ankle midpoint moving slower than this is standing (m/s)."""
     still_min_s: float = 1.0
     """Recording segmentation: a stand at a marker lasts at least this long (s)."""
+    ground_anchor: bool = True
+    """Re-anchor lifted skeletons on the floor (:func:`anchor_factor`): scale each about the
+    camera centre so that its lower ankle is ``ankle_height_m`` above the floor. Fixes most of
+    the lifter's depth error (depth from apparent body size); see reports/robot/head_error.md."""
+    anchor_min_ray_deg: float = 3.0
+    """Anchoring guard: the ray from the camera to the lower ankle must point at least this
+    far below the horizontal (deg), else the floor crossing is too ill-conditioned and the
+    lifter's depth is kept."""
+    anchor_min_camera_height_m: float = 0.5
+    """Anchoring guard: the camera centre must be at least this high above the ankle plane (m)."""
+    anchor_min_scale: float = 0.7
+    """Anchoring clamps its scale factor to [anchor_min_scale, anchor_max_scale]."""
+    anchor_max_scale: float = 1.4
+    """Upper bound of the anchoring's scale factor."""
 
     def __post_init__(self):
         if self.method not in METHODS:
             raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {self.method!r}")
         if len(self.markers_xz_m) != 3 or any(len(m) != 2 for m in self.markers_xz_m):
             raise ValueError("markers_xz_m: must be three [x, z] pairs")
+        if not 0 < self.anchor_min_scale <= 1 <= self.anchor_max_scale:
+            raise ValueError("anchor_min_scale, anchor_max_scale: need 0 < min <= 1 <= max")
 
     @property
     def floor_y_m(self) -> float:
@@ -107,6 +133,44 @@ def head_and_ankles(joints_cam_m) -> tuple[np.ndarray, np.ndarray]:
     return j[..., HEAD, :], 0.5 * (j[..., L_ANKLE, :] + j[..., R_ANKLE, :])
 
 
+# reasons of anchor_factor (None: applied)
+ANCHOR_NO_ANKLE = "no_ankle"
+ANCHOR_CAMERA_LOW = "camera_low"
+ANCHOR_RAY_FLAT = "ray_flat"
+
+
+def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationParams()) -> tuple[float, str | None]:
+    """The floor re-anchoring of one lifted skeleton: ``(k, reason)``.
+
+    ``joints_cam_m`` (17, 3) are camera-frame joints (m) and ``p_robot = A @ p_cam + b`` the
+    calibration, so the camera centre (the camera frame's origin) is at ``b`` in the robot
+    frame. Scaling the skeleton by ``k`` about the camera centre leaves every joint on its
+    viewing ray (every 2D projection is kept) and moves it in depth; ``k`` is chosen so that
+    the lower ankle (lower in the robot frame: the foot on the ground mid-stride) lies
+    ``ankle_height_m`` above the floor, then clamped to ``[anchor_min_scale, anchor_max_scale]``.
+
+    ``k`` is 1 with a reason when the anchoring cannot be trusted: ``no_ankle`` (no finite
+    ankle), ``camera_low`` (camera centre less than ``anchor_min_camera_height_m`` above the
+    ankle plane) or ``ray_flat`` (the ray to the ankle points less than
+    ``anchor_min_ray_deg`` below the horizontal, or up).
+    """
+    j = np.asarray(joints_cam_m, float).reshape(-1, 3)
+    A, b = np.asarray(A, float), np.asarray(b, float)
+    ankles = j[[L_ANKLE, R_ANKLE]]
+    rays = ankles @ A.T                                  # camera centre -> ankle, robot frame
+    ok = np.isfinite(rays).all(axis=1)
+    if not ok.any():
+        return 1.0, ANCHOR_NO_ANKLE
+    ray = rays[ok][np.argmin(rays[ok, 1])]               # the lower ankle
+    drop_m = b[1] - (params.floor_y_m + params.ankle_height_m)
+    if not drop_m >= params.anchor_min_camera_height_m:
+        return 1.0, ANCHOR_CAMERA_LOW
+    if -ray[1] < np.sin(np.radians(params.anchor_min_ray_deg)) * np.linalg.norm(ray):
+        return 1.0, ANCHOR_RAY_FLAT
+    k = drop_m / -ray[1]
+    return float(np.clip(k, params.anchor_min_scale, params.anchor_max_scale)), None
+
+
 @dataclass
 class Calibration:
     """A camera -> robot transform ``p_robot = A @ p_cam + b`` and how it was made."""
@@ -126,6 +190,32 @@ class Calibration:
         """Robot-frame positions of camera-frame points (..., 3)."""
         p = np.asarray(points_cam_m, dtype=float)
         return p @ self.A.T + self.b
+
+    @property
+    def camera_centre_m(self) -> np.ndarray:
+        """The camera centre (the camera frame's origin) in the robot frame (m)."""
+        return self.b.copy()
+
+    def anchor_to_floor(self, joints_cam_m) -> tuple[np.ndarray, bool]:
+        """Robot-frame joints (17, 3) of one camera-frame skeleton re-anchored on the floor
+        (:func:`anchor_factor`: scaled about the camera centre so its lower ankle is
+        ``ankle_height_m`` above the floor), and whether the anchoring applied (False: a
+        guard refused and the lifter's depth was kept, or ``params.ground_anchor`` is off).
+        Non-finite joints stay non-finite."""
+        j = np.asarray(joints_cam_m, float)
+        if not self.params.ground_anchor:
+            return self.apply(j), False
+        k, reason = anchor_factor(j, self.A, self.b, self.params)
+        return self.apply(k * j), reason is None
+
+    def to_robot(self, joints_cam_m) -> np.ndarray:
+        """Robot-frame joints of camera-frame skeletons (17, 3) or (P, 17, 3): each one
+        re-anchored on the floor when ``params.ground_anchor`` is on, else :meth:`apply`."""
+        j = np.asarray(joints_cam_m, float)
+        if not self.params.ground_anchor or j.shape[-2:] != (17, 3):
+            return self.apply(j)
+        flat = j.reshape(-1, 17, 3)
+        return np.stack([self.anchor_to_floor(p)[0] for p in flat]).reshape(j.shape)
 
     @property
     def scale(self) -> float:
@@ -230,6 +320,8 @@ def fit(head_cam_m, ankle_cam_m, params: CalibrationParams = CalibrationParams()
     head_r, ankle_r = targets(params, height)
     if params.method == "eq2":
         A, b = _fit_eq2(heads, ankles, head_r, ankle_r)
+    elif params.method == "pnp":
+        A, b = _fit_pnp(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]))
     else:
         A, b = _fit_similarity(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]), params.scale)
     return Calibration(A, b, params.method, height, heads, ankles, params, tuple(frames))
@@ -241,7 +333,7 @@ def _measured_height(heads, ankles, params: CalibrationParams) -> float:
     known marker spacing to the spacing the lifter saw (else a lifter that sees everything
     15 % too large would also make the worker 15 % too tall and bias the fit)."""
     length = float(np.mean(np.linalg.norm(heads - ankles, axis=1)))
-    if params.method != "rigid" or not params.scale:
+    if params.method == "eq2" or (params.method == "rigid" and not params.scale):
         return length
     mid = 0.5 * (heads + ankles)
     pairs = ((0, 1), (0, 2), (1, 2))
@@ -260,6 +352,28 @@ def _fit_eq2(heads, ankles, head_r, ankle_r) -> tuple[np.ndarray, np.ndarray]:
     # rows: rob_i = A cam_i  ->  rob = cam A^T
     A = np.linalg.solve(cam, rob).T
     return A, ankle_r[0] - A @ ankles[0]
+
+
+def _fit_pnp(src, dst) -> tuple[np.ndarray, np.ndarray]:
+    """The camera pose from the directions of the camera-frame points only (their depths,
+    the lifter's weak part, are not used): ``cv2.solvePnP`` of the robot-frame targets
+    against the normalised image coordinates ``(x/z, y/z)`` (identity intrinsics), started
+    from the similarity fit. Returns the rigid camera -> robot map (scale 1)."""
+    import cv2
+
+    A0, b0 = _fit_similarity(src, dst, True)
+    R0 = (A0 / np.cbrt(np.linalg.det(A0))).T                 # robot -> camera rotation
+    t0 = -R0 @ b0
+    uv = src[:, :2] / src[:, 2:3]
+    if not (src[:, 2] > 0.1).all():
+        raise CalibrationError("a calibration point is not in front of the camera")
+    ok, rvec, tvec = cv2.solvePnP(dst.reshape(-1, 1, 3), uv.reshape(-1, 1, 2), np.eye(3), None,
+                                  cv2.Rodrigues(R0)[0], t0.reshape(3, 1), useExtrinsicGuess=True,
+                                  flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok:
+        raise CalibrationError("solvePnP found no camera pose for the marker points")
+    R = cv2.Rodrigues(rvec)[0]
+    return R.T, -R.T @ tvec.ravel()
 
 
 def _fit_similarity(src, dst, with_scale: bool) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,8 @@ Per camera frame::
 
     2D keypoints -> StreamingLifter -> joints (camera frame)  \\
                           or 3D joints given directly (camera or robot frame)
-    -> calibration (camera -> robot frame) -> head tracker (per worker)
+    -> calibration (camera -> robot frame; each skeleton re-anchored on the floor when
+       the calibration's ground_anchor is on) -> head tracker (per worker)
     -> HazardMonitor (zones, hysteresis, fail-safe) -> RobotLink commands
 
 ``RobotLoop`` never sleeps and never reads the wall clock itself: time comes from the
@@ -190,6 +191,16 @@ def _step_outside_radius(e: np.ndarray, L: np.ndarray, r: float) -> float:
     return min(1.0, first) if first > 0 else 1.0
 
 
+def _robot_heads(calibration, persons: np.ndarray) -> np.ndarray:
+    """Robot-frame heads (P, 3) of camera-frame skeletons (P, 17, 3): through
+    ``calibration.to_robot`` (each skeleton re-anchored on the floor when the calibration's
+    ``ground_anchor`` is on) when it has one, else ``calibration.apply``."""
+    to_robot = getattr(calibration, "to_robot", None)
+    if to_robot is None:
+        return calibration.apply(persons[:, HEAD, :])
+    return to_robot(persons)[:, HEAD, :]
+
+
 def _vec3(v) -> tuple[float, float, float]:
     return tuple(float(x) for x in np.asarray(v, float).reshape(3))
 
@@ -257,7 +268,7 @@ class RobotLoop:
         shaped = persons.ndim == 3 and persons.shape[1:] == (17, 3)
         heads = persons[:, HEAD, :] if shaped and len(persons) else np.empty((0, 3))
         if self.calibration is not None and len(heads):
-            heads = self.calibration.apply(heads)
+            heads = _robot_heads(self.calibration, persons)
         if not valid or not shaped or not np.isfinite(heads).all():
             self.counters.invalid += 1
             why = reason if not valid else "non-finite joints" if shaped else f"joints of shape {persons.shape}"

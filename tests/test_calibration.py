@@ -145,3 +145,22 @@ def test_degenerate_inputs_are_refused():
         from_recording(np.arange(200) / 30, still, marker=np.r_[np.ones(100), 2 * np.ones(100)])
     with pytest.raises(ValueError, match="method"):
         CalibrationParams(method="magic")
+
+
+def test_pnp_ignores_the_lifters_depth_scale():
+    """The pnp fit uses only the points' directions: a lifter that sees everything 25 % too
+    far still gives the camera's pose (scale 1); the floor anchoring then removes the depth
+    error of a worker elsewhere."""
+    rng = np.random.default_rng(3)
+    cam = camera()
+    t, cam_j, label = recording(cam, rng, scale=1.25)
+    pnp = from_recording(t, cam_j, CalibrationParams(method="pnp"), marker=label)
+    assert pnp.scale == pytest.approx(1.0, abs=1e-9)
+    assert np.linalg.norm(pnp.b - cam.position_m) < 0.6
+    angle = np.degrees(np.arccos(np.clip((np.trace(pnp.A @ cam.R) - 1) / 2, -1, 1)))
+    assert angle < 3.0
+    truth = standing((-1.0, 2.5))
+    lifted = cam.to_camera(truth) * 1.25
+    robot, applied = pnp.anchor_to_floor(lifted)
+    assert applied
+    assert np.linalg.norm(robot[HEAD] - truth[HEAD]) < 0.5 * np.linalg.norm(pnp.apply(lifted[HEAD]) - truth[HEAD])
