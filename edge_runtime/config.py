@@ -241,6 +241,8 @@ _CHECKS: dict[tuple[str, str], tuple[str, Any]] = {
     ("calibration", "worker_height_m"): ("0 (measure) or a number in [1, 2.5]", lambda v: v == 0 or 1 <= v <= 2.5),
     ("calibration", "ankle_height_m"): ("a number in [0, 0.2]", lambda v: 0 <= v <= 0.2),
     ("calibration", "min_frames"): ("an integer of at least 1", lambda v: v >= 1),
+    ("calibration", "anchor_min_ray_deg"): ("a number in [0, 45]", lambda v: 0 <= v <= 45),
+    ("calibration", "anchor_min_camera_height_m"): ("a non-negative number", lambda v: v >= 0),
     ("calibration", "min_move_m"): ("a positive number", lambda v: v > 0),
     ("calibration", "still_speed_mps"): ("a positive number", lambda v: v > 0),
     ("calibration", "still_min_s"): ("a positive number", lambda v: v > 0),
