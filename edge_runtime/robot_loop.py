@@ -437,9 +437,13 @@ class RobotLoop:
 
     def _retract_to(self, target: np.ndarray) -> Motion:
         """A retraction to ``target`` with the tool turned toward the base, by at most
-        ``retract_max_turn_deg`` from where it points now."""
+        ``retract_max_turn_deg`` from where it points now. A repeat retraction (the worker
+        keeps coming) keeps the first one's tool yaw: turning again would swing the joints,
+        and with them the hand, through the cell."""
         target = np.array(target, float)
         target[1] = max(target[1], self.params.min_height_m)
+        if self._retract is not None and self._retract.kind == "retract":
+            return Motion("retract", _vec3(target), self.params.task_pitch_rad, self._retract.yaw_rad)
         yaw = tool_yaw_toward_base(target)
         if self._last_yaw is not None:
             turn = math.radians(self.params.retract_max_turn_deg)

@@ -14,6 +14,13 @@ Then the alerts are scored against the simulator's truth (event level), and a PN
 shows the IMU trace with the truth, the triggers and the alerts. ``--replay`` runs
 the same chain on a recording, as fast as it goes, in a few seconds.
 
+Then the robot side, in simulated time: the dissertation's three walks past, across and
+straight at a working Sawyer (chapter 3), seen by one camera at 30 Hz through the
+shipped int8 lifter, with the safety runtime commanding the simulated arm over CAN and
+over signed MAVLink, and the same walks without the runtime for comparison; a table and
+a top-down plot (``hrc.png``). Last, chapter 4 in small: GOLA-HRC finds the work-piece
+position for four simulated workers over the CAN robot link (``gola.png``).
+
 No hardware and no training: only the models shipped in edge_runtime/assets.
 """
 from __future__ import annotations
@@ -185,16 +192,46 @@ def run_live(out: Path, minutes: float, seed: int) -> None:
     _score_and_plot(out, rec.t_s, rec.acc_mps2, [e.to_json() for e in rec.events], alerts)
 
 
+def run_robot(out: Path, seed: int) -> None:
+    """Chapter 3's three walks on both link types, with and without the runtime."""
+    from .hrc import format_table, run_dissertation
+
+    print("\n== robot co-worker: the dissertation's three walks (simulated time) ==", flush=True)
+    for link in ("can", "mavlink"):
+        result = run_dissertation(link, seed)
+        (out / f"hrc_{link}.json").write_text(json.dumps(result, indent=1))
+        print(format_table(result), flush=True)
+    from .hrc import run
+    from .hrc_plots import plot_runs
+
+    summary, results = run("dissertation", "can", seed, keep_results=True)
+    print(f"top-down plot (Fig. 3.8): {plot_runs(results, summary, out / 'hrc.png')}")
+
+
+def run_posture(out: Path, seed: int, workers: int = 4) -> None:
+    """Chapter 4 in small: GOLA-HRC over the CAN robot link."""
+    print("\n== posture: GOLA-HRC over the CAN robot link ==", flush=True)
+    _run([sys.executable, "-m", "firmware_sim", "gola", "--cohort", str(workers), "--seed", str(seed), "--link", "can",
+          "--json", str(out / "gola.json"), "--plot", str(out / "gola.png"), "--quiet"])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m firmware_sim.demo", description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="demo_out", help="directory for the recording, alerts, CAN log and PNG")
     ap.add_argument("--minutes", type=float, default=3.0, help="length of the simulated drive")
     ap.add_argument("--seed", type=int, default=2026, help="seed of the simulated drive (a subject outside the training cohort)")
     ap.add_argument("--replay", action="store_true", help="replay a recording as fast as possible instead of live")
+    ap.add_argument("--part", choices=("all", "wearable", "robot", "posture"), default="all",
+                    help="which product function to show (default: all three)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (run_replay if args.replay else run_live)(out, args.minutes, args.seed)
+    if args.part in ("all", "wearable"):
+        (run_replay if args.replay else run_live)(out, args.minutes, args.seed)
+    if args.part in ("all", "robot"):
+        run_robot(out, seed=0)
+    if args.part in ("all", "posture"):
+        run_posture(out, seed=0)
     return 0
 
 

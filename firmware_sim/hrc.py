@@ -3,6 +3,7 @@
     python -m firmware_sim hrc --scenario NAME|dissertation|random:N --link can|mavlink --seed S
                                --json OUT.json [--plot OUT.png] [--max-speed M] [--camera-hz HZ]
                                [--perception auto|truth|lifter] [--no-runtime] [--with-baseline]
+                               [--retract-time S] [--zone KEY=VALUE ...] [--loop KEY=VALUE ...] [--jobs N]
 
 Runs the robot-side runtime (``edge_runtime.robot_loop.RobotLoop``) against the simulated
 Sawyer on a real link (CAN or signed MAVLink), a simulated worker and a simulated camera,
@@ -24,23 +25,31 @@ The JSON: ``scenarios`` (count), ``collisions`` (scenarios with at least one),
 ``min_separation_m`` (smallest clearance of all), ``stops``, ``retracts``, ``false_alarms``
 (totals), ``reaction_ms`` ``{"median", "p99", "n"}`` (wall clock, keypoints handed to the
 runtime -> command written on the link), ``command_delay_s`` (simulated time from the true
-head entering a zone to the runtime's command), the settings, and ``details``: one object per
-scenario. Python callers: :func:`run`, :func:`run_dissertation`, :func:`format_table`.
+head entering a zone to the runtime's command), ``head_error_m`` (``{"median", "p95"}``: the head
+the runtime was given against the true head, robot frame), ``runtime_cpu_share``, the settings
+(with every ZoneParams and LoopParams value used), and ``details``: one object per scenario.
+
+The runtime's configuration is the product's defaults except ``HRC_ZONES`` (T_retract = 2 s,
+see below); ``--zone``/``--loop`` override single fields to measure other settings.
+Python callers: :func:`run`, :func:`run_dissertation` (what ``make demo`` shows) and
+:func:`format_table`.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+from dataclasses import asdict, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from edge_runtime.cli import CliError, positive_float, positive_int
 from edge_runtime.hazard import ZoneParams
+from edge_runtime.robot_loop import LoopParams
 
-from .hrc_world import (DISSERTATION, RunResult, WorldParams, dissertation_scenarios, lifter_available,
-                        random_scenarios, run_scenario)
+from .hrc_world import (DISSERTATION, RunResult, WorldParams, dissertation_scenarios,
+                        lifter_available, percentiles, random_scenarios, run_scenario)
 
 LINKS = ("can", "mavlink")
 PERCEPTIONS = ("auto", "truth", "lifter")
@@ -50,7 +59,7 @@ HRC_ZONES = ZoneParams(retract_time_s=2.0)
 """The runtime's zones in these runs. The dissertation's T_retract = 1 s gives R2 = 1.0 m, but the
 simulated Sawyer needs about 2 s for a retraction that also turns the tool toward the base (the
 wrist turns half a revolution; measured from the extended posture: half way after 1.5 s, done
-after 1.9-2.6 s), so Eq. 4 with the measured T_retract = 2 s: R2 = 1.4 x (2 - 0.5) + 0.3 = 2.4 m,
+after 1.9-2.7 s), so Eq. 4 with the measured T_retract = 2 s: R2 = 1.4 x (2 - 0.5) + 0.3 = 2.4 m,
 R1 = 4.4 m. Everything else is the dissertation's."""
 
 
@@ -86,8 +95,27 @@ def resolve_perception(perception: str) -> str:
 
 
 def _run_one(job) -> RunResult:
-    sc, link, runtime, perception, world, zones = job
-    return run_scenario(sc, link, runtime, perception, world, zones)
+    sc, link, runtime, perception, world, zones, loop_params = job
+    return run_scenario(sc, link, runtime, perception, world, zones, loop_params)
+
+
+def overrides(base, items: list[str], flag: str):
+    """``base`` (a frozen config dataclass) with ``KEY=VALUE`` overrides of its number fields."""
+    kinds = {f.name: type(getattr(base, f.name)) for f in fields(base)}
+    changes = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        if not sep or key not in kinds or kinds[key] not in (int, float):
+            numeric = ", ".join(k for k, t in kinds.items() if t in (int, float))
+            raise CliError(f"{flag} {item!r}: expected KEY=NUMBER with KEY one of {numeric}")
+        try:
+            changes[key] = kinds[key](value)
+        except ValueError:
+            raise CliError(f"{flag} {item!r}: {value!r} is not a {kinds[key].__name__}") from None
+    try:
+        return replace(base, **changes)
+    except ValueError as e:
+        raise CliError(f"{flag}: {e}") from None
 
 
 def _map(jobs: list, n_jobs: int, progress: bool):
@@ -112,6 +140,7 @@ def _stats(values) -> dict:
 
 def summarize(results: list[RunResult], settings: dict) -> dict:
     """The contract JSON from per-scenario results."""
+    ran = [r.summary for r in results if "not_run" not in r.summary]
     det = [r.summary for r in results]
     reaction = [1000.0 * s for r in results for s in r.reaction_s]
     states: dict[str, int] = {}
@@ -121,13 +150,15 @@ def summarize(results: list[RunResult], settings: dict) -> dict:
     for kind in sorted({d["kind"] for d in det}):
         sub = [d for d in det if d["kind"] == kind]
         by_kind[kind] = {"scenarios": len(sub), "collisions": sum(d["collision"] for d in sub),
-                         "min_separation_m": min(d["min_separation_m"] for d in sub)}
+                         "min_separation_m": min((d["min_separation_m"] for d in sub if d["min_separation_m"]
+                                                  is not None), default=None)}
     return {
         **settings,
         "scenarios": len(det),
         "collisions": sum(d["collision"] for d in det),
         "collided": [d["name"] for d in det if d["collision"]],
-        "min_separation_m": min((d["min_separation_m"] for d in det), default=None),
+        "not_run": {d["name"]: d["not_run"] for d in det if "not_run" in d},
+        "min_separation_m": min((d["min_separation_m"] for d in ran), default=None),
         "stops": sum(d["stops"] for d in det),
         "retracts": sum(d["retracts"] for d in det),
         "unreachable_retracts": sum(d["unreachable"] for d in det),
@@ -139,6 +170,7 @@ def summarize(results: list[RunResult], settings: dict) -> dict:
         "by_kind": by_kind,
         "invalid_frames": sum(d["invalid"] for d in det),
         "runtime_cpu_share": _stats([d.get("runtime_cpu_share") for d in det]),
+        "head_error_m": percentiles([e for r in results for e in r.head_error_m], 1.0, (50, 95)),
         "frames": sum(d["frames"] for d in det),
         "details": det,
     }
@@ -146,7 +178,7 @@ def summarize(results: list[RunResult], settings: dict) -> dict:
 
 def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtime: bool = True,
         perception: str = "auto", camera_hz: float = 30.0, max_speed_mps: float = 2.0,
-        latency_ms: float | None = None, retract: str = "eq6", zones: ZoneParams = HRC_ZONES,
+        latency_ms: float | None = None, zones: ZoneParams = HRC_ZONES, loop_params: LoopParams | None = None,
         jobs: int = 1, progress: bool = False, keep_results: bool = False):
     """Run scenarios and return the contract JSON (and the per-scenario results with
     ``keep_results``, for plots)."""
@@ -156,17 +188,18 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
         raise CliError(f"--max-speed {max_speed_mps:g}: walking speeds of {SPEED_LIMITS_MPS[0]}-"
                        f"{SPEED_LIMITS_MPS[1]} m/s only")
     percept = resolve_perception(perception) if runtime else "none"
-    world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0,
-                        retract=retract)
+    world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0)
     scs = scenarios_for(scenario, seed, max_speed_mps)
-    results = _map([(sc, link, runtime, percept, world, zones) for sc in scs], jobs, progress)
+    results = _map([(sc, link, runtime, percept, world, zones, loop_params) for sc in scs], jobs, progress)
     settings = {
         "scenario": scenario, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
         "camera_hz": camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1), "max_speed_mps": max_speed_mps,
-        "retract": retract, "collision_m": world.collision_m,
+        "collision_m": world.collision_m,
         "zones": {"r1_m": round(zones.r1_m, 3), "r2_m": round(zones.r2_m, 3), "sizing": zones.sizing,
                   "retract_time_s": zones.retract_time_s, "predict_s": zones.predict_s,
                   "worker_speed_mps": zones.worker_speed_mps},
+        "zone_params": asdict(zones), "loop_params": {k: v for k, v in asdict(loop_params or LoopParams()).items()
+                                                       if k != "task_waypoints_m"},
     }
     out = summarize(results, settings)
     return (out, results) if keep_results else out
@@ -190,14 +223,17 @@ def format_table(result: dict) -> str:
     lines = [f"hrc: {result['link']} link, camera {result['camera_hz']:g} Hz, perception {result['perception']}, "
              f"R1 {result['zones']['r1_m']:.1f} m, R2 {result['zones']['r2_m']:.1f} m", head, "-" * len(head)]
     for d in result["details"]:
+        sep = "not run" if d["min_separation_m"] is None else f"{d['min_separation_m']:.3f}"
         row = (f"{d['name']:<14} {d['speed_mps']:>5.2f} {d['max_state']:<9} {d['stops']:>5} {d['retracts']:>4} "
-               f"{d['false_alarms']:>5} {d['min_separation_m']:>9.3f} {'YES' if d['collision'] else 'no':>9}")
+               f"{d['false_alarms']:>5} {sep:>9} {'YES' if d['collision'] else 'no':>9}")
         b = base.get(d["name"])
         if b:
             row += f" | {b['min_separation_m']:>21.3f} {'YES' if b['collision'] else 'no':>9}"
         lines.append(row)
     r = result["reaction_ms"]
     react = "n/a" if r["median"] is None else f"median {r['median']:.3f} ms, p99 {r['p99']:.3f} ms"
+    for name, why in result.get("not_run", {}).items():
+        lines.append(f"{name}: {why}")
     lines.append(f"collisions {result['collisions']}/{result['scenarios']}"
                  + (f" (without the runtime {result['baseline']['collisions']}/{result['scenarios']})" if base else "")
                  + f"; reaction (keypoints in -> command on the link) {react}")
@@ -231,8 +267,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "auto: lifter when the manifest has one (default)")
     p.add_argument("--no-runtime", action="store_true", help="baseline: the arm never sees the worker")
     p.add_argument("--with-baseline", action="store_true", help="also run the baseline and add it to the JSON")
-    p.add_argument("--retract", choices=("eq6", "toward_base"), default="eq6",
-                   help="eq6: the product; toward_base: an EXPERIMENT (fold the arm in; see hrc_world)")
+    p.add_argument("--retract-time", type=positive_float, default=HRC_ZONES.retract_time_s, metavar="S",
+                   help=f"T_retract of Eq. 4 (s; default {HRC_ZONES.retract_time_s:g}, the simulated Sawyer's; "
+                        "the dissertation's 1.0 gives R2 = 1 m, R1 = 3 m)")
+    p.add_argument("--zone", action="append", metavar="KEY=VALUE",
+                   help="override a ZoneParams number field of the runtime (repeatable), e.g. --zone predict_s=0.7")
+    p.add_argument("--loop", action="append", metavar="KEY=VALUE",
+                   help="override a LoopParams number field of the runtime (repeatable), e.g. --loop re_retract_m=100")
     p.add_argument("--jobs", type=positive_int, default=1, help="worker processes (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -249,8 +290,11 @@ def cmd(args) -> int:
     parse_scenario(args.scenario)
     _check_writable(args.json, "--json")
     _check_writable(args.plot, "--plot")
+    zones = overrides(replace(HRC_ZONES, retract_time_s=args.retract_time), args.zone, "--zone")
+    loop_params = overrides(LoopParams(), args.loop, "--loop")
     common = dict(link=args.link, seed=args.seed, camera_hz=args.camera_hz, max_speed_mps=args.max_speed,
-                  latency_ms=args.latency_ms, retract=args.retract, jobs=args.jobs, progress=not args.quiet)
+                  latency_ms=args.latency_ms, zones=zones, loop_params=loop_params, jobs=args.jobs,
+                  progress=not args.quiet)
     out, results = run(args.scenario, runtime=not args.no_runtime, perception=args.perception, keep_results=True,
                        **common)
     if args.with_baseline and not args.no_runtime:
@@ -270,7 +314,8 @@ def _one_line(out: dict) -> str:
     r = out["reaction_ms"]
     return (f"hrc: {out['scenarios']} scenarios ({out['scenario']}), {out['link']} link, camera {out['camera_hz']:g} Hz, "
             f"perception {out['perception']}, runtime {'on' if out['runtime'] else 'OFF'}: collisions "
-            f"{out['collisions']}, min separation {out['min_separation_m']:.3f} m, stops {out['stops']}, "
+            f"{out['collisions']}, not run {len(out['not_run'])}, min separation {out['min_separation_m']} m, "
+            f"stops {out['stops']}, "
             f"retracts {out['retracts']}, false alarms {out['false_alarms']}, reaction median {r['median']} ms "
             f"p99 {r['p99']} ms")
 

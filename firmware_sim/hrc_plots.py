@@ -29,9 +29,11 @@ def _panel(ax, res, zones: dict) -> None:
         for r, ls in ((zones["r1_m"], "--"), (zones["r2_m"], "-")):
             ax.add_patch(mpatches.Circle(ee[0], r, fill=False, ls=ls, color="tab:purple", lw=0.8))
     ax.add_patch(mpatches.Rectangle((-0.15, -0.15), 0.3, 0.3, color="0.3"))
-    verdict = "COLLISION" if s["collision"] else "no collision"
-    ax.set_title(f"{s['name']} ({s['speed_mps']:.1f} m/s): {verdict}, min sep {s['min_separation_m']:.2f} m",
-                 fontsize=8)
+    if s["min_separation_m"] is None:
+        verdict = s.get("not_run", "not run")
+    else:
+        verdict = f"{'COLLISION' if s['collision'] else 'no collision'}, min sep {s['min_separation_m']:.2f} m"
+    ax.set_title(f"{s['name']} ({s['speed_mps']:.1f} m/s): {verdict}", fontsize=8)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z (m)")

@@ -51,7 +51,9 @@ the true end effector to the nearer of the true head and the true predicted head
 head + ``predict_s`` x true head velocity, Eq. 3) exceeds ``R_level + margin``.
 ``reaction_ms`` is wall-clock time from a frame's keypoints being handed to the runtime
 to the command it caused being written on the link (``perf_counter`` around the perception
-call and ``RobotLoop.feed_lifted``, for frames that caused a command). ``runtime_cpu_share``
+call and ``RobotLoop.feed_lifted``, for frames that caused a command). ``head_error_m`` is the
+distance between the head the runtime was given (robot frame, after the calibration) and the
+true head at the frame's capture, over valid frames. ``runtime_cpu_share``
 is the wall-clock time spent inside the runtime (every frame and every tick) per simulated
 second: the share of one core the runtime would take in real time.
 The simulated-time delay per level is the time from the true distance first falling
@@ -60,6 +62,7 @@ the runtime acted before the truth got there, thanks to the prediction).
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -75,6 +78,7 @@ from edge_runtime.skeleton import HEAD
 from . import motions
 from .camera import CANONICAL, Camera, DetectorNoise, detect, resample
 from .human import Body, heading_towards
+from .sawyer import SawyerArm
 from .sawyer_firmware import SimClock, SimulatedRobot
 
 HRC_TASK_M: tuple[tuple[float, float, float], ...] = (
@@ -96,8 +100,9 @@ class WorldParams:
     """Camera frame rate (Hz): 30, or the dissertation's 5.8."""
     latency_s: float | None = None
     """Capture -> runtime latency of a frame (s); None: one camera period."""
-    pre_roll_s: float = 3.0
-    """Empty scene before the worker appears: the runtime reaches NORMAL and the arm works."""
+    pre_roll_s: float = 1.5
+    """Empty scene before the worker appears (the arm starts on its task's first waypoint): the
+    runtime reaches NORMAL (after ``ZoneParams.dwell_s`` of poses) and the arm is at work."""
     collision_m: float = 0.10
     """A worker joint closer than this to the end effector or a collision-sphere surface is a collision (m)."""
     false_alarm_margin_m: float = 0.3
@@ -111,10 +116,6 @@ class WorldParams:
     """``truth`` perception: keypoints scored below this are missed (as the lifter does)."""
     trace_every: int = 2
     """Keep every n-th step in the trace (for plots)."""
-    retract: str = "eq6"
-    """"eq6": the product's retraction (Eq. 6, edge_runtime.robot_loop). "toward_base": an
-    EXPERIMENT, not the product: the same step length pulled straight toward the base's axis
-    (see :class:`TowardBaseLoop`)."""
 
     @property
     def frame_latency_s(self) -> float:
@@ -138,7 +139,7 @@ class Scenario:
     """Detector noise multiplier (``DetectorNoise.scaled``)."""
     stand_s: float = 1.0
     """Standing at the start, seen by the camera, before walking (s)."""
-    linger_s: float = 2.0
+    linger_s: float = 1.0
     """Standing at the end of the path (s)."""
     seed: int = 0
     task_m: tuple[tuple[float, float, float], ...] = HRC_TASK_M
@@ -255,19 +256,24 @@ def lifter_available(assets_dir=None) -> bool:
     return any(m.get("arch") == "lifter" for m in manifest.get("models", []))
 
 
-def make_lifter(rate_hz: float):
-    from edge_runtime.lifter import LifterParams, StreamingLifter
+def make_lifter():
+    """The shipped lifter (int8, 1 thread, trained for 30 Hz; slower cameras are spaced out by it)."""
+    from edge_runtime.lifter import StreamingLifter
 
-    return StreamingLifter.from_manifest(params=LifterParams(frame_rate_hz=30.0))
+    return StreamingLifter.from_manifest()
 
 
-def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, height_m: float = 1.75):
-    """The dissertation's calibration for one camera placement: a simulated worker stands 2 s on each
-    floor marker (Eq. 1-2's (0, 1), (1, 1), (0, 2)), walking between them; his keypoints go through
-    the lifter and :func:`edge_runtime.calibration.from_recording` fits camera -> robot."""
+def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, height_m: float = 1.75,
+              stand_s: float | None = None):
+    """The dissertation's calibration for one camera placement: a simulated worker stands ``stand_s``
+    (default: 4 s, or 80 camera frames when that is longer: at 5.8 Hz the lifter's warm-up takes
+    about 2 s and every detector miss burst resets it) on each floor marker (Eq. 1-2's (0, 1), (1, 1), (0, 2)), walking between them; his keypoints go through
+    the lifter (frames still warming up are not used) and :func:`edge_runtime.calibration.from_recording`
+    fits camera -> robot. Raises ``edge_runtime.calibration.CalibrationError`` when the fit refuses."""
     from edge_runtime.calibration import CalibrationParams, from_recording
 
     rate = camera.rate_hz
+    stand_s = stand_s or max(4.0, 80.0 / rate)
     body = Body.from_height(height_m)
     markers = CalibrationParams().markers_xz_m
     parts, labels = [], []
@@ -276,50 +282,24 @@ def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, he
             w = motions.walk(body, [markers[i - 1], m], 0.8, rate)
             parts.append(w)
             labels.append(np.zeros(len(w), int))
-        s = motions.stand(body, m, math.pi, 2.0, rate, rng=rng)
+        s = motions.stand(body, m, math.pi, stand_s, rate, rng=rng)
         parts.append(s)
         labels.append(np.full(len(s), i + 1))
     mot = motions.concat(parts, blend_s=0.2)
     kp = detect(camera, mot.joints_m, rng, noise)
-    lifter = make_lifter(rate)
+    lifter = make_lifter()
     t = np.arange(len(kp)) / rate
     joints = np.full((len(kp), 17, 3), np.nan)
     for k in range(len(kp)):
         out = lifter.push(t[k], kp[k] if np.isfinite(kp[k, :, :2]).any() else None)
-        if out.valid:
+        if out.valid and not out.warming_up:
             joints[k] = out.joints_cam_m
-    marker = np.concatenate(labels)
-    marker[np.arange(len(marker)) < 27] = 0  # the lifter's warm-up
-    cal = from_recording(t, joints, marker=marker)
+    cal = from_recording(t, joints, marker=np.concatenate(labels))
     return cal, mot, lifter
 
 
 # ----------------------------------------------------------------------------------------------
 # the closed loop
-
-class TowardBaseLoop(RobotLoop):
-    """EXPERIMENT (``--retract toward_base``), not the product: the runtime with one change, the
-    level-2 retraction pulls the end effector straight toward the base's axis by Eq. 6's step
-    length (w1 + w2 = 0.5 m), stopping ``retract_min_radius_m`` + 0.1 m from the axis, tool turned
-    toward the base. It shows what a retraction direction that folds the arm in does for workers
-    who walk across the arm's reach (Eq. 6 moves the end effector along their path)."""
-
-    def _retract_motion(self, decision):
-        from edge_runtime.hazard import tool_yaw_toward_base
-        from edge_runtime.robot_loop import Motion
-
-        eff = np.array(self.effector_m(), float)
-        g = ground(eff)
-        r = float(np.linalg.norm(g))
-        step = min(self.zones.retract_weight_away_m + self.zones.retract_weight_path_m,
-                   max(r - self.params.retract_min_radius_m - 0.1, 0.0))
-        target = eff.copy()
-        if r > 1e-6:
-            target[[0, 2]] -= g / r * step
-        target[1] = max(target[1], self.params.min_height_m)
-        return Motion("retract", tuple(float(v) for v in target), self.params.task_pitch_rad,
-                      tool_yaw_toward_base(target))
-
 
 ARM_FOOTPRINT_M = 1.45
 """No part of the arm (collision spheres, the 10 cm tool) reaches further than this from the
@@ -327,6 +307,12 @@ base's axis (m; the reach is 1.26 m from the shoulder)."""
 FAR_CHECK_M, FAR_CHECK_EVERY = 0.5, 10
 """While every worker joint is more than ``ARM_FOOTPRINT_M + FAR_CHECK_M`` from the base's axis the
 clearance is computed every ``FAR_CHECK_EVERY``-th step only (it is above 0.5 m anyway)."""
+
+
+@functools.lru_cache(maxsize=16)
+def task_start_posture(position_m: tuple, pitch_rad: float, yaw_rad: float) -> np.ndarray:
+    """Joint angles (7,) with the end effector on the task's first waypoint (the arm starts at work)."""
+    return SawyerArm().solve_ik(position_m, pitch_rad, yaw_rad)
 
 
 def clearance_m(joints_m: np.ndarray, centres: np.ndarray, radii: np.ndarray, ee_m: np.ndarray) -> float:
@@ -346,6 +332,7 @@ class RunResult:
     ee_xz_m: np.ndarray
     state: np.ndarray
     reaction_s: list = field(default_factory=list)
+    head_error_m: list = field(default_factory=list)
 
 
 def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, perception: str = "truth",
@@ -369,8 +356,13 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     if not runtime:
         percept = None
     elif perception == "lifter":
-        calibration, _, _ = calibrate(camera, rng, noise)
-        percept = LifterPerception(make_lifter(world.camera_hz), kp)
+        from edge_runtime.calibration import CalibrationError
+
+        try:
+            calibration, _, _ = calibrate(camera, rng, noise)
+        except CalibrationError as e:  # the box would refuse to run: the arm never moves
+            return _not_run(sc, link, world, f"calibration failed: {e}")
+        percept = LifterPerception(make_lifter(), kp)
     else:
         percept = TruthPerception(camera, Jc, kp, world, sc.noise_scale, rng)
     # the truth: head, its ground velocity and Eq. 3's prediction, at the physics rate
@@ -381,9 +373,9 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     pred = head + zones.predict_s * v
 
     clock = SimClock()
-    sim = SimulatedRobot(link, clock=clock)
-    loop_cls = TowardBaseLoop if world.retract == "toward_base" else RobotLoop
-    loop = loop_cls(sim.link, calibration=calibration, zones=zones, params=lp, clock=clock)
+    sim = SimulatedRobot(link, clock=clock, q0_rad=task_start_posture(lp.task_waypoints_m[0], lp.task_pitch_rad,
+                                                                      lp.task_yaw_rad))
+    loop = RobotLoop(sim.link, calibration=calibration, zones=zones, params=lp, clock=clock)
     radii = {State.LEVEL1: zones.r1_m, State.LEVEL2: zones.r2_m}
     frame_i, deliver = 0, t_cap + world.frame_latency_s
     empty_next = 0.0
@@ -396,6 +388,7 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     max_state = State.NORMAL
     trace_t, trace_head, trace_ee, trace_state = [], [], [], []
     frame_s = tick_s = 0.0  # wall-clock time inside the runtime (per-frame calls, ticks)
+    head_err = []
     try:
         for step in range(n_total):
             now = clock()
@@ -414,6 +407,10 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
                     rec = loop.feed_lifted(out)
                     w1 = time.perf_counter()
                     frame_s += w1 - w0
+                    if out.valid:  # the head the runtime saw, in the robot frame, against the truth
+                        seen = out.joints_cam_m[HEAD] if calibration is None else calibration.to_robot(
+                            out.joints_cam_m)[HEAD]  # what the loop sees: floor-anchored when configured
+                        head_err.append(float(np.linalg.norm(seen - Jc[frame_i, HEAD])))
                     if rec.command is not None:
                         reaction.append(w1 - w0)
                     frame_i += 1
@@ -473,19 +470,34 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
         "min_separation_m": round(min_clear, 4), **diff,
         "false_alarms": int(sum(false_alarms)), "zone_entries": entries,
         "max_state": max_state.name, "command_delay_s": delays,
-        "reaction_ms": _percentiles(reaction), "frames": frame_i,
+        "reaction_ms": percentiles(reaction), "frames": frame_i,
+        "head_error_m": percentiles(head_err, 1.0, (50, 95)),
         "runtime_cpu_share": round((frame_s + tick_s) / max(n_total * dt, 1e-9), 5),
-        "retract": world.retract, "calibration_scale": None if calibration is None else round(calibration.scale, 4),
+        "calibration_scale": None if calibration is None else round(calibration.scale, 4),
     }
     return RunResult(summary, np.array(trace_t), np.array(trace_head), np.array(trace_ee), np.array(trace_state),
-                     reaction)
+                     reaction, head_err)
 
 
-def _percentiles(samples_s) -> dict:
-    if not len(samples_s):
-        return {"median": None, "p99": None, "n": 0}
-    ms = 1000.0 * np.asarray(samples_s)
-    return {"median": round(float(np.median(ms)), 4), "p99": round(float(np.percentile(ms, 99)), 4), "n": len(ms)}
+def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult:
+    """A scenario that could not run (the lifter path's calibration was refused for this camera)."""
+    summary = {**sc.describe(), "link": link, "runtime": True, "perception": "lifter", "camera_hz": world.camera_hz,
+               "latency_ms": round(1000 * world.frame_latency_s, 1), "not_run": why, "collision": False,
+               "collision_steps": 0, "first_collision_s": None, "min_separation_m": None, "stops": 0, "retracts": 0,
+               "unreachable": 0, "invalid": 0, "false_alarms": 0, "zone_entries": [], "max_state": "NORMAL",
+               "command_delay_s": {"LEVEL1": None, "LEVEL2": None}, "reaction_ms": percentiles([]), "frames": 0,
+               "head_error_m": percentiles([], 1.0, (50, 95)), "runtime_cpu_share": None, "calibration_scale": None}
+    empty = np.empty((0, 2))
+    return RunResult(summary, np.empty(0), empty, empty, np.empty(0, int))
+
+
+def percentiles(samples, scale: float = 1000.0, q=(50, 99)) -> dict:
+    """{"median", "p<q>", "n"} of ``samples`` x ``scale`` (default: seconds -> ms)."""
+    keys = ["median" if k == 50 else f"p{k}" for k in q]
+    if not len(samples):
+        return {**{k: None for k in keys}, "n": 0}
+    v = np.percentile(scale * np.asarray(samples, float), q)
+    return {**{k: round(float(x), 4) for k, x in zip(keys, v)}, "n": len(samples)}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -533,8 +545,13 @@ class RandomParams:
     speed_mps: tuple[float, float] = (0.5, 2.0)
     start_distance_m: tuple[float, float] = (3.0, 6.0)
     """Start: this far (ground) from the task's outermost point (m)."""
-    pass_offset_m: tuple[float, float] = (0.0, 0.8)
-    """A passing path's signed offset from the task's outermost point (m; + away from the base)."""
+    pass_distance_m: tuple[float, float] = (1.1, 1.8)
+    """A passing worker's path comes this close to the base's axis (m; the task reaches 1.0 m
+    out, its tool 1.1 m, and a walker's joints 0.3 m to the side of his path)."""
+    pass_bearing_deg: float = 60.0
+    """The passing path's nearest point lies within this bearing of +z (deg): in front of the arm."""
+    pass_oblique_deg: float = 35.0
+    """The passing path is up to this far off the tangent there (deg)."""
     stop_short_m: tuple[float, float] = (0.3, 0.9)
     """A stopping worker's pelvis stops this far short of the task's outermost point (m)."""
     min_base_distance_m: float = 1.1
@@ -555,8 +572,8 @@ class RandomParams:
 def random_scenario(rng: np.random.Generator, index: int, seed: int, params: RandomParams = RandomParams()) -> Scenario:
     """A random approach to the cell from the work side: direction, speed, start distance, worker
     height, camera placement (3-8 m, 1-3 m high, aimed at the cell) and detector noise scale; the
-    worker either walks past at a lateral offset from the task's outermost point or walks at it
-    and stops short. Paths that pass closer than ``min_base_distance_m`` to the base are redrawn."""
+    worker either walks past in front of the cell (nearest to the base's axis 1.1-1.8 m out) or
+    walks at the task's outermost point and stops short of it. Paths that pass closer than ``min_base_distance_m`` to the base are redrawn."""
     from .camera import random_placement
 
     p = params
@@ -572,15 +589,15 @@ def random_scenario(rng: np.random.Generator, index: int, seed: int, params: Ran
             end = cell + rng.uniform(*p.stop_short_m) * u
             pts = (start, end)
         else:
-            # pass: a straight line across the cell, offset sideways (perpendicular to the walk)
-            theta = rng.uniform(-0.35 * math.pi, 0.35 * math.pi) + (math.pi / 2 if rng.random() < 0.5 else -math.pi / 2)
-            walk_dir = np.array([math.sin(theta), math.cos(theta)])
-            side = np.array([-walk_dir[1], walk_dir[0]])
-            if side @ cell < 0:
-                side = -side                                         # + offset: away from the base
-            mid = cell + rng.uniform(*p.pass_offset_m) * side
-            start, end = mid - dist * walk_dir, mid + 2.5 * walk_dir
-            pts = (start, end)
+            # pass: a straight walk along the front of the cell, nearest to the base's axis at a
+            # bearing within pass_bearing_deg of +z, turned up to pass_oblique_deg off the tangent
+            phi = math.radians(rng.uniform(-1.0, 1.0) * p.pass_bearing_deg)
+            radial = np.array([math.sin(phi), math.cos(phi)])
+            psi = math.radians(rng.uniform(-1.0, 1.0) * p.pass_oblique_deg) + (0.0 if rng.random() < 0.5 else math.pi)
+            tangent = np.array([radial[1], -radial[0]])
+            walk_dir = math.cos(psi) * tangent + math.sin(psi) * radial
+            near = rng.uniform(*p.pass_distance_m) * radial
+            pts = (near - dist * walk_dir, near + 1.5 * walk_dir)
         d_base = path_base_distance(pts)
         if d_base >= p.min_base_distance_m:
             break

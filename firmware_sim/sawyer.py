@@ -281,9 +281,10 @@ class SawyerArm:
         """Joint angles (7,) that put the hand at ``position_m`` with the tool along (pitch, yaw).
 
         Bounded least squares (scipy's dogbox solver with the analytic Jacobian) from the
-        current posture, then from the ``ik_restarts`` postures of a fixed seed table whose
-        hand poses lie nearest the target; the first solution within tolerance that keeps
-        the arm clear of the floor, the pedestal and itself is taken. Raises :class:`Unreachable`.
+        current posture; if that misses, from the ``ik_restarts`` postures of a fixed seed table
+        whose hand poses lie nearest the target, keeping -- among the solutions within tolerance
+        that keep the arm clear of the floor, the pedestal and itself -- the one nearest the
+        current posture in joint space (largest joint change smallest). Raises :class:`Unreachable`.
         """
         c = self.config
         p = np.asarray(position_m, dtype=float).reshape(-1)
@@ -308,18 +309,26 @@ class SawyerArm:
             _, jp, jd = jacobian(q)
             return np.vstack([jp, w * jd])
 
-        starts = [np.clip(self.q_rad, self._lo, self._hi), *_nearest_seeds(p, d, c.ik_restarts, w)]
-        for i, q0 in enumerate(starts):
-            budget = 100 if i == 0 else c.ik_seed_evaluations
-            sol = least_squares(residual, q0, jac=jac, bounds=(self._lo, self._hi), method="dogbox",
-                                xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=budget)
-            q = sol.x
+        def solve(q0, budget):
+            q = least_squares(residual, q0, jac=jac, bounds=(self._lo, self._hi), method="dogbox",
+                              xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=budget).x
             pose = end_effector_pose(q)
-            if (np.linalg.norm(pose.position_m - p) <= c.position_tolerance_m
-                    and angle_between_rad(pose.direction, d) <= c.direction_tolerance_rad
-                    and posture_is_clear(q, c)):
-                return q
-        raise Unreachable("no joint solution within tolerance inside the joint limits")
+            ok = (np.linalg.norm(pose.position_m - p) <= c.position_tolerance_m
+                  and angle_between_rad(pose.direction, d) <= c.direction_tolerance_rad
+                  and posture_is_clear(q, c))
+            return q if ok else None
+
+        here = np.clip(self.q_rad, self._lo, self._hi)
+        q = solve(here, 100)
+        if q is not None:
+            return q
+        # From the seed table, the solution nearest the current posture in joint space: the
+        # controller interpolates joints, so a far branch would swing the hand through the cell.
+        found = [q for q in (solve(q0, c.ik_seed_evaluations) for q0 in _nearest_seeds(p, d, c.ik_restarts, w))
+                 if q is not None]
+        if not found:
+            raise Unreachable("no joint solution within tolerance inside the joint limits")
+        return min(found, key=lambda q: float(np.max(np.abs(q - here))))
 
 
     def set_target(self, position_m, pitch_rad: float, yaw_rad: float) -> np.ndarray:

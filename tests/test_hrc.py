@@ -44,6 +44,8 @@ def test_the_runtime_stops_and_retracts_in_time_on_both_links(front, baseline_fr
     # both zone levels were entered, each with the true worker inside its radius (+ margin)
     assert [e["level"] for e in s["zone_entries"]][:2] == ["LEVEL1", "LEVEL2"]
     assert s["reaction_ms"]["n"] >= 2 and s["reaction_ms"]["median"] > 0
+    # the head the runtime saw (detector noise at the true depth) is within centimetres of the truth
+    assert 0.005 < s["head_error_m"]["median"] < 0.1
 
 
 def test_clearance_measures_to_sphere_surfaces_and_the_end_effector():
@@ -139,6 +141,8 @@ def test_format_table_lists_every_scenario_and_the_baseline():
     (["--link", "usb"], "--link"),
     (["--camera-hz", "-5"], "--camera-hz"),
     (["--json", "/nonexistent-dir/x.json"], "--json"),
+    (["--loop", "no_such_field=1"], "--loop"),
+    (["--zone", "predict_s=soon"], "--zone"),
 ])
 def test_bad_arguments_are_one_line_and_exit_2(argv, needle, capsys):
     from firmware_sim.__main__ import main
@@ -158,3 +162,30 @@ def test_zone_radii_follow_eq4_with_the_measured_retraction_time():
     assert z.r2_m == pytest.approx(z.worker_speed_mps * (z.retract_time_s - z.predict_s) + z.margin2_m)
     assert z.r1_m == pytest.approx(z.r2_m + z.margin1_m)
     assert math.isclose(z.retract_time_s, 2.0)
+
+
+@pytest.mark.skipif(not __import__("firmware_sim.hrc_world", fromlist=["x"]).lifter_available(),
+                    reason="no lifter in edge_runtime/assets/manifest.json")
+def test_lifter_path_calibrates_per_camera_and_keeps_the_worker_clear(front):
+    s = run_scenario(front, "can", runtime=True, perception="lifter", zones=hrc.HRC_ZONES).summary
+    assert s["perception"] == "lifter"
+    assert 0.8 < s["calibration_scale"] < 1.25          # the 3-marker fit found a plausible scale
+    assert s["head_error_m"]["n"] > 50 and s["head_error_m"]["median"] < 1.0
+    assert not s["collision"] and s["max_state"] == "LEVEL2"
+
+
+def test_a_refused_calibration_is_reported_not_hidden(front, monkeypatch):
+    from edge_runtime.calibration import CalibrationError
+    from firmware_sim import hrc_world
+
+    def refuse(*a, **k):
+        raise CalibrationError("marker 1: 3 usable frames, need 10")
+
+    monkeypatch.setattr(hrc_world, "calibrate", refuse)
+    res = run_scenario(front, "can", runtime=True, perception="lifter", zones=hrc.HRC_ZONES)
+    assert res.summary["not_run"].startswith("calibration failed: marker 1")
+    out = hrc.summarize([res], {"link": "can", "camera_hz": 30.0, "perception": "lifter",
+                                "zones": {"r1_m": 4.4, "r2_m": 2.4}})
+    assert out["not_run"] == {"front": res.summary["not_run"]}
+    assert out["collisions"] == 0 and out["min_separation_m"] is None
+    assert "calibration failed" in hrc.format_table(out)
