@@ -11,13 +11,12 @@ that mean "the user's input was bad": one line, exit 2).
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import sys
 import time
 from pathlib import Path
 
-from .cli import CliError, make_parser, run
+from .cli import CliError, add_module_commands, make_parser, run
 
 ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 
@@ -245,11 +244,7 @@ def _feed_paced(loop, block) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser, sub = make_parser("python -m edge_runtime", __doc__.splitlines()[0])
     _add_wearable(sub)
-    for name, module, help_text in _MODULE_COMMANDS:
-        mod = importlib.import_module(f".{module}", __package__)
-        p = sub.add_parser(name, help=help_text)
-        mod.add_arguments(p)
-        p.set_defaults(func=mod.cmd, bad_input=tuple(getattr(mod, "BAD_INPUT", ())))
+    add_module_commands(sub, __package__, _MODULE_COMMANDS)
     return parser
 
 

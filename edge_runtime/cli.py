@@ -8,6 +8,7 @@ Anything else is a bug and keeps its traceback.
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 from typing import Callable, Iterable
 
@@ -32,6 +33,20 @@ def make_parser(prog: str, description: str) -> tuple[OneLineParser, argparse._S
     parser = OneLineParser(prog=prog, description=description)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=OneLineParser)
     return parser, sub
+
+
+def add_module_commands(sub: argparse._SubParsersAction, package: str,
+                        commands: Iterable[tuple[str, str, str]]) -> None:
+    """Subcommands that live in their own module of ``package``: (name, module, help) each.
+
+    The module defines ``add_arguments(parser)``, ``cmd(args) -> int`` and optionally
+    ``BAD_INPUT`` (exception types meaning "the user's input was bad"); they land in the
+    parsed arguments as ``func`` and ``bad_input``."""
+    for name, module, help_text in commands:
+        mod = importlib.import_module(f".{module}", package)
+        p = sub.add_parser(name, help=help_text)
+        mod.add_arguments(p)
+        p.set_defaults(func=mod.cmd, bad_input=tuple(getattr(mod, "BAD_INPUT", ())))
 
 
 def run(func: Callable[[], int | None], bad_input: Iterable[type[BaseException]] = ()) -> int:

@@ -15,13 +15,12 @@ Bad input exits with status 2 and one line on stderr naming the file and field.
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import sys
 from pathlib import Path
 
 
-from edge_runtime.cli import make_parser, run
+from edge_runtime.cli import add_module_commands, make_parser, run
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -62,11 +61,7 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--test", default=None, help="test NPZ (default: from DIR/metrics.json)")
     c.add_argument("--json", default=None)
 
-    for name, module, help_text in _MODULE_COMMANDS:
-        mod = importlib.import_module(f".{module}", __package__)
-        m = sub.add_parser(name, help=help_text)
-        mod.add_arguments(m)
-        m.set_defaults(module_cmd=mod.cmd)
+    add_module_commands(sub, __package__, _MODULE_COMMANDS)
     return p
 
 
@@ -157,9 +152,10 @@ def main(argv=None) -> int:
     from models.dataset import DataError
 
     cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "compare-int8": cmd_compare}
-    func = getattr(args, "module_cmd", None) or cmds[args.command]
+    func = getattr(args, "func", None) or cmds[args.command]
     return run(lambda: func(args),
-               bad_input=(ExportError, QuantizeError, DataError, ModelIntegrityError, OSError, ValueError, KeyError))
+               bad_input=(ExportError, QuantizeError, DataError, ModelIntegrityError, OSError, ValueError, KeyError,
+                          *getattr(args, "bad_input", ())))
 
 
 if __name__ == "__main__":

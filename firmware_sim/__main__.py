@@ -9,13 +9,12 @@ Further commands register themselves through :func:`build_parser` (one subparser
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import sys
 from pathlib import Path
 
 
-from edge_runtime.cli import CliError, make_parser, positive_float, positive_int, run
+from edge_runtime.cli import CliError, add_module_commands, make_parser, positive_float, positive_int, run
 
 
 def _out_dir(path: str) -> Path:
@@ -104,11 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_cohort)
 
-    for name, module, help_text in _MODULE_COMMANDS:
-        mod = importlib.import_module(f".{module}", __package__)
-        p = sub.add_parser(name, help=help_text)
-        mod.add_arguments(p)
-        p.set_defaults(func=mod.cmd)
+    add_module_commands(sub, __package__, _MODULE_COMMANDS)
     return ap
 
 
@@ -125,7 +120,7 @@ _MODULE_COMMANDS = (
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: args.func(args), bad_input=(ValueError,))
+    return run(lambda: args.func(args), bad_input=(ValueError, *getattr(args, "bad_input", ())))
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ def sawyer_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess
     (["--link", "mavlink", "--pty", "--signing-key", "abc"], "--signing-key"),
     (["--link", "mavlink", "--serial", "/nonexistent/tty"], "/nonexistent/tty"),
     (["--link", "can", "--can-port", "70000"], "--can-port"),
-    (["--link", "can", "--can-port", "1", "--can-interface", "udp_multicast"], "not allowed"),
+    (["--link", "can", "--can-port", "1", "--can-interface", "nosuchbus"], "not allowed"),
     (["--link", "bluetooth"], "--link"),
 ])
 def test_bad_input_is_one_line_and_exit_2(args, words, capsys):
