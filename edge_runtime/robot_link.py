@@ -84,7 +84,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.quaternion import QuaternionBase
 
 from .can_link import CanLinkError, E2EChecker, E2EProtector, load_dbc, open_bus
-from .serial_line import parse_serial_spec, parse_signing_key  # noqa: F401 - re-exported
+from .serial_line import parse_serial_spec
 from .config import BUS_INTERFACES
 
 DBC_PATH = Path(__file__).resolve().parent / "assets" / "robot_link.dbc"

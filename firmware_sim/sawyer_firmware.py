@@ -57,8 +57,9 @@ from edge_runtime.robot_link import (
     LIGHTS, LINK_ERRORS, MAV_CMD_ALARM, MAV_CMD_MOVE_ACK, MAV_CMD_RETRACT, MAV_CMD_STOP_RESUME, RESULT_TO_MAV,
     ROBOT_COMPID, ROBOT_SYSID, FdStream, LinkConfig, RobotCanCodec, RobotLink, RobotState, SerialStream,
     SocketStream, check_alarm, check_target, make_mavlink, mav_to_robot, open_can_bus, open_link, pack_status,
-    parse_signing_key, robot_to_mav, signature_failure, tool_pitch_yaw,
+    robot_to_mav, signature_failure, tool_pitch_yaw,
 )
+from edge_runtime.serial_line import parse_signing_key
 
 from .imu_firmware import close_pty_pair, open_pty_pair
 from .sawyer import ArmConfig, SawyerArm, Unreachable, warm_up
