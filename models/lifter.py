@@ -106,6 +106,28 @@ class TemporalModelBase(nn.Module):
         self.shrink = nn.Conv1d(channels, joints_out * 3, 1)
         self.causal = causal
 
+    def _build_layers(self, joints_in: int, in_features: int, filter_widths, causal: bool, channels: int,
+                      strided: bool) -> None:
+        """expand_conv and the residual blocks: dilated convolutions, or (``strided``) the same
+        weights applied with stride = width, one output per window. Same names and shapes
+        either way, so one state dict serves both variants."""
+        w0 = filter_widths[0]
+        self.expand_conv = nn.Conv1d(joints_in * in_features, channels, w0, stride=w0 if strided else 1, bias=False)
+        convs, bns = [], []
+        self.causal_shift = [w0 // 2 if causal else 0]
+        dilation = w0
+        for w in filter_widths[1:]:
+            self.pad.append((w - 1) * dilation // 2)
+            self.causal_shift.append(((w // 2) if strided else (w // 2) * dilation) if causal else 0)
+            convs.append(nn.Conv1d(channels, channels, w, stride=w, bias=False) if strided
+                         else nn.Conv1d(channels, channels, w, dilation=dilation, bias=False))
+            bns.append(nn.BatchNorm1d(channels, momentum=0.1))
+            convs.append(nn.Conv1d(channels, channels, 1, bias=False))
+            bns.append(nn.BatchNorm1d(channels, momentum=0.1))
+            dilation *= w
+        self.layers_conv = nn.ModuleList(convs)
+        self.layers_bn = nn.ModuleList(bns)
+
     def receptive_field(self) -> int:
         return 1 + 2 * sum(self.pad)
 
@@ -123,20 +145,7 @@ class TemporalModel(TemporalModelBase):
     def __init__(self, joints_in: int, in_features: int, joints_out: int, filter_widths, causal: bool = False,
                  dropout: float = 0.25, channels: int = 1024):
         super().__init__(joints_in, in_features, joints_out, filter_widths, causal, dropout, channels)
-        self.expand_conv = nn.Conv1d(joints_in * in_features, channels, filter_widths[0], bias=False)
-        convs, bns = [], []
-        self.causal_shift = [filter_widths[0] // 2 if causal else 0]
-        dilation = filter_widths[0]
-        for w in filter_widths[1:]:
-            self.pad.append((w - 1) * dilation // 2)
-            self.causal_shift.append((w // 2) * dilation if causal else 0)
-            convs.append(nn.Conv1d(channels, channels, w, dilation=dilation, bias=False))
-            bns.append(nn.BatchNorm1d(channels, momentum=0.1))
-            convs.append(nn.Conv1d(channels, channels, 1, bias=False))
-            bns.append(nn.BatchNorm1d(channels, momentum=0.1))
-            dilation *= w
-        self.layers_conv = nn.ModuleList(convs)
-        self.layers_bn = nn.ModuleList(bns)
+        self._build_layers(joints_in, in_features, filter_widths, causal, channels, strided=False)
 
     def _forward_blocks(self, x: torch.Tensor) -> torch.Tensor:
         x = self.drop(self.relu(self.expand_bn(self.expand_conv(x))))
@@ -154,21 +163,7 @@ class TemporalModelOptimized1f(TemporalModelBase):
     def __init__(self, joints_in: int, in_features: int, joints_out: int, filter_widths, causal: bool = False,
                  dropout: float = 0.25, channels: int = 1024):
         super().__init__(joints_in, in_features, joints_out, filter_widths, causal, dropout, channels)
-        self.expand_conv = nn.Conv1d(joints_in * in_features, channels, filter_widths[0], stride=filter_widths[0],
-                                     bias=False)
-        convs, bns = [], []
-        self.causal_shift = [filter_widths[0] // 2 if causal else 0]
-        dilation = filter_widths[0]
-        for w in filter_widths[1:]:
-            self.pad.append((w - 1) * dilation // 2)
-            self.causal_shift.append(w // 2 if causal else 0)
-            convs.append(nn.Conv1d(channels, channels, w, stride=w, bias=False))
-            bns.append(nn.BatchNorm1d(channels, momentum=0.1))
-            convs.append(nn.Conv1d(channels, channels, 1, bias=False))
-            bns.append(nn.BatchNorm1d(channels, momentum=0.1))
-            dilation *= w
-        self.layers_conv = nn.ModuleList(convs)
-        self.layers_bn = nn.ModuleList(bns)
+        self._build_layers(joints_in, in_features, filter_widths, causal, channels, strided=True)
 
     def _forward_blocks(self, x: torch.Tensor) -> torch.Tensor:
         x = self.drop(self.relu(self.expand_bn(self.expand_conv(x))))
