@@ -106,7 +106,7 @@ def cmd(a) -> int:
 
 
 def main(argv=None) -> int:
-    from edge_runtime.manifest import ModelIntegrityError
+    from edge_runtime.core.manifest import ModelIntegrityError
 
     args = build_parser().parse_args(argv)
     return run(lambda: cmd(args), bad_input=(ModelIntegrityError, ValueError))

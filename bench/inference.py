@@ -4,8 +4,8 @@ Every configuration (manifest entry x runtime x threads) runs in its own
 process (``bench.worker``) so that its peak resident memory is its own:
 
 * ``onnxruntime``: the manifest entry's file, sha256-checked
-  (``edge_runtime.manifest.read_verified``), on the box's session settings
-  (``edge_runtime.engine.session_options``: N intra-op threads, 1 inter-op,
+  (``edge_runtime.core.manifest.read_verified``), on the box's session settings
+  (``edge_runtime.core.onnx.session_options``: N intra-op threads, 1 inter-op,
   no spinning, all graph optimisations); ``session.run`` with a pre-built feed.
   The child imports numpy and onnxruntime only (no torch), as a box would.
 * ``torch-eager``: the same network rebuilt in torch, in eval mode under
@@ -81,8 +81,8 @@ def example_inputs(entry: dict, seed: int = 0) -> dict[str, np.ndarray]:
 def _ort_runner(cfg: InferenceConfig, entry: dict, feed: dict) -> tuple[Callable[[], object], dict]:
     import onnxruntime as ort
 
-    from edge_runtime.engine import session_options
-    from edge_runtime.manifest import read_verified
+    from edge_runtime.core.manifest import read_verified
+    from edge_runtime.core.onnx import session_options
 
     sess = ort.InferenceSession(read_verified(cfg.assets, entry), session_options(cfg.threads),
                                 providers=["CPUExecutionProvider"])
@@ -192,7 +192,7 @@ def measure(cfg: InferenceConfig) -> dict:
     """Run in a child process: load, warm up, time ``cfg.n`` calls. Returns the per-call
     times (ns), resident memory before loading the model and at the peak, load time,
     file size, or ``{"skipped": reason}``."""
-    from edge_runtime.manifest import load_manifest, manifest_path, select_model
+    from edge_runtime.core.manifest import load_manifest, manifest_path, select_model
 
     if cfg.runtime not in RUNTIMES:
         raise ValueError(f"runtime {cfg.runtime!r} not one of {RUNTIMES}")

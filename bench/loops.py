@@ -7,7 +7,7 @@ its peak resident memory is the runtime's. The simulated drive is made by the
 parent (:func:`prepare_drive`, firmware_sim) and handed over as a ``.npy`` file.
 
 ``wearable_100hz``
-    ``edge_runtime.wearable.WearableLoop`` with the int8 model on 1 thread and an
+    ``edge_runtime.wearable.loop.WearableLoop`` with the int8 model on 1 thread and an
     ``AlertPublisher`` (alerts + the 10 Hz WEARABLE_STATUS heartbeat thread) on an
     in-process python-can ``virtual`` bus, fed one sample at a time at a real
     100 Hz on absolute deadlines (sleeping in between) for ``realtime_s``
@@ -16,7 +16,7 @@ parent (:func:`prepare_drive`, firmware_sim) and handed over as a ``.npy`` file.
     threads) / wall time, in % of one core. A deadline miss is a sample whose
     processing ends after the next sample is due (10 ms).
 ``detector``
-    ``edge_runtime.detector.StreamingDetector.push`` of one sample, timed per call
+    ``edge_runtime.wearable.detector.StreamingDetector.push`` of one sample, timed per call
     over the drive (captures included, classification not).
 ``alert_latency``
     The same loop fed one sample at a time as fast as it goes over the whole
@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.timing import CpuShare, peak_rss_mb, sleep_until, summarize, time_calls
-from edge_runtime.sources import SAMPLE_RATE_HZ
+from edge_runtime.wearable.sources import SAMPLE_RATE_HZ
 
 PRE_TRIGGER_S = 2.5
 """The real-time stretch starts this long before a trigger (the detector window is 2 s)."""
@@ -63,8 +63,8 @@ class WearableConfig:
 def prepare_drive(minutes: float, seed: int, out_npy: str | Path) -> tuple[Path, int]:
     """A simulated drive saved as ``out_npy``, and a real-time start index 2.5 s before its
     first trigger (0 when it has none). Uses firmware_sim (parent process only)."""
-    from edge_runtime.detector import detect_triggers
-    from firmware_sim.wrist import simulate_drive
+    from edge_runtime.wearable.detector import detect_triggers
+    from firmware_sim.devices.wrist import simulate_drive
 
     acc = np.ascontiguousarray(simulate_drive(minutes, seed=seed).acc_mps2, dtype=np.float32)
     np.save(out_npy, acc)
@@ -79,9 +79,9 @@ class _Wearable:
     def __init__(self, cfg: WearableConfig):
         import os
 
-        from edge_runtime.can_link import AlertPublisher, open_bus
-        from edge_runtime.engine import ASSETS_DIR, Engine
-        from edge_runtime.wearable import WearableLoop
+        from edge_runtime.core.onnx import ASSETS_DIR, Engine
+        from edge_runtime.wearable.alerts import AlertPublisher, open_bus
+        from edge_runtime.wearable.loop import WearableLoop
 
         self.engine = Engine.from_manifest(cfg.assets or ASSETS_DIR, cfg.model, threads=cfg.threads)
         self.pub = AlertPublisher(open_bus("virtual", f"bench-{os.getpid()}"), heartbeat_period_s=0.1)
@@ -104,7 +104,7 @@ class _Wearable:
         self.decision_s.append(self._since_rx(d))
 
     def feed_one(self, i: int, acc: np.ndarray) -> None:
-        from edge_runtime.sources import ImuBlock
+        from edge_runtime.wearable.sources import ImuBlock
 
         self.t_fed = time.monotonic()
         block = ImuBlock(i / SAMPLE_RATE_HZ, acc[i : i + 1], continuous=i > 0)
@@ -140,7 +140,7 @@ def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float) -> dict
 
 
 def _detector(acc: np.ndarray) -> dict:
-    from edge_runtime.detector import StreamingDetector
+    from edge_runtime.wearable.detector import StreamingDetector
 
     det = StreamingDetector()
     rows = iter([acc[i : i + 1] for i in range(len(acc))])

@@ -1,10 +1,10 @@
 """The robot cycle at 30 Hz: keypoints in -> command out, in real time, in a child process.
 
-``edge_runtime.robot_loop.RobotLoop`` is driven as a box drives it: a camera
+``edge_runtime.robot.loop.RobotLoop`` is driven as a box drives it: a camera
 frame every 1/30 s (``StreamingLifter.push`` on the shipped int8 lifter, 1
 thread, then ``RobotLoop.feed_lifted``) and a control ``tick()`` every 10 ms,
 each on an absolute deadline with sleeps in between. The worker is a simulated
-person (firmware_sim.human/motions, made by the parent, :func:`prepare_worker`)
+person (firmware_sim.people.human/motions, made by the parent, :func:`prepare_worker`)
 walking from 4 m straight at the arm's base to 0.9 m and back, again and again,
 so the zones are entered and left and commands go out.
 
@@ -70,9 +70,9 @@ def lifter_entry(entries: list[dict], precision: str = "int8") -> dict | None:
 def prepare_worker(out_npz: str | Path, lifter: dict | None, seed: int = 0) -> Path:
     """The walking worker's robot-frame joints at 30 Hz and, for ``lifter`` (a manifest entry),
     their pixels in its canonical camera (score 1). Uses firmware_sim (parent process only)."""
-    from edge_runtime.keypoints import CameraModel
-    from firmware_sim.human import Body
-    from firmware_sim.motions import walk
+    from edge_runtime.robot.keypoints import CameraModel
+    from firmware_sim.people.human import Body
+    from firmware_sim.people.motions import walk
 
     motion = walk(Body.from_height(1.75), WALK_XZ_M, speed_mps=1.2, rate_hz=FRAME_RATE_HZ,
                   rng=np.random.default_rng(seed))
@@ -120,13 +120,13 @@ def _schedule(seconds: float) -> list[tuple[float, int]]:
 
 def measure_robot(cfg: RobotConfig) -> list[dict]:
     """Run in a child process: see the module docstring."""
-    from edge_runtime.engine import ASSETS_DIR
-    from edge_runtime.robot_loop import RobotLoop
+    from edge_runtime.core.onnx import ASSETS_DIR
+    from edge_runtime.robot.loop import RobotLoop
 
     data = np.load(cfg.worker_npz)
     link = _TimedLink()
     if cfg.lifter:
-        from edge_runtime.lifter import LifterParams, StreamingLifter
+        from edge_runtime.robot.lifter import LifterParams, StreamingLifter
 
         lifter = StreamingLifter.from_manifest(cfg.assets or ASSETS_DIR, LifterParams(precision=cfg.lifter))
         frames = data["keypoints_px"]
@@ -164,11 +164,11 @@ def measure_robot(cfg: RobotConfig) -> list[dict]:
 
 def robot_rows(seconds: float, assets: Path, entries: list[dict], seed: int, workdir: Path) -> list[dict]:
     """Parent side: the robot rows (a child process), or a "not available" row when
-    edge_runtime.robot_loop cannot be imported."""
+    edge_runtime.robot.loop cannot be imported."""
     from bench.worker import ChildFailed, run_child
 
-    if importlib.util.find_spec("edge_runtime.robot_loop") is None:
-        return [not_available("robot_30hz", "edge_runtime.robot_loop is not importable")]
+    if importlib.util.find_spec("edge_runtime.robot.loop") is None:
+        return [not_available("robot_30hz", "edge_runtime.robot.loop is not importable")]
     lifter = lifter_entry(entries)
     npz = prepare_worker(workdir / "worker.npz", lifter, seed)
     try:

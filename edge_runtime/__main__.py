@@ -14,11 +14,9 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
-from .cli import CliError, add_module_commands, make_parser, run
-
-ASSETS_DIR = Path(__file__).resolve().parent / "assets"
+from edge_runtime.cli import CliError, add_module_commands, make_parser, run
+from edge_runtime.core.manifest import ASSETS_DIR
 
 
 def _add_wearable(sub: argparse._SubParsersAction) -> None:
@@ -45,7 +43,7 @@ def _add_wearable(sub: argparse._SubParsersAction) -> None:
 
 def effective_config(args: argparse.Namespace):
     """The config file, then the command-line flags on top, validated as one."""
-    from . import config
+    from edge_runtime import config
 
     cfg = config.load(args.config)
     cfg = config.override(cfg, "model", assets=args.assets, name=args.model, threads=args.threads)
@@ -54,9 +52,9 @@ def effective_config(args: argparse.Namespace):
 
 
 def run_wearable(args: argparse.Namespace) -> int:
-    from .detector import DetectorConfig
-    from .sources import ImuBlock, ReplayStats, read_imu_csv
-    from .wearable import AlertPolicy, WearableLoop
+    from edge_runtime.wearable.detector import DetectorConfig
+    from edge_runtime.wearable.loop import AlertPolicy, WearableLoop
+    from edge_runtime.wearable.sources import ImuBlock, ReplayStats, read_imu_csv
 
     cfg = effective_config(args)
     if args.print_config:
@@ -74,12 +72,12 @@ def run_wearable(args: argparse.Namespace) -> int:
     else:
         live = _open_live_source(args.imu, cfg)
         blocks = live.blocks(args.duration)
-    from .engine import Engine
+    from edge_runtime.core.onnx import Engine
 
     engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
     unknown = sorted(set(cfg.alerts.never_alert) - set(engine.classes))
     if unknown:
-        from .config import ConfigError
+        from edge_runtime.config import ConfigError
 
         raise ConfigError(f"[alerts] never_alert: {unknown} are not classes of {engine.name} ({', '.join(engine.classes)})")
     for note in stats.notices:
@@ -163,7 +161,7 @@ def run_wearable(args: argparse.Namespace) -> int:
 
 def _open_publisher(cfg, can_log, engine, status_provider):
     """The CAN side: the configured python-can bus, alerts and the WEARABLE_STATUS heartbeat."""
-    from .can_link import AlertPublisher, open_bus
+    from edge_runtime.wearable.alerts import AlertPublisher, open_bus
 
     c = cfg.can
     extra = {"host": c.host, "port": c.port} if c.interface == "socketcand" else {}
@@ -208,19 +206,19 @@ def _open_live_source(spec: str, cfg):
     """``serial:PATH[?key=HEX]`` -> a MAVLink IMU source on that serial line;
     ``sim[?options]`` -> the simulated IMU firmware as a child process on a pseudo-terminal."""
     if spec == "sim" or spec.startswith("sim?"):
-        from .sim_imu import SimImuSource, SimSourceError
+        from edge_runtime.wearable.sim_source import SimImuSource, SimSourceError
 
         try:
             return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s)
         except SimSourceError as e:
             raise CliError(str(e)) from None
-    from .serial_line import parse_serial_spec
+    from edge_runtime.core.serial_line import parse_serial_spec
 
     try:
         path, key = parse_serial_spec(spec)
     except ValueError as e:
         raise CliError(f"--imu: {e}") from None
-    from .mavlink_source import MavlinkImuSource
+    from edge_runtime.wearable.mavlink_source import MavlinkImuSource
 
     try:
         return MavlinkImuSource(path, signing_key=key, silence_timeout_s=cfg.imu.silence_timeout_s)
@@ -231,7 +229,7 @@ def _open_live_source(spec: str, cfg):
 def _feed_paced(loop, block) -> None:
     """Feed one sample period at a time on a monotonic clock (no busy waiting)."""
     start = time.monotonic()
-    from .sources import ImuBlock
+    from edge_runtime.wearable.sources import ImuBlock
 
     for i in range(len(block.acc_mps2)):
         delay = start + (i + 1) / loop.rate_hz - time.monotonic()  # sample i is complete one period later
@@ -249,18 +247,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 _MODULE_COMMANDS = (
-    ("lift", "lift_cli", "lift 2D keypoints (JSON lines, camera or simulator) to 3D joints"),
-    ("robot", "robot_cli", "the robot-side safety loop against a real or simulated arm"),
+    ("lift", "robot.lift_command", "lift 2D keypoints (JSON lines, camera or simulator) to 3D joints"),
+    ("robot", "robot.command", "the robot-side safety loop against a real or simulated arm"),
 )
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .config import ConfigError
-    from .manifest import ModelIntegrityError
-    from .sources import InputError
+    from edge_runtime.config import ConfigError
+    from edge_runtime.core.manifest import ModelIntegrityError
+    from edge_runtime.errors import InputError
 
     args = build_parser().parse_args(argv)
-    from .can_link import CanLinkError
+    from edge_runtime.wearable.alerts import CanLinkError
 
     bad = (InputError, ModelIntegrityError, ConfigError, CanLinkError, *getattr(args, "bad_input", ()))
     return run(lambda: args.func(args), bad_input=bad)

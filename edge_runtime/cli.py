@@ -12,12 +12,10 @@ import importlib
 import sys
 from typing import Callable, Iterable
 
+from edge_runtime.errors import CliError  # noqa: F401 - commands import it from here
+
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
-
-
-class CliError(Exception):
-    """Bad input found by a command itself; the message is the whole story."""
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -20,6 +20,8 @@ from dataclasses import asdict, dataclass, field, fields, make_dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from edge_runtime.errors import ConfigError
+
 if TYPE_CHECKING:  # the real class is made from SECTIONS at run time (see _registry)
     BoxConfig = Any
 
@@ -28,10 +30,6 @@ BUS_INTERFACES = ("virtual", "socketcand", "socketcan", "slcan", "pcan", "kvaser
                   "canalystii", "seeedstudio", "serial")
 """python-can interfaces a box may use: a vehicle bus adapter, the socketcand hub, or the
 in-process virtual bus. Interfaces that are not a CAN bus (network broadcasts) are refused."""
-
-
-class ConfigError(ValueError):
-    """An invalid configuration; the message names the file and the key."""
 
 
 @dataclass(frozen=True)
@@ -88,7 +86,7 @@ class CanSection:
 
 @dataclass(frozen=True)
 class RobotLinkSection:
-    """The link to the arm's controller (``edge_runtime.robot_link``)."""
+    """The link to the arm's controller (``edge_runtime.robot.link.base``)."""
 
     kind: str = "can"
     """"can" (robot_link.dbc frames, E2E-protected) or "mavlink" (MAVLink 2, signed)."""
@@ -135,14 +133,14 @@ SECTIONS: tuple[tuple[str, type | str], ...] = (
     ("can", CanSection),
     ("robot_link", RobotLinkSection),
     ("camera", CameraSection),
-    ("camera_source", "edge_runtime.camera_source:CameraSourceParams"),
-    ("calibration", "edge_runtime.calibration:CalibrationParams"),
-    ("tracker", "edge_runtime.hazard:TrackerParams"),
-    ("zones", "edge_runtime.hazard:ZoneParams"),
-    ("robot_loop", "edge_runtime.robot_loop:LoopParams"),
-    ("lifter", "edge_runtime.lifter:LifterParams"),
-    ("cap", "edge_runtime.cap:CapParams"),
-    ("gola", "edge_runtime.gola:GolaParams"),
+    ("camera_source", "edge_runtime.robot.camera_source:CameraSourceParams"),
+    ("calibration", "edge_runtime.robot.calibration:CalibrationParams"),
+    ("tracker", "edge_runtime.robot.hazard:TrackerParams"),
+    ("zones", "edge_runtime.robot.hazard:ZoneParams"),
+    ("robot_loop", "edge_runtime.robot.loop:LoopParams"),
+    ("lifter", "edge_runtime.robot.lifter:LifterParams"),
+    ("cap", "edge_runtime.posture.cap:CapParams"),
+    ("gola", "edge_runtime.posture.gola:GolaParams"),
 )
 """Every section of the box configuration, in file order. Their modules must not import
 ``edge_runtime.config`` at top level (this module imports them)."""

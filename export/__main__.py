@@ -19,7 +19,6 @@ import json
 import sys
 from pathlib import Path
 
-
 from edge_runtime.cli import add_module_commands, make_parser, run
 
 
@@ -146,7 +145,7 @@ def cmd_compare(a) -> int:
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
-    from edge_runtime.manifest import ModelIntegrityError
+    from edge_runtime.core.manifest import ModelIntegrityError
     from export.onnx_export import ExportError
     from export.quantize import QuantizeError
     from models.dataset import DataError

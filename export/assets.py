@@ -34,11 +34,22 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from edge_runtime.manifest import (ManifestError, SCHEMA_VERSION, load_manifest, sha256_file, write_manifest)
-from edge_runtime.preprocess import preprocess
-from export.onnx_export import (DEFAULT_OPSET, INPUT_LAYOUT, INPUT_NAME, LOGITS, PROBS, ExportError,
-                                check_parity, git_commit, package_version, save_onnx, to_onnx)
-from export.quantize import QuantizeError, VARIANTS, build_variant, choose, pick_windows, probs_of
+from edge_runtime.core.manifest import SCHEMA_VERSION, ManifestError, load_manifest, sha256_file, write_manifest
+from edge_runtime.wearable.preprocess import preprocess
+from export.onnx_export import (
+    DEFAULT_OPSET,
+    INPUT_LAYOUT,
+    INPUT_NAME,
+    LOGITS,
+    PROBS,
+    ExportError,
+    check_parity,
+    git_commit,
+    package_version,
+    save_onnx,
+    to_onnx,
+)
+from export.quantize import VARIANTS, QuantizeError, build_variant, choose, pick_windows, probs_of
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_ASSETS = REPO_ROOT / "edge_runtime" / "assets"
@@ -69,7 +80,7 @@ def _metrics(y_true, probs, classes, subject=None) -> dict:
 
 def io_spec(k: int) -> tuple[list, list]:
     inputs = [{"name": INPUT_NAME, "shape": ["N", 6, 33, 3], "dtype": "float32", "layout": INPUT_LAYOUT,
-               "units": "m/s^2", "preprocess": "edge_runtime.preprocess.preprocess(capture (N, 700, 3) at 100 Hz)"}]
+               "units": "m/s^2", "preprocess": "edge_runtime.wearable.preprocess.preprocess(capture (N, 700, 3) at 100 Hz)"}]
     outputs = [{"name": PROBS, "shape": ["N", k], "dtype": "float32", "meaning": "softmax, classes order"},
                {"name": LOGITS, "shape": ["N", k], "dtype": "float32", "meaning": "pre-softmax scores"}]
     return inputs, outputs
@@ -146,7 +157,10 @@ def compare_int8(loso_dir: str | Path, *, method: str | None = None, train_npz: 
             build_variant(fp, q, method, X_train[cal])
             a = probs_of(fp, ev_x[ev]) if len(ev) else np.zeros((0, len(train.classes)))
             b = probs_of(q, ev_x[ev]) if len(ev) else np.zeros((0, len(train.classes)))
-            y_true.append(ev_set.y[ev]); p32.append(a); p8.append(b); subj.append(ev_set.subject[ev])
+            y_true.append(ev_set.y[ev])
+            p32.append(a)
+            p8.append(b)
+            subj.append(ev_set.subject[ev])
             agree = float(np.mean(a.argmax(1) == b.argmax(1))) if len(ev) else float("nan")
             rows.append({"fold": name, "n": int(len(ev)), "agreement": agree})
             log(f"  fold {name}: n {len(ev)}, int8/fp32 agreement {agree:.3f}")
@@ -212,7 +226,7 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
         log(f"[1/5] simulating {subjects} subjects (seed {seed}, {minutes:g} min per trial) -> {work / 'data'}")
         d = build_cohort_datasets(subjects, seed, minutes, work / "data", progress=progress)
         train_npz, test_npz, detector = d["train"], d["test"], d["detector"]
-        data_info = {"source": "firmware_sim.wrist.simulate_cohort via models.dataset.build_cohort_datasets",
+        data_info = {"source": "firmware_sim.devices.wrist.simulate_cohort via models.dataset.build_cohort_datasets",
                      "subjects": subjects, "seed": seed, "minutes_per_trial": minutes,
                      "detector": {k: detector[k] for k in ("recall", "precision", "distractions", "captures",
                                                            "false_alarms")}}

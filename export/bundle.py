@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from edge_runtime.cli import CliError
-from edge_runtime.manifest import ModelIntegrityError, sha256_bytes, sha256_file, verify_all
+from edge_runtime.core.manifest import ModelIntegrityError, sha256_bytes, sha256_file, verify_all
 
 ROOT = Path(__file__).resolve().parent.parent
 RUNTIME_PACKAGE = ROOT / "edge_runtime"
@@ -107,8 +107,10 @@ def _pyproject(version: str, reqs: tuple[str, ...]) -> str:
         'description = "Edge safety runtime: the torch-free edge_runtime package and its shipped models"\n'
         f'requires-python = "{REQUIRES_PYTHON}"\nlicense = {{text = "Apache-2.0"}}\ndependencies = [\n{deps}]\n\n'
         '[project.scripts]\nedge-runtime = "edge_runtime.__main__:main"\n\n'
-        '[tool.setuptools]\npackages = ["edge_runtime"]\ninclude-package-data = false\n\n'
-        '[tool.setuptools.package-data]\nedge_runtime = ["assets/*", "*.toml"]\n')
+        '[tool.setuptools]\ninclude-package-data = false\n\n'
+        '[tool.setuptools.packages.find]\nnamespaces = true\ninclude = ["edge_runtime", "edge_runtime.*"]\n'
+        'exclude = ["*.__pycache__"]\n\n'
+        '[tool.setuptools.package-data]\nedge_runtime = ["*.toml"]\n"edge_runtime.assets" = ["*"]\n')
 
 
 # ---------------------------------------------------------------------------------------------- build

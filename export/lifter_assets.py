@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from edge_runtime.cli import CliError, positive_int
-from edge_runtime.manifest import SCHEMA_VERSION, ManifestError, load_manifest, sha256_file, write_manifest
+from edge_runtime.core.manifest import SCHEMA_VERSION, ManifestError, load_manifest, sha256_file, write_manifest
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_ASSETS = REPO_ROOT / "edge_runtime" / "assets"
@@ -229,7 +229,7 @@ def build_int8(fp32_path: Path, out_path: Path, cand: QuantCandidate, calib: np.
 
 def latency_us(paths: dict[str, Path], runs: int, rf: int = 27) -> dict[str, dict]:
     """Per-frame (batch 1) latency on one onnxruntime thread, interleaved: {name: {p50_us, mean_us, p99_us}}."""
-    from export.quantize import make_session, interleaved_latency
+    from export.quantize import interleaved_latency, make_session
 
     x = np.random.default_rng(0).normal(0, 0.3, (1, rf, 17, 2)).astype(np.float32)
     sessions = {k: make_session(p, 1) for k, p in paths.items()}
@@ -271,7 +271,7 @@ def _entry(precision: str, file: str, path: Path, row: dict, common: dict, metri
 
 def manifest_entries(row: dict, fp32: Path, int8: Path, provenance: dict) -> list[dict]:
     """The two lifter manifest entries (the model contract) for a trained size."""
-    from firmware_sim.camera import CANONICAL
+    from firmware_sim.devices.camera import CANONICAL
 
     cam = CANONICAL
     rf = row["config"]["filter_widths"]
@@ -287,7 +287,7 @@ def manifest_entries(row: dict, fp32: Path, int8: Path, provenance: dict) -> lis
                    "cx_px": cam.cx_px, "cy_px": cam.cy_px},
         "inputs": [{"name": INPUT_NAME, "shape": ["N", rfield, 17, 2], "dtype": "float32",
                     "layout": f"N,{rfield},17,2: the last {rfield} frames oldest first, H36M-17 joints "
-                              "(edge_runtime.skeleton), x/y",
+                              "(edge_runtime.core.skeleton), x/y",
                     "units": "canonical-camera pixels normalised as u/w*2-1, v/w*2-h/w (w=1280, h=720)"}],
         "outputs": [{"name": POSE_OUTPUT, "shape": ["N", 1, 17, 3], "dtype": "float32",
                      "meaning": "root-relative joints (joint 0 = 0) of the LAST input frame, camera frame "
@@ -317,8 +317,16 @@ def run_size(channels: int, epochs: int, splits: dict, a, work: Path, log) -> tu
     import torch
 
     from models.lifter import LifterConfig
-    from models.lifter_train import (TrainConfig, eval_frames, evaluate, fit, fmt_metrics, load_checkpoint,
-                                     save_checkpoint, state_digest)
+    from models.lifter_train import (
+        TrainConfig,
+        eval_frames,
+        evaluate,
+        fit,
+        fmt_metrics,
+        load_checkpoint,
+        save_checkpoint,
+        state_digest,
+    )
 
     d = work / f"c{channels}"
     d.mkdir(parents=True, exist_ok=True)
@@ -483,7 +491,7 @@ def _figure(path: Path, row: dict, test, model) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from edge_runtime.skeleton import bones
+    from edge_runtime.core.skeleton import bones
     from models.lifter_train import eval_frames, predict
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))

@@ -36,8 +36,8 @@ from __future__ import annotations
 
 import contextlib
 import gc
-import logging
 import json
+import logging
 import tempfile
 import time
 import warnings
@@ -48,11 +48,17 @@ from typing import Callable, Sequence
 import numpy as np
 import onnx
 import onnxruntime as ort
-from onnxruntime.quantization import (CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType,
-                                      quantize_dynamic, quantize_static)
+from onnxruntime.quantization import (
+    CalibrationDataReader,
+    CalibrationMethod,
+    QuantFormat,
+    QuantType,
+    quantize_dynamic,
+    quantize_static,
+)
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from edge_runtime.engine import session_options
+from edge_runtime.core.onnx import session_options
 from export.onnx_export import INPUT_NAME, PROBS, get_metadata, op_counts, set_metadata
 
 MIN_AGREEMENT = 0.98
@@ -405,7 +411,7 @@ def quantize_file(fp32_path: str | Path, calib_npz: str | Path, out_path: str | 
                   n_calib: int = 1000, seed: int = 0, variants: Sequence[str] | None = None,
                   log: Callable[[str], None] = lambda s: None) -> dict:
     """CLI path: calibrate on part of an NPZ of capture windows, check on the rest, choose."""
-    from edge_runtime.preprocess import preprocess
+    from edge_runtime.wearable.preprocess import preprocess
     from models.dataset import load_npz
 
     ws = load_npz(calib_npz)

@@ -1,6 +1,6 @@
 """Simulated devices and world (DESIGN.md section 2).
 
-* :mod:`firmware_sim.wrist` -- the physically motivated right-wrist accelerometer
+* :mod:`firmware_sim.devices.wrist` -- the physically motivated right-wrist accelerometer
   of the dissertation's chapter 2 (kinematic arm chain, gravity projection, driving,
   vehicle acceleration, road vibration, sensor errors) and its simulated cohort;
 * ``python -m firmware_sim drive|cohort`` -- command line (see ``__main__``).

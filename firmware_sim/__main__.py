@@ -13,7 +13,6 @@ import json
 import sys
 from pathlib import Path
 
-
 from edge_runtime.cli import CliError, add_module_commands, make_parser, positive_float, positive_int, run
 
 
@@ -32,10 +31,9 @@ def _out_dir(path: str) -> Path:
 # ----------------------------------------------------------------------------------------------
 
 def cmd_drive(args) -> int:
-    from edge_runtime.detector import detect_triggers
-
-    from .wrist import make_subjects, simulate_drive
-    from .wrist_io import write_drive
+    from edge_runtime.wearable.detector import detect_triggers
+    from firmware_sim.devices.wrist import make_subjects, simulate_drive
+    from firmware_sim.devices.wrist_io import write_drive
 
     subject = None
     if args.subject is not None:
@@ -55,7 +53,7 @@ def cmd_drive(args) -> int:
            f"{len(rec.events)} events ({', '.join(f'{k} {v}' for k, v in sorted(counts.items()))}), "
            f"{len(trig)} detector triggers -> {csv}, {truth}")
     if args.plot:
-        from .plots import plot_drive
+        from firmware_sim.devices.wrist_plots import plot_drive
 
         png = out / "drive.png"
         plot_drive(rec, trig, png)
@@ -65,7 +63,7 @@ def cmd_drive(args) -> int:
 
 
 def cmd_cohort(args) -> int:
-    from .cohort import write_cohort
+    from firmware_sim.scenarios.cohort import write_cohort
 
     out = _out_dir(args.out)
     try:
@@ -109,12 +107,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 # Commands that live in their own module: each module defines ``add_arguments(parser)`` and ``cmd(args)``.
 _MODULE_COMMANDS = (
-    ("imu", "imu_firmware", "simulated wrist IMU firmware: MAVLink at 100 Hz over a pseudo-terminal"),
-    ("can-hub", "can_hub", "simulated CAN bus: a socketcand-protocol hub on 127.0.0.1"),
-    ("sawyer", "sawyer_firmware", "simulated Sawyer controller on a CAN or signed MAVLink link"),
-    ("hrc", "hrc", "closed-loop collision-avoidance scenarios: worker, camera, runtime, Sawyer"),
-    ("gola", "gola_experiment", "chapter 4's posture experiment: GOLA-HRC on a simulated cohort"),
-    ("head-error", "head_error", "head position error in the robot frame after calibration, through the lifter"),
+    ("imu", "devices.imu_firmware", "simulated wrist IMU firmware: MAVLink at 100 Hz over a pseudo-terminal"),
+    ("can-hub", "devices.can_hub", "simulated CAN bus: a socketcand-protocol hub on 127.0.0.1"),
+    ("sawyer", "robot.controller", "simulated Sawyer controller on a CAN or signed MAVLink link"),
+    ("hrc", "scenarios.hrc", "closed-loop collision-avoidance scenarios: worker, camera, runtime, Sawyer"),
+    ("gola", "scenarios.gola", "chapter 4's posture experiment: GOLA-HRC on a simulated cohort"),
+    ("head-error", "scenarios.head_error", "head position error in the robot frame after calibration, through the lifter"),
 )
 
 

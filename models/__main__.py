@@ -112,7 +112,7 @@ def cmd_train(a) -> int:
             m = run_within(a.arch, train, test, out, epochs=a.epochs, seed=a.seed, jobs=a.jobs, progress=progress)
             if is_main_process():
                 _print_metrics(m, f"{a.arch} within")
-            from models.train import fit, save_checkpoint, DEFAULT_EPOCHS
+            from models.train import DEFAULT_EPOCHS, fit, save_checkpoint
             ep = DEFAULT_EPOCHS[a.arch] if a.epochs is None else a.epochs
             model = fit(a.arch, train.X, train.y, len(train.classes), epochs=ep, seed=a.seed, progress=progress)
             if is_main_process():
@@ -157,7 +157,7 @@ def cmd_evaluate(a) -> int:
 
 
 def cmd_import(a) -> int:
-    from edge_runtime.labels import CLASSES
+    from edge_runtime.wearable.labels import CLASSES
     from models.importer import import_to_npz
 
     classes = [c.strip() for c in a.classes.split(",") if c.strip()] if a.classes else list(CLASSES)

@@ -41,8 +41,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from edge_runtime.detector import DetectorConfig, detect_triggers, extract_captures
-from edge_runtime.labels import CLASSES, OTHER
+from edge_runtime.wearable.detector import DetectorConfig, detect_triggers, extract_captures
+from edge_runtime.wearable.labels import CLASSES, OTHER
 
 SAMPLE_RATE_HZ = 100
 WINDOW_FRAMES = 700
@@ -319,7 +319,7 @@ def windows_from_stream(acc: np.ndarray, events: Sequence, *, subject: int, tria
 
 def windows_from_recording(rec, classes: Sequence[str] = CLASSES, cfg: DetectorConfig = DetectorConfig()
                            ) -> tuple[WindowSet, WindowSet, DetectorStats]:
-    """A ``firmware_sim.wrist.Recording`` (``acc_mps2``, ``events``, ``subject_id``, ``trial``)
+    """A ``firmware_sim.devices.wrist.Recording`` (``acc_mps2``, ``events``, ``subject_id``, ``trial``)
     -> (train windows, test windows, detector stats)."""
     return windows_from_stream(rec.acc_mps2, rec.events, subject=int(rec.subject_id),
                                trial=str(getattr(rec, "trial", "")), classes=classes, cfg=cfg,
@@ -328,9 +328,10 @@ def windows_from_recording(rec, classes: Sequence[str] = CLASSES, cfg: DetectorC
 
 def build_cohort_datasets(n_subjects: int = 20, seed: int = 0, minutes_per_trial: float = 15.0,
                           out_dir: str | os.PathLike = "data", progress: bool = True) -> dict:
-    """Simulate the cohort (firmware_sim.wrist) -> out_dir/train.npz, test.npz, detector.json."""
-    from firmware_sim.wrist import simulate_cohort  # the simulator is only needed here
+    """Simulate the cohort (firmware_sim.devices.wrist) -> out_dir/train.npz, test.npz, detector.json."""
     from tqdm import tqdm
+
+    from firmware_sim.devices.wrist import simulate_cohort  # the simulator is only needed here
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

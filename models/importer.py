@@ -35,9 +35,8 @@ from typing import Sequence
 
 import numpy as np
 
-from edge_runtime.labels import CLASSES, OTHER
-from models.dataset import (SAMPLE_RATE_HZ, DataError, WindowSet, concat, load_npz, save_npz,
-                            windows_from_stream)
+from edge_runtime.wearable.labels import CLASSES, OTHER
+from models.dataset import SAMPLE_RATE_HZ, DataError, WindowSet, concat, load_npz, save_npz, windows_from_stream
 
 STREAM_HEADER = ["t", "ax", "ay", "az"]
 EVENT_HEADER = ["start_s", "end_s", "label"]

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from edge_runtime.skeleton import JOINTS
+from edge_runtime.core.skeleton import JOINTS
 
 from .lifter import LifterConfig, LifterNet, mpjpe, weighted_mpjpe
 from .pose_data import ACTIVITY_NAMES, PoseSet, flip
@@ -179,8 +179,8 @@ def ground_plane_root(ps: PoseSet, idx: np.ndarray, pose: np.ndarray) -> np.ndar
     With the camera's extrinsics known (``ps.meta["extrinsics"]``: robot -> camera ``R``, ``t``), the ray
     through the lower ankle's 2D keypoint meets the plane ``ANKLE_HEIGHT_M`` above the floor; the pelvis is
     that point minus the ankle's predicted root-relative offset. None without extrinsics."""
-    from edge_runtime.skeleton import BASE_HEIGHT_M, L_ANKLE, R_ANKLE
-    from firmware_sim.camera import F_PX, HEIGHT_PX, WIDTH_PX
+    from edge_runtime.core.skeleton import BASE_HEIGHT_M, L_ANKLE, R_ANKLE
+    from firmware_sim.devices.camera import F_PX, HEIGHT_PX, WIDTH_PX
 
     ext = ps.meta.get("extrinsics")
     if not ext:

@@ -6,15 +6,15 @@ Recipe (:func:`build_splits`)
   half "F", half "M"; every segment length is then scaled by N(1, 3 %) on its own, so
   proportions differ between people too. TRAIN subjects and HELD-OUT subjects are disjoint.
 * Motions: each subject performs a random working session
-  (:func:`firmware_sim.motions.random_activity`: walking at 0.5-2.0 m/s with turns and
+  (:func:`firmware_sim.people.motions.random_activity`: walking at 0.5-2.0 m/s with turns and
   curves, standing, working at a point, looking down, bending, squatting, turning) around the
   Sawyer's work cell, at 30 Hz.
 * Cameras: placements as in the dissertation (3-8 m from the cell, 1-3 m high, aimed at it;
-  :func:`firmware_sim.camera.random_placement`), in the canonical 100 deg pinhole camera the
+  :func:`firmware_sim.devices.camera.random_placement`), in the canonical 100 deg pinhole camera the
   lifter serves (a distorted real camera is undistorted into it by the runtime). A pool of
   TRAIN placements and a disjoint pool of HELD-OUT placements; each session is seen from
   ``views`` placements of its pool.
-* Inputs: the 2D detector model (:func:`firmware_sim.camera.detect`: noise scaling with
+* Inputs: the 2D detector model (:func:`firmware_sim.devices.camera.detect`: noise scaling with
   distance, jitter, outliers, left/right swaps, missed joints, joints out of the image),
   then the runtime's policy for missing joints: a missed joint is HELD at its last value;
   a frame is ``valid`` when every joint was seen within the last ``hold_frames`` (3)
@@ -39,10 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
-from edge_runtime import skeleton as sk
-from firmware_sim import camera as cam_sim
-from firmware_sim import motions as mo
-from firmware_sim.human import Body
+from edge_runtime.core import skeleton as sk
+from firmware_sim.devices import camera as cam_sim
+from firmware_sim.people import motions as mo
+from firmware_sim.people.human import Body
 
 LENGTH_FIELDS = ("upper_arm_m", "forearm_m", "hand_m", "thigh_m", "shank_m", "head_m", "shoulder_width_m",
                  "hip_width_m", "trunk_m", "neck_m", "crown_m")

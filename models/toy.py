@@ -1,4 +1,4 @@
-"""Small synthetic data for tests and examples (not the simulator: see firmware_sim.wrist).
+"""Small synthetic data for tests and examples (not the simulator: see firmware_sim.devices.wrist).
 
 ``toy_windows``: separable capture windows, one waveform per class on top of
 gravity and noise. ``toy_stream``: a 100 Hz wrist stream with step-like hand

@@ -1,0 +1,205 @@
+"""``assets/manifest.json``: what the box runs, and the proof that it is what was built.
+
+numpy-free, torch-free: the standard library only.
+
+Schema (``SCHEMA_VERSION`` 1; ``python -m export assets`` writes it)::
+
+    {
+      "version": 1,                     # manifest schema version
+      "created_by": "python -m export assets --seed 0 ...",
+      "models": [
+        {
+          "name": "convlstm-int8",      # unique; Engine.from_manifest(dir, name_or_precision)
+          "file": "convlstm.int8.onnx", # relative to the assets directory, no sub-directories
+          "sha256": "...",              # of the file's bytes; checked before every load
+          "precision": "int8",          # "fp32" | "int8"
+          "arch": "convlstm",
+          "model_version": "...",
+          "parameters": {"torch": 79998, "keras": 79598},
+          "inputs":  [{"name": "imu", "shape": ["N", 6, 33, 3], "dtype": "float32",
+                       "layout": "...", "units": "m/s^2"}],
+          "outputs": [{"name": "probs", "shape": ["N", 6], "dtype": "float32"}, ...],
+          "classes": ["Phone", ...],    # model-output order; [] for a model that is not a
+                                        # classifier (arch "lifter", which adds "receptive_field",
+                                        # "joints" and "camera": see edge_runtime/lifter.py)
+          "metrics": {...},             # how well it does, and on what
+          "quantization": {...},        # int8 only: method, calibration, int8 operators, candidates
+          "provenance": {"command", "seed", "data", "git_commit", "versions": {...}}
+        }, ...
+      ]
+    }
+
+:func:`load_manifest` validates the structure; :func:`verify_file` checks a
+model file against its sha256. Any problem raises :class:`ManifestError` or
+:class:`ModelIntegrityError` (both one-line, both naming the file).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from edge_runtime.errors import ManifestError, ModelIntegrityError
+
+SCHEMA_VERSION = 1
+MANIFEST_NAME = "manifest.json"
+ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets"
+"""The shipped models, their manifest and the DBCs (edge_runtime/assets)."""
+PRECISIONS = ("fp32", "int8")
+CLASSIFIER_ARCHS = ("convlstm", "cnn", "lstm", "lda")
+"""Architectures whose entries must list their ``classes``; other models (the pose
+lifter) list ``[]``."""
+_REQUIRED_MODEL_KEYS = ("name", "file", "sha256", "precision", "arch", "parameters", "inputs",
+                        "outputs", "classes")
+
+
+
+def sha256_file(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def manifest_path(assets_dir: str | os.PathLike) -> Path:
+    p = Path(assets_dir)
+    return p if p.suffix == ".json" else p / MANIFEST_NAME
+
+
+def _check_model(entry: Any, i: int, where: str) -> None:
+    if not isinstance(entry, dict):
+        raise ManifestError(f"{where}: field 'models[{i}]': expected an object")
+    for key in _REQUIRED_MODEL_KEYS:
+        if key not in entry:
+            raise ManifestError(f"{where}: field 'models[{i}].{key}': missing")
+    f = entry["file"]
+    if not isinstance(f, str) or not f or Path(f).name != f or f in (".", ".."):
+        raise ManifestError(f"{where}: field 'models[{i}].file': {f!r} must be a plain file name "
+                            "inside the assets directory")
+    sha = entry["sha256"]
+    if not (isinstance(sha, str) and len(sha) == 64 and all(c in "0123456789abcdef" for c in sha)):
+        raise ManifestError(f"{where}: field 'models[{i}].sha256': expected 64 lowercase hex digits")
+    if entry["precision"] not in PRECISIONS:
+        raise ManifestError(f"{where}: field 'models[{i}].precision': {entry['precision']!r} "
+                            f"not one of {PRECISIONS}")
+    classes = entry["classes"]
+    if not (isinstance(classes, list) and all(isinstance(c, str) and c for c in classes)
+            and len(set(classes)) == len(classes)):
+        raise ManifestError(f"{where}: field 'models[{i}].classes': expected unique non-empty strings")
+    if not classes and entry["arch"] in CLASSIFIER_ARCHS:
+        raise ManifestError(f"{where}: field 'models[{i}].classes': a {entry['arch']} classifier needs its "
+                            "class list")
+    for key in ("inputs", "outputs"):
+        io = entry[key]
+        if not (isinstance(io, list) and io and all(isinstance(t, dict) and "name" in t for t in io)):
+            raise ManifestError(f"{where}: field 'models[{i}].{key}': expected a list of {{name, shape, dtype}}")
+
+
+def load_manifest(assets_dir: str | os.PathLike) -> dict:
+    """Read and validate ``assets_dir/manifest.json`` (or a manifest path itself)."""
+    path = manifest_path(assets_dir)
+    if not path.is_file():
+        raise ManifestError(f"{path}: manifest not found (rebuild with `python -m export assets --seed 0`)")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ManifestError(f"{path}: not readable JSON ({type(e).__name__}: {e})".replace("\n", " ")) from None
+    if not isinstance(data, dict):
+        raise ManifestError(f"{path}: expected a JSON object at the top level")
+    if data.get("version") != SCHEMA_VERSION:
+        raise ManifestError(f"{path}: field 'version': {data.get('version')!r}, this runtime reads "
+                            f"version {SCHEMA_VERSION}")
+    models = data.get("models")
+    if not isinstance(models, list) or not models:
+        raise ManifestError(f"{path}: field 'models': expected a non-empty list")
+    for i, m in enumerate(models):
+        _check_model(m, i, str(path))
+    names = [m["name"] for m in models]
+    if len(set(names)) != len(names):
+        raise ManifestError(f"{path}: field 'models[].name': names must be unique, got {names}")
+    return data
+
+
+def select_model(manifest: dict, name_or_precision: str = "int8", where: str = MANIFEST_NAME,
+                 arch: str | tuple[str, ...] | None = None) -> dict:
+    """The entry named ``name_or_precision``; else the first entry with that precision.
+
+    With ``arch`` (a name or a tuple of names), only entries of that architecture are
+    candidates (a manifest may ship a classifier and the pose lifter side by side)."""
+    archs = (arch,) if isinstance(arch, str) else arch
+    models = [m for m in manifest["models"] if archs is None or m["arch"] in archs]
+    if not models:
+        raise ManifestError(f"{where}: field 'models': no model of arch {arch!r} (the manifest lists "
+                            f"{', '.join(sorted({m['arch'] for m in manifest['models']}))})")
+    for m in models:
+        if m["name"] == name_or_precision:
+            return m
+    for m in models:
+        if m["precision"] == name_or_precision:
+            return m
+    choices = sorted({m["name"] for m in models} | {m["precision"] for m in models})
+    raise ManifestError(f"{where}: field 'models': no model named or of precision {name_or_precision!r} "
+                        f"(choose one of {', '.join(choices)})")
+
+
+def read_verified(assets_dir: str | os.PathLike, entry: dict) -> bytes:
+    """The model file's bytes, after checking them against the manifest's sha256.
+
+    The bytes that were hashed are the bytes that get loaded (no window between
+    the check and the load)."""
+    path = Path(assets_dir) / entry["file"]
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise ModelIntegrityError(f"{path}: model file listed in the manifest is missing") from None
+    except OSError as e:
+        raise ModelIntegrityError(f"{path}: cannot read model file ({e.strerror or e})") from None
+    got = sha256_bytes(data)
+    if got != entry["sha256"]:
+        raise ModelIntegrityError(f"{path}: sha256 mismatch (manifest {entry['sha256'][:12]}..., "
+                                  f"file {got[:12]}...): refusing to load a model that is not the one shipped")
+    return data
+
+
+def load_verified(assets_dir: str | os.PathLike, name_or_precision: str = "int8",
+                  arch: str | tuple[str, ...] | None = None) -> tuple[dict, bytes, Path]:
+    """(manifest entry, hash-checked model bytes, model path) for ``name_or_precision``
+    (a name or a precision), optionally among the entries of one ``arch``."""
+    mpath = manifest_path(assets_dir)
+    entry = select_model(load_manifest(assets_dir), name_or_precision, str(mpath), arch=arch)
+    return entry, read_verified(mpath.parent, entry), mpath.parent / entry["file"]
+
+
+def verify_file(assets_dir: str | os.PathLike, entry: dict) -> None:
+    read_verified(assets_dir, entry)
+
+
+def verify_all(assets_dir: str | os.PathLike) -> dict:
+    """Load the manifest and check every model file's hash; returns the manifest."""
+    m = load_manifest(assets_dir)
+    base = manifest_path(assets_dir).parent
+    for entry in m["models"]:
+        verify_file(base, entry)
+    return m
+
+
+def write_manifest(assets_dir: str | os.PathLike, manifest: dict) -> Path:
+    """Validate and write ``manifest.json`` (sorted keys, stable bytes)."""
+    path = manifest_path(assets_dir)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.json")
+    tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n", encoding="utf-8")
+    try:
+        load_manifest(tmp)
+    except ManifestError:
+        tmp.unlink(missing_ok=True)
+        raise
+    os.replace(tmp, path)
+    return path

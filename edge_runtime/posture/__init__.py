@@ -1,0 +1,1 @@
+"""Posture: the CAP score of a 3D pose and the GOLA-HRC work-piece optimiser."""

@@ -1,0 +1,446 @@
+"""The 3-marker camera -> robot calibration of dissertation Eq. 1-2.
+
+Three markers lie on the floor at ``(0, floor, 1)``, ``(1, floor, 1)`` and
+``(0, floor, 2)`` in the robot frame. A worker stands on each in turn; the lifter's
+head and ankle-midpoint positions (camera frame, metres) at each marker give the
+transform. The dissertation writes the floor as ``+H_base`` in a ``y``-down robot
+frame, with the head at ``H_base - L_y``; our robot frame (``edge_runtime.core.skeleton``)
+is ``y``-up with the floor at ``y = -0.914 m``, so here the floor is
+``-base_height_m`` and the head at the markers is at ``floor + L_y``. The
+``y`` axis vector of Eq. 2 is therefore ``head - ankle`` (pointing up), not the
+dissertation's ``ankle - head``; nothing else changes.
+
+Two fits, both giving ``p_robot = A @ p_cam + b``:
+
+* ``"eq2"`` -- the dissertation's. Eq. 1: ``p_r = (p_c - ankle_m1) T^-1 + m1`` (row
+  vectors) with Eq. 2's ``T = diag(1/L_x, 1/L_y, 1/L_z) [x_c; y_c; z_c]``,
+  ``x_c = head_m2 - head_m1``, ``y_c = head_m1 - ankle_m1``, ``z_c = head_m3 - head_m1``:
+  a scale per axis and a rotation, exact at the three markers. With noisy inputs the
+  three axes are not orthogonal, so the map shears space, and it rests on four points
+  only (three heads and one ankle).
+* ``"rigid"`` (default) -- a least-squares similarity (rotation by SVD, one scale,
+  translation; Umeyama 1991) over all six correspondences, every head and every ankle
+  at every marker. It cannot shear, uses twice the data, and its residuals measure
+  how well the recording fits. tests/test_calibration.py compares the two on simulated
+  cameras with keypoint noise; the rigid fit's head error is the lower, hence the
+  default. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
+  transform).
+* ``"pnp"`` -- the camera pose from the directions of the six points only
+  (``cv2.solvePnP`` with identity intrinsics on ``(x/z, y/z)``, started from the rigid
+  fit): ignores the lifter's depth. Scale 1, so use it with the ground anchoring.
+
+Ground anchoring (``ground_anchor``, :func:`anchor_factor`, :meth:`Calibration.to_robot`):
+the lifter's weak part is the root's depth (from apparent body size). Once the floor is
+known, each lifted skeleton is scaled about the camera centre (every 2D projection is
+kept) so that its lower ankle rests ``ankle_height_m`` above the floor; guarded against
+flat rays and low cameras, the factor clamped. reports/robot/head_error.md measures it.
+
+``L_y`` is the height of the head joint above the ankle midpoint: the worker's height
+as the skeleton measures it (``worker_height_m``; 0 means: measure it from the
+recording as the mean head-ankle distance, in the lifter's metres).
+
+Inputs are averaged robustly (a per-axis median over the frames at each marker), so
+keypoint noise and a few bad frames do not move the result. Degenerate inputs are
+refused with a ``CalibrationError`` that says what went wrong: markers on a line,
+a worker who did not move between markers, too few frames, non-finite values.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, L_ANKLE, R_ANKLE
+from edge_runtime.errors import InputError
+
+FORMAT_VERSION = 1
+METHODS = ("rigid", "eq2", "pnp")
+
+
+class CalibrationError(InputError):
+    """A calibration that cannot be made or loaded; the message says why."""
+
+
+@dataclass(frozen=True)
+class CalibrationParams:
+    """The marker layout and the fit ([calibration] in the box configuration)."""
+
+    markers_xz_m: tuple[tuple[float, float], ...] = ((0.0, 1.0), (1.0, 1.0), (0.0, 2.0))
+    """Ground positions (x, z) of markers 1, 2 and 3 in the robot frame (m). Marker 2 lies
+    along +x from marker 1 and marker 3 along +z, as in the dissertation's Fig. 3.1."""
+    base_height_m: float = BASE_HEIGHT_M
+    """Height of the robot frame's origin (top of the base) above the floor (m)."""
+    worker_height_m: float = 0.0
+    """L_y: head-joint height above the ankle midpoint of the calibrating worker (m);
+    0 = measure it from the recording."""
+    ankle_height_m: float = 0.07
+    """Height of the ankle joints above the floor (m; 0.039 of body height). The
+    dissertation puts the ankle midpoint on the marker (0); this lifts it to the joint."""
+    method: str = "rigid"
+    """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
+    "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1)."""
+    scale: bool = True
+    """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
+    min_frames: int = 10
+    """Frames needed at each marker."""
+    min_move_m: float = 0.3
+    """The head must move at least this far between markers (m), else the worker did not move."""
+    still_speed_mps: float = 0.15
+    """Recording segmentation: the ankle midpoint moving slower than this is standing (m/s)."""
+    still_min_s: float = 1.0
+    """Recording segmentation: a stand at a marker lasts at least this long (s)."""
+    ground_anchor: bool = True
+    """Re-anchor lifted skeletons on the floor (:func:`anchor_factor`): scale each about the
+    camera centre so that its lower ankle is ``ankle_height_m`` above the floor. Fixes most of
+    the lifter's depth error (depth from apparent body size); see reports/robot/head_error.md."""
+    anchor_min_ray_deg: float = 3.0
+    """Anchoring guard: the ray from the camera to the lower ankle must point at least this
+    far below the horizontal (deg), else the floor crossing is too ill-conditioned and the
+    lifter's depth is kept."""
+    anchor_min_camera_height_m: float = 0.5
+    """Anchoring guard: the camera centre must be at least this high above the ankle plane (m)."""
+    anchor_min_scale: float = 0.7
+    """Anchoring clamps its scale factor to [anchor_min_scale, anchor_max_scale]."""
+    anchor_max_scale: float = 1.4
+    """Upper bound of the anchoring's scale factor."""
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {self.method!r}")
+        if len(self.markers_xz_m) != 3 or any(len(m) != 2 for m in self.markers_xz_m):
+            raise ValueError("markers_xz_m: must be three [x, z] pairs")
+        if not 0 < self.anchor_min_scale <= 1 <= self.anchor_max_scale:
+            raise ValueError("anchor_min_scale, anchor_max_scale: need 0 < min <= 1 <= max")
+
+    @property
+    def floor_y_m(self) -> float:
+        return -self.base_height_m
+
+
+def robust_mean(points) -> np.ndarray:
+    """Per-axis median of (N, 3) points, ignoring non-finite rows."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    if len(p) == 0:
+        raise CalibrationError("no finite positions")
+    return np.median(p, axis=0)
+
+
+def head_and_ankles(joints_cam_m) -> tuple[np.ndarray, np.ndarray]:
+    """Head and ankle midpoint of (..., 17, 3) joints."""
+    j = np.asarray(joints_cam_m, dtype=float)
+    return j[..., HEAD, :], 0.5 * (j[..., L_ANKLE, :] + j[..., R_ANKLE, :])
+
+
+# reasons of anchor_factor (None: applied)
+ANCHOR_NO_ANKLE = "no_ankle"
+ANCHOR_CAMERA_LOW = "camera_low"
+ANCHOR_RAY_FLAT = "ray_flat"
+
+
+def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationParams()) -> tuple[float, str | None]:
+    """The floor re-anchoring of one lifted skeleton: ``(k, reason)``.
+
+    ``joints_cam_m`` (17, 3) are camera-frame joints (m) and ``p_robot = A @ p_cam + b`` the
+    calibration, so the camera centre (the camera frame's origin) is at ``b`` in the robot
+    frame. Scaling the skeleton by ``k`` about the camera centre leaves every joint on its
+    viewing ray (every 2D projection is kept) and moves it in depth; ``k`` is chosen so that
+    the lower ankle (lower in the robot frame: the foot on the ground mid-stride) lies
+    ``ankle_height_m`` above the floor, then clamped to ``[anchor_min_scale, anchor_max_scale]``.
+
+    ``k`` is 1 with a reason when the anchoring cannot be trusted: ``no_ankle`` (no finite
+    ankle), ``camera_low`` (camera centre less than ``anchor_min_camera_height_m`` above the
+    ankle plane) or ``ray_flat`` (the ray to the ankle points less than
+    ``anchor_min_ray_deg`` below the horizontal, or up).
+    """
+    j = np.asarray(joints_cam_m, float).reshape(-1, 3)
+    A, b = np.asarray(A, float), np.asarray(b, float)
+    ankles = j[[L_ANKLE, R_ANKLE]]
+    rays = ankles @ A.T                                  # camera centre -> ankle, robot frame
+    ok = np.isfinite(rays).all(axis=1)
+    if not ok.any():
+        return 1.0, ANCHOR_NO_ANKLE
+    ray = rays[ok][np.argmin(rays[ok, 1])]               # the lower ankle
+    drop_m = b[1] - (params.floor_y_m + params.ankle_height_m)
+    if not drop_m >= params.anchor_min_camera_height_m:
+        return 1.0, ANCHOR_CAMERA_LOW
+    if -ray[1] < np.sin(np.radians(params.anchor_min_ray_deg)) * np.linalg.norm(ray):
+        return 1.0, ANCHOR_RAY_FLAT
+    k = drop_m / -ray[1]
+    return float(np.clip(k, params.anchor_min_scale, params.anchor_max_scale)), None
+
+
+@dataclass
+class Calibration:
+    """A camera -> robot transform ``p_robot = A @ p_cam + b`` and how it was made."""
+
+    A: np.ndarray
+    b: np.ndarray
+    method: str
+    worker_height_m: float
+    head_cam_m: np.ndarray
+    """(3, 3) head positions at markers 1-3 (camera frame), the fit's inputs."""
+    ankle_cam_m: np.ndarray
+    """(3, 3) ankle midpoints at markers 1-3 (camera frame)."""
+    params: CalibrationParams = field(default_factory=CalibrationParams)
+    frames: tuple[int, ...] = ()
+
+    def apply(self, points_cam_m) -> np.ndarray:
+        """Robot-frame positions of camera-frame points (..., 3)."""
+        p = np.asarray(points_cam_m, dtype=float)
+        return p @ self.A.T + self.b
+
+    @property
+    def camera_centre_m(self) -> np.ndarray:
+        """The camera centre (the camera frame's origin) in the robot frame (m)."""
+        return self.b.copy()
+
+    def anchor_to_floor(self, joints_cam_m) -> tuple[np.ndarray, bool]:
+        """Robot-frame joints (17, 3) of one camera-frame skeleton re-anchored on the floor
+        (:func:`anchor_factor`: scaled about the camera centre so its lower ankle is
+        ``ankle_height_m`` above the floor), and whether the anchoring applied (False: a
+        guard refused and the lifter's depth was kept, or ``params.ground_anchor`` is off).
+        Non-finite joints stay non-finite."""
+        j = np.asarray(joints_cam_m, float)
+        if not self.params.ground_anchor:
+            return self.apply(j), False
+        k, reason = anchor_factor(j, self.A, self.b, self.params)
+        return self.apply(k * j), reason is None
+
+    def to_robot(self, joints_cam_m) -> np.ndarray:
+        """Robot-frame joints of camera-frame skeletons (17, 3) or (P, 17, 3): each one
+        re-anchored on the floor when ``params.ground_anchor`` is on, else :meth:`apply`."""
+        j = np.asarray(joints_cam_m, float)
+        if not self.params.ground_anchor or j.shape[-2:] != (17, 3):
+            return self.apply(j)
+        flat = j.reshape(-1, 17, 3)
+        return np.stack([self.anchor_to_floor(p)[0] for p in flat]).reshape(j.shape)
+
+    @property
+    def scale(self) -> float:
+        """Mean scale factor of A (1 for a pure rotation)."""
+        return float(np.cbrt(abs(np.linalg.det(self.A))))
+
+    def residuals_m(self) -> dict[str, list[float]]:
+        """Distance (m) between each transformed input and its marker target."""
+        heads, ankles = targets(self.params, self.worker_height_m)
+        return {
+            "head": np.linalg.norm(self.apply(self.head_cam_m) - heads, axis=1).round(4).tolist(),
+            "ankle": np.linalg.norm(self.apply(self.ankle_cam_m) - ankles, axis=1).round(4).tolist(),
+        }
+
+    def to_json(self) -> dict:
+        return {
+            "version": FORMAT_VERSION,
+            "method": self.method,
+            "A": self.A.tolist(),
+            "b": self.b.tolist(),
+            "scale": self.scale,
+            "worker_height_m": self.worker_height_m,
+            "inputs": {"head_cam_m": self.head_cam_m.tolist(), "ankle_cam_m": self.ankle_cam_m.tolist(),
+                       "frames_per_marker": list(self.frames)},
+            "residuals_m": self.residuals_m(),
+            "params": {k: (list(map(list, v)) if k == "markers_xz_m" else v) for k, v in asdict(self.params).items()},
+        }
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_json(), indent=2) + "\n")
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Calibration":
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text())
+        except OSError as e:
+            raise CalibrationError(f"{p}: cannot read ({e.strerror or e})") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise CalibrationError(f"{p}: not JSON ({e})") from None
+        try:
+            return cls.from_json(data)
+        except (KeyError, TypeError, ValueError) as e:
+            raise CalibrationError(f"{p}: not a calibration file ({type(e).__name__}: {e})") from None
+
+    @classmethod
+    def from_json(cls, data: dict) -> "Calibration":
+        if data.get("version") != FORMAT_VERSION:
+            raise ValueError(f"version {data.get('version')!r}, expected {FORMAT_VERSION}")
+        A, b = np.array(data["A"], float), np.array(data["b"], float)
+        if A.shape != (3, 3) or b.shape != (3,) or not (np.isfinite(A).all() and np.isfinite(b).all()):
+            raise ValueError("A must be 3x3 and b 3 finite numbers")
+        if abs(np.linalg.det(A)) < 1e-9:
+            raise ValueError("A is singular")
+        raw = dict(data.get("params", {}))
+        if "markers_xz_m" in raw:
+            raw["markers_xz_m"] = tuple(tuple(float(x) for x in m) for m in raw["markers_xz_m"])
+        inputs = data["inputs"]
+        return cls(A, b, data["method"], float(data["worker_height_m"]),
+                   np.array(inputs["head_cam_m"], float), np.array(inputs["ankle_cam_m"], float),
+                   CalibrationParams(**raw), tuple(inputs.get("frames_per_marker", ())))
+
+
+def marker_points(params: CalibrationParams) -> np.ndarray:
+    """(3, 3) robot-frame floor positions of the markers."""
+    return np.array([[x, params.floor_y_m, z] for x, z in params.markers_xz_m], float)
+
+
+def targets(params: CalibrationParams, worker_height_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Robot-frame head and ankle positions (3, 3) of a worker standing on each marker."""
+    ankles = marker_points(params) + [0.0, params.ankle_height_m, 0.0]
+    return ankles + [0.0, worker_height_m, 0.0], ankles
+
+
+def _check_markers(params: CalibrationParams) -> None:
+    m = np.asarray(params.markers_xz_m, float)
+    u, v = m[1] - m[0], m[2] - m[0]
+    area = abs(u[0] * v[1] - u[1] * v[0])
+    if area < 1e-3:
+        raise CalibrationError(f"markers {params.markers_xz_m} are collinear: they must span the floor")
+
+
+def fit(head_cam_m, ankle_cam_m, params: CalibrationParams = CalibrationParams(),
+        frames: tuple[int, ...] = ()) -> Calibration:
+    """The transform from the (3, 3) head and ankle-midpoint positions at markers 1-3."""
+    _check_markers(params)
+    heads = np.asarray(head_cam_m, float).reshape(3, 3)
+    ankles = np.asarray(ankle_cam_m, float).reshape(3, 3)
+    if not (np.isfinite(heads).all() and np.isfinite(ankles).all()):
+        raise CalibrationError("non-finite head or ankle positions")
+    for k in (1, 2):
+        moved = float(np.linalg.norm(heads[k] - heads[0]))
+        if moved < params.min_move_m:
+            raise CalibrationError(f"the worker did not move from marker 1 to marker {k + 1} "
+                                   f"(head moved {moved:.2f} m, need {params.min_move_m} m)")
+    x_c, z_c = heads[1] - heads[0], heads[2] - heads[0]
+    if np.linalg.norm(np.cross(x_c, z_c)) < 0.1 * np.linalg.norm(x_c) * np.linalg.norm(z_c):
+        raise CalibrationError("the head positions at the three markers are (nearly) collinear")
+    height = params.worker_height_m or _measured_height(heads, ankles, params)
+    if height < 0.5:
+        raise CalibrationError(f"head only {height:.2f} m above the ankles: not a standing worker")
+    head_r, ankle_r = targets(params, height)
+    if params.method == "eq2":
+        A, b = _fit_eq2(heads, ankles, head_r, ankle_r)
+    elif params.method == "pnp":
+        A, b = _fit_pnp(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]))
+    else:
+        A, b = _fit_similarity(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]), params.scale)
+    return Calibration(A, b, params.method, height, heads, ankles, params, tuple(frames))
+
+
+def _measured_height(heads, ankles, params: CalibrationParams) -> float:
+    """L_y from the recording: the mean head-ankle distance, in metres of the robot frame.
+    For the scaled rigid fit the lifter's metres are first corrected by the ratio of the
+    known marker spacing to the spacing the lifter saw (else a lifter that sees everything
+    15 % too large would also make the worker 15 % too tall and bias the fit)."""
+    length = float(np.mean(np.linalg.norm(heads - ankles, axis=1)))
+    if params.method == "eq2" or (params.method == "rigid" and not params.scale):
+        return length
+    mid = 0.5 * (heads + ankles)
+    pairs = ((0, 1), (0, 2), (1, 2))
+    m = marker_points(params)
+    seen = sum(np.linalg.norm(mid[i] - mid[j]) for i, j in pairs)
+    known = sum(np.linalg.norm(m[i] - m[j]) for i, j in pairs)
+    return length * known / seen
+
+
+def _fit_eq2(heads, ankles, head_r, ankle_r) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 1-2 as a column-vector affine map: the camera vectors x_c, y_c, z_c map onto the
+    robot-frame vectors between the same marker targets (which, for the default
+    layout, are L_x e_x, L_y e_y, L_z e_z: Eq. 2's scaling times rotation)."""
+    cam = np.stack([heads[1] - heads[0], heads[0] - ankles[0], heads[2] - heads[0]])  # rows x_c, y_c, z_c
+    rob = np.stack([head_r[1] - head_r[0], head_r[0] - ankle_r[0], head_r[2] - head_r[0]])
+    # rows: rob_i = A cam_i  ->  rob = cam A^T
+    A = np.linalg.solve(cam, rob).T
+    return A, ankle_r[0] - A @ ankles[0]
+
+
+def _fit_pnp(src, dst) -> tuple[np.ndarray, np.ndarray]:
+    """The camera pose from the directions of the camera-frame points only (their depths,
+    the lifter's weak part, are not used): ``cv2.solvePnP`` of the robot-frame targets
+    against the normalised image coordinates ``(x/z, y/z)`` (identity intrinsics), started
+    from the similarity fit. Returns the rigid camera -> robot map (scale 1)."""
+    import cv2
+
+    A0, b0 = _fit_similarity(src, dst, True)
+    R0 = (A0 / np.cbrt(np.linalg.det(A0))).T                 # robot -> camera rotation
+    t0 = -R0 @ b0
+    uv = src[:, :2] / src[:, 2:3]
+    if not (src[:, 2] > 0.1).all():
+        raise CalibrationError("a calibration point is not in front of the camera")
+    ok, rvec, tvec = cv2.solvePnP(dst.reshape(-1, 1, 3), uv.reshape(-1, 1, 2), np.eye(3), None,
+                                  cv2.Rodrigues(R0)[0], t0.reshape(3, 1), useExtrinsicGuess=True,
+                                  flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok:
+        raise CalibrationError("solvePnP found no camera pose for the marker points")
+    R = cv2.Rodrigues(rvec)[0]
+    return R.T, -R.T @ tvec.ravel()
+
+
+def _fit_similarity(src, dst, with_scale: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares rotation (SVD), optional uniform scale and translation: dst ~ s R src + t."""
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    S, D = src - mu_s, dst - mu_d
+    U, sig, Vt = np.linalg.svd(D.T @ S)
+    E = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])  # a rotation, not a reflection
+    R = U @ E @ Vt
+    s = float(np.trace(np.diag(sig) @ E) / (S * S).sum()) if with_scale else 1.0
+    A = s * R
+    return A, mu_d - A @ mu_s
+
+
+def segment_stands(t_s, ankle_cam_m, params: CalibrationParams = CalibrationParams()) -> list[np.ndarray]:
+    """Index arrays of the standing periods of a calibration recording, in time order.
+
+    A frame is standing when the medians of the ankle midpoint over the half second
+    before it and the half second after it are less than ``still_speed_mps * 0.5 s``
+    apart (medians, so keypoint noise and outliers do not break a stand); standing runs
+    shorter than ``still_min_s`` are dropped.
+    """
+    t = np.asarray(t_s, float)
+    a = np.asarray(ankle_cam_m, float)
+    half = 0.5
+    still = np.zeros(len(t), bool)
+    for i, ti in enumerate(t):
+        before = a[(t > ti - half) & (t <= ti)]
+        after = a[(t >= ti) & (t < ti + half)]
+        before, after = before[np.isfinite(before).all(axis=1)], after[np.isfinite(after).all(axis=1)]
+        if len(before) >= 3 and len(after) >= 3:
+            moved = np.linalg.norm(np.median(after, axis=0) - np.median(before, axis=0))
+            still[i] = moved < params.still_speed_mps * half
+    runs, start = [], None
+    for i, s in enumerate(np.append(still, False)):
+        if s and start is None:
+            start = i
+        elif not s and start is not None:
+            if t[i - 1] - t[start] >= params.still_min_s:
+                runs.append(np.arange(start, i))
+            start = None
+    return runs
+
+
+def from_recording(t_s, joints_cam_m, params: CalibrationParams = CalibrationParams(),
+                   marker=None) -> Calibration:
+    """Calibrate from a recording of the worker standing on markers 1, 2, 3 in turn.
+
+    ``joints_cam_m`` is (N, 17, 3). ``marker`` (N,) may label each frame 1, 2, 3 (0 or
+    negative: walking); without it the first three standing periods are taken as
+    markers 1, 2 and 3.
+    """
+    heads, ankles = head_and_ankles(joints_cam_m)
+    if marker is not None:
+        marker = np.asarray(marker)
+        groups = [np.flatnonzero(marker == k) for k in (1, 2, 3)]
+    else:
+        groups = segment_stands(t_s, ankles, params)
+        if len(groups) < 3:
+            raise CalibrationError(f"found {len(groups)} standing period(s) of at least {params.still_min_s} s; "
+                                   "need 3 (markers 1, 2, 3) -- did the worker move between markers?")
+        groups = groups[:3]
+    for k, g in enumerate(groups, 1):
+        n_ok = int(np.isfinite(heads[g]).all(axis=1).sum()) if len(g) else 0
+        if n_ok < params.min_frames:
+            raise CalibrationError(f"marker {k}: {n_ok} usable frames, need {params.min_frames}")
+    h = np.stack([robust_mean(heads[g]) for g in groups])
+    a = np.stack([robust_mean(ankles[g]) for g in groups])
+    return fit(h, a, params, frames=tuple(len(g) for g in groups))

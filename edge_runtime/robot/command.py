@@ -1,0 +1,508 @@
+"""``python -m edge_runtime robot``: the robot-side safety loop against a real or simulated arm.
+
+    python -m edge_runtime robot --config BOX.toml --link can|mavlink [link options]
+        (--keypoints KP.jsonl | --camera DEV --pose-model POSE.onnx | --joints J.jsonl)
+        [--calibration CAL.json] [--duration S] [--log OUT.jsonl]
+    python -m edge_runtime robot --joints|--keypoints RECORDING.jsonl --calibrate CAL.json
+    python -m edge_runtime robot --config BOX.toml --print-config
+
+Inputs (one of):
+
+* ``--keypoints KP.jsonl``: 2D keypoints (:func:`edge_runtime.robot.keypoints.read_keypoints_jsonl`;
+  [camera] keypoint_format), lifted to 3D by the shipped lifter ([lifter]).
+* ``--camera DEV --pose-model POSE.onnx``: a camera through a 2D pose model
+  (:mod:`edge_runtime.robot.camera_source`), then the lifter.
+* ``--joints J.jsonl``: 3D joints, one JSON object per frame::
+
+      {"t": 0.033, "joints_cam_m": [[x, y, z] x 17], "valid": true, "reason": null}
+      {"t": 0.066, "joints_robot_m": [[x, y, z] x 17]}
+      {"t": 0.1, "people": [{"id": 3, "joints_cam_m": [...]}, ...]}
+
+  ``joints_cam_m`` are camera-frame metres (what ``python -m edge_runtime lift --out``
+  writes, so its output can be fed back here) and need ``--calibration``;
+  ``joints_robot_m`` are robot-frame metres (a simulator's true joints) and are used as
+  they are. ``valid``/``reason`` are optional (the lifter's verdict); ``marker`` (1, 2, 3)
+  optionally labels the frames of a calibration recording. A ``{"summary": ...}`` line
+  is skipped.
+
+A recording is replayed in real time (frame timestamps) and the loop is ticked every
+10 ms between frames; a camera is read by a thread (which also runs the pose model)
+while this thread ticks the loop and feeds each frame as it arrives, so a stalled
+camera stops the arm through the 200 ms staleness check. Keypoints are lifted inside
+the loop's frame (``RobotLoop.feed_keypoints``), so the reaction time includes the
+lifter. The arm gets its commands over the configured link ([robot_link], or the
+flags; the link sends its own heartbeat and reconnects by itself). At the end (input
+exhausted, ``--duration`` reached or Ctrl-C) the arm is stopped, and a summary is
+printed: frames, states, stops, retracts, link errors, the link's own counters and the
+reaction time from a frame's arrival to its command on the link. ``--log`` writes one
+JSON object per frame (``t_in_s``, ``t_command_s``, ``state``, ``reason``,
+``distance_m``, ``command``) and a final ``{"summary": ...}`` line. ``--sizing
+iso15066`` sizes the stop zone by ISO/TS 15066's protective separation distance
+([zones]).
+
+``--calibrate OUT.json`` runs the 3-marker procedure of :mod:`edge_runtime.robot.calibration`
+on a recording of the worker standing on markers 1, 2 and 3 (camera-frame joints or
+keypoints), writes the calibration and prints its residuals; no link is opened.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from edge_runtime.cli import CliError, positive_float
+from edge_runtime.core.manifest import ManifestError
+from edge_runtime.errors import InputError
+from edge_runtime.robot.calibration import Calibration, CalibrationError
+
+TICK_S = 0.01
+"""Control cycle of the real-time driver (s)."""
+
+
+class JointsInputError(InputError):
+    """A malformed joints file; the message names the file and line."""
+
+
+BAD_INPUT = (CalibrationError, JointsInputError, ManifestError)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    src = parser.add_mutually_exclusive_group()
+    src.add_argument("--keypoints", metavar="FILE.jsonl", help="2D keypoints per frame, lifted by the shipped lifter")
+    src.add_argument("--camera", metavar="DEV",
+                     help="a camera (device index, file or URL) through --pose-model [camera] device")
+    src.add_argument("--joints", metavar="FILE.jsonl", help="3D joints per frame (joints_cam_m or joints_robot_m)")
+    parser.add_argument("--pose-model", metavar="M.onnx", help="2D pose ONNX model for --camera [camera] pose_model")
+    parser.add_argument("--config", metavar="BOX.toml", help="the box configuration (edge_runtime/box.example.toml)")
+    parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
+    link = parser.add_argument_group("robot link (override [robot_link])")
+    link.add_argument("--link", choices=("can", "mavlink"), help="[robot_link] kind")
+    link.add_argument("--can-interface", help="python-can interface [robot_link] interface")
+    link.add_argument("--can-channel", help="python-can channel [robot_link] channel")
+    link.add_argument("--can-host", help="socketcand hub address [robot_link] host")
+    link.add_argument("--can-port", type=int, help="socketcand hub port [robot_link] port")
+    link.add_argument("--serial", metavar="serial:PATH[?key=HEX]", help="MAVLink serial line [robot_link] serial")
+    parser.add_argument("--calibration", metavar="CAL.json", help="camera -> robot calibration for camera-frame joints")
+    parser.add_argument("--calibrate", metavar="OUT.json", help="run the 3-marker calibration on the recording, write it")
+    parser.add_argument("--sizing", choices=("eq45", "iso15066"), help="zone sizing [zones] sizing")
+    parser.add_argument("--duration", type=positive_float, metavar="S", help="stop after S seconds")
+    parser.add_argument("--log", metavar="OUT.jsonl", help="one JSON object per frame, then a summary")
+    parser.add_argument("--quiet", action="store_true", help="print only the summary")
+
+
+def effective_config(args):
+    from edge_runtime import config
+
+    cfg = config.load(args.config)
+    cfg = config.override(cfg, "robot_link", kind=args.link, interface=args.can_interface, channel=args.can_channel,
+                          host=args.can_host, port=args.can_port, serial=args.serial)
+    cfg = config.override(cfg, "camera", pose_model=args.pose_model)
+    return config.override(cfg, "zones", sizing=args.sizing)
+
+
+# ---------------------------------------------------------------------------- inputs
+
+
+@dataclass
+class JointsFrame:
+    t_s: float
+    joints_m: np.ndarray | None
+    """(P, 17, 3), or None when nobody was seen."""
+    frame: str
+    """"camera" or "robot"."""
+    valid: bool = True
+    reason: str = ""
+    ids: list | None = None
+    marker: int = 0
+
+
+def _array17(value, where: str) -> np.ndarray:
+    try:
+        a = np.array([[np.nan if v is None else float(v) for v in row] for row in value], dtype=float)
+    except (TypeError, ValueError):
+        raise JointsInputError(f"{where}: expected 17 [x, y, z] rows of numbers") from None
+    if a.shape != (17, 3):
+        raise JointsInputError(f"{where}: expected 17 [x, y, z] rows, got shape {a.shape}")
+    return a
+
+
+def _pick_joints(obj: dict, where: str) -> tuple[np.ndarray | None, str | None]:
+    keys = [k for k in ("joints_cam_m", "joints_robot_m") if k in obj]
+    if len(keys) > 1:
+        raise JointsInputError(f"{where}: give joints_cam_m or joints_robot_m, not both")
+    if not keys:
+        return None, None
+    value = obj[keys[0]]
+    frame = "camera" if keys[0] == "joints_cam_m" else "robot"
+    return (None if value is None else _array17(value, f"{where}: {keys[0]}")), frame
+
+
+def parse_joints_line(line: str, where: str) -> JointsFrame | None:
+    """One line of a joints file (None: blank or a summary line)."""
+    if not line.strip():
+        return None
+    try:
+        obj = json.loads(line)
+    except json.JSONDecodeError as e:
+        raise JointsInputError(f"{where}: not valid JSON ({e.msg} at column {e.colno})") from None
+    if not isinstance(obj, dict):
+        raise JointsInputError(f"{where}: expected a JSON object per line")
+    if "summary" in obj:
+        return None
+    t = obj.get("t", obj.get("t_s"))
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+        raise JointsInputError(f"{where}: t: expected a finite number of seconds, got {t!r}")
+    valid = obj.get("valid", True)
+    if not isinstance(valid, bool):
+        raise JointsInputError(f"{where}: valid: expected true/false, got {valid!r}")
+    reason = obj.get("reason") or ""
+    marker = obj.get("marker", 0)
+    if marker not in (0, 1, 2, 3):
+        raise JointsInputError(f"{where}: marker: expected 1, 2 or 3, got {marker!r}")
+    if "people" in obj:
+        people = obj["people"]
+        if not isinstance(people, list):
+            raise JointsInputError(f"{where}: people: expected a list")
+        picked = [_pick_joints(p if isinstance(p, dict) else {}, f"{where}: people[{i}]") for i, p in enumerate(people)]
+        if any(j is None for j, _ in picked):
+            raise JointsInputError(f"{where}: every person needs joints_cam_m or joints_robot_m")
+        frames = {f for _, f in picked}
+        if len(frames) > 1:
+            raise JointsInputError(f"{where}: people mix camera- and robot-frame joints")
+        joints = np.stack([j for j, _ in picked]) if picked else None
+        ids = [p.get("id", i) for i, p in enumerate(people)]
+        return JointsFrame(float(t), joints, frames.pop() if frames else "robot", valid, reason, ids, marker)
+    joints, frame = _pick_joints(obj, where)
+    if frame is None:
+        raise JointsInputError(f"{where}: no joints_cam_m, joints_robot_m or people")
+    if joints is None and valid:
+        raise JointsInputError(f"{where}: joints are null in a frame marked valid")
+    return JointsFrame(float(t), None if joints is None else joints[None], frame, valid, reason, None, marker)
+
+
+def read_joints_jsonl(path: str) -> list[JointsFrame]:
+    """Every frame of a joints file, checked in full (times must increase)."""
+    try:
+        f = open(path, encoding="utf-8")
+    except OSError as e:
+        raise JointsInputError(f"{path}: cannot open ({e.strerror or e})") from None
+    frames: list[JointsFrame] = []
+    kind = None  # the frame of the first joints seen: a file holds one kind only
+    with f:
+        try:
+            for n, line in enumerate(f, 1):
+                fr = parse_joints_line(line, f"{path}:{n}")
+                if fr is None:
+                    continue
+                if frames and fr.t_s <= frames[-1].t_s:
+                    raise JointsInputError(f"{path}:{n}: t {fr.t_s} does not increase (previous {frames[-1].t_s})")
+                if fr.joints_m is not None:
+                    if kind is not None and fr.frame != kind:
+                        raise JointsInputError(f"{path}:{n}: mixes camera- and robot-frame joints")
+                    kind = fr.frame
+                frames.append(fr)
+        except UnicodeDecodeError:
+            raise JointsInputError(f"{path}: not UTF-8 text") from None
+    if not frames:
+        raise JointsInputError(f"{path}: no frames")
+    return frames
+
+
+@dataclass
+class KeypointSource:
+    """2D keypoints of the followed person per frame, and the lifter for them."""
+
+    frames: Any
+    """Iterator of (t_s, keypoints (17, 3) or None for nobody)."""
+    lifter: Any
+    live: bool
+    """A camera (frames come in real time) rather than a recording (replayed at its timestamps)."""
+
+
+def _keypoint_source(args, cfg) -> KeypointSource:
+    """--keypoints or --camera, with the shipped lifter ([lifter]) and the camera model
+    ([camera] intrinsics; else a 100 degree camera at the video's size, or 1280 x 720)."""
+    from edge_runtime.core.onnx import ASSETS_DIR
+    from edge_runtime.robot.keypoints import CameraModel, PersonSelector, read_keypoints_jsonl
+    from edge_runtime.robot.lifter import StreamingLifter
+
+    cam = cfg.camera
+    camera = CameraModel.from_json(cam.intrinsics) if cam.intrinsics else None
+    source = None
+    if args.keypoints:
+        frames = [(f.t_s, f.people) for f in read_keypoints_jsonl(args.keypoints, cam.keypoint_format, cam.rate_hz)]
+    else:
+        from edge_runtime.robot.camera_source import CameraKeypointSource, PoseModel
+
+        if not cam.pose_model:
+            raise CliError("--camera needs --pose-model POSE.onnx (or [camera] pose_model)")
+        model = PoseModel(cam.pose_model, keypoint_format=cam.keypoint_format, threads=cfg.lifter.threads)
+        source = CameraKeypointSource(args.camera, model, cfg.camera_source)
+        frames = _camera_frames(source, args.quiet)
+    if camera is None:
+        size = source.frame_size() if source is not None else None
+        camera = CameraModel.from_fov(*(size or (1280, 720)))
+    lifter = StreamingLifter.from_manifest(ASSETS_DIR, cfg.lifter, camera=camera, keypoint_format=cam.keypoint_format)
+    selector = PersonSelector()
+
+    def followed():
+        for t_s, people in frames:
+            person = selector.select(people)
+            yield t_s, None if person is None else person.keypoints
+
+    return KeypointSource(followed(), lifter, live=source is not None)
+
+
+def _camera_frames(source, quiet: bool):
+    """(t_s, people) from a camera source; its status changes go to stderr."""
+    from edge_runtime.robot.camera_source import CameraFrame
+
+    try:
+        for item in source.frames():
+            if isinstance(item, CameraFrame):
+                yield item.t_s, item.people
+            elif not quiet:
+                print(f"camera: {item.state} ({item.since_s:.2f} s since the last frame)", file=sys.stderr)
+    finally:
+        source.close()
+
+
+# ---------------------------------------------------------------------------- calibration
+
+
+def run_calibrate(args, cfg) -> int:
+    from edge_runtime.robot.calibration import from_recording
+
+    if args.joints:
+        frames = [f for f in read_joints_jsonl(args.joints) if f.joints_m is not None and f.valid]
+        if any(f.frame != "camera" for f in frames):
+            raise CliError(f"--calibrate needs camera-frame joints (joints_cam_m); {args.joints} has robot-frame joints")
+        t = np.array([f.t_s for f in frames])
+        joints = np.stack([f.joints_m[0] for f in frames]) if frames else np.empty((0, 17, 3))
+        labels = np.array([f.marker for f in frames])
+        marker = labels if labels.any() else None
+    elif args.keypoints:
+        src = _keypoint_source(args, cfg)
+        lifted = [(t, p) for t, p in ((t, src.lifter.push(t, kp)) for t, kp in src.frames) if p.valid]
+        t = np.array([x[0] for x in lifted])
+        joints = np.stack([x[1].joints_cam_m for x in lifted]) if lifted else np.empty((0, 17, 3))
+        marker = None
+    else:
+        raise CliError("--calibrate needs a recording: --joints FILE.jsonl or --keypoints FILE.jsonl")
+    if len(t) == 0:
+        raise CalibrationError("the recording has no valid frames")
+    cal = from_recording(t, joints, cfg.calibration, marker=marker)
+    try:
+        cal.save(args.calibrate)
+    except OSError as e:
+        raise CliError(f"--calibrate {args.calibrate}: cannot write ({e.strerror or e})") from None
+    r = cal.residuals_m()
+    print(f"calibration ({cal.method}, scale {cal.scale:.3f}, worker height {cal.worker_height_m:.2f} m, "
+          f"frames per marker {list(cal.frames)}) written to {args.calibrate}\n"
+          f"  residuals (m): head {r['head']}, ankle {r['ankle']}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- the live loop
+
+
+def _open_link(cfg):
+    """The configured robot link (``edge_runtime.robot.link.base.open_link``). The link sends its
+    own heartbeat from poll() and reconnects by itself."""
+    from edge_runtime.robot.link.base import open_link
+
+    r = cfg.robot_link
+    if r.kind == "can":
+        options = {"interface": r.interface, "channel": r.channel, "bitrate": r.bitrate,
+                   "host": r.host if r.interface == "socketcand" else None,
+                   "port": r.port if r.interface == "socketcand" else None}
+    else:
+        if not r.serial:
+            raise CliError("--link mavlink needs --serial serial:PATH[?key=HEX] (or [robot_link] serial)")
+        options = {"serial": r.serial, "baud": r.baud}  # serial:PATH[?key=HEX], parsed by the link
+    try:
+        return open_link(r.kind, **options)
+    except ValueError as e:
+        raise CliError(f"robot link {r.kind}: {e}") from None
+
+
+def _frames(args, cfg, calibration):
+    """(frames, camera_frame, live): ``frames`` yields (t_s, feed) pairs, ``feed(loop)``
+    hands one frame to the loop; ``camera_frame`` says whether the joints need the
+    calibration; ``live``: a camera, not a recording."""
+    if args.joints:
+        frames = read_joints_jsonl(args.joints)
+        camera_frame = any(f.frame == "camera" and f.joints_m is not None for f in frames)
+        if camera_frame and calibration is None:
+            raise CliError(f"{args.joints} holds camera-frame joints (joints_cam_m): give --calibration CAL.json")
+        return ((f.t_s, (lambda loop, f=f: loop.feed_joints(f.joints_m, f.valid, f.reason, f.ids)))
+                for f in frames), camera_frame, False
+    if calibration is None:
+        raise CliError("lifted joints are in the camera frame: give --calibration CAL.json")
+    src = _keypoint_source(args, cfg)
+    return ((t_s, (lambda loop, t_s=t_s, kp=kp: loop.feed_keypoints(src.lifter, t_s, kp)))
+            for t_s, kp in src.frames), True, src.live
+
+
+def run_loop(args, cfg) -> int:
+    from edge_runtime.robot.loop import RobotLoop
+
+    calibration = Calibration.load(args.calibration) if args.calibration else None
+    frames, camera_frame, live = _frames(args, cfg, calibration)
+    first = None if live else next(frames, None)  # a bad file is reported before the link opens
+    if first is None and not live:
+        raise CliError("no frames")
+    try:
+        log = open(args.log, "w", encoding="utf-8") if args.log else None
+    except OSError as e:
+        raise CliError(f"--log {args.log}: cannot write ({e.strerror or e})") from None
+    link = _open_link(cfg)
+    loop = RobotLoop(link, calibration if camera_frame else None, cfg.zones, cfg.tracker, cfg.robot_loop,
+                     clock=time.monotonic, on_record=(lambda r: log.write(json.dumps(asdict(r)) + "\n")) if log else None)
+    states: dict[str, int] = {}
+    last = None
+
+    def feed(t_rel_s: float, fn) -> None:
+        nonlocal last
+        rec = fn(loop)
+        states[rec.state] = states.get(rec.state, 0) + 1
+        now = (rec.state, rec.reason, loop.link_state, loop.link_error)
+        if not args.quiet and now != last:
+            print(f"t={t_rel_s:8.2f}s  {rec.state:<7} {rec.reason}  d={rec.distance_m:.2f} m  link {loop.link_state}"
+                  + (f" ({loop.link_error})" if loop.link_error else ""), file=sys.stderr)
+            last = now
+
+    start = time.monotonic()
+    try:
+        if live:
+            _drive_live(loop, frames, feed, start, args.duration)
+        else:
+            _drive_replay(loop, _chain(first, frames), feed, start, args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        _safe_stop(link)
+        summary = _summary(loop, link, states, time.monotonic() - start)
+        if log:
+            log.write(json.dumps({"summary": summary}) + "\n")
+            log.close()
+        close = getattr(link, "close", None)
+        if close:
+            close()
+    s = summary
+    rt = s["reaction_ms"]
+    print(f"summary: {s['frames']} frames in {s['wall_s']:.1f} s; states {s['states']}\n"
+          f"  stops {s['stops']}, retracts {s['retracts']}, unreachable {s['unreachable']}, invalid frames "
+          f"{s['invalid']}, stale {s['stale']}; link {s['link']} (errors {s['link_errors']})\n"
+          f"  reaction (frame in -> command on the link): median {rt['median']} ms, p99 {rt['p99']} ms "
+          f"over {rt['n']} commands"
+          + ("\n  robot link: " + ", ".join(f"{k} {v}" for k, v in s["robot_link"].items()) if "robot_link" in s else "")
+          + (f"\n  log: {args.log}" if args.log else ""))
+    return 0
+
+
+def _drive_replay(loop, frames, feed, start: float, duration: float | None) -> None:
+    """A recording at its own pace: each frame at its timestamp, ticks every TICK_S between."""
+    t0 = None
+    for t_s, fn in frames:
+        t0 = t_s if t0 is None else t0
+        due = start + (t_s - t0)
+        if duration and due - start > duration:
+            return
+        _tick_until(loop, due)
+        feed(t_s - t0, fn)
+    _tick_until(loop, time.monotonic() + TICK_S)
+
+
+def _drive_live(loop, frames, feed, start: float, duration: float | None) -> None:
+    """A camera: a reader thread pulls frames (and runs the pose model) while this thread
+    ticks the loop every TICK_S and feeds each frame as it arrives, so a stalled camera
+    is noticed by the staleness check, not by a blocked loop."""
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=2)
+    done = object()
+    stop = threading.Event()
+
+    def reader():
+        try:
+            for item in frames:
+                if stop.is_set():
+                    break
+                try:
+                    q.put_nowait(item)
+                except queue.Full:  # the loop is behind: the newest frame matters, drop the oldest
+                    q.get_nowait()
+                    q.put_nowait(item)
+        finally:
+            q.put(done)
+
+    threading.Thread(target=reader, name="robot-camera", daemon=True).start()
+    try:
+        while not (duration and time.monotonic() - start > duration):
+            try:
+                item = q.get(timeout=TICK_S)
+            except queue.Empty:
+                loop.tick()
+                continue
+            if item is done:
+                return
+            feed(time.monotonic() - start, item[1])
+            loop.tick()
+    finally:
+        stop.set()
+
+
+def _chain(first, rest):
+    yield first
+    yield from rest
+
+
+def _tick_until(loop, due: float) -> None:
+    """Tick the loop every TICK_S until the monotonic clock reaches ``due``."""
+    while True:
+        loop.tick()
+        left = due - time.monotonic()
+        if left <= 0:
+            return
+        time.sleep(min(TICK_S, left))
+
+
+def _safe_stop(link) -> None:
+    try:
+        link.stop()
+    except Exception as e:  # noqa: BLE001 - reported, the controller's watchdog stops the arm anyway
+        print(f"warning: final stop not sent ({type(e).__name__}: {e}); the arm's watchdog stops it", file=sys.stderr)
+
+
+def _summary(loop, link, states: dict, wall_s: float) -> dict:
+    react = [1e3 * (r.t_command_s - r.t_in_s) for r in loop.records if r.t_command_s is not None]
+    rt = {"median": round(float(np.median(react)), 3) if react else None,
+          "p99": round(float(np.percentile(react, 99)), 3) if react else None, "n": len(react)}
+    out = {**loop.status(), "states": states, "wall_s": round(wall_s, 3), "reaction_ms": rt}
+    link_summary = getattr(link, "summary", None)
+    if link_summary is not None:
+        out["robot_link"] = link_summary()
+    return out
+
+
+def cmd(args) -> int:
+    cfg = effective_config(args)
+    if args.print_config:
+        print(cfg.to_toml(), end="")
+        return 0
+    if args.calibrate:
+        return run_calibrate(args, cfg)
+    if not (args.keypoints or args.camera or args.joints) and cfg.camera.device:
+        args.camera = cfg.camera.device  # the box's own camera ([camera] device)
+    if not (args.keypoints or args.camera or args.joints):
+        raise CliError("robot: give an input: --keypoints FILE.jsonl, --camera DEV --pose-model M.onnx "
+                       "or --joints FILE.jsonl")
+    return run_loop(args, cfg)

@@ -1,0 +1,407 @@
+"""Head tracking, prediction and the two-level hazard zones of dissertation chapter 3.
+
+All positions are in the robot frame of :mod:`edge_runtime.core.skeleton` (metres, ``y``
+up, origin on top of the Sawyer base). "Ground-projected" distances drop ``y``.
+
+* **Tracking and prediction (Eq. 3).** ``HeadTracker`` fits a straight line to the
+  head positions of the last ``window_s`` seconds (least squares, per axis). Its slope
+  is the head velocity and its value now is the filtered head position; the prediction
+  is ``P_head(T + t) = P_head(T) + t * V_head`` with ``t = 0.5 s``. A finite difference
+  of two frames turns 3 cm of head noise per axis at 30 Hz into 2.2 m/s (rms, 3D) of
+  velocity noise, i.e. 1.1 m of prediction noise; the 0.5 s fit brings it to 0.09 m/s
+  (tests/test_hazard.py::test_least_squares_velocity_rejects_keypoint_noise measures
+  both). The price is lag: a change of walking speed is fully seen after ``window_s``.
+* **Zones (Eq. 4-5).** Two vertical cylinders around the end effector::
+
+      R2 = V_worker * (T_retract - t) + R_margin2     (Eq. 4)  1.4 * (1 - 0.5) + 0.3 = 1.0 m
+      R1 = R2 + R_margin1                             (Eq. 5)  1.0 + 2.0              = 3.0 m
+
+  or, with ``sizing = "iso15066"``, R1 is ISO/TS 15066's protective separation distance
+  ``S_p = v_h (T_r + T_s) + v_r T_r + S_s + C + Z_d + Z_r`` (v_h = 1.6 m/s per ISO 13855)
+  and R2 stays Eq. 4's retraction radius (R1 is never below R2).
+* **Decision.** A worker's distance is the smaller of the ground-projected distances
+  from the end effector to his predicted and to his current head (the dissertation uses
+  the predicted head only; the current head keeps a worker who stops or turns away
+  inside the zone from being waved through). With several workers the nearest counts.
+* **States** (``State``): ``NORMAL`` (task motion, green light, no tone) ->
+  ``LEVEL1`` (stop, red light, 2000 Hz at 70 dB) -> ``LEVEL2`` (retract along Eq. 6,
+  4000 Hz at 80 dB). Escalation is immediate. De-escalation needs the distance above
+  the *exit* radius (entry radius + ``hysteresis_m``) for ``dwell_s`` without a break,
+  so keypoint noise at a zone boundary cannot make the arm chatter.
+* **Fail-safe** (``FAULT``): no pose for more than ``stale_after_s`` (200 ms), or the
+  lifter's output invalid, and the arm stops with a distinct reason. A worker who was
+  inside R1 and vanishes from view also holds the arm stopped (``worker_lost``).
+  The fault clears after ``dwell_s`` of valid frames.
+
+Eq. 6 (retraction): ``L = w1 * unit(P_eff - P_head) + w2 * unit(V_ground)`` with
+``w1 = 0.3 m`` and ``w2 = 0.2 m``, ground-projected, and the tool turned toward the
+robot base (``retract_pose``).
+"""
+from __future__ import annotations
+
+import enum
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
+
+
+def ground(v) -> np.ndarray:
+    """The ground projection (x, z) of a robot-frame point or vector."""
+    v = np.asarray(v, dtype=float)
+    return v[..., GROUND_AXES]
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-9 else np.zeros_like(v)
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Head tracking ([tracker] in the box configuration)."""
+
+    window_s: float = 0.5
+    """Length of the least-squares window for velocity and position (s). Longer rejects
+    more noise but reacts later to a change of walking direction."""
+    min_samples: int = 3
+    """Frames a fit needs; with fewer (a new track) the velocity is taken as zero. At
+    5.8 Hz a 0.5 s window holds 3 frames."""
+    max_speed_mps: float = 3.0
+    """Head speeds above this (m/s) are clipped: faster than a running worker, so noise."""
+    jump_m: float = 1.0
+    """A head that moves further than this between two frames (beyond what
+    ``max_speed_mps`` allows) is a new track: the window restarts."""
+
+
+@dataclass(frozen=True)
+class ZoneParams:
+    """Hazard-zone sizing and the state machine ([zones] in the box configuration)."""
+
+    sizing: str = "eq45"
+    """"eq45": the dissertation's Eq. 4-5; "iso15066": R1 is ISO/TS 15066's S_p."""
+    predict_s: float = 0.5
+    """Prediction horizon t of Eq. 3 (s)."""
+    worker_speed_mps: float = 1.4
+    """V_worker of Eq. 4: the assumed walking speed (m/s; Bohannon & Andrews 2011)."""
+    retract_time_s: float = 1.0
+    """T_retract of Eq. 4: time the arm needs to retract (s; from the Sawyer's joint speeds)."""
+    margin2_m: float = 0.3
+    """R_margin2 of Eq. 4 (m)."""
+    margin1_m: float = 2.0
+    """R_margin1 of Eq. 5 (m)."""
+    iso_human_speed_mps: float = 1.6
+    """ISO/TS 15066 v_h: the human's approach speed (m/s; ISO 13855's walking speed)."""
+    iso_robot_speed_mps: float = 0.6
+    """v_r: the robot's speed toward the human (m/s; Intera's default Cartesian limit)."""
+    iso_reaction_time_s: float = 0.15
+    """T_r: camera frame + lifting + link until the stop command lands (s)."""
+    iso_stop_time_s: float = 0.3
+    """T_s: the robot's stopping time (s)."""
+    iso_stop_distance_m: float = 0.09
+    """S_s: the robot's stopping distance (m)."""
+    iso_intrusion_m: float = 0.85
+    """C: intrusion distance (m; ISO 13855's 850 mm reach for coarse body detection, since
+    a hand reaches ahead of the tracked head)."""
+    iso_sensing_uncertainty_m: float = 0.1
+    """Z_d: uncertainty of the worker's position (m; calibrated head error)."""
+    iso_robot_uncertainty_m: float = 0.01
+    """Z_r: uncertainty of the robot's position (m)."""
+    hysteresis_m: float = 0.2
+    """Exit radii are the entry radii plus this (m)."""
+    dwell_s: float = 1.0
+    """A lower level is entered only after this long (s) beyond its exit radius, and a
+    fault clears only after this long of valid frames."""
+    stale_after_s: float = 0.2
+    """No pose for longer than this (s) and the arm stops (reason ``pose_stale``)."""
+    lost_hold_s: float = 3.0
+    """A worker last seen inside R1 who vanishes holds the arm stopped this long (s) of
+    empty frames before the scene counts as clear (reason ``worker_lost``)."""
+    retract_weight_away_m: float = 0.3
+    """Eq. 6 weight factor 1: the step away from the head (m)."""
+    retract_weight_path_m: float = 0.2
+    """Eq. 6 weight factor 2: the step along the worker's walking direction (m)."""
+    level1_tone_hz: float = 2000.0
+    level1_tone_db: float = 70.0
+    level2_tone_hz: float = 4000.0
+    level2_tone_db: float = 80.0
+
+    def __post_init__(self):
+        if self.sizing not in ("eq45", "iso15066"):
+            raise ValueError(f"sizing: must be eq45 or iso15066, got {self.sizing!r}")
+
+    @property
+    def r2_m(self) -> float:
+        """Level-2 (retract) radius, Eq. 4 (never below R_margin2: a prediction horizon longer
+        than the retraction already covers it)."""
+        return max(self.worker_speed_mps * (self.retract_time_s - self.predict_s), 0.0) + self.margin2_m
+
+    @property
+    def protective_distance_m(self) -> float:
+        """ISO/TS 15066 S_p = v_h (T_r + T_s) + v_r T_r + S_s + C + Z_d + Z_r (m)."""
+        return (self.iso_human_speed_mps * (self.iso_reaction_time_s + self.iso_stop_time_s)
+                + self.iso_robot_speed_mps * self.iso_reaction_time_s + self.iso_stop_distance_m
+                + self.iso_intrusion_m + self.iso_sensing_uncertainty_m + self.iso_robot_uncertainty_m)
+
+    @property
+    def r1_m(self) -> float:
+        """Level-1 (stop and warn) radius: Eq. 5, or S_p (never below R2)."""
+        if self.sizing == "iso15066":
+            return max(self.protective_distance_m, self.r2_m)
+        return self.r2_m + self.margin1_m
+
+
+class State(enum.IntEnum):
+    """The arm's safety state, ordered by how much it restricts the arm."""
+
+    NORMAL = 0
+    LEVEL1 = 1
+    FAULT = 2
+    LEVEL2 = 3
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """Light and tone the arm's beacon shows."""
+
+    light: str
+    tone_hz: float = 0.0
+    tone_db: float = 0.0
+
+
+@dataclass(frozen=True)
+class HeadEstimate:
+    """One worker's head: filtered position, velocity and the Eq. 3 prediction (robot frame)."""
+
+    t_s: float
+    position_m: np.ndarray
+    velocity_mps: np.ndarray
+    predicted_m: np.ndarray
+
+
+class HeadTracker:
+    """Least-squares head tracker for one worker (see the module docstring)."""
+
+    def __init__(self, params: TrackerParams = TrackerParams(), predict_s: float = 0.5):
+        self.p = params
+        self.predict_s = predict_s
+        self._t: deque[float] = deque()
+        self._x: deque[np.ndarray] = deque()
+        self.resets = 0
+
+    def reset(self) -> None:
+        self._t.clear()
+        self._x.clear()
+
+    def update(self, t_s: float, head_m) -> HeadEstimate:
+        head = np.asarray(head_m, dtype=float)
+        if self._t:
+            dt = t_s - self._t[-1]
+            jumped = np.linalg.norm(head - self._x[-1]) > self.p.jump_m + self.p.max_speed_mps * dt
+            if dt <= 0 or dt > self.p.window_s or jumped:  # a gap or a jump: a new track
+                self.reset()
+                self.resets += 1
+        self._t.append(t_s)
+        self._x.append(head)
+        while t_s - self._t[0] > self.p.window_s:
+            self._t.popleft()
+            self._x.popleft()
+        return self._estimate(t_s)
+
+    def _estimate(self, t_s: float) -> HeadEstimate:
+        if len(self._t) < self.p.min_samples:
+            pos, vel = self._x[-1], np.zeros(3)
+        else:
+            t = np.fromiter(self._t, float) - t_s
+            x = np.stack(self._x)
+            tc = t - t.mean()
+            vel = tc @ (x - x.mean(axis=0)) / float(tc @ tc)
+            pos = x.mean(axis=0) - t.mean() * vel  # the fitted line at t_s
+            speed = float(np.linalg.norm(vel))
+            if speed > self.p.max_speed_mps:
+                vel = vel * (self.p.max_speed_mps / speed)
+        return HeadEstimate(t_s, pos, vel, pos + self.predict_s * vel)
+
+
+def distance_to_effector(est: HeadEstimate, effector_m) -> float:
+    """Ground-projected distance from the end effector to the nearer of the predicted and
+    the current head (m)."""
+    e = ground(effector_m)
+    return float(min(np.linalg.norm(ground(est.predicted_m) - e), np.linalg.norm(ground(est.position_m) - e)))
+
+
+def retract_direction(effector_m, est: HeadEstimate, params: ZoneParams = ZoneParams()) -> np.ndarray:
+    """Eq. 6 in the robot frame: ``w1 unit(P_eff - P_head) + w2 unit(V_ground)``, on the
+    ground (y = 0). A standing worker contributes no second term."""
+    away = _unit(ground(effector_m) - ground(est.position_m))
+    path = _unit(ground(est.velocity_mps)) if np.linalg.norm(ground(est.velocity_mps)) > 0.2 else np.zeros(2)
+    L = params.retract_weight_away_m * away + params.retract_weight_path_m * path
+    return np.array([L[0], 0.0, L[1]])
+
+
+def tool_yaw_toward_base(position_m) -> float:
+    """Yaw (rad) that points the tool at the robot base from ``position_m``: the heading of
+    the ground vector toward the base's axis, measured from +z toward +x
+    (yaw = atan2(dx, dz); 0 points the tool along +z, the work side)."""
+    g = -ground(position_m)
+    return float(math.atan2(g[0], g[1]))
+
+
+@dataclass
+class Decision:
+    """What the arm should do now, and why."""
+
+    state: State
+    reason: str
+    distance_m: float = math.inf
+    worker: int | None = None
+    head: HeadEstimate | None = None
+    changed: bool = False
+
+
+def alarms(params: ZoneParams) -> dict[State, Alarm]:
+    """The beacon for each state (Fig. 3.5): green, red + 2000 Hz/70 dB, red + 4000 Hz/80 dB;
+    a fault shows yellow without a tone."""
+    return {
+        State.NORMAL: Alarm("green"),
+        State.LEVEL1: Alarm("red", params.level1_tone_hz, params.level1_tone_db),
+        State.LEVEL2: Alarm("red", params.level2_tone_hz, params.level2_tone_db),
+        State.FAULT: Alarm("yellow"),
+    }
+
+
+@dataclass
+class _Hold:
+    """Time since a condition stopped holding (for dwell timing)."""
+
+    since_s: float | None = None
+
+    def clear_for(self, t_s: float, clear: bool) -> float:
+        if not clear:
+            self.since_s = None
+            return 0.0
+        if self.since_s is None:
+            self.since_s = t_s
+        return t_s - self.since_s
+
+
+@dataclass
+class HazardMonitor:
+    """The zone state machine over every tracked worker (see the module docstring).
+
+    Call ``observe(t_s, heads, effector_m)`` once per pose frame, with ``heads`` a
+    mapping worker id -> head position (robot frame, metres) of the workers seen in it
+    (empty: nobody seen), ``invalid(t_s, reason)`` for a frame the lifter marked
+    invalid, and ``check(t_s)`` at every control cycle (staleness)."""
+
+    zones: ZoneParams = field(default_factory=ZoneParams)
+    tracker: TrackerParams = field(default_factory=TrackerParams)
+
+    def __post_init__(self):
+        self.state = State.FAULT
+        self.reason = "no_pose_yet"
+        self.level = State.NORMAL  # the zone level, before faults
+        self._alarms = alarms(self.zones)
+        self._trackers: dict[int, HeadTracker] = {}
+        self._last_pose_s: float | None = None
+        self._fault: str | None = "no_pose_yet"  # nothing is known until poses have flowed for dwell_s
+        self._fault_clear = _Hold()
+        self._below = {State.LEVEL2: _Hold(), State.LEVEL1: _Hold()}
+        self._lost_since_s: float | None = None
+        self.last = Decision(self.state, self.reason)
+        self.stale_events = 0
+        """How often the pose stream went stale."""
+
+    # -- inputs ---------------------------------------------------------------------------
+
+    def observe(self, t_s: float, heads: dict[int, np.ndarray], effector_m) -> Decision:
+        """A valid pose frame: update the trackers and the zone level."""
+        self._last_pose_s = t_s
+        for wid in [w for w in self._trackers if w not in heads]:
+            del self._trackers[wid]
+        nearest = (math.inf, None, None)
+        for wid, head in heads.items():
+            est = self._trackers.setdefault(wid, HeadTracker(self.tracker, self.zones.predict_s)).update(t_s, head)
+            d = distance_to_effector(est, effector_m)
+            if d < nearest[0]:
+                nearest = (d, wid, est)
+        self._update_level(t_s, *nearest)
+        if self._fault is not None and self._fault_clear.clear_for(t_s, True) >= self.zones.dwell_s:
+            self._fault = None
+        return self._decide(t_s, *nearest)
+
+    def invalid(self, t_s: float, reason: str) -> Decision:
+        """A frame the lifter (or the input) marked invalid: stop."""
+        self._last_pose_s = t_s
+        self._set_fault(t_s, f"pose_invalid: {reason}" if reason else "pose_invalid")
+        return self._decide(t_s)
+
+    def check(self, t_s: float) -> Decision:
+        """Staleness check, at every control cycle."""
+        if self._last_pose_s is None:
+            self._set_fault(t_s, "no_pose_yet")
+            return self._decide(t_s)
+        if t_s - self._last_pose_s > self.zones.stale_after_s:
+            self._set_fault(t_s, "pose_stale")
+            return self._decide(t_s)
+        return self.last
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _set_fault(self, t_s: float, reason: str) -> None:
+        if reason == "pose_stale" and self._fault != reason:
+            self.stale_events += 1
+        self._fault = reason
+        self._fault_clear.clear_for(t_s, False)
+        self._trackers.clear()  # velocities across a gap are meaningless
+
+    def _update_level(self, t_s: float, d: float, wid, est) -> None:
+        z = self.zones
+        if d <= z.r2_m:
+            entry = State.LEVEL2
+        elif d <= z.r1_m:
+            entry = State.LEVEL1
+        else:
+            entry = State.NORMAL
+        if est is None and self.level >= State.LEVEL1:
+            # nobody seen: a worker last seen inside R1 may be hidden, not gone
+            if self._lost_since_s is None:
+                self._lost_since_s = t_s
+            if t_s - self._lost_since_s < z.lost_hold_s:
+                entry = max(entry, State.LEVEL1)
+        else:
+            self._lost_since_s = None
+        if entry >= self.level:
+            self.level = entry
+            for hold in self._below.values():
+                hold.clear_for(t_s, False)
+            return
+        # de-escalate one level at a time, each after dwell_s beyond its exit radius
+        exit_r = {State.LEVEL2: z.r2_m + z.hysteresis_m, State.LEVEL1: z.r1_m + z.hysteresis_m}
+        while self.level > entry:
+            level = State.LEVEL2 if self.level == State.LEVEL2 else State.LEVEL1
+            if self._below[level].clear_for(t_s, d > exit_r[level]) < z.dwell_s:
+                break
+            self.level = State.LEVEL1 if level == State.LEVEL2 else State.NORMAL
+            self._below[level].clear_for(t_s, False)
+
+    def _decide(self, t_s: float, d: float = math.inf, wid=None, est=None) -> Decision:
+        if self._fault is not None and self.level != State.LEVEL2:
+            state, reason = State.FAULT, self._fault
+        elif self.level == State.NORMAL:
+            state, reason = State.NORMAL, "clear"
+        elif self._lost_since_s is not None:
+            state, reason = self.level, "worker_lost"
+        else:
+            state, reason = self.level, ("level2_retract" if self.level == State.LEVEL2 else "level1_stop")
+        if self._fault is not None and state == State.LEVEL2:
+            reason = f"level2_retract ({self._fault})"
+        dec = Decision(state, reason, d, wid, est, changed=(state, reason) != (self.last.state, self.last.reason))
+        self.state, self.reason, self.last = state, reason, dec
+        return dec
+
+    def alarm(self, state: State) -> Alarm:
+        return self._alarms[state]

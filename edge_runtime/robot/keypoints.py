@@ -1,0 +1,510 @@
+"""2D keypoint inputs for the pose lifter: formats, the COCO-17 -> H36M-17 mapping,
+JSON lines, person selection and camera models (numpy + OpenCV, no torch).
+
+Formats
+=======
+``h36m``: the lifter's own 17 joints, in :mod:`edge_runtime.core.skeleton`'s order.
+``coco``: the 17 COCO keypoints that Detectron2, OpenPose (its COCO-17 subset),
+MMPose, YOLO-pose and most 2D detectors write::
+
+    0 nose  1 left_eye  2 right_eye  3 left_ear  4 right_ear  5 left_shoulder
+    6 right_shoulder  7 left_elbow  8 right_elbow  9 left_wrist  10 right_wrist
+    11 left_hip  12 right_hip  13 left_knee  14 right_knee  15 left_ankle  16 right_ankle
+
+A keypoint array is ``(..., 17, 3)``: x, y in image pixels and a detector score in
+[0, 1]; ``(..., 17, 2)`` means every score is 1. A NaN coordinate means "not seen".
+
+COCO-17 -> H36M-17, joint by joint (:func:`coco_to_h36m`)
+=========================================================
+Limbs are the same points in both sets; the torso and head joints of Human3.6M
+have no COCO counterpart and are built from the nearest COCO points:
+
+==  ==============  ===========================================================
+0   hip (pelvis)    midpoint of COCO left_hip (11) and right_hip (12): H36M's
+                    pelvis is the centre of the hip joints
+1-3 right hip, knee, ankle = COCO 12, 14, 16
+4-6 left hip, knee, ankle  = COCO 11, 13, 15
+7   spine           pelvis + 0.45 * (thorax - pelvis): where the simulated bodies
+                    the shipped lifter learnt from put it (firmware_sim.people.human's
+                    SPINE_AT); Human3.6M's own skeleton has it at 0.48 (pelvis ->
+                    spine 233 mm, spine -> thorax 257 mm)
+8   thorax          midpoint of the shoulders (5, 6): H36M's thorax is the base
+                    of the neck, between the shoulder joints
+9   neck_nose       COCO nose (0): VideoPose3D's joint 9 is the nose
+10  head            the top of the head, extrapolated from the ears:
+                    ``e + HEAD_UP * (e - thorax)`` with ``e`` the midpoint of the
+                    ears, ``HEAD_UP`` = 0.5. With anthropometric proportions
+                    (thorax at 0.818 of body height, ears at about 0.93, head top
+                    1.0; DESIGN section 5) the ears lie two thirds of the way from
+                    thorax to head top, hence 1/2. When the ears are missing or
+                    score under half the eyes' score (a face turned to the camera
+                    hides them) the eyes' midpoint stands in for ``e`` (it lies a
+                    few cm in front of the ears: up to 7 % of the body's height off
+                    in a profile view, so the ears are preferred)
+11-13 left shoulder, elbow, wrist  = COCO 5, 7, 9
+14-16 right shoulder, elbow, wrist = COCO 6, 8, 10
+==  ==============  ===========================================================
+
+A derived joint's score is the lowest score of the points it is made from, and
+it is NaN when any of them is NaN: a joint built from a missing point is itself
+missing, never invented. :func:`h36m_to_coco_3d` is the inverse used to make
+COCO keypoints from a 3D H36M skeleton (the simulator, and the round-trip test):
+it places ears and eyes on a head of standard proportions.
+
+JSON lines (:func:`read_keypoints_jsonl`)
+=========================================
+One object per line (a frame)::
+
+    {"t": 0.033, "frame": 1, "format": "coco",
+     "people": [{"id": 0, "keypoints": [[x, y, score], ... 17]}]}
+
+``t`` (s) may be missing when ``frame`` is given (t = frame / fps); ``keypoints``
+may also be a flat list ``[x0, y0, s0, x1, ...]`` (51 numbers, or 34 without
+scores), and a coordinate may be ``null`` (not seen). ``format`` is optional
+and, when present, must agree with the format the reader was asked for.
+Blank lines are skipped. Anything else is a :class:`KeypointInputError` naming
+the file and the line. A person with fewer than 17 keypoints is passed on as
+given (shape (n, 3)): the lifter counts every joint of such a frame as missing
+(held for a few frames, then the frame is invalid). :class:`PersonSelector`
+picks whom to follow when several people are in a frame.
+
+Camera models (:class:`CameraModel`)
+====================================
+Intrinsics K (pixels), distortion in OpenCV's order (k1, k2, p1, p2[, k3[, k4,
+k5, k6[, s1, s2, s3, s4[, tau_x, tau_y]]]]) and the image size. Pixels of a
+real camera are undistorted with ``cv2.undistortPoints`` and re-projected with
+the lifter's canonical camera (:meth:`CameraModel.to_camera`), then normalised
+as VideoPose3D does (:func:`normalize_screen`): ``u/w*2 - 1``, ``v/w*2 - h/w``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
+from edge_runtime.errors import InputError
+
+FORMATS = ("coco", "h36m")
+COCO_JOINTS: tuple[str, ...] = (
+    "nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder",
+    "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip",
+    "left_knee", "right_knee", "left_ankle", "right_ankle",
+)
+C_NOSE, C_L_EYE, C_R_EYE, C_L_EAR, C_R_EAR, C_L_SHOULDER, C_R_SHOULDER = range(7)
+C_L_HIP, C_R_HIP = 11, 12
+
+COPIED_FROM_COCO: dict[int, int] = {1: 12, 2: 14, 3: 16, 4: 11, 5: 13, 6: 15, 9: C_NOSE,
+                                    11: 5, 12: 7, 13: 9, 14: 6, 15: 8, 16: 10}
+"""H36M joint -> the COCO keypoint it is a copy of."""
+HEAD_UP = 0.5
+"""Head top = ear midpoint + HEAD_UP * (ear midpoint - thorax) (see the module docstring)."""
+SPINE_FRACTION = 0.45
+"""Spine = pelvis + SPINE_FRACTION * (thorax - pelvis)."""
+EYES_FOR_EARS = 0.5
+"""The eyes stand in for the ears when the ears score below this fraction of the eyes' score."""
+
+UNDISTORT_CRITERIA = (3, 50, 1e-6)  # cv2.TERM_CRITERIA_COUNT | EPS: 50 iterations or 1e-6
+"""Iterations for ``cv2.undistortPoints``: OpenCV's default (5 iterations) leaves up to
+0.7 px in the corners of a wide-angle lens (k1 = -0.28); this leaves < 0.01 px."""
+
+# head geometry for h36m_to_coco_3d (m): ears two thirds of the way thorax -> head top
+_EAR_HALF_WIDTH_M = 0.075
+_EYE_FORWARD_M = 0.08
+_EYE_HALF_WIDTH_M = 0.032
+
+
+class KeypointInputError(InputError):
+    """Malformed keypoint input; the message names the file and the line."""
+
+
+# ---------------------------------------------------------------------------- formats
+
+
+def as_keypoints(kp, n_joints: int | None = N_JOINTS) -> np.ndarray:
+    """``kp`` as float64 (..., J, 3) (x, y, score); (..., J, 2) gets score 1.
+
+    ``n_joints`` None accepts any joint count (the lifter checks it)."""
+    a = np.asarray(kp, dtype=np.float64)
+    if a.ndim < 2 or a.shape[-1] not in (2, 3) or (n_joints is not None and a.shape[-2] != n_joints):
+        want = f"{n_joints}" if n_joints is not None else "J"
+        raise ValueError(f"keypoints of shape {a.shape}, expected (..., {want}, 2 or 3)")
+    if a.shape[-1] == 2:
+        a = np.concatenate([a, np.ones(a.shape[:-1] + (1,))], axis=-1)
+    return a
+
+
+def _weights(rows: dict[int, dict[int, float]]) -> np.ndarray:
+    """(17, 17) matrix: H36M joint <- weighted sum of COCO keypoints."""
+    w = np.zeros((N_JOINTS, len(COCO_JOINTS)))
+    for h, sources in rows.items():
+        for c, v in sources.items():
+            w[h, c] = v
+    return w
+
+
+def _head_row(pair: tuple[int, int]) -> dict[int, float]:
+    """Head top = e + HEAD_UP * (e - thorax), e the midpoint of ``pair`` (ears or eyes)."""
+    a, b = (1 + HEAD_UP) / 2, -HEAD_UP / 2
+    return {pair[0]: a, pair[1]: a, C_L_SHOULDER: b, C_R_SHOULDER: b}
+
+
+_F = SPINE_FRACTION / 2
+_ROWS = {**{h: {c: 1.0} for h, c in COPIED_FROM_COCO.items()},
+         HIP: {C_L_HIP: 0.5, C_R_HIP: 0.5},
+         THORAX: {C_L_SHOULDER: 0.5, C_R_SHOULDER: 0.5},
+         SPINE: {C_L_HIP: 0.5 - _F, C_R_HIP: 0.5 - _F, C_L_SHOULDER: _F, C_R_SHOULDER: _F}}
+W_EARS = _weights({**_ROWS, HEAD: _head_row((C_L_EAR, C_R_EAR))})
+"""COCO -> H36M weights with the head from the ears."""
+W_EYES = _weights({**_ROWS, HEAD: _head_row((C_L_EYE, C_R_EYE))})
+"""The same with the head from the eyes."""
+
+
+def _map(c: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """H36M (..., 17, 3) = ``w`` applied to COCO (..., 17, 3); a joint's score is the lowest
+    score among its sources, and it is NaN when any source coordinate or score is NaN."""
+    used = w != 0
+    finite = np.isfinite(c[..., :2])
+    xy = np.einsum("hc,...cd->...hd", w, np.where(finite, c[..., :2], 0.0))
+    bad = np.einsum("hc,...c->...h", used, ~finite.all(axis=-1)) > 0
+    score = np.min(np.where(used, c[..., None, :, 2], np.inf), axis=-1)  # NaN propagates
+    xy[bad] = np.nan
+    score[bad] = np.nan
+    return np.concatenate([xy, score[..., None]], axis=-1)
+
+
+def coco_to_h36m(kp) -> np.ndarray:
+    """COCO-17 (..., 17, 2|3) -> H36M-17 (..., 17, 3), joint by joint as the module docstring says."""
+    c = as_keypoints(kp)
+    out = _map(c, W_EARS)
+    # the eyes stand in for the ears when they score higher, or when the ears are not there
+    from_eyes = _map(c, W_EYES[HEAD:HEAD + 1])[..., 0, :]
+    ears_score = out[..., HEAD, 2]
+    use_eyes = np.isfinite(from_eyes[..., 0]) & ~(ears_score >= EYES_FOR_EARS * from_eyes[..., 2])  # NaN: eyes
+    out[..., HEAD, :] = np.where(use_eyes[..., None], from_eyes, out[..., HEAD, :])
+    return out
+
+
+def to_h36m(kp, fmt: str) -> np.ndarray:
+    """Keypoints of format ``fmt`` ("coco" | "h36m") as H36M-17 (..., 17, 3)."""
+    if fmt == "coco":
+        return coco_to_h36m(kp)
+    if fmt == "h36m":
+        return as_keypoints(kp)
+    raise ValueError(f"unknown keypoint format {fmt!r} (one of {', '.join(FORMATS)})")
+
+
+def h36m_to_coco_3d(joints) -> np.ndarray:
+    """COCO-17 points (..., 17, 3) of a 3D H36M-17 skeleton (..., 17, 3), metres, any frame.
+
+    Limbs and nose are copied; ears sit on the line thorax -> head top, two thirds of the
+    way up, 7.5 cm either side along the shoulder line; eyes 8 cm in front of the ear
+    midpoint (toward the nose) and 3.2 cm either side. Project the result with
+    ``cv2.projectPoints`` to get what a COCO detector would report."""
+    p = np.asarray(joints, dtype=np.float64)
+    out = np.empty(p.shape[:-2] + (17, 3))
+    for h, j in COPIED_FROM_COCO.items():
+        out[..., j, :] = p[..., h, :]
+    thorax, head = p[..., THORAX, :], p[..., HEAD, :]
+    centre = thorax + (head - thorax) / (1 + HEAD_UP)
+    up = _unit(head - thorax)
+    lateral = _unit(_reject(p[..., L_SHOULDER, :] - p[..., R_SHOULDER, :], up))
+    forward = _unit(_reject(_reject(p[..., NECK, :] - centre, up), lateral))
+    for j, side in ((C_L_EAR, 1), (C_R_EAR, -1)):
+        out[..., j, :] = centre + side * _EAR_HALF_WIDTH_M * lateral
+    for j, side in ((C_L_EYE, 1), (C_R_EYE, -1)):
+        out[..., j, :] = centre + _EYE_FORWARD_M * forward + side * _EYE_HALF_WIDTH_M * lateral
+    return out
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+
+
+def _reject(v: np.ndarray, axis_unit: np.ndarray) -> np.ndarray:
+    return v - np.sum(v * axis_unit, axis=-1, keepdims=True) * axis_unit
+
+
+# ---------------------------------------------------------------------------- JSON lines
+
+
+@dataclass
+class Person:
+    keypoints: np.ndarray
+    """(J, 3) x, y (pixels), score; J is 17 unless the source sent fewer."""
+    id: int | None = None
+    """The exporter's track id, when it has one."""
+
+
+@dataclass
+class KeypointFrame:
+    t_s: float
+    """Frame time (s)."""
+    frame: int | None
+    people: list[Person]
+    format: str
+
+
+def _fail(where: str, msg: str):
+    raise KeypointInputError(f"{where}: {msg}")
+
+
+def _parse_person(p, i: int, where: str) -> Person:
+    if not isinstance(p, dict) or "keypoints" not in p:
+        _fail(where, f"people[{i}]: expected an object with 'keypoints'")
+    raw = p["keypoints"]
+    if not isinstance(raw, list):
+        _fail(where, f"people[{i}].keypoints: expected a list")
+    if raw and all(isinstance(v, list) for v in raw):
+        rows = raw
+        if any(len(r) not in (2, 3) for r in rows):
+            _fail(where, f"people[{i}].keypoints: each keypoint must be [x, y] or [x, y, score]")
+        if len({len(r) for r in rows}) > 1:
+            _fail(where, f"people[{i}].keypoints: mixed [x, y] and [x, y, score] entries")
+        width = len(rows[0])
+    else:
+        width = 3 if len(raw) % 3 == 0 and len(raw) != 34 else 2
+        if len(raw) % width:
+            _fail(where, f"people[{i}].keypoints: a flat list of {len(raw)} numbers is neither x,y,score "
+                         "triples nor x,y pairs")
+        rows = [raw[k:k + width] for k in range(0, len(raw), width)]
+    if len(rows) > N_JOINTS:
+        _fail(where, f"people[{i}].keypoints: {len(rows)} keypoints, expected 17")
+    try:
+        a = np.array([[np.nan if v is None else float(v) for v in r] for r in rows], dtype=np.float64)
+    except (TypeError, ValueError):
+        _fail(where, f"people[{i}].keypoints: non-numeric value")
+    a = a.reshape(len(rows), width)
+    pid = p.get("id")
+    if pid is not None and (isinstance(pid, bool) or not isinstance(pid, int)):
+        _fail(where, f"people[{i}].id: expected an integer, got {pid!r}")
+    return Person(as_keypoints(a, n_joints=None), pid)
+
+
+def parse_keypoint_line(line: str, where: str, fmt: str, fps: float = 30.0) -> KeypointFrame | None:
+    """One JSON line -> a frame (None for a blank line); ``where`` is "FILE:LINE"."""
+    if not line.strip():
+        return None
+    try:
+        obj = json.loads(line)
+    except json.JSONDecodeError as e:
+        _fail(where, f"not valid JSON ({e.msg} at character {e.pos + 1})")
+    if not isinstance(obj, dict):
+        _fail(where, "expected a JSON object per line")
+    line_fmt = obj.get("format", fmt)
+    if line_fmt != fmt:
+        _fail(where, f"format {line_fmt!r}, but the input was declared {fmt!r}")
+    frame = obj.get("frame")
+    if frame is not None and (isinstance(frame, bool) or not isinstance(frame, int)):
+        _fail(where, f"frame: expected an integer, got {frame!r}")
+    t = obj.get("t")
+    if t is None:
+        if frame is None:
+            _fail(where, "neither 't' (s) nor 'frame' given")
+        t = frame / fps
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+        _fail(where, f"t: expected a finite number of seconds, got {t!r}")
+    people = obj.get("people", [])
+    if not isinstance(people, list):
+        _fail(where, "people: expected a list")
+    return KeypointFrame(float(t), frame, [_parse_person(p, i, where) for i, p in enumerate(people)], fmt)
+
+
+def read_keypoints_jsonl(path: str | os.PathLike, fmt: str = "coco", fps: float = 30.0
+                         ) -> Iterator[KeypointFrame]:
+    """Frames of a JSON-lines keypoint file, lazily; errors name the file and line."""
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown keypoint format {fmt!r} (one of {', '.join(FORMATS)})")
+    try:
+        f = open(path, "rb")
+    except OSError as e:
+        raise KeypointInputError(f"{path}: cannot open ({e.strerror or e})") from None
+    with f:
+        for n, raw in enumerate(f, 1):
+            try:
+                line = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise KeypointInputError(f"{path}:{n}: not UTF-8 text") from None
+            frame = parse_keypoint_line(line, f"{path}:{n}", fmt, fps)
+            if frame is not None:
+                yield frame
+
+
+# ---------------------------------------------------------------------------- person selection
+
+
+SELECT_MODES = ("largest", "confident", "track")
+
+
+def _extent_px2(kp: np.ndarray, min_score: float) -> float:
+    """Area (px^2) of the bounding box of the keypoints seen with at least ``min_score``."""
+    ok = np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= min_score)  # a NaN score compares False
+    if ok.sum() < 2:
+        return 0.0
+    span = kp[ok, :2].max(axis=0) - kp[ok, :2].min(axis=0)
+    return float(span[0] * span[1])
+
+
+def _confidence(kp: np.ndarray) -> float:
+    return float(np.nansum(kp[:, 2])) if np.isfinite(kp[:, :2]).any() else 0.0
+
+
+@dataclass
+class PersonSelector:
+    """Which detected person the lifter follows, frame after frame.
+
+    ``largest``: the largest bounding box of confidently seen keypoints; ``confident``:
+    the highest summed score; ``track``: the exporter's id ``track_id`` (or, when it is
+    None, the id of the first person picked by size), and nobody when that id is absent
+    (the lifter then handles the person as lost; it never jumps to someone else)."""
+
+    mode: str = "largest"
+    track_id: int | None = None
+    min_score: float = 0.3
+
+    def __post_init__(self):
+        if self.mode not in SELECT_MODES:
+            raise ValueError(f"person selection {self.mode!r}: one of {', '.join(SELECT_MODES)}")
+
+    def select(self, people: Sequence[Person]) -> Person | None:
+        if not people:
+            return None
+        if self.mode == "confident":
+            return max(people, key=lambda p: _confidence(p.keypoints))
+        if self.mode == "track" and self.track_id is not None:
+            return next((p for p in people if p.id == self.track_id), None)
+        best = max(people, key=lambda p: _extent_px2(p.keypoints, self.min_score))
+        if self.mode == "track":
+            self.track_id = best.id
+        return best
+
+
+# ---------------------------------------------------------------------------- cameras
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """A pinhole camera with OpenCV's distortion model; all lengths in pixels."""
+
+    fx_px: float
+    fy_px: float
+    cx_px: float
+    cy_px: float
+    width_px: int
+    height_px: int
+    dist: tuple[float, ...] = ()
+    """Distortion coefficients in OpenCV's order (k1, k2, p1, p2[, k3[, ...]]); () = none."""
+
+    def __post_init__(self):
+        for name in ("fx_px", "fy_px", "width_px", "height_px"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"camera {name}: expected a positive number, got {v!r}")
+        if not all(math.isfinite(v) for v in (self.cx_px, self.cy_px, *self.dist)):
+            raise ValueError("camera: principal point and distortion must be finite")
+        if len(self.dist) not in (0, 4, 5, 8, 12, 14):
+            raise ValueError(f"camera dist: {len(self.dist)} coefficients; OpenCV takes 4, 5, 8, 12 or 14")
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx_px, 0, self.cx_px], [0, self.fy_px, self.cy_px], [0, 0, 1]], np.float64)
+
+    @property
+    def dist_array(self) -> np.ndarray:
+        return np.asarray(self.dist, np.float64)
+
+    @classmethod
+    def from_fov(cls, width_px: int, height_px: int, hfov_deg: float = 100.0) -> "CameraModel":
+        """A distortion-free camera with horizontal field of view ``hfov_deg`` and a centred
+        principal point."""
+        f = (width_px / 2) / math.tan(math.radians(hfov_deg) / 2)
+        return cls(f, f, width_px / 2, height_px / 2, int(width_px), int(height_px))
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "camera") -> "CameraModel":
+        """From ``{"width_px", "height_px", "fx_px", "fy_px", "cx_px", "cy_px"[, "dist"]}``
+        (the manifest's ``camera`` form) or ``{"K": 3x3, "dist", "width_px", "height_px"}``."""
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}: expected an object")
+        try:
+            if "K" in d:
+                K = np.asarray(d["K"], dtype=np.float64)
+                if K.shape != (3, 3):
+                    raise ValueError(f"{where}: field 'K': expected a 3x3 matrix")
+                fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+            else:
+                fx, fy, cx, cy = (float(d[k]) for k in ("fx_px", "fy_px", "cx_px", "cy_px"))
+            w, h = d["width_px"], d["height_px"]
+            dist = tuple(float(v) for v in d.get("dist", ()) or ())
+        except KeyError as e:
+            raise ValueError(f"{where}: field {e.args[0]!r}: missing") from None
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{where}: {e}") from None
+        if isinstance(w, bool) or isinstance(h, bool) or not isinstance(w, int) or not isinstance(h, int):
+            raise ValueError(f"{where}: width_px and height_px must be integers")
+        try:
+            return cls(float(fx), float(fy), float(cx), float(cy), w, h, dist)
+        except ValueError as e:
+            raise ValueError(f"{where}: {e}") from None
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike) -> "CameraModel":
+        """A camera file (JSON, :meth:`from_dict`'s fields); errors name the file."""
+        try:
+            d = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise InputError(f"{path}: not a readable JSON camera file ({' '.join(str(e).split())})") from None
+        try:
+            return cls.from_dict(d, str(path))
+        except ValueError as e:
+            raise InputError(str(e)) from None
+
+    def to_dict(self) -> dict:
+        return {"width_px": self.width_px, "height_px": self.height_px, "fx_px": self.fx_px,
+                "fy_px": self.fy_px, "cx_px": self.cx_px, "cy_px": self.cy_px, "dist": list(self.dist)}
+
+    def same_pixels_as(self, other: "CameraModel") -> bool:
+        """Whether pixels of this camera are already pixels of ``other`` (no mapping needed)."""
+        return (not any(self.dist) and not any(other.dist)
+                and (self.fx_px, self.fy_px, self.cx_px, self.cy_px) ==
+                (other.fx_px, other.fy_px, other.cx_px, other.cy_px))
+
+    def to_camera(self, points_px, target: "CameraModel") -> np.ndarray:
+        """Pixels (..., 2) of this camera -> undistorted pixels of the ``target`` camera.
+
+        ``cv2.undistortPoints`` removes this camera's distortion and re-projects with
+        ``target``'s K; the two cameras share their optical centre and axes. Non-finite
+        points stay NaN."""
+        import cv2
+
+        p = np.asarray(points_px, dtype=np.float64)
+        if self.same_pixels_as(target):
+            return p.copy()
+        flat = p.reshape(-1, 2)
+        out = np.full(flat.shape, np.nan)
+        ok = np.isfinite(flat).all(axis=1)
+        if ok.any():
+            und = cv2.undistortPoints(flat[ok].reshape(-1, 1, 2), self.K, self.dist_array, P=target.K,
+                                      criteria=UNDISTORT_CRITERIA)
+            out[ok] = und.reshape(-1, 2)
+        return out.reshape(p.shape)
+
+
+def normalize_screen(points_px, width_px: float, height_px: float) -> np.ndarray:
+    """VideoPose3D's normalisation: ``u/w*2 - 1``, ``v/w*2 - h/w`` (x in [-1, 1])."""
+    p = np.asarray(points_px, dtype=np.float64)
+    return p / width_px * 2 - np.array([1.0, height_px / width_px])
+
+
+def image_to_canonical(kp_h36m, camera: CameraModel | None, canonical: CameraModel) -> np.ndarray:
+    """H36M keypoints (..., 17, 3) in ``camera`` pixels -> normalised canonical-camera
+    coordinates (..., 17, 2) (scores dropped). ``camera`` None means the keypoints are
+    already canonical pixels."""
+    kp = np.asarray(kp_h36m, dtype=np.float64)
+    px = kp[..., :2] if camera is None else camera.to_camera(kp[..., :2], canonical)
+    return normalize_screen(px, canonical.width_px, canonical.height_px)

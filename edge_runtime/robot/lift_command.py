@@ -1,0 +1,181 @@
+"""``python -m edge_runtime lift``: 2D keypoints -> the streaming lifter -> 3D joints per frame.
+
+    python -m edge_runtime lift --keypoints KP.jsonl --format coco --width 1920 --height 1080 \\
+        [--camera CAM.json] [--assets DIR] [--precision int8|fp32] [--threads N] --out OUT.jsonl
+    python -m edge_runtime lift --video PATH|DEVICE|URL --pose-model POSE.onnx [--camera CAM.json] --out OUT.jsonl
+
+Input: a JSON-lines keypoint file (:func:`edge_runtime.robot.keypoints.read_keypoints_jsonl`),
+read and checked in full before the model loads, or a camera / video through OpenCV and a
+2D pose ONNX model (:mod:`edge_runtime.robot.camera_source`, its contract in the docstring).
+
+The camera: ``--camera CAM.json`` (fx_px, fy_px, cx_px, cy_px, width_px, height_px and
+OpenCV ``dist``); without it, a distortion-free camera with the lifter's 100 degree
+horizontal field of view at ``--width`` x ``--height`` (a video's own size by default).
+
+Output (``--out``): one JSON object per frame -- ``t``, ``frame``, ``person`` (the
+exporter's id), ``valid``, ``reason``, ``warming_up``, ``observed`` (17 booleans),
+``joints_cam_m`` (17 x [x, y, z], metres, camera frame; null when invalid) and
+``root_cam_m`` -- then one ``{"summary": {...}}`` line: frames, valid share, mean
+per-frame lifter time (ms) and every counter. The summary is also printed.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from edge_runtime.cli import CliError, positive_float, positive_int, probability
+from edge_runtime.core.manifest import PRECISIONS, ModelIntegrityError
+from edge_runtime.robot.camera_source import CameraError
+from edge_runtime.robot.keypoints import FORMATS, SELECT_MODES, CameraModel, KeypointInputError, PersonSelector
+
+BAD_INPUT = (KeypointInputError, CameraError, ModelIntegrityError)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    src = parser.add_mutually_exclusive_group(required=True)
+    src.add_argument("--keypoints", metavar="FILE.jsonl", help="2D keypoints, one JSON object per frame")
+    src.add_argument("--video", metavar="PATH|DEVICE|URL", help="a video file, a camera index or a stream URL")
+    parser.add_argument("--pose-model", metavar="POSE.onnx", help="2D pose ONNX model for --video (contract: "
+                        "edge_runtime/camera_source.py)")
+    parser.add_argument("--format", choices=FORMATS, default="coco", help="keypoint layout [coco]")
+    parser.add_argument("--width", type=positive_int, metavar="PX", help="image width of the keypoints' camera")
+    parser.add_argument("--height", type=positive_int, metavar="PX", help="image height of the keypoints' camera")
+    parser.add_argument("--camera", metavar="CAM.json", help="camera intrinsics and OpenCV distortion")
+    parser.add_argument("--assets", metavar="DIR", help="model directory with manifest.json [edge_runtime/assets]")
+    parser.add_argument("--config", metavar="BOX.toml", help="the box configuration; its [lifter] section "
+                        "(edge_runtime/box.example.toml)")
+    parser.add_argument("--precision", choices=PRECISIONS, help="which lifter [lifter] precision (int8)")
+    parser.add_argument("--threads", type=positive_int, help="onnxruntime intra-op threads [lifter] threads (1)")
+    parser.add_argument("--person", default="largest", metavar="|".join(SELECT_MODES) + "|id:N",
+                        help="whom to follow when several people are seen [largest]")
+    parser.add_argument("--min-score", type=probability, help="keypoints scoring lower are missing "
+                        "[lifter] min_score (0.3)")
+    parser.add_argument("--hold-frames", type=int, help="frames a missing joint is held [lifter] hold_frames (3)")
+    parser.add_argument("--fps", type=positive_float, default=30.0,
+                        help="frame rate for lines with 'frame' but no 't' [30]")
+    parser.add_argument("--out", metavar="OUT.jsonl", help="per-frame results and a summary line")
+    parser.add_argument("--quiet", action="store_true", help="no status lines on stderr")
+
+
+def _selector(spec: str, min_score: float) -> PersonSelector:
+    if spec.startswith("id:"):
+        try:
+            return PersonSelector("track", track_id=int(spec[3:]), min_score=min_score)
+        except ValueError:
+            raise CliError(f"--person {spec}: expected id:<integer>") from None
+    if spec not in SELECT_MODES:
+        raise CliError(f"--person {spec}: one of {', '.join(SELECT_MODES)} or id:N")
+    return PersonSelector(spec, min_score=min_score)
+
+
+def _camera(args, size: tuple[int, int] | None) -> CameraModel:
+    """--camera, else the canonical field of view at --width x --height (or the video's size)."""
+    if args.camera:
+        cam = CameraModel.from_json(args.camera)
+        for flag, given, have in (("--width", args.width, cam.width_px), ("--height", args.height, cam.height_px)):
+            if given is not None and given != have:
+                raise CliError(f"{flag} {given} disagrees with {args.camera} ({have} px)")
+        return cam
+    w, h = args.width, args.height
+    if (w is None or h is None) and size:
+        w, h = w or size[0], h or size[1]
+    if w is None or h is None:
+        raise CliError("give the image size (--width and --height) or a camera file (--camera CAM.json)")
+    return CameraModel.from_fov(w, h)
+
+
+def _params(args):
+    """The [lifter] section of --config (defaults without one), the flags on top."""
+    from edge_runtime import config
+
+    cfg = config.override(config.load(args.config), "lifter", precision=args.precision, threads=args.threads,
+                          min_score=args.min_score, hold_frames=args.hold_frames)
+    return cfg.lifter
+
+
+def _frames_from_file(args):
+    """[(t_s, frame, people)], read and checked in full before any model loads."""
+    from edge_runtime.robot.keypoints import read_keypoints_jsonl
+
+    frames = [(f.t_s, f.frame, f.people) for f in read_keypoints_jsonl(args.keypoints, args.format, args.fps)]
+    if not frames:
+        raise KeypointInputError(f"{args.keypoints}: no frames")
+    return frames, None
+
+
+def _frames_from_video(args, stats: dict, threads: int):
+    from edge_runtime.robot.camera_source import CameraFrame, CameraKeypointSource, PoseModel
+
+    if not args.pose_model:
+        raise CliError("--video needs --pose-model POSE.onnx (the 2D keypoint detector)")
+    model = PoseModel(args.pose_model, keypoint_format=args.format, threads=threads)
+    source = CameraKeypointSource(args.video, model)
+
+    def frames():
+        try:
+            for item in source.frames():
+                if isinstance(item, CameraFrame):
+                    yield item.t_s, item.index, item.people
+                    continue
+                stats[item.state] = stats.get(item.state, 0) + 1
+                if not args.quiet:
+                    print(f"camera: {item.state} ({item.since_s:.2f} s since the last frame)", file=sys.stderr)
+        finally:
+            source.close()
+            stats.update(source.stats.to_json())
+
+    return frames(), source.frame_size()
+
+
+def cmd(args) -> int:
+    from edge_runtime.core.onnx import ASSETS_DIR
+    from edge_runtime.robot.lifter import StreamingLifter
+
+    params = _params(args)
+    selector = _selector(args.person, params.min_score)
+    camera_stats: dict = {}
+    if args.keypoints:
+        if args.pose_model:
+            raise CliError("--pose-model goes with --video, not --keypoints")
+        frames, size = _frames_from_file(args)
+    else:
+        frames, size = _frames_from_video(args, camera_stats, params.threads)
+    camera = _camera(args, size)
+    lifter = StreamingLifter.from_manifest(args.assets or ASSETS_DIR, params, camera=camera,
+                                           keypoint_format=args.format)
+    try:
+        out = open(args.out, "w", encoding="utf-8") if args.out else None
+    except OSError as e:
+        raise CliError(f"--out {args.out}: cannot write ({e.strerror or e})") from None
+    t_wall = time.perf_counter()
+    try:
+        for t_s, index, people in frames:
+            person = selector.select(people)
+            pose = lifter.push(t_s, None if person is None else person.keypoints)
+            if out:
+                rec = {"t": t_s, "frame": index, "person": None if person is None else person.id}
+                rec.update(pose.to_json())
+                out.write(json.dumps(rec) + "\n")
+    except KeyboardInterrupt:
+        pass
+    finally:
+        wall = time.perf_counter() - t_wall
+        summary = {"model": lifter.name, "precision": lifter.precision, "threads": params.threads,
+                   "camera": camera.to_dict(), "wall_s": round(wall, 3), **lifter.stats.to_json()}
+        if camera_stats:
+            summary["camera_source"] = camera_stats
+        if out:
+            out.write(json.dumps({"summary": summary}) + "\n")
+            out.close()
+    s = lifter.stats
+    invalid = ", ".join(f"{k} {v}" for k, v in sorted(s.invalid.items())) or "none"
+    mean = f"{s.mean_infer_ms:.3f} ms" if s.inferences else "n/a"
+    print(f"summary: {s.frames} frames, valid {s.valid} ({summary['valid_share']:.1%}; warming up {s.warming_up}), "
+          f"mean lifter time {mean} per frame ({lifter.name}, {params.threads} thread(s))\n"
+          f"  invalid: {invalid}; joints held {s.joints_held}, frames dropped {s.frames_dropped}, "
+          f"interpolated {s.frames_interpolated}, resets {s.resets}"
+          + ("\n  camera: " + ", ".join(f"{k} {v}" for k, v in camera_stats.items()) if camera_stats else "")
+          + (f"\n  written to {args.out}" if args.out else ""))
+    return 0

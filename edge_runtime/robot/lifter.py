@@ -1,0 +1,448 @@
+"""The streaming pose lifter: 2D keypoints per camera frame -> 3D joints in the camera frame.
+
+    lifter = StreamingLifter.from_manifest(ASSETS_DIR, LifterParams(precision="int8"),
+                                           camera=CameraModel.from_json("cam.json"), keypoint_format="coco")
+    pose = lifter.push(t_s, keypoints)      # (17, 3) x, y (px), score -- or None: nobody seen
+    if pose.valid:
+        use(pose.joints_cam_m)              # (17, 3) metres, OpenCV camera axes
+
+The model (a VideoPose3D-style temporal network, shipped by ``python -m export``)
+is loaded ONLY through ``assets/manifest.json`` (entry ``arch`` "lifter"; sha256
+checked before the bytes reach onnxruntime). Its contract: input ``keypoints_2d``
+float32 (N, 27, 17, 2), the last 27 frames oldest first, H36M-17 joints in the
+canonical camera's pixels normalised as ``u/w*2 - 1``, ``v/w*2 - h/w``; outputs
+``pose_3d`` (N, 1, 17, 3) root-relative joints and ``root_3d`` (N, 1, 3) the
+pelvis, metres, camera frame, both for the LAST input frame. Absolute joints =
+pose_3d + root_3d. Pixels of another camera are undistorted and re-projected into
+the canonical camera (the manifest's ``camera``) before normalising
+(:mod:`edge_runtime.robot.keypoints`).
+
+Streaming
+=========
+A causal ring buffer holds the last ``receptive_field`` (27) frames; each camera
+frame costs ONE onnxruntime call on a (1, 27, 17, 2) view of it (no copy: every
+frame is written twice into a buffer of 2 x 27 slots, so the last 27 are always
+contiguous). The output for frame t equals a batch run of the model over the
+sequence padded at its start.
+
+Start-up padding: after a start or a reset the first usable frame is replicated
+into all 27 slots, as VideoPose3D pads a sequence with its edge values; the
+output is computed at once and flagged ``warming_up`` until 27 real frames
+have been buffered (outputs during warm-up are valid but rest on padding).
+
+Missing data is never fed through as garbage:
+
+* A joint is missing when its score is below ``min_score`` or a coordinate is
+  NaN/infinite. It is HELD at its last valid observation for up to
+  ``hold_frames`` frames (``observed`` is False for it); missing longer (or never
+  seen since the last reset) the frame is INVALID (reason ``missing_joints: ...``)
+  and the model is not run.
+* A frame with no person (``None``) or a keypoint array that is not 17 joints
+  counts as every joint missing: held within ``hold_frames``, else invalid with
+  reason ``no_person`` / ``joint_count`` (counted either way: ``stats.no_person``,
+  ``stats.wrong_joint_count``).
+* Dropped camera frames: a timestamp step above ``max_gap_periods`` frame periods
+  means ``round(dt * frame_rate_hz) - 1`` frames were dropped; their joints age
+  like missing ones.
+* Holes in the buffer (dropped frames, invalid frames) are bridged when valid
+  input returns by linear interpolation between the frames on either side, so
+  the temporal context stays evenly spaced, provided the hole lasted at most
+  ``lost_timeout_s``; after a longer one (the person was lost) the buffer is
+  RESET and warm-up starts again from the next valid frame.
+* A camera slower than ``frame_rate_hz`` looks like one that drops frames, so its
+  frames are spaced out to the model's rate by the same interpolation (each pose
+  is still computed, and reported, at the camera's own frames).
+* A timestamp that does not increase is refused (reason ``time_not_increasing``)
+  and changes nothing; one that goes back by more than ``lost_timeout_s`` starts
+  a new stream (:meth:`StreamingLifter.restart`: buffer, joint memory and clock
+  forgotten; ``stats.restarts``).
+
+Every outcome is counted in :class:`LifterStats`. This module never imports
+torch, onnx, or edge_runtime.config.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections import Counter
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from edge_runtime.core.manifest import PRECISIONS, ModelIntegrityError
+from edge_runtime.core.onnx import ASSETS_DIR, session_from_manifest
+from edge_runtime.core.skeleton import JOINTS, N_JOINTS
+from edge_runtime.robot.keypoints import FORMATS, CameraModel, image_to_canonical, to_h36m
+
+LIFTER_ARCH = "lifter"
+INPUT_NAME = "keypoints_2d"
+POSE_OUTPUT = "pose_3d"
+ROOT_OUTPUT = "root_3d"
+JOINT_SET = "h36m-17"
+
+# reason codes (LiftedPose.reason starts with one; LifterStats.invalid counts them)
+NO_PERSON = "no_person"
+JOINT_COUNT = "joint_count"
+MISSING_JOINTS = "missing_joints"
+TIME_NOT_INCREASING = "time_not_increasing"
+BAD_TIME = "bad_time"
+
+
+@dataclass(frozen=True)
+class LifterParams:
+    """Tunables of :class:`StreamingLifter` (a TOML section of the box configuration)."""
+
+    precision: str = "int8"
+    """Which shipped lifter to run: "int8" or "fp32" (manifest entry lifter-<precision>)."""
+    threads: int = 1
+    """onnxruntime intra-op threads (the box has 2 cores; 1 leaves one for the rest)."""
+    min_score: float = 0.3
+    """A keypoint whose detector score is below this is treated as missing."""
+    hold_frames: int = 3
+    """A missing joint is held at its last valid observation for up to this many frames
+    (100 ms at 30 Hz); missing longer, the frame is reported invalid."""
+    frame_rate_hz: float = 30.0
+    """The camera rate the model was trained for; sets the frame period for gap detection
+    and hole filling."""
+    max_gap_periods: float = 1.5
+    """A timestamp step above this many frame periods means frames were dropped."""
+    lost_timeout_s: float = 0.5
+    """A hole in the input (dropped or invalid frames) up to this long is bridged by linear
+    interpolation; a longer one (the person was lost) resets the buffer."""
+
+    def __post_init__(self):
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision: {self.precision!r}, expected one of {', '.join(PRECISIONS)}")
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
+            raise ValueError(f"threads: expected an integer >= 1, got {self.threads!r}")
+        if isinstance(self.hold_frames, bool) or not isinstance(self.hold_frames, int) or self.hold_frames < 0:
+            raise ValueError(f"hold_frames: expected an integer >= 0, got {self.hold_frames!r}")
+        if not 0.0 <= self.min_score <= 1.0:
+            raise ValueError(f"min_score: expected a number in [0, 1], got {self.min_score!r}")
+        for name in ("frame_rate_hz", "lost_timeout_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name}: expected a positive number, got {v!r}")
+        if not (math.isfinite(self.max_gap_periods) and self.max_gap_periods >= 1.0):
+            raise ValueError(f"max_gap_periods: expected a number >= 1, got {self.max_gap_periods!r}")
+
+
+@dataclass
+class LiftedPose:
+    """The lifter's answer for one camera frame."""
+
+    t_s: float
+    """The frame's timestamp (s), as pushed."""
+    joints_cam_m: np.ndarray
+    """(17, 3) absolute H36M joints in the camera frame (m; x right, y down, z forward);
+    all NaN when the frame is invalid."""
+    root_cam_m: np.ndarray
+    """(3,) the pelvis in the camera frame (m); NaN when invalid."""
+    valid: bool
+    reason: str | None
+    """None when valid; else a code (``no_person``, ``joint_count``, ``missing_joints``,
+    ``time_not_increasing``, ``bad_time``), then ``: `` and details."""
+    observed: np.ndarray
+    """(17,) bool: the joint was seen in this frame (False: held or missing)."""
+    warming_up: bool = False
+    """The buffer still holds start-up padding (fewer than 27 real frames since a reset)."""
+    infer_s: float = 0.0
+    """Time of this frame's onnxruntime call (s); 0 when the model was not run."""
+
+    @property
+    def code(self) -> str | None:
+        return None if self.reason is None else self.reason.split(":", 1)[0]
+
+    def to_json(self) -> dict:
+        """A JSON-ready dict (joints as lists, None when invalid)."""
+        def fin(a):
+            return np.round(a, 5).tolist() if self.valid else None
+
+        return {"t": self.t_s, "valid": self.valid, "reason": self.reason, "warming_up": self.warming_up,
+                "joints_cam_m": fin(self.joints_cam_m), "root_cam_m": fin(self.root_cam_m),
+                "observed": [bool(v) for v in self.observed]}
+
+
+@dataclass
+class LifterStats:
+    """Counters since the lifter was made."""
+
+    frames: int = 0
+    valid: int = 0
+    warming_up: int = 0
+    """Valid frames whose buffer still held start-up padding."""
+    invalid: Counter = field(default_factory=Counter)
+    """Invalid frames by reason code."""
+    no_person: int = 0
+    """Frames pushed with nobody in them (None)."""
+    wrong_joint_count: int = 0
+    """Frames whose keypoints were not 17 joints (all their joints count as missing)."""
+    joints_held: int = 0
+    """Joint-frames filled from an earlier observation."""
+    frames_dropped: int = 0
+    """Camera frames missing according to the timestamps."""
+    frames_interpolated: int = 0
+    """Buffer slots filled by interpolation across a hole."""
+    resets: int = 0
+    """Buffer resets after the person was lost for longer than lost_timeout_s."""
+    restarts: int = 0
+    """Full restarts: the timestamps went back by more than lost_timeout_s (a new stream)."""
+    inferences: int = 0
+    infer_s: float = 0.0
+    """Total onnxruntime time (s)."""
+
+    @property
+    def mean_infer_ms(self) -> float:
+        return 1000 * self.infer_s / self.inferences if self.inferences else float("nan")
+
+    def to_json(self) -> dict:
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        d["invalid"] = dict(self.invalid)
+        d["valid_share"] = self.valid / self.frames if self.frames else 0.0
+        d["mean_infer_ms"] = None if not self.inferences else round(self.mean_infer_ms, 4)
+        return d
+
+
+class StreamingLifter:
+    """A causal ring buffer of 2D frames in front of one lifter ONNX session."""
+
+    def __init__(self, session, entry: dict, *, params: LifterParams = LifterParams(),
+                 camera: CameraModel | None = None, keypoint_format: str = "h36m", source: str = ""):
+        if keypoint_format not in FORMATS:
+            raise ValueError(f"keypoint format {keypoint_format!r}: one of {', '.join(FORMATS)}")
+        self.session = session
+        self.entry = entry
+        self.params = params
+        self.source = source or entry.get("file", "<lifter>")
+        self.name = entry.get("name", LIFTER_ARCH)
+        self.precision = entry.get("precision", "")
+        self.keypoint_format = keypoint_format
+        self.receptive_field, self.canonical_camera = _check_entry(entry, self.source)
+        self.camera = camera
+        _check_session(session, self.receptive_field, self.source)
+        self._outputs = [POSE_OUTPUT, ROOT_OUTPUT]
+        self.stats = LifterStats()
+        self._period_s = 1.0 / params.frame_rate_hz
+        r = self.receptive_field
+        self._ring = np.zeros((2 * r, N_JOINTS, 2), np.float32)
+        self._last_seen = np.zeros((N_JOINTS, 2), np.float64)
+        self._age = np.full(N_JOINTS, np.inf)
+        self._last_t: float | None = None
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+
+    @classmethod
+    def from_manifest(cls, assets_dir: str | os.PathLike = ASSETS_DIR, params: LifterParams = LifterParams(), *,
+                      camera: CameraModel | None = None, keypoint_format: str = "h36m") -> "StreamingLifter":
+        """The shipped lifter of ``params.precision`` (manifest entry of arch "lifter"),
+        hash-checked, with ``params.threads`` intra-op threads."""
+        session, entry, path = session_from_manifest(assets_dir, params.precision, arch=LIFTER_ARCH,
+                                                     threads=params.threads)
+        return cls(session, entry, params=params, camera=camera, keypoint_format=keypoint_format, source=path)
+
+    # ------------------------------------------------------------------ state
+
+    def reset(self) -> None:
+        """Empty the buffer: the next usable frame starts a new warm-up. Joint memory is kept
+        (its age decides whether a held value may still be used)."""
+        self._pos = 0
+        self._filled = 0
+        self._buffered_t: float | None = None
+        self._frames_since_buffered = 0
+
+    def restart(self) -> None:
+        """Forget everything but the counters: buffer, joint memory and the clock (a new
+        stream, e.g. a source whose timestamps started again)."""
+        self.stats.restarts += 1
+        self.reset()
+        self._age[:] = np.inf
+        self._last_t = None
+
+    @property
+    def warming_up(self) -> bool:
+        return self._filled < self.receptive_field
+
+    def window(self) -> np.ndarray:
+        """The model input the last call saw: (receptive_field, 17, 2) normalised, oldest first."""
+        return self._ring[self._pos:self._pos + self.receptive_field]
+
+    def _write(self, frame: np.ndarray) -> None:
+        r = self.receptive_field
+        self._ring[self._pos] = frame
+        self._ring[self._pos + r] = frame
+        self._pos = (self._pos + 1) % r
+        self._filled += 1
+
+    # ------------------------------------------------------------------ per frame
+
+    def push(self, t_s: float, keypoints) -> LiftedPose:
+        """One camera frame: ``keypoints`` (17, 3) x, y (pixels of ``camera``), score in the
+        lifter's ``keypoint_format``, (17, 2) for all scores 1, or None when nobody was
+        seen. Returns the 3D pose for this frame, or an invalid result saying why."""
+        st = self.stats
+        st.frames += 1
+        t_s = float(t_s)
+        if not math.isfinite(t_s):
+            return self._invalid(t_s, f"{BAD_TIME}: timestamp {t_s}", None)
+        if self._last_t is not None and t_s < self._last_t - self.params.lost_timeout_s:
+            self.restart()  # the clock went back by more than a lost person's timeout: a new stream
+        if self._last_t is not None and t_s <= self._last_t:
+            return self._invalid(t_s, f"{TIME_NOT_INCREASING}: {t_s:.4f} s after {self._last_t:.4f} s", None)
+        steps = self._steps_since_last(t_s)
+        self._last_t = t_s
+        self._frames_since_buffered += steps
+        observed, why = self._observe(keypoints)
+        self._age[~observed] += steps
+        held = ~observed & (self._age <= self.params.hold_frames)
+        stale = ~observed & ~held
+        if self._buffered_t is not None and t_s - self._buffered_t > self.params.lost_timeout_s + 1e-9:
+            st.resets += 1  # lost for too long: the buffer no longer describes this person's recent motion
+            self.reset()
+        if stale.any():
+            if why is None:
+                why = f"{MISSING_JOINTS}: " + ", ".join(JOINTS[j] for j in np.flatnonzero(stale))
+            return self._invalid(t_s, why, observed)
+        st.joints_held += int(held.sum())
+        frame = self._last_seen.astype(np.float32)
+        self._buffer(frame)
+        return self._run(t_s, observed)
+
+    def _steps_since_last(self, t_s: float) -> int:
+        """Frame periods since the previous frame (1, or more when frames were dropped)."""
+        if self._last_t is None:
+            return 1
+        dt = t_s - self._last_t
+        if dt <= self.params.max_gap_periods * self._period_s:
+            return 1
+        steps = max(1, round(dt / self._period_s))
+        self.stats.frames_dropped += steps - 1
+        return steps
+
+    def _observe(self, keypoints) -> tuple[np.ndarray, str | None]:
+        """Update the joint memory from this frame; (observed mask, invalid reason or None)."""
+        if keypoints is None:
+            self.stats.no_person += 1
+            return np.zeros(N_JOINTS, bool), f"{NO_PERSON}: nobody in this frame"
+        kp = np.asarray(keypoints, dtype=np.float64)
+        if kp.ndim != 2 or kp.shape[0] != N_JOINTS or kp.shape[1] not in (2, 3):
+            self.stats.wrong_joint_count += 1
+            return np.zeros(N_JOINTS, bool), f"{JOINT_COUNT}: keypoints of shape {kp.shape}, expected (17, 3)"
+        kp = to_h36m(kp, self.keypoint_format)
+        ok = np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= self.params.min_score)  # NaN score: False
+        if ok.any():
+            norm = image_to_canonical(kp[ok], self.camera, self.canonical_camera)
+            ok_norm = np.isfinite(norm).all(axis=1)  # undistortion may fail far outside the image
+            idx = np.flatnonzero(ok)
+            ok[idx[~ok_norm]] = False
+            self._last_seen[idx[ok_norm]] = norm[ok_norm]
+            self._age[idx[ok_norm]] = 0
+        return ok, None
+
+    def _buffer(self, frame: np.ndarray) -> None:
+        """Append a usable frame; bridge a hole since the last one by interpolation, or
+        replicate the frame into every slot after a reset (start-up padding)."""
+        if self._buffered_t is None:
+            self._ring[:] = frame
+            self._pos, self._filled = 0, 0
+        else:
+            gap = self._frames_since_buffered - 1
+            if gap > 0:
+                last = self._ring[(self._pos - 1) % self.receptive_field].copy()
+                for k in range(1, gap + 1):
+                    self._write(last + (frame - last) * (k / (gap + 1)))
+                self.stats.frames_interpolated += gap
+        self._write(frame)
+        self._buffered_t = self._last_t
+        self._frames_since_buffered = 0
+
+    def _run(self, t_s: float, observed: np.ndarray) -> LiftedPose:
+        x = self.window()[None]
+        t0 = time.perf_counter()
+        pose, root = self.session.run(self._outputs, {INPUT_NAME: x})
+        dt = time.perf_counter() - t0
+        st = self.stats
+        st.inferences += 1
+        st.infer_s += dt
+        root_m = root.reshape(3).astype(np.float64)
+        joints = pose.reshape(N_JOINTS, 3).astype(np.float64) + root_m
+        if not np.isfinite(joints).all():
+            return self._invalid(t_s, "model_output: non-finite joints", observed)
+        warming = self.warming_up
+        st.valid += 1
+        st.warming_up += warming
+        return LiftedPose(t_s, joints, root_m, True, None, observed, warming, dt)
+
+    def _invalid(self, t_s: float, reason: str, observed: np.ndarray | None) -> LiftedPose:
+        self.stats.invalid[reason.split(":", 1)[0]] += 1
+        obs = np.zeros(N_JOINTS, bool) if observed is None else observed
+        return LiftedPose(t_s, np.full((N_JOINTS, 3), np.nan), np.full(3, np.nan), False, reason, obs,
+                          self.warming_up, 0.0)
+
+    # ------------------------------------------------------------------ batch (reference, tools)
+
+    def lift_windows(self, windows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The model on (N, receptive_field, 17, 2) normalised windows: (pose_3d (N, 17, 3),
+        root_3d (N, 3)). No buffering, no checks of missing data: a reference and a tool."""
+        x = np.ascontiguousarray(windows, dtype=np.float32)
+        pose, root = self.session.run(self._outputs, {INPUT_NAME: x})
+        return pose[:, 0], root[:, 0]
+
+    def describe(self) -> dict:
+        return {"name": self.name, "precision": self.precision, "source": self.source,
+                "receptive_field": self.receptive_field, "threads": self.params.threads,
+                "keypoint_format": self.keypoint_format, "canonical_camera": self.canonical_camera.to_dict(),
+                "camera": None if self.camera is None else self.camera.to_dict()}
+
+    def __repr__(self) -> str:
+        return f"StreamingLifter({self.name!r}, precision={self.precision!r}, rf={self.receptive_field})"
+
+
+def padded_windows(frames: np.ndarray, receptive_field: int) -> np.ndarray:
+    """(T, 17, 2) -> (T, receptive_field, 17, 2): frame t's causal window, the sequence
+    padded at its start by replicating frame 0 (the streaming lifter's start-up padding)."""
+    f = np.asarray(frames)
+    pad = np.repeat(f[:1], receptive_field - 1, axis=0)
+    full = np.concatenate([pad, f], axis=0)
+    idx = np.arange(len(f))[:, None] + np.arange(receptive_field)[None, :]
+    return full[idx]
+
+
+def _check_entry(entry: dict, source: str) -> tuple[int, CameraModel]:
+    """(receptive field, canonical camera) from a lifter manifest entry."""
+    rf = entry.get("receptive_field", 27)
+    if isinstance(rf, bool) or not isinstance(rf, int) or rf < 1:
+        raise ModelIntegrityError(f"{source}: manifest field 'receptive_field': expected a positive integer, "
+                                  f"got {rf!r}")
+    if entry.get("joints", JOINT_SET) != JOINT_SET:
+        raise ModelIntegrityError(f"{source}: manifest field 'joints': {entry.get('joints')!r}, this runtime "
+                                  f"feeds {JOINT_SET}")
+    if "camera" not in entry:
+        raise ModelIntegrityError(f"{source}: manifest field 'camera': missing (the canonical camera the "
+                                  "lifter was trained for)")
+    try:
+        cam = CameraModel.from_dict(entry["camera"], "manifest field 'camera'")
+    except ValueError as e:
+        raise ModelIntegrityError(f"{source}: {e}") from None
+    return rf, cam
+
+
+def _check_session(session, rf: int, source: str) -> None:
+    """The session has the lifter's input and outputs, with the right shapes on a probe."""
+    inputs = {i.name: i.shape for i in session.get_inputs()}
+    outputs = {o.name for o in session.get_outputs()}
+    if INPUT_NAME not in inputs or not {POSE_OUTPUT, ROOT_OUTPUT} <= outputs:
+        raise ModelIntegrityError(f"{source}: expected input {INPUT_NAME!r} and outputs {POSE_OUTPUT!r}, "
+                                  f"{ROOT_OUTPUT!r}; the model has {sorted(inputs)} -> {sorted(outputs)}")
+    try:
+        pose, root = session.run([POSE_OUTPUT, ROOT_OUTPUT], {INPUT_NAME: np.zeros((1, rf, N_JOINTS, 2), np.float32)})
+    except Exception as e:  # onnxruntime's own exception types
+        msg = " ".join(str(e).split())[:200]
+        raise ModelIntegrityError(f"{source}: the model does not take (1, {rf}, 17, 2) keypoints ({msg})") from None
+    if pose.shape != (1, 1, N_JOINTS, 3) or root.shape != (1, 1, 3):
+        raise ModelIntegrityError(f"{source}: outputs of shape {pose.shape} and {root.shape}, expected "
+                                  f"(1, 1, 17, 3) and (1, 1, 3)")
+
+
+__all__ = ["LifterParams", "LiftedPose", "LifterStats", "StreamingLifter", "padded_windows", "LIFTER_ARCH"]

@@ -1,0 +1,554 @@
+"""The robot-side safety loop: poses in, hazard decisions, commands out on the robot link.
+
+Per camera frame::
+
+    2D keypoints -> StreamingLifter -> joints (camera frame)  \\
+                          or 3D joints given directly (camera or robot frame)
+    -> calibration (camera -> robot frame; each skeleton re-anchored on the floor when
+       the calibration's ground_anchor is on) -> head tracker (per worker)
+    -> HazardMonitor (zones, hysteresis, fail-safe) -> RobotLink commands
+
+``RobotLoop`` never sleeps and never reads the wall clock itself: time comes from the
+injectable ``clock`` (``time.monotonic`` by default; a scenario runner passes its
+simulated clock). Its driver calls
+
+* ``feed_joints(...)`` / ``feed_lifted(...)`` for every camera frame, and
+* ``tick()`` at the control rate (e.g. every 10 ms): link polling, the 200 ms staleness
+  check, the task motion and the heartbeat.
+
+Commands go out only when what the arm should do changes (plus ``heartbeat()`` every
+``heartbeat_period_s``; the controller's watchdog stops the arm after 200 ms without
+one), so the link is never flooded. What the arm should do:
+
+=========  =====================================================  ==================
+state      motion                                                 beacon
+=========  =====================================================  ==================
+NORMAL     the task: cycle through ``task_waypoints_m``            green
+LEVEL1     ``stop()``                                              red, 2000 Hz 70 dB
+LEVEL2     ``retract(P_eff + L)`` on entry (Eq. 6; again when it  red, 4000 Hz 80 dB
+           is done and the worker still comes closer), the tool
+           turned toward the base by up to 45 deg, the target
+           kept 0.3-0.7 m (``retract_min/max_radius_m``) off the
+           base's axis; if the controller reports it unreachable,
+           one retraction straight toward the base, and if that
+           is refused too: ``stop()`` (``retract_unreachable``)
+FAULT      ``stop()`` (pose stale / invalid / no pose yet)          yellow
+=========  =====================================================  ==================
+
+The link (``edge_runtime.robot.link.base.RobotLink``) never raises on a transport fault; it
+reports ``link_ok`` and reconnects by itself. The loop reads ``link_ok`` at every poll:
+a drop is counted (``link_errors``) and reported (status ``link``: ``connecting``, ``ok``,
+``lost``; ``link_error`` from the link), and when the link is back the current motion
+and beacon are sent again (``resume()`` first: the controller's watchdog has latched
+a stop meanwhile). A link object that does raise is handled the same way, with a
+heartbeat tried every ``link_retry_s``. A command the link refuses as invalid
+(``ValueError``) or that the controller answers ``unreachable``/``refused``/``invalid``
+is counted (``refused``); for a retraction the arm is stopped instead, and a task
+waypoint is skipped. The beacon is sent just before the motion, because the controller
+reports the answer to its latest command only.
+
+Heartbeats: a ``RobotLink`` whose ``config.heartbeat_period_s`` is set sends them
+itself from ``poll()``; otherwise the loop calls ``heartbeat()`` every
+``heartbeat_period_s``.
+
+Every frame leaves a ``FrameRecord`` with ``t_in_s`` (the clock when the frame
+arrived) and ``t_command_s`` (the clock after the link call it caused returned, or
+None), so the reaction time keypoints-in -> command-on-link can be measured.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+from edge_runtime.core.skeleton import HEAD
+from edge_runtime.robot.hazard import (
+    HazardMonitor,
+    State,
+    TrackerParams,
+    ZoneParams,
+    ground,
+    retract_direction,
+    tool_yaw_toward_base,
+)
+
+
+@dataclass(frozen=True)
+class LoopParams:
+    """The loop's timing and the arm's normal work ([robot_loop] in the box configuration)."""
+
+    heartbeat_period_s: float = 0.05
+    """heartbeat() period (s); the controller's watchdog stops the arm after 200 ms without
+    a valid command or heartbeat."""
+    link_retry_s: float = 0.5
+    """A link whose calls raise is retried this often (s); a latched watchdog is cleared
+    at most this often."""
+    task_waypoints_m: tuple[tuple[float, float, float], ...] = (
+        (0.45, 0.14, 0.55), (0.0, 0.14, 0.8), (-0.45, 0.14, 0.55))
+    """The task: robot-frame end-effector positions (m) the arm cycles through while NORMAL
+    (y = 0.14 m is 1.055 m above the floor, the dissertation's P0)."""
+    task_pitch_rad: float = 0.0
+    """Tool pitch during the task (rad)."""
+    task_yaw_rad: float = 0.0
+    """Tool yaw during the task (rad; 0 points the tool along +z, the work side)."""
+    waypoint_tolerance_m: float = 0.03
+    """A waypoint counts as reached within this distance (m)."""
+    min_height_m: float = -0.3
+    """Retraction targets are kept at or above this robot-frame height (m)."""
+    retract_min_radius_m: float = 0.3
+    """A retraction stops short of this ground distance from the base's axis (m): closer in,
+    the Sawyer cannot hold its tool pointed at the base (its IK refuses the target)."""
+    re_retract_m: float = 0.15
+    """In level 2, the arm retracts again (Eq. 6 from where it is) once its retraction is done
+    and the worker has come this much closer (m) since it began."""
+    retract_max_turn_deg: float = 45.0
+    """The tool turns toward the base while retracting (the dissertation's Sec. 3.2.4.4) by
+    at most this much (deg); 180 turns it all the way. A large turn makes the hand swing
+    through joint space: in the simulated Sawyer a full turn swept it 0.3 m toward the
+    worker, which 45 deg avoids."""
+    retract_max_radius_m: float = 0.7
+    """Retraction targets further than this from the base's axis (ground distance, m) are
+    pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
+    records: int = 100_000
+    """Frame records kept in memory (the oldest are dropped)."""
+
+    def __post_init__(self):
+        if not 0 <= self.retract_min_radius_m < self.retract_max_radius_m:
+            raise ValueError("retract_max_radius_m: must be above retract_min_radius_m (and both >= 0)")
+
+
+class RobotLinkLike(Protocol):
+    """What the loop uses of ``edge_runtime.robot.link.base.RobotLink``.
+
+    Optional, used when present: ``state`` (``ee_position_m``, ``yaw_rad``, ``watchdog``;
+    a link without ``result`` may flag ``unreachable`` here), ``link_ok`` and
+    ``last_error``, ``result(seq)`` (the controller's answer to a command whose call
+    returned ``seq``), ``config.heartbeat_period_s`` (the link heartbeats by itself) and
+    ``set_runtime_state(state)``."""
+
+    def move_to(self, position_m, pitch_rad: float, yaw_rad: float) -> Any: ...
+    def retract(self, position_m, pitch_rad: float, yaw_rad: float) -> Any: ...
+    def stop(self) -> Any: ...
+    def resume(self) -> Any: ...
+    def set_alarm(self, light: str, tone_hz: float, tone_db: float) -> Any: ...
+    def heartbeat(self) -> Any: ...
+    def poll(self) -> Any: ...
+
+
+@dataclass(frozen=True)
+class Motion:
+    """One motion command: kind is "move", "retract" or "stop"."""
+
+    kind: str
+    position_m: tuple[float, float, float] | None = None
+    pitch_rad: float = 0.0
+    yaw_rad: float = 0.0
+
+
+STOP = Motion("stop")
+INVALID = "invalid"
+"""What ``_call`` returns for a command the link refused as invalid (ValueError)."""
+REFUSALS = ("unreachable", "refused", "invalid")
+"""Controller answers (``RobotLink.result``) that mean a command was not carried out."""
+NO_PERSON = "no_person"
+"""The lifter's reason code for a frame in which nobody was detected."""
+
+
+@dataclass
+class FrameRecord:
+    """One camera frame through the loop (times on the loop's clock, seconds)."""
+
+    t_in_s: float
+    t_command_s: float | None
+    state: str
+    reason: str
+    distance_m: float
+    command: str | None
+
+
+@dataclass
+class LoopCounters:
+    frames: int = 0
+    invalid: int = 0
+    stale: int = 0
+    stops: int = 0
+    retracts: int = 0
+    moves: int = 0
+    unreachable: int = 0
+    refused: int = 0
+    link_errors: int = 0
+    heartbeats: int = 0
+    commands: int = 0
+
+
+def _step_outside_radius(e: np.ndarray, L: np.ndarray, r: float) -> float:
+    """The largest fraction (0..1) of the ground step ``L`` from ``e`` that stays at least
+    ``r`` from the origin all the way."""
+    a, b, c = float(L @ L), 2.0 * float(e @ L), float(e @ e) - r * r
+    if c <= 0:
+        return 0.0  # already inside: turn the tool, do not move
+    disc = b * b - 4 * a * c
+    if a == 0 or disc < 0:
+        return 1.0
+    first = (-b - math.sqrt(disc)) / (2 * a)
+    return min(1.0, first) if first > 0 else 1.0
+
+
+def _robot_heads(calibration, persons: np.ndarray) -> np.ndarray:
+    """Robot-frame heads (P, 3) of camera-frame skeletons (P, 17, 3): through
+    ``calibration.to_robot`` (each skeleton re-anchored on the floor when the calibration's
+    ``ground_anchor`` is on) when it has one, else ``calibration.apply``."""
+    to_robot = getattr(calibration, "to_robot", None)
+    if to_robot is None:
+        return calibration.apply(persons[:, HEAD, :])
+    return to_robot(persons)[:, HEAD, :]
+
+
+def _vec3(v) -> tuple[float, float, float]:
+    return tuple(float(x) for x in np.asarray(v, float).reshape(3))
+
+
+class RobotLoop:
+    """See the module docstring.
+
+    ``calibration``: an ``edge_runtime.robot.calibration.Calibration`` mapping camera-frame
+    joints to the robot frame, or None when the joints given are in the robot frame
+    already (the simulator's true joints)."""
+
+    def __init__(self, link: RobotLinkLike, calibration=None, zones: ZoneParams = ZoneParams(),
+                 tracker: TrackerParams = TrackerParams(), params: LoopParams = LoopParams(),
+                 clock: Callable[[], float] = time.monotonic,
+                 on_record: Callable[[FrameRecord], None] | None = None):
+        if not params.task_waypoints_m:
+            raise ValueError("task_waypoints_m: at least one waypoint")
+        self.link = link
+        self.calibration = calibration
+        self.zones = zones
+        self.params = params
+        self.clock = clock
+        self.on_record = on_record
+        self.monitor = HazardMonitor(zones, tracker)
+        self.counters = LoopCounters()
+        self.records: deque[FrameRecord] = deque(maxlen=params.records)
+        self.link_state = "connecting"
+        self.link_error = ""
+        self._raised = False  # the last link call raised: retry at link_retry_s
+        self._auto_heartbeat = getattr(getattr(link, "config", None), "heartbeat_period_s", None) is not None
+        self._waypoint = 0
+        self._sent_motion: Motion | None = None
+        self._sent_alarm = None
+        self._sent_runtime_state = None
+        self._retract: Motion | None = None
+        self._retract_seq = None
+        self._retract_fallback = False
+        self._retract_distance_m = math.inf
+        self._move_seq = None
+        self._unreachable = False
+        self._last_hb_s = -math.inf
+        self._next_retry_s = -math.inf
+        self._last_watchdog_fix_s = -math.inf
+        self._last_effector: np.ndarray | None = None
+        self._last_yaw: float | None = None
+
+    # -- inputs ---------------------------------------------------------------------------
+
+    def feed_joints(self, joints_m, valid: bool = True, reason: str = "", ids=None,
+                    t_in_s: float | None = None) -> FrameRecord:
+        """One frame of 3D joints: (17, 3) for one worker, (P, 17, 3) for several, (0, 17, 3)
+        or None for nobody seen. ``valid``/``reason``: the lifter's verdict; an invalid frame
+        stops the arm, except ``no_person`` (nobody detected): that is an empty scene, judged
+        like any frame without workers (a worker lost inside a zone holds the arm). ``ids``:
+        a stable id per person (default: their index) so each keeps his own tracker.
+        ``t_in_s``: when the frame's input arrived (default: now)."""
+        t_in = self.clock() if t_in_s is None else t_in_s
+        if not valid and reason.split(":", 1)[0] == NO_PERSON:
+            joints_m, valid = None, True
+        self.counters.frames += 1
+        self._poll_link()
+        persons = np.empty((0, 17, 3)) if joints_m is None else np.asarray(joints_m, float)
+        if persons.ndim == 2:
+            persons = persons[None]
+        shaped = persons.ndim == 3 and persons.shape[1:] == (17, 3)
+        heads = persons[:, HEAD, :] if shaped and len(persons) else np.empty((0, 3))
+        if self.calibration is not None and len(heads):
+            heads = _robot_heads(self.calibration, persons)
+        if not valid or not shaped or not np.isfinite(heads).all():
+            self.counters.invalid += 1
+            why = reason if not valid else "non-finite joints" if shaped else f"joints of shape {persons.shape}"
+            decision = self.monitor.invalid(t_in, why)
+        else:
+            keys = list(range(len(heads))) if ids is None else list(ids)
+            decision = self.monitor.observe(t_in, dict(zip(keys, heads)), self.effector_m())
+        return self._act(t_in, decision, record=True)
+
+    def feed_lifted(self, out, t_in_s: float | None = None) -> FrameRecord:
+        """A StreamingLifter output (``joints_cam_m`` (17, 3), ``valid``, ``reason``), judged
+        as in ``feed_joints``."""
+        reason = str(getattr(out, "reason", "") or "")
+        return self.feed_joints(out.joints_cam_m, bool(out.valid), reason, t_in_s=t_in_s)
+
+    def feed_keypoints(self, lifter, t_frame_s: float, keypoints) -> FrameRecord:
+        """One frame of 2D keypoints (one person, or None for nobody) through ``lifter``
+        (``StreamingLifter.push(t_s, keypoints)``). The frame's ``t_in_s`` is taken before
+        lifting, so the reaction time includes the lifter."""
+        t_in = self.clock()
+        return self.feed_lifted(lifter.push(t_frame_s, keypoints), t_in_s=t_in)
+
+    def tick(self) -> None:
+        """A control cycle: link poll, staleness, task progress, heartbeat."""
+        now = self.clock()
+        self._poll_link()
+        self._act(now, self.monitor.check(now), record=False)
+        due = now - self._last_hb_s >= self.params.heartbeat_period_s - 1e-6
+        if not self._auto_heartbeat and not self._raised and due and self._call("heartbeat") is not None:
+            self.counters.heartbeats += 1
+            self._last_hb_s = now
+
+    # -- state ----------------------------------------------------------------------------
+
+    def effector_m(self) -> np.ndarray:
+        """The end effector's robot-frame position: the controller's last report, else the
+        last position commanded, else the first task waypoint."""
+        if self._last_effector is not None:
+            return self._last_effector
+        if self._sent_motion is not None and self._sent_motion.position_m is not None:
+            return np.array(self._sent_motion.position_m)
+        return np.array(self.params.task_waypoints_m[0], float)
+
+    def status(self) -> dict:
+        m = self.monitor
+        reason = "retract_unreachable" if self._unreachable and m.state == State.LEVEL2 else m.reason
+        self.counters.stale = m.stale_events
+        return {"state": m.state.name, "reason": reason, "link": self.link_state,
+                "link_error": self.link_error, "waypoint": self._waypoint, **vars(self.counters)}
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _poll_link(self) -> None:
+        """Read the controller's state (end effector, watchdog, answers) and the link's health."""
+        if self._raised:
+            if self.clock() < self._next_retry_s or self._call("heartbeat") is None:
+                return
+            self._raised = False
+        try:
+            self.link.poll()
+        except Exception as e:  # noqa: BLE001 - a link that raises is a lost link
+            self._link_raised("poll", e)
+            return
+        self._check_health()
+        state = getattr(self.link, "state", None)
+        if state is None:
+            return
+        pos = getattr(state, "ee_position_m", None)
+        if pos is not None and np.isfinite(np.asarray(pos, float)).all():
+            self._last_effector = np.asarray(pos, float).reshape(3)
+        yaw = getattr(state, "yaw_rad", None)
+        self._last_yaw = float(yaw) if yaw is not None and math.isfinite(yaw) else None
+        now = self.clock()
+        if getattr(state, "watchdog", False) and self._sent_motion is not None and self._sent_motion.kind == "move" \
+                and now - self._last_watchdog_fix_s >= self.params.link_retry_s:
+            self._last_watchdog_fix_s = now  # the controller latched a stop: send everything again
+            self._sent_motion = self._sent_alarm = None
+        if self._retract_seq is not None and self._refused(self._retract_seq, state):
+            self._retract_refused()
+        if self._move_seq is not None and self._refused(self._move_seq, state):
+            self._skip_waypoint()
+
+    def _skip_waypoint(self) -> None:
+        """A task waypoint the arm cannot reach (counted in ``refused``): go on to the next."""
+        self._move_seq = None
+        self._waypoint = (self._waypoint + 1) % len(self.params.task_waypoints_m)
+
+    def _refused(self, seq, state) -> bool:
+        """Did the controller refuse command ``seq``? (``RobotLink.result``; a link without
+        it may flag ``state.unreachable``.)"""
+        result = getattr(self.link, "result", None)
+        if result is not None and type(seq) is int:
+            if result(seq) in REFUSALS:
+                self.counters.refused += 1
+                return True
+            return False
+        return bool(getattr(state, "unreachable", False))
+
+    def _check_health(self) -> None:
+        ok = bool(getattr(self.link, "link_ok", True))
+        if ok and self.link_state != "ok":
+            self.link_state, self.link_error = "ok", ""
+            self._sent_motion = self._sent_alarm = None  # (re)connected: send the current commands
+        elif not ok:
+            if self.link_state == "ok":
+                self.counters.link_errors += 1
+                self.link_state = "lost"
+            self.link_error = str(getattr(self.link, "last_error", "") or "no state from the robot yet")
+
+    def _link_raised(self, name: str, e: Exception) -> None:
+        if self.link_state != "lost":
+            self.counters.link_errors += 1
+        self.link_state, self.link_error = "lost", f"{name}: {type(e).__name__}: {e}"
+        self._raised = True
+        self._next_retry_s = self.clock() + self.params.link_retry_s
+
+    def _desired_motion(self, state: State, decision) -> Motion:
+        if state == State.NORMAL:
+            self._retract, self._retract_seq, self._unreachable = None, None, False
+            return self._task_motion()
+        if state == State.LEVEL2:
+            if self._retract is None or self._retract_again(decision):
+                self._retract = self._retract_motion(decision)
+                self._retract_fallback = False
+                self._retract_distance_m = decision.distance_m
+            return self._retract
+        self._retract, self._retract_seq, self._unreachable = None, None, False
+        return STOP
+
+    def _task_motion(self) -> Motion:
+        p = self.params
+        target = p.task_waypoints_m[self._waypoint]
+        s = self._sent_motion
+        if (s is not None and s.kind == "move" and s.position_m == tuple(target) and self._last_effector is not None
+                and np.linalg.norm(self._last_effector - target) <= p.waypoint_tolerance_m):
+            self._waypoint = (self._waypoint + 1) % len(p.task_waypoints_m)
+            target = p.task_waypoints_m[self._waypoint]
+        return Motion("move", _vec3(target), p.task_pitch_rad, p.task_yaw_rad)
+
+    def _retract_again(self, decision) -> bool:
+        """Retract once more when the last retraction is done and the worker has come
+        ``re_retract_m`` closer since it began (he keeps walking at the arm), and there is
+        still room to go (the new target differs from where the hand is)."""
+        r = self._retract
+        if r is None or r.kind != "retract" or self._last_effector is None or decision.head is None:
+            return False
+        done = np.linalg.norm(self._last_effector - r.position_m) <= self.params.waypoint_tolerance_m
+        closer = decision.distance_m < self._retract_distance_m - self.params.re_retract_m
+        if not (done and closer):
+            return False
+        nxt = self._retract_motion(decision)
+        return nxt.kind == "retract" and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
+
+    def _retract_motion(self, decision) -> Motion:
+        """Eq. 6's step from the effector, kept between ``retract_min_radius_m`` and
+        ``retract_max_radius_m`` of the base's axis, tool turned toward the base."""
+        eff = self.effector_m()
+        if decision.head is None:  # level 2 held without a current head (should not happen): stop
+            return STOP
+        L = retract_direction(eff, decision.head, self.zones)
+        target = eff + _step_outside_radius(ground(eff), ground(L), self.params.retract_min_radius_m) * L
+        r = float(np.linalg.norm(ground(target)))
+        if r > self.params.retract_max_radius_m:
+            target[[0, 2]] *= self.params.retract_max_radius_m / r
+        return self._retract_to(target)
+
+    def _retract_to(self, target: np.ndarray) -> Motion:
+        """A retraction to ``target`` with the tool turned toward the base, by at most
+        ``retract_max_turn_deg`` from where it points now. A repeat retraction (the worker
+        keeps coming) keeps the first one's tool yaw: turning again would swing the joints,
+        and with them the hand, through the cell."""
+        target = np.array(target, float)
+        target[1] = max(target[1], self.params.min_height_m)
+        if self._retract is not None and self._retract.kind == "retract":
+            return Motion("retract", _vec3(target), self.params.task_pitch_rad, self._retract.yaw_rad)
+        yaw = tool_yaw_toward_base(target)
+        if self._last_yaw is not None:
+            turn = math.radians(self.params.retract_max_turn_deg)
+            yaw = self._last_yaw + max(-turn, min(turn, math.remainder(yaw - self._last_yaw, 2 * math.pi)))
+        return Motion("retract", _vec3(target), self.params.task_pitch_rad, yaw)
+
+    def _radial_retract(self) -> Motion:
+        """The fallback retraction: straight toward the base's axis (away from anyone in
+        front of the arm), as far as Eq. 6's step but not inside ``retract_min_radius_m``."""
+        eff = self.effector_m()
+        g = ground(eff)
+        r = float(np.linalg.norm(g))
+        step = self.zones.retract_weight_away_m + self.zones.retract_weight_path_m
+        new_r = min(r, max(self.params.retract_min_radius_m, min(r, self.params.retract_max_radius_m) - step))
+        target = eff.copy()
+        target[[0, 2]] = g * (new_r / r) if r > 1e-9 else g
+        return self._retract_to(target)
+
+    def _retract_refused(self) -> None:
+        """The controller (or the link) refused the retraction: try the radial fallback once,
+        then stop (reason ``retract_unreachable``)."""
+        self.counters.unreachable += 1
+        self._retract_seq = None
+        if self._retract_fallback:
+            self._unreachable = True
+            self._retract = STOP
+        else:
+            self._retract_fallback = True
+            self._retract = self._radial_retract()
+
+    def _act(self, t_s: float, decision, record: bool) -> FrameRecord | None:
+        state = decision.state
+        motion = self._desired_motion(state, decision)
+        alarm = self.monitor.alarm(state)
+        t_cmd, sent = None, None
+        # the beacon first: the controller reports the answer to its latest command only,
+        # and the motion's answer (unreachable?) is the one that matters
+        if alarm != self._sent_alarm and not self._raised \
+                and self._call("set_alarm", alarm.light, alarm.tone_hz, alarm.tone_db) is not None:
+            self._sent_alarm = alarm
+            t_cmd, sent = self.clock(), "alarm"
+        if motion != self._sent_motion and not self._raised and self._send_motion(motion):
+            t_cmd, sent = self.clock(), motion.kind
+        self._report_runtime_state(state)
+        if not record:
+            return None
+        rec = FrameRecord(t_s, t_cmd, state.name, self.status()["reason"], decision.distance_m, sent)
+        self.records.append(rec)
+        if self.on_record:
+            self.on_record(rec)
+        return rec
+
+    def _send_motion(self, motion: Motion) -> bool:
+        c = self.counters
+        if motion.kind == "stop":
+            ok = self._call("stop") is not None
+            c.stops += ok
+            self._move_seq = None
+        else:
+            if motion.kind == "move" and (self._sent_motion is None or self._sent_motion.kind != "move") \
+                    and self._call("resume") is None:
+                return False
+            method = "move_to" if motion.kind == "move" else "retract"
+            seq = self._call(method, motion.position_m, pitch_rad=motion.pitch_rad, yaw_rad=motion.yaw_rad)
+            ok = seq is not None
+            if motion.kind == "retract":
+                c.retracts += ok
+                self._retract_seq, self._move_seq = seq, None
+                if seq is INVALID:  # refused before it left: the fallback now
+                    self._retract_refused()
+                    return self._send_motion(self._retract)
+            else:
+                c.moves += ok
+                self._move_seq = seq
+                if seq is INVALID:  # a waypoint the link will not take: the next one
+                    self._skip_waypoint()
+        if ok:
+            self._sent_motion = motion
+        return ok
+
+    def _call(self, name: str, *args, **kwargs):
+        """A link call: its result (True for None), ``INVALID`` when the link refused the
+        arguments (ValueError), or None when it raised (the link is then lost)."""
+        try:
+            result = getattr(self.link, name)(*args, **kwargs)
+        except ValueError:
+            self.counters.refused += 1
+            return INVALID
+        except Exception as e:  # noqa: BLE001 - any link failure is a lost link, never a crash
+            self._link_raised(name, e)
+            return None
+        self.counters.commands += 1
+        return True if result is None else result
+
+    def _report_runtime_state(self, state: State) -> None:
+        """What the link's heartbeat says about the runtime: degraded while in FAULT."""
+        want = "degraded" if state == State.FAULT else "running"
+        setter = getattr(self.link, "set_runtime_state", None)
+        if setter is not None and want != self._sent_runtime_state:
+            setter(want)
+            self._sent_runtime_state = want

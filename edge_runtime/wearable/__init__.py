@@ -1,0 +1,1 @@
+"""The wearable distraction product: IMU sources -> detector -> preprocessing -> classifier -> alert decisions -> CAN."""

@@ -1,0 +1,243 @@
+"""Live wrist-IMU source: MAVLink 2 HIGHRES_IMU / SCALED_IMU over a serial line.
+
+``MavlinkImuSource(path).blocks()`` yields :class:`ImuBlock` objects -- whatever
+arrived in one read of the serial line (usually one sample at 100 Hz, at most
+``block_samples``), stamped with the host arrival time -- and :class:`SourceStatus` events (the sensor went silent / came
+back). It never blocks for longer than the read timeout (50 ms), so a silent
+sensor is reported within ``silence_timeout_s`` + 50 ms, and the "silent" status is
+repeated every read timeout while it lasts (the caller keeps control for its heartbeat).
+
+Bad input is counted in :attr:`MavlinkImuSource.stats` and handled:
+
+* corrupted bytes: pymavlink's CRC check rejects the packet (robust parsing; the
+  packet and bytes are counted, nothing of it is delivered);
+* a gap in the timestamps (> 1.5 periods): the next block has ``continuous=False``
+  and the missing samples are counted as ``dropped``;
+* duplicate or out-of-order timestamps: the sample is dropped and counted (a jump
+  back of more than 1 s is taken as a sensor reboot: the stream restarts,
+  ``continuous=False``);
+* NaN samples are passed on (the loop counts them and resets its detector);
+  SCALED_IMU's -32768 is the "invalid" marker and becomes NaN;
+* saturation: a sample with an axis at the int16 limit or beyond
+  ``saturation_mps2`` is counted (and passed on);
+* with a signing key, unsigned or wrongly signed packets are rejected and counted.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Iterator, Union
+
+import numpy as np
+import serial
+from pymavlink.dialects.v20 import common as mavlink2
+
+from edge_runtime.wearable.sources import MAX_GAP_PERIODS, SAMPLE_RATE_HZ, ImuBlock
+
+MG_TO_MPS2 = 9.80665e-3
+G_MPS2 = 9.80665
+INT16_INVALID = -32768
+INT16_SAT = 32767
+BLOCK_SAMPLES = 10
+READ_TIMEOUT_S = 0.05
+REBOOT_BACKJUMP_S = 1.0
+
+
+@dataclass
+class SourceStatus:
+    state: str
+    """"silent" (no sample for silence_timeout_s), "ok" (samples again), "disconnected"."""
+    since_s: float
+    """Seconds since the last sample (monotonic clock) when the event was raised."""
+    last_t_s: float | None = None
+    """Stream time of the last sample received, if any."""
+
+
+@dataclass
+class SourceStats:
+    samples: int = 0
+    blocks: int = 0
+    packets: int = 0
+    heartbeats: int = 0
+    crc_errors: int = 0
+    """Packets rejected by the parser (bad CRC, bad length/flags, junk bytes)."""
+    bad_bytes: int = 0
+    """Bytes thrown away with those packets."""
+    dropped: int = 0
+    """Samples missing from the stream (timestamp gaps)."""
+    gaps: int = 0
+    out_of_order: int = 0
+    """Duplicate or backwards timestamps (dropped)."""
+    reboots: int = 0
+    saturated: int = 0
+    nan_samples: int = 0
+    signature_failures: int = 0
+    silent_events: int = 0
+    read_errors: int = 0
+
+
+Event = Union[ImuBlock, SourceStatus]
+
+
+class MavlinkImuSource:
+    def __init__(self, path: str, baud: int = 921600, signing_key: bytes | None = None,
+                 silence_timeout_s: float = 0.2, saturation_mps2: float = 2 * G_MPS2,
+                 on_status: Callable[[SourceStatus], None] | None = None,
+                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S):
+        self.path = path
+        self.silence_timeout_s = float(silence_timeout_s)
+        self.saturation_mps2 = float(saturation_mps2)
+        self.on_status = on_status
+        self.block_samples = int(block_samples)
+        self.read_timeout_s = min(float(read_timeout_s), READ_TIMEOUT_S)
+        self.stats = SourceStats()
+        try:
+            self.ser = serial.Serial(path, baudrate=baud, timeout=self.read_timeout_s)
+        except (serial.SerialException, OSError) as e:
+            raise ValueError(f"cannot open IMU serial line {path!r}: {e}") from None
+        self.mav = mavlink2.MAVLink(None)
+        self.mav.robust_parsing = True
+        if signing_key is not None:
+            if len(signing_key) != 32:
+                raise ValueError(f"MAVLink signing key must be 32 bytes, got {len(signing_key)}")
+            self.mav.signing.secret_key = bytes(signing_key)
+            self.mav.signing.timestamp = int((time.time() - 1420070400) * 100_000)
+            # allow_unsigned_callback stays None: unsigned packets are refused
+        self._period = 1.0 / SAMPLE_RATE_HZ
+        self._closed = False
+        self._last_t: float | None = None
+        self._pending: list[tuple[float, float, float]] = []
+        self._pending_t0: float | None = None
+        self._pending_continuous = False  # the first block of a stream is not continuous
+        self._next_continuous = False
+        self._last_rx = time.monotonic()
+        self._rx: float | None = None
+        self._silent = False
+
+    # -- public --------------------------------------------------------------------------
+    def close(self) -> None:
+        self._closed = True
+        try:
+            self.ser.close()
+        except Exception:
+            pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def blocks(self, duration_s: float | None = None) -> Iterator[Event]:
+        """ImuBlocks and SourceStatus events until close() (or ``duration_s`` of wall time)."""
+        end = None if duration_s is None else time.monotonic() + duration_s
+        out: list[Event] = []
+        while not self._closed:
+            if end is not None and time.monotonic() >= end:
+                break
+            got = self._read()
+            if got:
+                self._rx = time.monotonic()
+                for m in self.mav.parse_buffer(got) or ():
+                    self._handle(m, out)
+            # hand over at once what this read brought: a capture's last sample waits for nothing
+            self._flush(out)
+            now = time.monotonic()
+            if now - self._last_rx >= self.silence_timeout_s and not out:
+                # repeated every read timeout while silent, so that the caller keeps control
+                # (heartbeats); silent_events counts the transitions only
+                self._flush(out)
+                if not self._silent:
+                    self._silent = True
+                    self.stats.silent_events += 1
+                self._status(out, SourceStatus("silent", now - self._last_rx, self._last_t))
+            while out:
+                yield out.pop(0)
+        self._flush(out)
+        yield from out
+
+    # -- internals -----------------------------------------------------------------------
+    def _read(self) -> bytes:
+        try:
+            return self.ser.read(max(1, self.ser.in_waiting))
+        except (serial.SerialException, OSError):
+            # e.g. the writer closed the pty: wait a read timeout, never spin
+            self.stats.read_errors += 1
+            time.sleep(self.read_timeout_s)
+            return b""
+
+    def _status(self, out: list, st: SourceStatus) -> None:
+        if self.on_status is not None:
+            self.on_status(st)
+        out.append(st)
+
+    def _handle(self, m, out: list) -> None:
+        mtype = m.get_type()
+        if mtype == "BAD_DATA":
+            reason = str(getattr(m, "reason", ""))
+            if "signature" in reason.lower():
+                self.stats.signature_failures += 1
+            else:
+                self.stats.crc_errors += 1
+                self.stats.bad_bytes += len(getattr(m, "data", b""))
+            return
+        self.stats.packets += 1
+        if mtype == "HEARTBEAT":
+            self.stats.heartbeats += 1
+            return
+        if mtype == "HIGHRES_IMU":
+            t = m.time_usec * 1e-6
+            acc = (float(m.xacc), float(m.yacc), float(m.zacc))
+            sat = any(abs(v) >= self.saturation_mps2 * (1 - 1e-6) for v in acc)
+        elif mtype == "SCALED_IMU":
+            t = m.time_boot_ms * 1e-3
+            raw = (m.xacc, m.yacc, m.zacc)
+            acc = tuple(float("nan") if r == INT16_INVALID else r * MG_TO_MPS2 for r in raw)
+            sat = any(abs(r) >= INT16_SAT for r in raw if r != INT16_INVALID) or \
+                any(abs(v) >= self.saturation_mps2 * (1 - 1e-6) for v in acc)
+        else:
+            return
+        self._sample(t, acc, sat, out)
+
+    def _sample(self, t: float, acc, sat: bool, out: list) -> None:
+        now = time.monotonic()
+        if self._last_t is not None:
+            dt = t - self._last_t
+            if dt < -REBOOT_BACKJUMP_S:  # sensor rebooted: a new stream
+                self.stats.reboots += 1
+                self._flush(out)
+                self._next_continuous = False
+            elif dt <= 0.5 * self._period:
+                self.stats.out_of_order += 1
+                return
+            elif dt > MAX_GAP_PERIODS * self._period:
+                self.stats.gaps += 1
+                self.stats.dropped += max(0, int(round(dt / self._period)) - 1)
+                self._flush(out)
+                self._next_continuous = False
+        self._last_rx = now
+        if self._silent:
+            self._silent = False
+            self._status(out, SourceStatus("ok", 0.0, self._last_t))
+        self._last_t = t
+        self.stats.samples += 1
+        if sat:
+            self.stats.saturated += 1
+        if any(v != v for v in acc):
+            self.stats.nan_samples += 1
+        if not self._pending:
+            self._pending_t0 = t
+            self._pending_continuous = self._next_continuous
+            self._next_continuous = True
+        self._pending.append(acc)
+        if len(self._pending) >= self.block_samples:
+            self._flush(out)
+
+    def _flush(self, out: list) -> None:
+        if not self._pending:
+            return
+        out.append(ImuBlock(self._pending_t0, np.asarray(self._pending, dtype=np.float32),
+                            self._pending_continuous, rx_monotonic_s=self._rx))
+        self.stats.blocks += 1
+        self._pending = []
+        self._pending_t0 = None

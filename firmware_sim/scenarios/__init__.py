@@ -1,0 +1,1 @@
+"""Scenario runners: the closed-loop HRC suite, head error, the GOLA experiment, the wearable cohort, the demo."""

@@ -1,0 +1,285 @@
+"""Head position error in the robot frame after the 3-marker calibration, with the shipped lifter.
+
+    python -m firmware_sim head-error --placements 40 --seed 0 --json reports/robot/head_error.json \\
+        --plot reports/robot/head_error.png
+
+For each of N random camera placements (:func:`firmware_sim.devices.camera.random_placement`: 3-8 m
+from the cell, 1-3 m high, canonical intrinsics, 30 Hz):
+
+1. a calibrating worker (height drawn from 1.60-1.90 m) stands ``STAND_S`` on each of the three
+   floor markers (0, floor, 1), (1, floor, 1), (0, floor, 2), walking between them; his
+   keypoints (:func:`firmware_sim.devices.camera.detect`, default detector noise) go through the
+   shipped :class:`edge_runtime.robot.lifter.StreamingLifter` and
+   :func:`edge_runtime.robot.calibration.from_recording` fits camera -> robot (frames labelled
+   by marker; warm-up frames unused);
+2. another worker (another height) walks between random points 3-8 m from the camera and
+   works ``WORK_S`` at each; the lifter runs on, and each valid frame's head is mapped to the
+   robot frame twice: ``off`` -- ``Calibration.apply`` of the lifted head; ``on`` --
+   ``Calibration.anchor_to_floor`` (the skeleton scaled about the camera centre so its lower
+   ankle rests on the floor, guards as in ``CalibrationParams``).
+
+Errors (m) against the true head: 3-D, ground-projected (x-z: what the hazard zones use)
+and height (y), median and p95, overall and binned by the true ground distance from the
+camera to the worker's pelvis (3-4, 4-5, ..., 7-8 m). Placements whose calibration is
+refused are counted and skipped.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from edge_runtime.cli import CliError, positive_int
+from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, HIP
+from edge_runtime.robot.calibration import METHODS as METHODS_FIT
+from edge_runtime.robot.calibration import (
+    Calibration,
+    CalibrationError,
+    CalibrationParams,
+    anchor_factor,
+    from_recording,
+)
+from firmware_sim.devices.camera import Camera, DetectorNoise, detect, random_placement
+from firmware_sim.people import motions
+from firmware_sim.people.human import Body
+
+METHODS = ("off", "on")
+BINS_M = tuple(range(3, 9))               # distance bin edges (m): 3-4, ..., 7-8
+STAND_S = 3.0                             # calibration: time on each marker (s)
+WORK_S = 3.0                              # test: time working at each stop (s)
+STOPS = 5                                 # test: stops per placement
+WORKER_HEIGHTS_M = (1.60, 1.90)           # workers' heights are drawn uniformly from this range
+RATE_HZ = 30.0
+TRUTH = "truth"                           # --calibration-method: the true extrinsics, no fit
+
+BAD_INPUT = (OSError,)
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--placements", type=positive_int, default=40, help="random camera placements (default 40)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--anchor", choices=("on", "off", "both"), default="both",
+                        help="floor re-anchoring of the lifted skeleton: measure with it, without, or both")
+    parser.add_argument("--precision", choices=("int8", "fp32"), default="int8", help="which shipped lifter")
+    parser.add_argument("--calibration-method", choices=(*METHODS_FIT, TRUTH), default=CalibrationParams().method,
+                        help="the calibration fit (edge_runtime.robot.calibration; default: its default), or "
+                             f"'{TRUTH}': the simulated camera's true extrinsics (the reference)")
+    parser.add_argument("--json", required=True, metavar="OUT.json", help="write the figures here")
+    parser.add_argument("--plot", metavar="OUT.png", help="error vs distance, both methods")
+
+
+# ------------------------------------------------------------------------------ simulation
+def _body(rng: np.random.Generator) -> Body:
+    return Body.from_height(float(rng.uniform(*WORKER_HEIGHTS_M)), str(rng.choice(["F", "M"])))
+
+
+def calibration_motion(body: Body, rng: np.random.Generator, params: CalibrationParams = CalibrationParams()):
+    """The calibration walk: (motion, marker label per frame: 1-3 standing, 0 walking)."""
+    markers = params.markers_xz_m
+    parts, labels = [], []
+    for i, m in enumerate(markers):
+        if i:
+            parts.append(motions.walk(body, [markers[i - 1], m], 0.8, RATE_HZ))
+            labels.append(np.zeros(len(parts[-1]), int))
+        parts.append(motions.stand(body, m, math.pi, STAND_S, RATE_HZ, rng=rng))
+        labels.append(np.full(len(parts[-1]), i + 1))
+    return motions.concat(parts, blend_s=0.2), np.concatenate(labels)
+
+
+def stop_points(camera: Camera, rng: np.random.Generator, n: int) -> np.ndarray:
+    """(n, 2) floor points (x, z) 3.2-7.8 m (ground distance) from the camera whose whole
+    standing body (floor to 2 m) is in the image."""
+    cam = camera.position_m
+    out = []
+    for _ in range(10_000):
+        p = np.array([rng.uniform(-3.0, 3.0), rng.uniform(-1.5, 3.5)])
+        d = math.hypot(p[0] - cam[0], p[1] - cam[2])
+        ends = np.array([[p[0], y, p[1]] for y in (-BASE_HEIGHT_M, 2.0 - BASE_HEIGHT_M)])
+        if 3.2 <= d <= 7.8 and camera.in_image(camera.project(ends)).all():
+            out.append(p)
+            if len(out) == n:
+                return np.array(out)
+    raise RuntimeError("no floor points 3-8 m from this camera in view")
+
+
+def work_motion(body: Body, camera: Camera, rng: np.random.Generator):
+    """The test: walk to ``STOPS`` random points in view 3-8 m from the camera, work at each."""
+    pts = stop_points(camera, rng, STOPS)
+    parts = []
+    for i, p in enumerate(pts):
+        if i:
+            parts.append(motions.walk(body, [pts[i - 1], p], float(rng.uniform(0.8, 1.6)), RATE_HZ, rng=rng))
+        heading = parts[-1].end[1] if parts else float(rng.uniform(-math.pi, math.pi))
+        parts.append(motions.work_at(body, p, heading, WORK_S, rate_hz=RATE_HZ, rng=rng))
+    return motions.concat(parts, blend_s=0.3)
+
+
+def lift(lifter, keypoints: np.ndarray, t0_s: float) -> np.ndarray:
+    """(T, 17, 3) camera-frame joints of detector output (T, 17, 3) at RATE_HZ from ``t0_s``;
+    NaN where the lifter is invalid or still warming up."""
+    out = np.full((len(keypoints), 17, 3), np.nan)
+    for k, kp in enumerate(keypoints):
+        pose = lifter.push(t0_s + k / RATE_HZ, kp if np.isfinite(kp[:, :2]).any() else None)
+        if pose.valid and not pose.warming_up:
+            out[k] = pose.joints_cam_m
+    return out
+
+
+def true_calibration(camera: Camera, params: CalibrationParams = CalibrationParams()) -> Calibration:
+    """The exact camera -> robot map of a simulated camera (the reference for the fits)."""
+    zero = np.zeros((3, 3))
+    return Calibration(camera.R.T, camera.position_m, TRUTH, 0.0, zero, zero, params)
+
+
+def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
+                  params: CalibrationParams = CalibrationParams(), truth: bool = False) -> dict:
+    """One camera placement: calibrate (``truth``: take the true extrinsics instead; the
+    calibration walk is still simulated, so the random streams match), then the worker's
+    frames. Returns per-frame arrays (``distance_m``, per method ``err`` (T, 3) rows of 3-D,
+    ground, height errors) or ``{"refused": reason}``."""
+    camera = random_placement(rng)
+    noise = DetectorNoise()
+    cal_mot, labels = calibration_motion(_body(rng), rng)
+    cal_joints = lift(lifter, detect(camera, cal_mot.joints_m, rng, noise), 0.0)
+    try:
+        cal = true_calibration(camera, params) if truth else from_recording(cal_mot.t_s, cal_joints, params,
+                                                                             marker=labels)
+    except CalibrationError as e:
+        return {"camera": camera.to_dict(), "refused": str(e)}
+    work = work_motion(_body(rng), camera, rng)
+    t0 = len(cal_mot) / RATE_HZ + 2.0                     # a gap: the lifter restarts its buffer
+    joints = lift(lifter, detect(camera, work.joints_m, rng, noise), t0)
+    ok = np.isfinite(joints).all(axis=(1, 2))
+    joints, truth = joints[ok], work.joints_m[ok, HEAD]
+    cam = camera.position_m
+    dist = np.hypot(*(work.joints_m[ok, HIP][:, [0, 2]] - cam[[0, 2]]).T)
+    res = {"camera": camera.to_dict(), "calibration_scale": cal.scale, "distance_m": dist}
+    for m in methods:
+        if m == "on":
+            ks = np.array([anchor_factor(j, cal.A, cal.b, cal.params) for j in joints], dtype=object)
+            k = ks[:, 0].astype(float) if len(ks) else np.ones(0)
+            res["applied"] = np.array([r is None for r in ks[:, 1]]) if len(ks) else np.zeros(0, bool)
+            res["factor"] = k
+            head = cal.apply(k[:, None] * joints[:, HEAD])
+        else:
+            head = cal.apply(joints[:, HEAD])
+        d = head - truth
+        res[m] = np.stack([np.linalg.norm(d, axis=1), np.hypot(d[:, 0], d[:, 2]), d[:, 1]], axis=1)
+    return res
+
+
+# ------------------------------------------------------------------------------ figures
+def _stats(err: np.ndarray) -> dict:
+    """Median and p95 (m) of (N, 3) rows of 3-D, ground and signed height errors."""
+    if not len(err):
+        return {"n": 0}
+    q = lambda x, p: round(float(np.percentile(x, p)), 4)  # noqa: E731
+    e3, eg, eh = err.T
+    return {"n": int(len(err)),
+            "error_3d_m": {"median": q(e3, 50), "p95": q(e3, 95)},
+            "error_ground_m": {"median": q(eg, 50), "p95": q(eg, 95)},
+            "error_height_m": {"median_abs": q(np.abs(eh), 50), "p95_abs": q(np.abs(eh), 95),
+                               "median_signed": q(eh, 50)}}
+
+
+def summarise(results: list[dict], methods, args) -> dict:
+    done = [r for r in results if "refused" not in r]
+    dist = np.concatenate([r["distance_m"] for r in done]) if done else np.zeros(0)
+    out = {"command": (f"python -m firmware_sim head-error --placements {args.placements} --seed {args.seed} "
+                       f"--anchor {args.anchor} --precision {args.precision} "
+                       f"--calibration-method {args.calibration_method} --json {args.json}"
+                       + (f" --plot {args.plot}" if args.plot else "")),
+           "lifter_precision": args.precision, "calibration_method": args.calibration_method, "placements": args.placements,
+           "calibrations_refused": [r["refused"] for r in results if "refused" in r],
+           "frames": int(len(dist)), "methods": {}}
+    for m in methods:
+        err = np.concatenate([r[m] for r in done]) if done else np.zeros((0, 3))
+        bins = {f"{lo}-{lo + 1}m": _stats(err[(dist >= lo) & (dist < lo + 1)]) for lo in BINS_M[:-1]}
+        out["methods"][m] = {"all": _stats(err), "by_distance": bins}
+    if "on" in methods and done:
+        applied = np.concatenate([r["applied"] for r in done])
+        k = np.concatenate([r["factor"] for r in done])
+        p = CalibrationParams()
+        out["anchoring"] = {"applied_fraction": round(float(applied.mean()), 4) if len(applied) else None,
+                            "factor_median": round(float(np.median(k)), 4) if len(k) else None,
+                            "clamped_fraction": round(float(np.mean((k <= p.anchor_min_scale)
+                                                                    | (k >= p.anchor_max_scale))), 4) if len(k) else None}
+    out["per_placement"] = [
+        {"camera_position_m": np.round(r["camera"]["position_m"], 3).tolist(),
+         **({"refused": r["refused"]} if "refused" in r else
+            {"calibration_scale": round(r["calibration_scale"], 4), "frames": int(len(r["distance_m"])),
+             **{f"median_error_3d_m_{m}": round(float(np.median(r[m][:, 0])), 4) if len(r[m]) else None
+                for m in methods}})}
+        for r in results]
+    return out
+
+
+def plot(summary: dict, path: str | Path) -> None:
+    import matplotlib  # lazily: only --plot needs it
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    centres = [lo + 0.5 for lo in BINS_M[:-1]]
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), sharex=True)
+    colours = {"off": "tab:red", "on": "tab:blue"}
+    names = {"off": "lifter root (no anchoring)", "on": "floor-anchored"}
+    for ax, key, title in zip(axes, ("error_3d_m", "error_ground_m", "error_height_m"),
+                              ("3-D head error", "ground-projected (x-z) head error", "|height| error")):
+        for m, s in summary["methods"].items():
+            b = s["by_distance"].values()
+            med = [v[key]["median" if key != "error_height_m" else "median_abs"] if v["n"] else np.nan for v in b]
+            p95 = [v[key]["p95" if key != "error_height_m" else "p95_abs"] if v["n"] else np.nan for v in b]
+            ax.plot(centres, med, "o-", color=colours[m], label=f"{names[m]}: median")
+            ax.plot(centres, p95, "s--", color=colours[m], alpha=0.6, label=f"{names[m]}: p95")
+        ax.set_title(title)
+        ax.set_xlabel("ground distance camera -> worker (m)")
+        ax.set_ylabel("error (m)")
+        ax.grid(alpha=0.3)
+        ax.set_ylim(bottom=0)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"head position in the robot frame after the 3-marker calibration, {summary['lifter_precision']} "
+                 f"lifter, {summary['placements']} placements, {summary['frames']} frames")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def cmd(args) -> int:
+    from edge_runtime.core.manifest import ManifestError
+    from edge_runtime.robot.lifter import LifterParams, StreamingLifter
+
+    methods = METHODS if args.anchor == "both" else (args.anchor,)
+    for p in filter(None, (args.json, args.plot)):
+        if not Path(p).parent.is_dir():
+            raise CliError(f"{p}: directory {Path(p).parent} does not exist")
+    try:
+        lifter = StreamingLifter.from_manifest(params=LifterParams(precision=args.precision))
+    except (ManifestError, OSError, ValueError) as e:
+        raise CliError(f"lifter {args.precision}: {e}") from None
+    rng = np.random.default_rng(args.seed)
+    results = []
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a dependency
+        tqdm = None
+    seeds = rng.integers(0, 2**31, args.placements)
+    truth = args.calibration_method == TRUTH
+    params = CalibrationParams(method="rigid" if truth else args.calibration_method)
+    it = tqdm(seeds, desc="placements", unit="cam") if tqdm else seeds
+    for s in it:
+        lifter.restart()
+        results.append(run_placement(lifter, np.random.default_rng(int(s)), methods, params, truth))
+    summary = summarise(results, methods, args)
+    Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
+    if args.plot:
+        plot(summary, args.plot)
+    for m, s in summary["methods"].items():
+        a = s["all"]
+        if a["n"]:
+            print(f"{m:>3}: 3-D median {a['error_3d_m']['median']:.3f} p95 {a['error_3d_m']['p95']:.3f} m; "
+                  f"ground median {a['error_ground_m']['median']:.3f} p95 {a['error_ground_m']['p95']:.3f} m "
+                  f"({a['n']} frames)")
+    return 0

@@ -1,0 +1,330 @@
+"""``python -m firmware_sim hrc``: the closed-loop collision-avoidance proof (dissertation chapter 3).
+
+    python -m firmware_sim hrc --scenario NAME|dissertation|random:N --link can|mavlink --seed S
+                               --json OUT.json [--plot OUT.png] [--max-speed M] [--camera-hz HZ]
+                               [--perception auto|truth|lifter] [--no-runtime] [--with-baseline]
+                               [--retract-time S] [--zone KEY=VALUE ...] [--loop KEY=VALUE ...] [--jobs N]
+
+Runs the robot-side runtime (``edge_runtime.robot.loop.RobotLoop``) against the simulated
+Sawyer on a real link (CAN or signed MAVLink), a simulated worker and a simulated camera,
+in simulated time (:mod:`firmware_sim.scenarios.hrc_world` describes the world, what counts as a
+collision, a false alarm and the reaction time). Scenarios:
+
+* ``left_to_right``, ``right_to_left``, ``front``: the dissertation's three validation walks
+  (``dissertation`` runs all three);
+* ``random:N``: N random approaches from the work side (speed 0.5..``--max-speed`` m/s, start
+  3-6 m out, camera 3-8 m away and 1-3 m high, detector noise x0.5-2, a worker who walks past
+  or stops short); paths closer than 1.1 m to the base's axis are redrawn: nothing can avoid a
+  worker who walks through the robot's base, and the folded arm still fills 0.69 m around its
+  axis (``hrc_world.RandomParams.min_base_distance_m``).
+
+``--no-runtime`` is the baseline: the same scenarios with an arm that never sees the worker
+(the loop is fed empty frames), which shows the collisions the runtime has to prevent.
+
+The JSON: ``scenarios`` (count), ``collisions`` (scenarios with at least one),
+``min_separation_m`` (smallest clearance of all), ``stops``, ``retracts``, ``false_alarms``
+(totals), ``reaction_ms`` ``{"median", "p99", "n"}`` (wall clock, keypoints handed to the
+runtime -> command written on the link), ``command_delay_s`` (simulated time from the true
+head entering a zone to the runtime's command), ``head_error_m`` (``{"median", "p95"}``: the head
+the runtime was given against the true head, robot frame), ``runtime_cpu_share``, the settings
+(with every ZoneParams and LoopParams value used), and ``details``: one object per scenario.
+
+The runtime's configuration is the product's defaults except ``HRC_ZONES`` (T_retract = 2 s,
+see below); ``--zone``/``--loop`` override single fields to measure other settings.
+Python callers: :func:`run`, :func:`run_dissertation` (what ``make demo`` shows) and
+:func:`format_table`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import asdict, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from edge_runtime.cli import CliError, positive_float, positive_int
+from edge_runtime.robot.hazard import ZoneParams
+from edge_runtime.robot.loop import LoopParams
+from firmware_sim.scenarios.hrc_world import (
+    DISSERTATION,
+    RunResult,
+    WorldParams,
+    dissertation_scenarios,
+    lifter_available,
+    percentiles,
+    random_scenarios,
+    run_scenario,
+)
+
+LINKS = ("can", "mavlink")
+PERCEPTIONS = ("auto", "truth", "lifter")
+SPEED_LIMITS_MPS = (0.5, 2.0)
+
+HRC_ZONES = ZoneParams(retract_time_s=2.0)
+"""The runtime's zones in these runs. The dissertation's T_retract = 1 s gives R2 = 1.0 m, but the
+simulated Sawyer needs about 2 s for a retraction that also turns the tool toward the base (the
+wrist turns half a revolution; measured from the extended posture: half way after 1.5 s, done
+after 1.9-2.7 s), so Eq. 4 with the measured T_retract = 2 s: R2 = 1.4 x (2 - 0.5) + 0.3 = 2.4 m,
+R1 = 4.4 m. Everything else is the dissertation's."""
+
+
+def parse_scenario(text: str) -> tuple[str, int | None]:
+    """``NAME``, ``dissertation`` or ``random:N`` -> (kind, N)."""
+    if text in DISSERTATION or text == "dissertation":
+        return text, None
+    if text.startswith("random:"):
+        try:
+            n = int(text.split(":", 1)[1])
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise CliError(f"--scenario {text!r}: random:N needs a whole number N >= 1")
+        return "random", n
+    raise CliError(f"--scenario {text!r}: expected one of {', '.join(DISSERTATION)}, dissertation or random:N")
+
+
+def scenarios_for(text: str, seed: int, max_speed_mps: float = 2.0):
+    kind, n = parse_scenario(text)
+    if kind == "random":
+        return random_scenarios(n, seed, max_speed_mps)
+    all3 = dissertation_scenarios(seed)
+    return all3 if kind == "dissertation" else [s for s in all3 if s.name == kind]
+
+
+def resolve_perception(perception: str) -> str:
+    if perception == "auto":
+        return "lifter" if lifter_available() else "truth"
+    if perception == "lifter" and not lifter_available():
+        raise CliError("--perception lifter: edge_runtime/assets/manifest.json lists no lifter (arch 'lifter')")
+    return perception
+
+
+def _run_one(job) -> RunResult:
+    sc, link, runtime, perception, world, zones, loop_params = job
+    return run_scenario(sc, link, runtime, perception, world, zones, loop_params)
+
+
+def overrides(base, items: list[str], flag: str):
+    """``base`` (a frozen config dataclass) with ``KEY=VALUE`` overrides of its number fields."""
+    kinds = {f.name: type(getattr(base, f.name)) for f in fields(base)}
+    changes = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        if not sep or key not in kinds or kinds[key] not in (int, float):
+            numeric = ", ".join(k for k, t in kinds.items() if t in (int, float))
+            raise CliError(f"{flag} {item!r}: expected KEY=NUMBER with KEY one of {numeric}")
+        try:
+            changes[key] = kinds[key](value)
+        except ValueError:
+            raise CliError(f"{flag} {item!r}: {value!r} is not a {kinds[key].__name__}") from None
+    try:
+        return replace(base, **changes)
+    except ValueError as e:
+        raise CliError(f"{flag}: {e}") from None
+
+
+def _map(jobs: list, n_jobs: int, progress: bool):
+    """Run the jobs (in ``n_jobs`` processes when > 1), in order, with a progress bar."""
+    from tqdm import tqdm
+
+    bar = dict(total=len(jobs), disable=not progress, unit="scenario", file=sys.stderr, leave=False)
+    if n_jobs <= 1:
+        return [_run_one(j) for j in tqdm(jobs, **bar)]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(n_jobs) as ex:
+        return list(tqdm(ex.map(_run_one, jobs, chunksize=1), **bar))
+
+
+def _stats(values) -> dict:
+    v = [x for x in values if x is not None]
+    if not v:
+        return {"median": None, "p99": None, "n": 0}
+    return {"median": round(float(np.median(v)), 4), "p99": round(float(np.percentile(v, 99)), 4), "n": len(v)}
+
+
+def summarize(results: list[RunResult], settings: dict) -> dict:
+    """The contract JSON from per-scenario results."""
+    ran = [r.summary for r in results if "not_run" not in r.summary]
+    det = [r.summary for r in results]
+    reaction = [1000.0 * s for r in results for s in r.reaction_s]
+    states: dict[str, int] = {}
+    for d in det:
+        states[d["max_state"]] = states.get(d["max_state"], 0) + 1
+    by_kind = {}
+    for kind in sorted({d["kind"] for d in det}):
+        sub = [d for d in det if d["kind"] == kind]
+        by_kind[kind] = {"scenarios": len(sub), "collisions": sum(d["collision"] for d in sub),
+                         "min_separation_m": min((d["min_separation_m"] for d in sub if d["min_separation_m"]
+                                                  is not None), default=None)}
+    return {
+        **settings,
+        "scenarios": len(det),
+        "collisions": sum(d["collision"] for d in det),
+        "collided": [d["name"] for d in det if d["collision"]],
+        "not_run": {d["name"]: d["not_run"] for d in det if "not_run" in d},
+        "min_separation_m": min((d["min_separation_m"] for d in ran), default=None),
+        "stops": sum(d["stops"] for d in det),
+        "retracts": sum(d["retracts"] for d in det),
+        "unreachable_retracts": sum(d["unreachable"] for d in det),
+        "false_alarms": sum(d["false_alarms"] for d in det),
+        "zone_entries": sum(len(d["zone_entries"]) for d in det),
+        "reaction_ms": _stats(reaction),
+        "command_delay_s": {lvl: _stats([d["command_delay_s"][lvl] for d in det]) for lvl in ("LEVEL1", "LEVEL2")},
+        "max_state": states,
+        "by_kind": by_kind,
+        "invalid_frames": sum(d["invalid"] for d in det),
+        "runtime_cpu_share": _stats([d.get("runtime_cpu_share") for d in det]),
+        "head_error_m": percentiles([e for r in results for e in r.head_error_m], 1.0, (50, 95)),
+        "frames": sum(d["frames"] for d in det),
+        "details": det,
+    }
+
+
+def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtime: bool = True,
+        perception: str = "auto", camera_hz: float = 30.0, max_speed_mps: float = 2.0,
+        latency_ms: float | None = None, zones: ZoneParams = HRC_ZONES, loop_params: LoopParams | None = None,
+        jobs: int = 1, progress: bool = False, keep_results: bool = False):
+    """Run scenarios and return the contract JSON (and the per-scenario results with
+    ``keep_results``, for plots)."""
+    if link not in LINKS:
+        raise CliError(f"--link {link!r}: expected can or mavlink")
+    if not SPEED_LIMITS_MPS[0] <= max_speed_mps <= SPEED_LIMITS_MPS[1]:
+        raise CliError(f"--max-speed {max_speed_mps:g}: walking speeds of {SPEED_LIMITS_MPS[0]}-"
+                       f"{SPEED_LIMITS_MPS[1]} m/s only")
+    percept = resolve_perception(perception) if runtime else "none"
+    world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0)
+    scs = scenarios_for(scenario, seed, max_speed_mps)
+    results = _map([(sc, link, runtime, percept, world, zones, loop_params) for sc in scs], jobs, progress)
+    settings = {
+        "scenario": scenario, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
+        "camera_hz": camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1), "max_speed_mps": max_speed_mps,
+        "collision_m": world.collision_m,
+        "zones": {"r1_m": round(zones.r1_m, 3), "r2_m": round(zones.r2_m, 3), "sizing": zones.sizing,
+                  "retract_time_s": zones.retract_time_s, "predict_s": zones.predict_s,
+                  "worker_speed_mps": zones.worker_speed_mps},
+        "zone_params": asdict(zones), "loop_params": {k: v for k, v in asdict(loop_params or LoopParams()).items()
+                                                       if k != "task_waypoints_m"},
+    }
+    out = summarize(results, settings)
+    return (out, results) if keep_results else out
+
+
+def run_dissertation(link: str, seed: int) -> dict:
+    """The three dissertation scenarios with the runtime, and the same without it (``baseline``)."""
+    out = run("dissertation", link, seed)
+    base = run("dissertation", link, seed, runtime=False)
+    out["baseline"] = {k: base[k] for k in ("collisions", "collided", "min_separation_m", "details")}
+    return out
+
+
+def format_table(result: dict) -> str:
+    """A fixed-width table of a run (one row per scenario), for ``make demo``."""
+    base = {d["name"]: d for d in result.get("baseline", {}).get("details", [])}
+    head = (f"{'scenario':<14} {'speed':>5} {'max state':<9} {'stops':>5} {'retr':>4} {'false':>5} "
+            f"{'min sep m':>9} {'collision':>9}")
+    if base:
+        head += f" | {'no runtime: min sep m':>21} {'collision':>9}"
+    lines = [f"hrc: {result['link']} link, camera {result['camera_hz']:g} Hz, perception {result['perception']}, "
+             f"R1 {result['zones']['r1_m']:.1f} m, R2 {result['zones']['r2_m']:.1f} m", head, "-" * len(head)]
+    for d in result["details"]:
+        sep = "not run" if d["min_separation_m"] is None else f"{d['min_separation_m']:.3f}"
+        row = (f"{d['name']:<14} {d['speed_mps']:>5.2f} {d['max_state']:<9} {d['stops']:>5} {d['retracts']:>4} "
+               f"{d['false_alarms']:>5} {sep:>9} {'YES' if d['collision'] else 'no':>9}")
+        b = base.get(d["name"])
+        if b:
+            row += f" | {b['min_separation_m']:>21.3f} {'YES' if b['collision'] else 'no':>9}"
+        lines.append(row)
+    r = result["reaction_ms"]
+    react = "n/a" if r["median"] is None else f"median {r['median']:.3f} ms, p99 {r['p99']:.3f} ms"
+    for name, why in result.get("not_run", {}).items():
+        lines.append(f"{name}: {why}")
+    lines.append(f"collisions {result['collisions']}/{result['scenarios']}"
+                 + (f" (without the runtime {result['baseline']['collisions']}/{result['scenarios']})" if base else "")
+                 + f"; reaction (keypoints in -> command on the link) {react}")
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------------------------
+# command line
+
+def _speed(s: str) -> float:
+    v = positive_float(s)
+    if not SPEED_LIMITS_MPS[0] <= v <= SPEED_LIMITS_MPS[1]:
+        raise argparse.ArgumentTypeError(f"must be {SPEED_LIMITS_MPS[0]}-{SPEED_LIMITS_MPS[1]} m/s, got {s}")
+    return v
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenario", default="dissertation",
+                   help=f"{', '.join(DISSERTATION)}, dissertation (all three) or random:N (default dissertation)")
+    p.add_argument("--link", choices=LINKS, default="can", help="robot link (default can)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", default=None, metavar="OUT.json", help="write the results here")
+    p.add_argument("--plot", default=None, metavar="OUT.png", help="Fig. 3.8: top-down worker and end-effector paths")
+    p.add_argument("--max-speed", type=_speed, default=2.0, metavar="M",
+                   help="fastest random walking speed (m/s, 0.5-2.0; default 2.0)")
+    p.add_argument("--camera-hz", type=positive_float, default=30.0, help="camera rate (Hz; 30, or 5.8 as in ch. 3)")
+    p.add_argument("--latency-ms", type=positive_float, default=None,
+                   help="capture -> runtime latency of a frame (ms; default one camera period)")
+    p.add_argument("--perception", choices=PERCEPTIONS, default="auto",
+                   help="truth: detector keypoints at the true depth; lifter: the shipped lifter + calibration; "
+                        "auto: lifter when the manifest has one (default)")
+    p.add_argument("--no-runtime", action="store_true", help="baseline: the arm never sees the worker")
+    p.add_argument("--with-baseline", action="store_true", help="also run the baseline and add it to the JSON")
+    p.add_argument("--retract-time", type=positive_float, default=HRC_ZONES.retract_time_s, metavar="S",
+                   help=f"T_retract of Eq. 4 (s; default {HRC_ZONES.retract_time_s:g}, the simulated Sawyer's; "
+                        "the dissertation's 1.0 gives R2 = 1 m, R1 = 3 m)")
+    p.add_argument("--zone", action="append", metavar="KEY=VALUE",
+                   help="override a ZoneParams number field of the runtime (repeatable), e.g. --zone predict_s=0.7")
+    p.add_argument("--loop", action="append", metavar="KEY=VALUE",
+                   help="override a LoopParams number field of the runtime (repeatable), e.g. --loop re_retract_m=100")
+    p.add_argument("--jobs", type=positive_int, default=1, help="worker processes (default 1)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _check_writable(path: str | None, flag: str) -> None:
+    if path is None:
+        return
+    parent = Path(path).resolve().parent
+    if not parent.is_dir():
+        raise CliError(f"{flag} {path}: directory {str(parent)!r} does not exist")
+
+
+def cmd(args) -> int:
+    parse_scenario(args.scenario)
+    _check_writable(args.json, "--json")
+    _check_writable(args.plot, "--plot")
+    zones = overrides(replace(HRC_ZONES, retract_time_s=args.retract_time), args.zone, "--zone")
+    loop_params = overrides(LoopParams(), args.loop, "--loop")
+    common = dict(link=args.link, seed=args.seed, camera_hz=args.camera_hz, max_speed_mps=args.max_speed,
+                  latency_ms=args.latency_ms, zones=zones, loop_params=loop_params, jobs=args.jobs,
+                  progress=not args.quiet)
+    out, results = run(args.scenario, runtime=not args.no_runtime, perception=args.perception, keep_results=True,
+                       **common)
+    if args.with_baseline and not args.no_runtime:
+        base = run(args.scenario, runtime=False, **common)
+        out["baseline"] = {k: base[k] for k in ("collisions", "collided", "min_separation_m", "details")}
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+    if args.plot:
+        from firmware_sim.scenarios.hrc_plots import plot_runs
+
+        plot_runs(results, out, args.plot)
+    print(format_table(out) if len(out["details"]) <= 12 else _one_line(out))
+    return 0
+
+
+def _one_line(out: dict) -> str:
+    r = out["reaction_ms"]
+    return (f"hrc: {out['scenarios']} scenarios ({out['scenario']}), {out['link']} link, camera {out['camera_hz']:g} Hz, "
+            f"perception {out['perception']}, runtime {'on' if out['runtime'] else 'OFF'}: collisions "
+            f"{out['collisions']}, not run {len(out['not_run'])}, min separation {out['min_separation_m']} m, "
+            f"stops {out['stops']}, "
+            f"retracts {out['retracts']}, false alarms {out['false_alarms']}, reaction median {r['median']} ms "
+            f"p99 {r['p99']} ms")
+
+
+BAD_INPUT = (CliError,)

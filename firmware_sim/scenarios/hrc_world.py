@@ -1,0 +1,616 @@
+"""The closed-loop world of ``python -m firmware_sim hrc``: worker, camera, perception, runtime, Sawyer.
+
+Everything runs in SIMULATED time on one :class:`firmware_sim.robot.controller.SimClock`,
+so a 10 s scenario takes about a second of CPU. Per physics/control step (``dt_s`` = 10 ms):
+
+1. camera frames whose processing latency has elapsed are handed to the runtime
+   (``RobotLoop.feed_lifted``), timed with ``perf_counter`` (``reaction_ms``);
+2. ``RobotLoop.tick()`` (link poll, staleness check, task motion, heartbeat);
+3. the collision check of the worker's TRUE joints against the arm's TRUE posture;
+4. ``SimulatedRobot.step(dt_s)``: the controller reads the runtime's frames off the real
+   link (CAN frames on python-can's virtual bus with E2E, or signed MAVLink 2 on a socket
+   pair), moves the arm within its limits and reports its state back.
+
+The worker (:mod:`firmware_sim.people.motions`, sampled at the physics rate) does not react to
+the arm: he walks his path, and the runtime must keep the arm clear of him.
+
+Camera and perception
+---------------------
+The camera (:mod:`firmware_sim.devices.camera`) captures at ``camera_hz`` (30 Hz, or the
+dissertation's 5.8 Hz); :func:`firmware_sim.devices.camera.detect` turns the true joints into
+2D keypoints with detector noise, outliers, limb swaps and missed joints. A frame reaches
+the runtime ``latency_s`` after its capture (default: one camera period, i.e. detection
+and lifting pipelined at the camera's rate; the dissertation's 5.8 Hz pipeline took
+0.17 s per frame). Two perception paths:
+
+* ``truth``: the detector's 2D keypoints are back-projected at the joint's true depth
+  plus a depth error (``depth_noise_m``: a slowly drifting error common to the body plus
+  white per-joint jitter, scaled with the detector noise), i.e. the detector-level noise
+  mapped to 3D; missing joints are held for up to 3 frames like the lifter does, longer
+  and the frame is invalid (``missing_joints``), nobody detected is ``no_person``. The
+  joints arrive in the robot frame (no calibration).
+* ``lifter``: keypoints -> :class:`edge_runtime.robot.lifter.StreamingLifter` (the shipped
+  model, found through ``edge_runtime/assets/manifest.json``) -> the 3-marker calibration
+  of Eq. 1-2, made per camera placement the way the dissertation does it: a simulated
+  worker stands on the three floor markers in turn (:func:`calibrate`).
+
+Collisions and separation
+-------------------------
+The clearance at a step is the smallest distance from any of the worker's 17 true joints
+to the end effector (the hand origin) or to the SURFACE of any of the arm's collision
+spheres (:meth:`firmware_sim.robot.sawyer.SawyerArm.collision_spheres`: links l0..l6, hand
+and a 10 cm tool). A collision is a clearance below ``collision_m`` (0.10 m).
+``min_separation_m`` is the smallest clearance over the run.
+
+False alarms and reaction
+-------------------------
+A zone entry is a rise of the runtime's zone level (``HazardMonitor.level``) to LEVEL1 or
+LEVEL2. It is a FALSE ALARM when, at that moment, the TRUE worker is outside that level's
+radius plus ``false_alarm_margin_m`` by the runtime's own rule: the ground distance from
+the true end effector to the nearer of the true head and the true predicted head (true
+head + ``predict_s`` x true head velocity, Eq. 3) exceeds ``R_level + margin``.
+``reaction_ms`` is wall-clock time from a frame's keypoints being handed to the runtime
+to the command it caused being written on the link (``perf_counter`` around the perception
+call and ``RobotLoop.feed_lifted``, for frames that caused a command). ``head_error_m`` is the
+distance between the head the runtime was given (robot frame, after the calibration) and the
+true head at the frame's capture, over valid frames. ``runtime_cpu_share``
+is the wall-clock time spent inside the runtime (every frame and every tick) per simulated
+second: the share of one core the runtime would take in real time.
+The simulated-time delay per level is the time from the true distance first falling
+to the level's radius to the first command the runtime sent in that level (negative:
+the runtime acted before the truth got there, thanks to the prediction).
+"""
+from __future__ import annotations
+
+import functools
+import math
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from edge_runtime.core.skeleton import HEAD
+from edge_runtime.robot.hazard import State, ZoneParams, ground
+from edge_runtime.robot.lifter import MISSING_JOINTS, NO_PERSON, LiftedPose
+from edge_runtime.robot.loop import LoopParams, RobotLoop
+from firmware_sim.devices.camera import CANONICAL, Camera, DetectorNoise, detect, resample
+from firmware_sim.people import motions
+from firmware_sim.people.human import Body, heading_towards
+from firmware_sim.robot.controller import SimClock, SimulatedRobot
+from firmware_sim.robot.sawyer import SawyerArm
+
+HRC_TASK_M: tuple[tuple[float, float, float], ...] = (
+    (0.55, 0.14, 0.75), (0.0, 0.14, 1.0), (-0.55, 0.14, 0.75))
+"""The arm's task in these scenarios (robot-frame end-effector waypoints, m): a sweep that
+reaches 1.0 m out on the work side, into the walkway, at the dissertation's working height
+(y = 0.14 m is 1.055 m above the floor)."""
+CELL_POINT_XZ_M = (0.0, 1.0)
+"""The task's outermost point (ground x, z): where walkers aim and pass."""
+
+
+@dataclass(frozen=True)
+class WorldParams:
+    """Timing and judging of the simulated world."""
+
+    dt_s: float = 0.01
+    """Physics and control step (s)."""
+    camera_hz: float = 30.0
+    """Camera frame rate (Hz): 30, or the dissertation's 5.8."""
+    latency_s: float | None = None
+    """Capture -> runtime latency of a frame (s); None: one camera period."""
+    pre_roll_s: float = 1.5
+    """Empty scene before the worker appears (the arm starts on its task's first waypoint): the
+    runtime reaches NORMAL (after ``ZoneParams.dwell_s`` of poses) and the arm is at work."""
+    collision_m: float = 0.10
+    """A worker joint closer than this to the end effector or a collision-sphere surface is a collision (m)."""
+    false_alarm_margin_m: float = 0.3
+    """A zone entry with the true worker beyond the zone radius plus this is a false alarm (m)."""
+    depth_noise_m: float = 0.06
+    """``truth`` perception: depth error (m, 1 sd at noise scale 1), half a slowly drifting body error,
+    half white per-joint jitter."""
+    hold_frames: int = 3
+    """``truth`` perception: a missed joint is held this many frames (as the lifter does)."""
+    min_score: float = 0.3
+    """``truth`` perception: keypoints scored below this are missed (as the lifter does)."""
+    trace_every: int = 2
+    """Keep every n-th step in the trace (for plots)."""
+
+    @property
+    def frame_latency_s(self) -> float:
+        return 1.0 / self.camera_hz if self.latency_s is None else self.latency_s
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One worker, one path, one camera."""
+
+    name: str
+    waypoints_xz_m: tuple[tuple[float, float], ...]
+    """The worker's path on the floor (robot x, z; m)."""
+    speed_mps: float
+    kind: str = "pass"
+    """"pass": walks by and on; "stop": walks toward the cell and stops short of the end effector."""
+    height_m: float = 1.75
+    camera_eye_m: tuple[float, float, float] = (0.0, 0.6, 6.9)
+    camera_target_m: tuple[float, float, float] = (0.0, 0.086, 0.9)
+    noise_scale: float = 1.0
+    """Detector noise multiplier (``DetectorNoise.scaled``)."""
+    stand_s: float = 1.0
+    """Standing at the start, seen by the camera, before walking (s)."""
+    linger_s: float = 1.0
+    """Standing at the end of the path (s)."""
+    seed: int = 0
+    task_m: tuple[tuple[float, float, float], ...] = HRC_TASK_M
+    """The arm's task during this scenario (``LoopParams.task_waypoints_m``)."""
+    min_base_distance_m: float = float("nan")
+    """Closest ground distance of the path to the base's axis (m; filled in by the builders)."""
+
+    def camera(self, rate_hz: float) -> Camera:
+        return Camera.look_at(self.camera_eye_m, self.camera_target_m, CANONICAL, 0.0, rate_hz)
+
+    def describe(self) -> dict:
+        return {"name": self.name, "kind": self.kind, "speed_mps": round(self.speed_mps, 3),
+                "height_m": round(self.height_m, 3), "noise_scale": round(self.noise_scale, 3),
+                "path_xz_m": [[round(a, 3), round(b, 3)] for a, b in self.waypoints_xz_m],
+                "min_base_distance_m": round(self.min_base_distance_m, 3),
+                "camera_eye_m": [round(v, 3) for v in self.camera_eye_m]}
+
+
+def path_base_distance(waypoints_xz_m) -> float:
+    """Closest ground distance (m) of a polyline to the robot base's axis (the origin)."""
+    p = np.asarray(waypoints_xz_m, float)
+    best = math.inf
+    for a, b in zip(p[:-1], p[1:]):
+        d = b - a
+        t = float(np.clip(-(a @ d) / max(d @ d, 1e-12), 0.0, 1.0))
+        best = min(best, float(np.linalg.norm(a + t * d)))
+    return best
+
+
+def worker_motion(sc: Scenario, rate_hz: float) -> motions.Motion:
+    """The worker's true motion at ``rate_hz``: stand at the start, walk the path, stand."""
+    body = Body.from_height(sc.height_m)
+    pts = np.asarray(sc.waypoints_xz_m, float)
+    rng = np.random.default_rng(sc.seed)
+    h0 = heading_towards(pts[0], pts[1])
+    walk = motions.walk(body, pts, sc.speed_mps, rate_hz, rng=rng)
+    start = motions.stand(body, pts[0], h0, sc.stand_s, rate_hz, rng=rng)
+    end_xz, end_h = walk.end
+    end = motions.stand(body, end_xz, end_h, sc.linger_s, rate_hz, rng=rng)
+    return motions.concat([start, walk, end], blend_s=0.2)
+
+
+# ----------------------------------------------------------------------------------------------
+# perception
+
+class TruthPerception:
+    """Detector keypoints back-projected at the true depth (+ depth noise): see the module docstring.
+
+    ``frame(k)`` returns a :class:`edge_runtime.robot.lifter.LiftedPose` whose joints are in the
+    robot frame (the loop runs without a calibration)."""
+
+    name = "truth"
+
+    def __init__(self, camera: Camera, joints_m: np.ndarray, keypoints: np.ndarray, params: WorldParams,
+                 noise_scale: float, rng: np.random.Generator):
+        self.camera, self.params = camera, params
+        cam = camera.to_camera(joints_m)                          # (T, 17, 3) true camera-frame joints
+        T = len(cam)
+        sd = params.depth_noise_m * noise_scale * math.sqrt(0.5)
+        a = math.exp(-1.0 / (0.5 * camera.rate_hz))
+        drift = np.empty(T)
+        x = rng.normal()
+        for t in range(T):
+            x = a * x + math.sqrt(1 - a * a) * rng.normal()
+            drift[t] = x
+        self.depth = cam[..., 2] + sd * (drift[:, None] + rng.normal(size=(T, 17)))
+        self.keypoints = keypoints
+        self._last = np.full((17, 3), np.nan)
+        self._age = np.full(17, np.inf)
+
+    def frame(self, k: int, t_s: float) -> LiftedPose:
+        kp = self.keypoints[k]
+        ok = np.isfinite(kp[:, :2]).all(1) & (kp[:, 2] >= self.params.min_score)
+        K = self.camera.intrinsics
+        d = self.depth[k]
+        cam = np.stack([(kp[:, 0] - K.cx_px) / K.fx_px * d, (kp[:, 1] - K.cy_px) / K.fy_px * d, d], 1)
+        self._last[ok] = self.camera.to_robot(cam[ok])
+        self._age[ok] = 0
+        self._age[~ok] += 1
+        stale = self._age > self.params.hold_frames
+        if stale.any():
+            code = NO_PERSON if not ok.any() else MISSING_JOINTS
+            return LiftedPose(t_s, np.full((17, 3), np.nan), np.full(3, np.nan), False, f"{code}: simulated",
+                              ok)
+        return LiftedPose(t_s, self._last.copy(), self._last[0].copy(), True, None, ok)
+
+    def push(self, k: int, t_s: float):
+        return self.frame(k, t_s)
+
+
+class LifterPerception:
+    """Keypoints -> the shipped StreamingLifter (camera-frame joints); the loop applies the calibration."""
+
+    name = "lifter"
+
+    def __init__(self, lifter, keypoints: np.ndarray):
+        self.lifter, self.keypoints = lifter, keypoints
+
+    def push(self, k: int, t_s: float):
+        kp = self.keypoints[k]
+        return self.lifter.push(t_s, None if not np.isfinite(kp[:, :2]).any() else kp)
+
+
+def lifter_available(assets_dir=None) -> bool:
+    """Does the manifest list a pose lifter (arch "lifter")?"""
+    import json
+
+    from edge_runtime.core.onnx import ASSETS_DIR
+
+    try:
+        manifest = json.loads((Path(assets_dir or ASSETS_DIR) / "manifest.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return any(m.get("arch") == "lifter" for m in manifest.get("models", []))
+
+
+def make_lifter():
+    """The shipped lifter (int8, 1 thread, trained for 30 Hz; slower cameras are spaced out by it)."""
+    from edge_runtime.robot.lifter import StreamingLifter
+
+    return StreamingLifter.from_manifest()
+
+
+def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, height_m: float = 1.75,
+              stand_s: float | None = None):
+    """The dissertation's calibration for one camera placement: a simulated worker stands ``stand_s``
+    (default: 4 s, or 80 camera frames when that is longer: at 5.8 Hz the lifter's warm-up takes
+    about 2 s and every detector miss burst resets it) on each floor marker (Eq. 1-2's (0, 1), (1, 1), (0, 2)), walking between them; his keypoints go through
+    the lifter (frames still warming up are not used) and :func:`edge_runtime.robot.calibration.from_recording`
+    fits camera -> robot. Raises ``edge_runtime.robot.calibration.CalibrationError`` when the fit refuses."""
+    from edge_runtime.robot.calibration import CalibrationParams, from_recording
+
+    rate = camera.rate_hz
+    stand_s = stand_s or max(4.0, 80.0 / rate)
+    body = Body.from_height(height_m)
+    markers = CalibrationParams().markers_xz_m
+    parts, labels = [], []
+    for i, m in enumerate(markers):
+        if i:
+            w = motions.walk(body, [markers[i - 1], m], 0.8, rate)
+            parts.append(w)
+            labels.append(np.zeros(len(w), int))
+        s = motions.stand(body, m, math.pi, stand_s, rate, rng=rng)
+        parts.append(s)
+        labels.append(np.full(len(s), i + 1))
+    mot = motions.concat(parts, blend_s=0.2)
+    kp = detect(camera, mot.joints_m, rng, noise)
+    lifter = make_lifter()
+    t = np.arange(len(kp)) / rate
+    joints = np.full((len(kp), 17, 3), np.nan)
+    for k in range(len(kp)):
+        out = lifter.push(t[k], kp[k] if np.isfinite(kp[k, :, :2]).any() else None)
+        if out.valid and not out.warming_up:
+            joints[k] = out.joints_cam_m
+    cal = from_recording(t, joints, marker=np.concatenate(labels))
+    return cal, mot, lifter
+
+
+# ----------------------------------------------------------------------------------------------
+# the closed loop
+
+ARM_FOOTPRINT_M = 1.45
+"""No part of the arm (collision spheres, the 10 cm tool) reaches further than this from the
+base's axis (m; the reach is 1.26 m from the shoulder)."""
+FAR_CHECK_M, FAR_CHECK_EVERY = 0.5, 10
+"""While every worker joint is more than ``ARM_FOOTPRINT_M + FAR_CHECK_M`` from the base's axis the
+clearance is computed every ``FAR_CHECK_EVERY``-th step only (it is above 0.5 m anyway)."""
+
+
+@functools.lru_cache(maxsize=16)
+def task_start_posture(position_m: tuple, pitch_rad: float, yaw_rad: float) -> np.ndarray:
+    """Joint angles (7,) with the end effector on the task's first waypoint (the arm starts at work)."""
+    return SawyerArm().solve_ik(position_m, pitch_rad, yaw_rad)
+
+
+def clearance_m(joints_m: np.ndarray, centres: np.ndarray, radii: np.ndarray, ee_m: np.ndarray) -> float:
+    """Smallest distance (m) from any joint (17, 3) to the end effector or a sphere surface."""
+    d_sph = np.linalg.norm(joints_m[:, None, :] - centres[None], axis=-1) - radii[None]
+    d_ee = np.linalg.norm(joints_m - ee_m, axis=-1)
+    return float(min(d_sph.min(), d_ee.min()))
+
+
+@dataclass
+class RunResult:
+    """One scenario's figures (``summary``) and traces (for the plots)."""
+
+    summary: dict
+    t_s: np.ndarray
+    head_xz_m: np.ndarray
+    ee_xz_m: np.ndarray
+    state: np.ndarray
+    reaction_s: list = field(default_factory=list)
+    head_error_m: list = field(default_factory=list)
+
+
+def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, perception: str = "truth",
+                 world: WorldParams = WorldParams(), zones: ZoneParams = ZoneParams(),
+                 loop_params: LoopParams | None = None) -> RunResult:
+    """Run one scenario closed-loop; see the module docstring for what is measured."""
+    dt = world.dt_s
+    rate = round(1.0 / dt)
+    rng = np.random.default_rng([sc.seed, 7])
+    lp = replace(loop_params or LoopParams(), task_waypoints_m=sc.task_m)
+    mot = worker_motion(sc, rate)
+    J = mot.joints_m
+    n_pre = int(round(world.pre_roll_s / dt))
+    n_total = n_pre + len(J)
+    camera = sc.camera(world.camera_hz)
+    noise = DetectorNoise().scaled(sc.noise_scale)
+    Jc = resample(J, rate, world.camera_hz)            # (Tc, 17, 3) at the camera's frames
+    t_cap = n_pre * dt + np.arange(len(Jc)) / world.camera_hz
+    kp = detect(camera, Jc, rng, noise)
+    calibration = None
+    if not runtime:
+        percept = None
+    elif perception == "lifter":
+        from edge_runtime.robot.calibration import CalibrationError
+
+        try:
+            calibration, _, _ = calibrate(camera, rng, noise)
+        except CalibrationError as e:  # the box would refuse to run: the arm never moves
+            return _not_run(sc, link, world, f"calibration failed: {e}")
+        percept = LifterPerception(make_lifter(), kp)
+    else:
+        percept = TruthPerception(camera, Jc, kp, world, sc.noise_scale, rng)
+    # the truth: head, its ground velocity and Eq. 3's prediction, at the physics rate
+    head = J[:, HEAD]
+    v = np.gradient(head, dt, axis=0)
+    k_smooth = max(1, int(0.2 / dt))
+    v = np.apply_along_axis(lambda c: np.convolve(c, np.ones(k_smooth) / k_smooth, "same"), 0, v)
+    pred = head + zones.predict_s * v
+
+    clock = SimClock()
+    sim = SimulatedRobot(link, clock=clock, q0_rad=task_start_posture(lp.task_waypoints_m[0], lp.task_pitch_rad,
+                                                                      lp.task_yaw_rad))
+    loop = RobotLoop(sim.link, calibration=calibration, zones=zones, params=lp, clock=clock)
+    radii = {State.LEVEL1: zones.r1_m, State.LEVEL2: zones.r2_m}
+    frame_i, deliver = 0, t_cap + world.frame_latency_s
+    empty_next = 0.0
+    min_clear, collision_steps, first_collision = math.inf, 0, None
+    reaction, entries, false_alarms = [], [], []
+    true_enter = {State.LEVEL1: None, State.LEVEL2: None}
+    act_at = {State.LEVEL1: None, State.LEVEL2: None}
+    counters0 = None
+    prev_level = State.NORMAL
+    max_state = State.NORMAL
+    trace_t, trace_head, trace_ee, trace_state = [], [], [], []
+    frame_s = tick_s = 0.0  # wall-clock time inside the runtime (per-frame calls, ticks)
+    head_err = []
+    try:
+        for step in range(n_total):
+            now = clock()
+            k = step - n_pre
+            if k == 0:
+                counters0 = dict(vars(loop.counters))
+            # 1. camera frames due now
+            if k < 0 or percept is None:
+                if now + 1e-9 >= empty_next:  # an empty scene (or an arm unaware of the worker)
+                    loop.feed_joints(None)
+                    empty_next += 1.0 / world.camera_hz
+            else:
+                while frame_i < len(deliver) and deliver[frame_i] <= now + 1e-9:
+                    w0 = time.perf_counter()
+                    out = percept.push(frame_i, t_cap[frame_i])
+                    rec = loop.feed_lifted(out)
+                    w1 = time.perf_counter()
+                    frame_s += w1 - w0
+                    if out.valid:  # the head the runtime saw, in the robot frame, against the truth
+                        seen = out.joints_cam_m[HEAD] if calibration is None else calibration.to_robot(
+                            out.joints_cam_m)[HEAD]  # what the loop sees: floor-anchored when configured
+                        head_err.append(float(np.linalg.norm(seen - Jc[frame_i, HEAD])))
+                    if rec.command is not None:
+                        reaction.append(w1 - w0)
+                    frame_i += 1
+            # 2. control cycle
+            w0 = time.perf_counter()
+            loop.tick()
+            tick_s += time.perf_counter() - w0
+            # 3. truth and judging
+            arm = sim.controller.arm
+            ee = arm.pose().position_m
+            if k >= 0:
+                c = math.inf
+                far = float(np.min(np.hypot(J[k, :, 0], J[k, :, 2]))) - ARM_FOOTPRINT_M
+                if far < FAR_CHECK_M or k % FAR_CHECK_EVERY == 0:  # far from any reach: every 10th step
+                    centres, r = arm.collision_spheres()
+                    c = clearance_m(J[k], centres, r, ee)
+                if c < min_clear:
+                    min_clear = c
+                if c < world.collision_m:
+                    collision_steps += 1
+                    if first_collision is None:
+                        first_collision = round(k * dt, 3)
+                e = ground(ee)
+                true_d = min(np.linalg.norm(ground(pred[k]) - e), np.linalg.norm(ground(head[k]) - e))
+                for lvl, rad in radii.items():
+                    if true_enter[lvl] is None and true_d <= rad:
+                        true_enter[lvl] = now
+                level = loop.monitor.level
+                if level > prev_level and level in radii:
+                    false = bool(true_d > radii[level] + world.false_alarm_margin_m)
+                    entries.append({"t_s": round(k * dt, 3), "level": level.name, "true_distance_m": round(
+                        float(true_d), 3), "false_alarm": false})
+                    false_alarms.append(false)
+                prev_level = level
+                st = loop.monitor.state
+                max_state = max(max_state, st) if st != State.FAULT else max_state
+                for lvl in radii:
+                    if act_at[lvl] is None and st == lvl:  # its command went out in the call that changed state
+                        act_at[lvl] = now
+                if k % world.trace_every == 0:
+                    trace_t.append(k * dt)
+                    trace_head.append(ground(head[k]))
+                    trace_ee.append(e)
+                    trace_state.append(int(st))
+            # 4. the arm
+            sim.step(dt)
+    finally:
+        sim.close()
+    c1 = vars(loop.counters)
+    diff = {key: c1[key] - (counters0 or {}).get(key, 0) for key in ("stops", "retracts", "unreachable", "invalid")}
+    delays = {lvl.name: (None if true_enter[lvl] is None or act_at[lvl] is None
+                         else round(act_at[lvl] - true_enter[lvl], 3)) for lvl in radii}
+    summary = {
+        **sc.describe(), "link": link, "runtime": runtime, "perception": percept.name if percept else "none",
+        "camera_hz": world.camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1),
+        "collision": collision_steps > 0, "collision_steps": collision_steps, "first_collision_s": first_collision,
+        "min_separation_m": round(min_clear, 4), **diff,
+        "false_alarms": int(sum(false_alarms)), "zone_entries": entries,
+        "max_state": max_state.name, "command_delay_s": delays,
+        "reaction_ms": percentiles(reaction), "frames": frame_i,
+        "head_error_m": percentiles(head_err, 1.0, (50, 95)),
+        "runtime_cpu_share": round((frame_s + tick_s) / max(n_total * dt, 1e-9), 5),
+        "calibration_scale": None if calibration is None else round(calibration.scale, 4),
+    }
+    return RunResult(summary, np.array(trace_t), np.array(trace_head), np.array(trace_ee), np.array(trace_state),
+                     reaction, head_err)
+
+
+def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult:
+    """A scenario that could not run (the lifter path's calibration was refused for this camera)."""
+    summary = {**sc.describe(), "link": link, "runtime": True, "perception": "lifter", "camera_hz": world.camera_hz,
+               "latency_ms": round(1000 * world.frame_latency_s, 1), "not_run": why, "collision": False,
+               "collision_steps": 0, "first_collision_s": None, "min_separation_m": None, "stops": 0, "retracts": 0,
+               "unreachable": 0, "invalid": 0, "false_alarms": 0, "zone_entries": [], "max_state": "NORMAL",
+               "command_delay_s": {"LEVEL1": None, "LEVEL2": None}, "reaction_ms": percentiles([]), "frames": 0,
+               "head_error_m": percentiles([], 1.0, (50, 95)), "runtime_cpu_share": None, "calibration_scale": None}
+    empty = np.empty((0, 2))
+    return RunResult(summary, np.empty(0), empty, empty, np.empty(0, int))
+
+
+def percentiles(samples, scale: float = 1000.0, q=(50, 99)) -> dict:
+    """{"median", "p<q>", "n"} of ``samples`` x ``scale`` (default: seconds -> ms)."""
+    keys = ["median" if k == 50 else f"p{k}" for k in q]
+    if not len(samples):
+        return {**{k: None for k in keys}, "n": 0}
+    v = np.percentile(scale * np.asarray(samples, float), q)
+    return {**{k: round(float(x), 4) for k, x in zip(keys, v)}, "n": len(samples)}
+
+
+# ----------------------------------------------------------------------------------------------
+# scenarios
+
+CAMERA_6M = ((0.0, 1.8 - 0.914, 6.9), (0.0, 0.086, 0.9))
+"""The dissertation's webcam: about 6 m in front of the robot, 1.8 m high, aimed at the cell."""
+
+
+EXTENDED_M = ((0.0, 0.14, 1.0),)
+"""An expanded working posture: the end effector held 1.0 m out on the work side."""
+DISSERTATION = ("left_to_right", "right_to_left", "front")
+
+
+def dissertation_scenarios(seed: int = 0) -> list[Scenario]:
+    """Chapter 3's validation walks (Fig. 3.7-3.8), at 1.4 m/s, starting 3.2 m from the end effector,
+    the camera 6 m in front of the cell:
+
+    * ``left_to_right``: the arm in an expanded posture (end effector held 1.0 m out) blocks the
+      walkway; the worker walks from -x to +x with his pelvis 0.3 m outside the end effector, so
+      his body sweeps through the tool;
+    * ``right_to_left``: the same posture, the worker walks from +x to -x straight through the tip
+      of the tool (the end effector mid-path; the path passes 1.1 m from the base's axis, the
+      closest a path can pass and still be avoidable, see ``RandomParams.min_base_distance_m``);
+    * ``front``: the same posture; the worker walks from +z straight at the end effector and stops
+      with his pelvis 0.15 m short of it (the tool points at him)."""
+    eye, target = CAMERA_6M
+    cx, cz = CELL_POINT_XZ_M
+    common = dict(speed_mps=1.4, camera_eye_m=eye, camera_target_m=target)
+    out = [
+        Scenario("left_to_right", ((cx - 3.2, cz + 0.3), (cx + 3.2, cz + 0.3)), seed=seed, task_m=EXTENDED_M,
+                 **common),
+        Scenario("right_to_left", ((cx + 3.2, cz + 0.1), (cx - 3.2, cz + 0.1)), seed=seed + 1, task_m=EXTENDED_M,
+                 **common),
+        Scenario("front", ((cx, cz + 3.2), (cx, cz + 0.15)), kind="stop", seed=seed + 2, task_m=EXTENDED_M,
+                 **common),
+    ]
+    return [replace(s, min_base_distance_m=path_base_distance(s.waypoints_xz_m)) for s in out]
+
+
+@dataclass(frozen=True)
+class RandomParams:
+    """How random approaches are drawn (see :func:`random_scenario`)."""
+
+    speed_mps: tuple[float, float] = (0.5, 2.0)
+    start_distance_m: tuple[float, float] = (3.0, 6.0)
+    """Start: this far (ground) from the task's outermost point (m)."""
+    pass_distance_m: tuple[float, float] = (1.1, 1.8)
+    """A passing worker's path comes this close to the base's axis (m; the task reaches 1.0 m
+    out, its tool 1.1 m, and a walker's joints 0.3 m to the side of his path)."""
+    pass_bearing_deg: float = 60.0
+    """The passing path's nearest point lies within this bearing of +z (deg): in front of the arm."""
+    pass_oblique_deg: float = 35.0
+    """The passing path is up to this far off the tangent there (deg)."""
+    stop_short_m: tuple[float, float] = (0.3, 0.9)
+    """A stopping worker's pelvis stops this far short of the task's outermost point (m)."""
+    min_base_distance_m: float = 1.1
+    """Paths that come closer than this to the base's axis are redrawn (m). Nothing can avoid a
+    worker who walks through the robot's base, and the arm cannot shrink below a footprint: folded
+    as far as a retraction takes it (hand 0.35-0.5 m from the axis, tool turned toward the base)
+    its collision spheres still reach 0.62-0.69 m from the axis (measured on the simulated Sawyer),
+    a walker's joints reach about 0.3 m to the side of his path, and a collision is 0.10 m; so a
+    path must pass about 0.69 + 0.3 + 0.1 = 1.1 m from the axis to be avoidable at all."""
+    noise_scale: tuple[float, float] = (0.5, 2.0)
+    height_m: tuple[float, float] = (1.55, 1.95)
+    camera_distance_m: tuple[float, float] = (3.0, 8.0)
+    camera_height_m: tuple[float, float] = (1.0, 3.0)
+    p_stop: float = 0.5
+    """Share of approaches that stop short (the rest walk past)."""
+
+
+def random_scenario(rng: np.random.Generator, index: int, seed: int, params: RandomParams = RandomParams()) -> Scenario:
+    """A random approach to the cell from the work side: direction, speed, start distance, worker
+    height, camera placement (3-8 m, 1-3 m high, aimed at the cell) and detector noise scale; the
+    worker either walks past in front of the cell (nearest to the base's axis 1.1-1.8 m out) or
+    walks at the task's outermost point and stops short of it. Paths that pass closer than ``min_base_distance_m`` to the base are redrawn."""
+    from firmware_sim.devices.camera import random_placement
+
+    p = params
+    cell = np.asarray(CELL_POINT_XZ_M, float)
+    while True:
+        stop = rng.random() < p.p_stop
+        # approach direction: from anywhere on the work side (the heading the worker walks)
+        come_from = rng.uniform(-0.45 * math.pi, 0.45 * math.pi)      # bearing of the start from the cell, 0 = +z
+        u = np.array([math.sin(come_from), math.cos(come_from)])    # cell -> start
+        dist = rng.uniform(*p.start_distance_m)
+        if stop:
+            start = cell + dist * u
+            end = cell + rng.uniform(*p.stop_short_m) * u
+            pts = (start, end)
+        else:
+            # pass: a straight walk along the front of the cell, nearest to the base's axis at a
+            # bearing within pass_bearing_deg of +z, turned up to pass_oblique_deg off the tangent
+            phi = math.radians(rng.uniform(-1.0, 1.0) * p.pass_bearing_deg)
+            radial = np.array([math.sin(phi), math.cos(phi)])
+            psi = math.radians(rng.uniform(-1.0, 1.0) * p.pass_oblique_deg) + (0.0 if rng.random() < 0.5 else math.pi)
+            tangent = np.array([radial[1], -radial[0]])
+            walk_dir = math.cos(psi) * tangent + math.sin(psi) * radial
+            near = rng.uniform(*p.pass_distance_m) * radial
+            pts = (near - dist * walk_dir, near + 1.5 * walk_dir)
+        d_base = path_base_distance(pts)
+        if d_base >= p.min_base_distance_m:
+            break
+    cam = random_placement(rng, distance_m=p.camera_distance_m, height_m=p.camera_height_m)
+    aim = np.array([0.0, 0.086, 0.9])
+    return Scenario(
+        f"random_{index:03d}", tuple(tuple(float(v) for v in q) for q in pts), float(rng.uniform(*p.speed_mps)),
+        "stop" if stop else "pass", float(rng.uniform(*p.height_m)), tuple(float(v) for v in cam.position_m),
+        tuple(float(v) for v in aim), float(rng.uniform(*p.noise_scale)), seed=int(seed * 100003 + index),
+        min_base_distance_m=d_base)
+
+
+def random_scenarios(n: int, seed: int, max_speed_mps: float = 2.0, params: RandomParams = RandomParams()) -> list[Scenario]:
+    p = replace(params, speed_mps=(params.speed_mps[0], max_speed_mps))
+    rng = np.random.default_rng(seed)
+    return [random_scenario(rng, i, seed, p) for i in range(n)]
+

@@ -1,0 +1,67 @@
+"""Event-level scoring of the wearable's decisions against the simulator's truth.
+
+A decision matches a truth event when its trigger time falls within
+[start_s - tolerance_s, end_s] (the detector's capture starts 1 s before the
+trigger, so a trigger just before the annotated start still sees the motion).
+
+* recall    = distraction events with at least one alert / distraction events
+* precision = alerts that match a distraction event / alerts
+* label accuracy = matched alerts whose class equals the event's / matched alerts
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from edge_runtime.wearable.labels import DISTRACTIONS
+
+
+@dataclass
+class AlertScore:
+    distractions: int
+    detected: int
+    alerts: int
+    alerts_on_distraction: int
+    alerts_label_correct: int
+
+    @property
+    def recall(self) -> float:
+        return self.detected / self.distractions if self.distractions else float("nan")
+
+    @property
+    def precision(self) -> float:
+        return self.alerts_on_distraction / self.alerts if self.alerts else float("nan")
+
+    @property
+    def label_accuracy(self) -> float:
+        return self.alerts_label_correct / self.alerts_on_distraction if self.alerts_on_distraction else float("nan")
+
+    def as_dict(self) -> dict:
+        return {
+            "distractions": self.distractions,
+            "alerts": self.alerts,
+            "recall": round(self.recall, 4),
+            "precision": round(self.precision, 4),
+            "label_accuracy": round(self.label_accuracy, 4),
+        }
+
+
+def score_alerts(decisions: list[dict], events: list[dict], tolerance_s: float = 1.0) -> AlertScore:
+    """``decisions``: dicts with t_trigger_s, label, alerted; ``events``: dicts with start_s, end_s, label."""
+    truth = [e for e in events if e["label"] in DISTRACTIONS]
+    alerts = [d for d in decisions if d["alerted"]]
+
+    def match(d):
+        for e in truth:
+            if e["start_s"] - tolerance_s <= d["t_trigger_s"] <= e["end_s"]:
+                return e
+        return None
+
+    matched = [(d, match(d)) for d in alerts]
+    hit_events = {id(e) for _, e in matched if e is not None}
+    return AlertScore(
+        distractions=len(truth),
+        detected=len(hit_events),
+        alerts=len(alerts),
+        alerts_on_distraction=sum(e is not None for _, e in matched),
+        alerts_label_correct=sum(e is not None and e["label"] == d["label"] for d, e in matched),
+    )

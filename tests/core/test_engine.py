@@ -1,0 +1,171 @@
+"""edge_runtime.core.onnx + manifest: hash-checked loading, session settings, classify shapes, bad input."""
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from support import REPO_ROOT
+
+from edge_runtime.core.manifest import (
+    SCHEMA_VERSION,
+    ManifestError,
+    ModelIntegrityError,
+    load_manifest,
+    select_model,
+    sha256_file,
+    write_manifest,
+)
+from edge_runtime.core.onnx import ASSETS_DIR, Engine, session_options
+from edge_runtime.wearable.labels import CLASSES
+from edge_runtime.wearable.preprocess import preprocess
+
+ROOT = REPO_ROOT
+
+
+@pytest.fixture(scope="module")
+def assets(tmp_path_factory):
+    """fp32 + int8 ConvLSTM (random weights) with a manifest, built with export/."""
+    import torch
+
+    from export.onnx_export import example_input, save_onnx, to_onnx
+    from export.quantize import build_variant
+    from models.nets import build
+
+    d = tmp_path_factory.mktemp("assets")
+    torch.manual_seed(0)
+    m = build("convlstm", len(CLASSES)).eval()
+    fp = save_onnx(to_onnx(m, CLASSES, commit=""), d / "convlstm.fp32.onnx")
+    q = build_variant(fp, d / "convlstm.int8.onnx", "qdq_conv", example_input(64))
+    entries = [{"name": f"convlstm-{p}", "file": f.name, "sha256": sha256_file(f), "precision": p,
+                "arch": "convlstm", "parameters": {"torch": 79998, "keras": 79598}, "classes": list(CLASSES),
+                "inputs": [{"name": "imu", "shape": ["N", 6, 33, 3], "dtype": "float32"}],
+                "outputs": [{"name": "probs", "shape": ["N", 6], "dtype": "float32"}]}
+               for f, p in ((fp, "fp32"), (q, "int8"))]
+    write_manifest(d, {"version": SCHEMA_VERSION, "created_by": "test", "models": entries})
+    return d
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    shutil.copytree(src, dst)
+    return dst
+
+
+def test_load_by_precision_and_name(assets):
+    e8 = Engine.from_manifest(assets, "int8")
+    assert e8.precision == "int8" and e8.name == "convlstm-int8" and e8.classes == list(CLASSES)
+    e32 = Engine.from_manifest(assets, "convlstm-fp32")
+    assert e32.precision == "fp32"
+    assert e8.metadata["arch"] == "convlstm" and json.loads(e8.metadata["classes"]) == list(CLASSES)
+
+
+def test_session_settings(assets):
+    e = Engine.from_manifest(assets, "int8", threads=2)
+    so = e.session.get_session_options()
+    assert so.intra_op_num_threads == 2 and so.inter_op_num_threads == 1
+    assert so.get_session_config_entry("session.intra_op.allow_spinning") == "0"
+    assert e.session.get_providers() == ["CPUExecutionProvider"]
+    with pytest.raises(ValueError):
+        session_options(0)
+
+
+def test_classify_shapes_and_capture_path(assets):
+    e = Engine.from_manifest(assets, "fp32")
+    rng = np.random.default_rng(0)
+    x700 = (rng.normal(0, 2, (3, 700, 3)) + [0, 0, 9.81]).astype(np.float32)
+    x = preprocess(x700)
+    p1 = e.classify(x[0])
+    assert p1.shape == (len(CLASSES),) and abs(float(p1.sum()) - 1) < 1e-5
+    pn = e.classify(x)
+    assert pn.shape == (3, len(CLASSES))
+    np.testing.assert_allclose(pn[0], p1, atol=1e-6)
+    np.testing.assert_allclose(e.classify_capture(x700), pn, atol=1e-6)
+    np.testing.assert_allclose(e.classify_capture(x700[1]), pn[1], atol=1e-6)
+    assert e.classify(x[:0]).shape == (0, len(CLASSES))
+    assert e.classify(x.astype(np.float64)).dtype == np.float32
+    assert e.predict(x[0]) in CLASSES and len(e.predict(x)) == 3
+    assert e.classify(np.asfortranarray(x[0])).shape == (len(CLASSES),)
+
+
+@pytest.mark.parametrize("bad", [np.zeros((6, 33, 2)), np.zeros((2, 6, 32, 3)), np.zeros((33, 3)),
+                                 np.full((6, 33, 3), np.nan)])
+def test_classify_refuses_bad_input(assets, bad):
+    e = Engine.from_manifest(assets, "int8")
+    with pytest.raises(ValueError):
+        e.classify(bad)
+
+
+def test_sha_mismatch_is_refused_naming_the_file(assets, tmp_path):
+    d = _copy(assets, tmp_path / "a")
+    f = d / "convlstm.int8.onnx"
+    data = bytearray(f.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    f.write_bytes(bytes(data))
+    with pytest.raises(ModelIntegrityError, match="convlstm.int8.onnx.*sha256 mismatch"):
+        Engine.from_manifest(d, "int8")
+    Engine.from_manifest(d, "fp32")  # the untouched model still loads
+
+
+def test_missing_and_malformed_manifests(assets, tmp_path):
+    with pytest.raises(ManifestError, match="manifest not found"):
+        Engine.from_manifest(tmp_path, "int8")
+    d = _copy(assets, tmp_path / "b")
+    (d / "convlstm.fp32.onnx").unlink()
+    with pytest.raises(ModelIntegrityError, match="convlstm.fp32.onnx.*missing"):
+        Engine.from_manifest(d, "fp32")
+    (d / "manifest.json").write_text("{not json")
+    with pytest.raises(ManifestError, match="manifest.json"):
+        load_manifest(d)
+    m = load_manifest(assets)
+    m["models"][0]["file"] = "../escape.onnx"
+    (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(ManifestError, match="file"):
+        load_manifest(d)
+    m = load_manifest(assets)
+    m["version"] = 99
+    (d / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(ManifestError, match="version"):
+        load_manifest(d)
+    with pytest.raises(ManifestError, match="int4"):
+        select_model(load_manifest(assets), "int4")
+
+
+def test_classes_disagreeing_with_model_metadata_are_refused(assets, tmp_path):
+    d = _copy(assets, tmp_path / "c")
+    m = load_manifest(d)
+    for e in m["models"]:
+        e["classes"] = list(reversed(e["classes"]))
+    write_manifest(d, m)
+    with pytest.raises(ModelIntegrityError, match="classes"):
+        Engine.from_manifest(d, "int8")
+
+
+def test_wearable_cli_refuses_tampered_model_in_one_line(assets, tmp_path):
+    d = _copy(assets, tmp_path / "d")
+    (d / "convlstm.int8.onnx").write_bytes(b"\x00" * 100)
+    csv = tmp_path / "rec.csv"
+    t = np.arange(300) / 100
+    rows = "\n".join(f"{ti:.2f},0.0,0.0,9.81" for ti in t)
+    csv.write_text("t,ax,ay,az\n" + rows + "\n")
+    r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(csv), "--assets", str(d)],
+                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert r.returncode != 0
+    err = r.stderr.strip()
+    assert "Traceback" not in err and "sha256 mismatch" in err and "convlstm.int8.onnx" in err
+
+
+@pytest.mark.skipif(not (ASSETS_DIR / "manifest.json").exists(), reason="no shipped assets")
+def test_shipped_manifest_describes_its_models():
+    m = load_manifest(ASSETS_DIR)
+    by = {e["precision"]: e for e in m["models"] if e["arch"] == "convlstm"}
+    assert {"fp32", "int8"} <= set(by)
+    for e in by.values():
+        assert sha256_file(ASSETS_DIR / e["file"]) == e["sha256"]
+        assert e["parameters"] == {"torch": 79998, "keras": 79598}
+        assert "macro_f1" in e["metrics"]["test_captures"]
+        assert e["provenance"]["seed"] is not None and e["provenance"]["versions"]["onnxruntime"]
+    q = by["int8"]["quantization"]
+    assert q["int8_operators"] and q["method"]
+    assert abs(by["int8"]["metrics"]["macro_f1_delta_vs_fp32"]) <= 0.01

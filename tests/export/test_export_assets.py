@@ -1,0 +1,86 @@
+"""export assets / compare-int8 end to end at toy scale (the real build: python -m export assets --seed 0)."""
+import json
+
+import numpy as np
+import pytest
+
+from edge_runtime.core.manifest import load_manifest, verify_all
+from edge_runtime.core.onnx import Engine
+from edge_runtime.wearable.labels import CLASSES
+
+
+@pytest.fixture(scope="module")
+def small_assets(tmp_path_factory):
+    from export.assets import build_assets
+
+    out = tmp_path_factory.mktemp("assets")
+    work = tmp_path_factory.mktemp("work")
+    (out / "vehicle_alerts.dbc").write_text("VERSION \"\"\n")  # other assets must survive a rebuild
+    build_assets(seed=1, subjects=2, epochs=2, minutes=2.0, out=out, work=work,
+                 variants=["qdq_conv", "qdq_conv+dyn_lstm"], command="test", log=lambda s: None, progress=False, auto_loso=False)
+    return out, work
+
+
+def test_assets_build_writes_a_valid_manifest(small_assets):
+    out, _ = small_assets
+    m = verify_all(out)
+    assert (out / "vehicle_alerts.dbc").exists()
+    by = {e["precision"]: e for e in m["models"]}
+    assert set(by) == {"fp32", "int8"}
+    for e in by.values():
+        assert e["arch"] == "convlstm" and e["classes"] == list(CLASSES)
+        assert e["parameters"] == {"torch": 79998, "keras": 79598}
+        assert e["inputs"][0]["name"] == "imu" and e["inputs"][0]["shape"] == ["N", 6, 33, 3]
+        prov = e["provenance"]
+        assert prov["seed"] == 1 and prov["versions"]["onnxruntime"] and "command" in prov
+        assert "macro_f1" in e["metrics"]["test_captures"]
+    q = by["int8"]["quantization"]
+    assert q["method"] in ("qdq_conv", "qdq_conv+dyn_lstm") and q["int8_operators"]["Conv"] == 2
+    assert abs(by["int8"]["metrics"]["macro_f1_delta_vs_fp32"]) <= 0.01
+    assert by["fp32"]["metrics"]["parity_vs_torch"]["ok"]
+    eng = Engine.from_manifest(out, "int8")
+    assert eng.classify(np.zeros((6, 33, 3), np.float32)).shape == (len(CLASSES),)
+
+
+def test_rebuild_keeps_entries_of_other_models(small_assets, tmp_path):
+    """A manifest entry this command does not build (e.g. a pose lifter) is kept on rebuild."""
+    import shutil
+
+    from edge_runtime.core.manifest import write_manifest
+    from export.assets import build_assets
+
+    out, work = small_assets
+    dst = tmp_path / "assets"
+    shutil.copytree(out, dst)
+    m = load_manifest(dst)
+    extra = dict(m["models"][0], name="lifter-fp32", arch="lifter")
+    m["models"].append(extra)
+    write_manifest(dst, m)
+    build_assets(seed=1, subjects=2, epochs=2, minutes=2.0, out=dst, work=work, variants=["qdq_conv"],
+                 command="test", log=lambda s: None, progress=False, auto_loso=False)
+    names = [e["name"] for e in load_manifest(dst)["models"]]
+    assert sorted(names) == ["convlstm-fp32", "convlstm-int8", "lifter-fp32"]
+    # same seed, same data, same commit -> the same fp32 model bytes
+    assert (dst / "convlstm.fp32.onnx").read_bytes() == (out / "convlstm.fp32.onnx").read_bytes()
+
+
+def test_compare_int8_over_loso_folds(tmp_path, capsys):
+    from export.__main__ import main
+    from models.dataset import save_npz
+    from models.experiments import run_loso
+    from models.toy import toy_windows
+
+    ws = toy_windows(n_per_class=12, n_classes=len(CLASSES), n_subjects=3, seed=2, classes=list(CLASSES))
+    npz = save_npz(tmp_path / "train.npz", ws)
+    from models.dataset import load_npz
+
+    run_loso("convlstm", load_npz(npz), None, tmp_path / "loso", epochs=3, seed=0, jobs=1, progress=False,
+             final_model=False)
+    rc = main(["compare-int8", "--loso-dir", str(tmp_path / "loso"), "--method", "qdq_conv",
+               "--json", str(tmp_path / "cmp.json")])
+    r = json.loads((tmp_path / "cmp.json").read_text())
+    assert r["folds"] == 3 and r["n"] == len(ws)
+    assert {"fp32_macro_f1", "int8_macro_f1", "macro_f1_delta", "holds"} <= set(r)
+    assert r["max_parity_torch_onnx"] < 1e-4
+    assert rc == (0 if r["holds"] else 1)
+    assert "LOSO over 3 folds" in capsys.readouterr().out

@@ -1,0 +1,218 @@
+"""models/: parameter counts, learning, determinism, metrics, datasets, LOSO folds."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from edge_runtime.wearable.labels import CLASSES
+from models.dataset import DataError, WindowSet, load_npz, save_npz, windows_from_recording
+from models.evaluate import compute_metrics, predict, save_confusion_png
+from models.experiments import run_loso, run_within
+from models.lda import LDAClassifier, window_features
+from models.nets import build, keras_param_count, torch_param_count
+from models.toy import toy_stream, toy_windows
+from models.train import fit, load_checkpoint, save_checkpoint
+
+# --------------------------------------------------------------------------- networks
+
+def test_convlstm_parameter_counts():
+    m = build("convlstm", 6)
+    assert keras_param_count(m) == 79_598  # the dissertation's figure
+    assert torch_param_count(m) == 79_998  # nn.LSTM's two bias vectors
+
+
+@pytest.mark.parametrize("arch", ["convlstm", "cnn", "lstm"])
+def test_forward_shapes_any_class_count(arch):
+    for k in (2, 6, 9):
+        out = build(arch, k)(torch.zeros(4, 6, 33, 3))
+        assert out.shape == (4, k)
+
+
+# --------------------------------------------------------------------------- training
+
+@pytest.fixture(scope="module")
+def toy():
+    return toy_windows(n_per_class=24, n_classes=4, n_subjects=3, seed=1)
+
+
+def test_convlstm_learns_separable_toy(toy):
+    test = toy_windows(n_per_class=10, n_classes=4, n_subjects=1, seed=2)
+    model = fit("convlstm", toy.X, toy.y, 4, epochs=30, seed=0, progress=False, batch_size=32, lr=3e-3)
+    acc = np.mean(predict(model, test.X).argmax(1) == test.y)
+    assert acc >= 0.8, acc  # chance is 0.25
+
+
+def test_lda_learns_separable_toy(toy):
+    test = toy_windows(n_per_class=10, n_classes=4, n_subjects=1, seed=2)
+    lda = fit("lda", toy.X, toy.y, 4, epochs=0, seed=0)
+    assert np.mean(lda.predict(test.X) == test.y) >= 0.9
+    assert window_features(test.X[:3]).shape == (3, 594)  # the networks' input, flattened
+    assert window_features(test.X[:3], "summary").shape == (3, 12)
+    summary = LDAClassifier(4, features="summary").fit(toy.X, toy.y)
+    assert np.mean(summary.predict(test.X) == test.y) >= 0.5
+    assert predict(lda, test.X).shape == (len(test.y), 4)
+
+
+def test_lda_unseen_class_gets_zero_probability(toy):
+    m = toy.y < 3
+    lda = LDAClassifier(4).fit(toy.X[m], toy.y[m])
+    p = lda.predict_proba(toy.X)
+    assert p.shape == (len(toy.y), 4) and np.all(p[:, 3] == 0)
+
+
+def _weights(model):
+    return {k: v.clone() for k, v in model.state_dict().items()}
+
+
+@pytest.mark.parametrize("arch", ["convlstm", "lstm"])
+def test_training_is_deterministic(toy, arch):
+    sub = toy.subset(np.arange(0, len(toy), 3))
+    a = _weights(fit(arch, sub.X, sub.y, 4, epochs=2, seed=7, progress=False, batch_size=16))
+    b = _weights(fit(arch, sub.X, sub.y, 4, epochs=2, seed=7, progress=False, batch_size=16))
+    c = _weights(fit(arch, sub.X, sub.y, 4, epochs=2, seed=8, progress=False, batch_size=16))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert not all(torch.equal(a[k], c[k]) for k in a)
+
+
+def test_checkpoint_roundtrip(tmp_path, toy):
+    model = fit("cnn", toy.X[:16], toy.y[:16], 4, epochs=1, seed=0, progress=False)
+    path = save_checkpoint(tmp_path, model, arch="cnn", classes=toy.classes, seed=0, epochs=1,
+                           metrics={"macro_f1": 0.5}, data={"train": "toy"})
+    assert path.name == "model.pt"
+    ck = torch.load(path, weights_only=False)
+    assert set(ck) == {"arch", "state_dict", "classes", "n_classes", "seed", "epochs", "metrics", "data"}
+    m2, meta = load_checkpoint(tmp_path)
+    assert not m2.training and meta["classes"] == toy.classes and meta["n_classes"] == 4
+    np.testing.assert_allclose(predict(model, toy.X[:5]), predict(m2, toy.X[:5]), atol=1e-6)
+    lda = fit("lda", toy.X, toy.y, 4, epochs=0, seed=0)
+    p = save_checkpoint(tmp_path / "lda", lda, arch="lda", classes=toy.classes, seed=0, epochs=0, metrics={},
+                        data={})
+    assert p.name == "model.pkl"
+    l2, meta = load_checkpoint(p)
+    assert meta["arch"] == "lda" and np.allclose(predict(l2, toy.X[:5]), predict(lda, toy.X[:5]))
+
+
+# --------------------------------------------------------------------------- metrics
+
+def test_metrics_on_hand_made_confusion(tmp_path):
+    # truth A A A A B B C C ; pred A A A B B C C C
+    y_true = [0, 0, 0, 0, 1, 1, 2, 2]
+    y_pred = [0, 0, 0, 1, 1, 2, 2, 2]
+    m = compute_metrics(y_true, y_pred, ["A", "B", "C"], subject=[1, 1, 1, 1, 2, 2, 2, 2])
+    assert m["confusion"] == [[3, 1, 0], [0, 1, 1], [0, 0, 2]]
+    assert m["accuracy"] == pytest.approx(6 / 8)
+    pc = m["per_class"]
+    assert pc["A"] == pytest.approx({"precision": 1.0, "recall": 0.75, "f1": 6 / 7, "support": 4})
+    assert pc["B"] == pytest.approx({"precision": 0.5, "recall": 0.5, "f1": 0.5, "support": 2})
+    assert pc["C"] == pytest.approx({"precision": 2 / 3, "recall": 1.0, "f1": 0.8, "support": 2})
+    assert m["macro_f1"] == pytest.approx((6 / 7 + 0.5 + 0.8) / 3)
+    # subject 1: truth A A A A, pred A A A B -> labels {A, B}: A f1 6/7, B f1 0
+    assert m["per_subject"]["1"]["f1"] == pytest.approx((6 / 7 + 0) / 2)
+    assert m["per_subject"]["2"]["accuracy"] == pytest.approx(3 / 4)
+    png = save_confusion_png(m["confusion"], ["A", "B", "C"], tmp_path / "cm.png", title="t")
+    assert png.stat().st_size > 1000
+
+
+def test_macro_f1_distractions_excludes_other():
+    m = compute_metrics([0, 1, 5, 5], [0, 1, 0, 5], list(CLASSES))
+    assert m["macro_f1_distractions"] == pytest.approx((2 / 3 + 1.0) / 2)
+
+
+# --------------------------------------------------------------------------- datasets
+
+def test_npz_roundtrip_and_validation(tmp_path, toy):
+    p = save_npz(tmp_path / "d.npz", toy)
+    back = load_npz(p)
+    assert back.X.dtype == np.float32 and back.classes == toy.classes
+    np.testing.assert_array_equal(back.y, toy.y)
+    np.testing.assert_array_equal(back.trial, toy.trial)
+
+    def bad(name, **kw):
+        d = dict(X=toy.X, y=toy.y, subject=toy.subject, classes=np.array(toy.classes))
+        d.update(kw)
+        for k in [k for k, v in d.items() if v is None]:
+            del d[k]
+        path = tmp_path / f"{name}.npz"
+        np.savez(path, **d)
+        with pytest.raises(DataError) as e:
+            load_npz(path)
+        msg = str(e.value)
+        assert "\n" not in msg and str(path) in msg
+        return msg
+
+    assert "'X'" in bad("shape", X=toy.X[:, :600])
+    X = toy.X.copy()
+    X[3, 10, 1] = np.nan
+    assert "'X'" in bad("nan", X=X) and "window 3" in bad("nan2", X=X)
+    assert "'y'" in bad("label", y=np.where(toy.y == 0, 9, toy.y))
+    assert "'y'" in bad("ylen", y=toy.y[:-1])
+    assert "'subject'" in bad("nosubj", subject=None)
+    assert "'classes'" in bad("cls", classes=np.array(["A", "A", "B", "C"]))
+    with pytest.raises(DataError, match="not found"):
+        load_npz(tmp_path / "missing.npz")
+    (tmp_path / "junk.npz").write_text("not a zip")
+    with pytest.raises(DataError, match="junk.npz"):
+        load_npz(tmp_path / "junk.npz")
+
+
+def test_windows_from_recording_train_and_test():
+    rec = toy_stream([(10, 14, "Phone"), (40, 44, "Drink"), (70, 72, "Other")], seconds=120, false_alarms=[95])
+    train, test, stats = windows_from_recording(rec)
+    # TRAIN: one window per truth event, from 1 s before its start
+    assert list(train.y) == [CLASSES.index("Phone"), CLASSES.index("Drink"), CLASSES.index("Other")]
+    np.testing.assert_allclose(train.t_s, [9.0, 39.0, 69.0])
+    np.testing.assert_array_equal(train.X[0], rec.acc_mps2[900:1600])
+    # TEST: detector captures; onsets at start + 0.3 s; the false alarm at 95 s is Other
+    labels = [test.classes[k] for k in test.y]
+    assert labels[:2] == ["Phone", "Drink"]
+    assert labels[-1] == "Other" and test.t_s[-1] == pytest.approx(94.0, abs=0.05)
+    assert stats.distractions == 2 and stats.detected == 2 and stats.recall == 1.0
+    assert stats.captures == len(test) and stats.precision == pytest.approx(2 / len(test))
+    assert test.X.shape[1:] == (700, 3) and np.all(test.subject == 0)
+
+
+def test_windows_from_recording_unknown_label():
+    rec = toy_stream([(10, 14, "Juggling")], seconds=60)
+    with pytest.raises(DataError, match="Juggling"):
+        windows_from_recording(rec)
+
+
+# --------------------------------------------------------------------------- protocols
+
+def test_loso_one_fold_per_subject(tmp_path, toy):
+    m = run_loso("cnn", toy, None, tmp_path, epochs=1, seed=0, progress=False)
+    assert m["folds"] == ["s0", "s1", "s2"]
+    assert set(m["per_subject"]) == {"0", "1", "2"} and m["n"] == len(toy)
+    for s in range(3):
+        assert (tmp_path / "folds" / f"s{s}" / "model.pt").exists()
+    assert (tmp_path / "model.pt").exists() and (tmp_path / "metrics.json").exists()
+    assert (tmp_path / "confusion.png").exists()
+
+
+def test_loso_scores_test_captures_of_held_out_subject(tmp_path, toy):
+    test = toy_windows(n_per_class=3, n_classes=4, n_subjects=3, seed=5)
+    m = run_loso("lda", toy, test, tmp_path, seed=0, progress=False, final_model=False)
+    assert m["n"] == len(test) and m["evaluated_on"] == "test captures"
+    assert m["macro_f1"] > 0.8
+
+
+def test_within_subject_by_trial(tmp_path, toy):
+    m = run_within("lda", toy, None, tmp_path, seed=0, progress=False)
+    assert m["protocol"].endswith("leave-one-trial-out") and m["folds"] == 6  # 3 subjects x 2 trials
+    toy2 = WindowSet(toy.X, toy.y, toy.subject, toy.classes)
+    m2 = run_within("lda", toy2, None, tmp_path / "k", seed=0, progress=False)
+    assert m2["protocol"].endswith("5-fold") and m2["n"] == len(toy)
+
+
+def test_cohort_datasets_from_simulator(tmp_path):
+    pytest.importorskip("firmware_sim.devices.wrist")
+    from models.dataset import build_cohort_datasets
+
+    r = build_cohort_datasets(n_subjects=2, seed=0, minutes_per_trial=1.5, out_dir=tmp_path, progress=False)
+    train, test = load_npz(r["train"]), load_npz(r["test"])
+    assert train.classes == list(CLASSES) and len(set(train.subject.tolist())) == 2
+    assert len(test) == r["detector"]["captures"] and test.repeat is not None
+    det = r["detector"]
+    assert 0 <= det["recall"] <= 1 and 0 <= det["precision"] <= 1
+    assert (tmp_path / "detector.json").exists()

@@ -1,0 +1,172 @@
+"""The 3-marker calibration (Eq. 1-2) recovers a simulated camera's placement."""
+import json
+
+import numpy as np
+import pytest
+
+from edge_runtime.core.skeleton import HEAD
+from edge_runtime.robot.calibration import (
+    Calibration,
+    CalibrationError,
+    CalibrationParams,
+    fit,
+    from_recording,
+    head_and_ankles,
+)
+from firmware_sim.devices.camera import Camera
+from firmware_sim.people import human
+
+MARKERS = ((0.0, 1.0), (1.0, 1.0), (0.0, 2.0))
+BODY = human.Body.from_height(1.75)
+NOISE_M = np.array([0.03, 0.03, 0.08])  # camera frame: a monocular lifter is worst in depth
+
+
+def standing(xz, heading=0.0):
+    return human.joints(BODY, human.Posture(), pelvis_xz_m=xz, heading_rad=heading)
+
+
+def camera(eye=(1.5, 1.6, 7.0)):
+    return Camera.look_at(eye, target_m=(0.0, 0.1 - 0.914 + 1.0, 1.0))
+
+
+def recording(cam, rng, frames_per_marker=60, fps=30.0, scale=1.0):
+    """The worker stands on markers 1, 2, 3 (2 s each) and walks between them (1 s)."""
+    joints, label = [], []
+    pts = [np.array(m) for m in MARKERS]
+    for i, p in enumerate(pts):
+        for _ in range(frames_per_marker):
+            joints.append(standing(p))
+            label.append(i + 1)
+        if i + 1 < len(pts):
+            for s in np.linspace(0, 1, int(fps))[1:-1]:
+                joints.append(standing(p + s * (pts[i + 1] - p)))
+                label.append(0)
+    cam_j = cam.to_camera(np.stack(joints)) * scale
+    cam_j = cam_j + rng.normal(0, 1, cam_j.shape) * NOISE_M
+    t = np.arange(len(cam_j)) / fps
+    return t, cam_j, np.array(label)
+
+
+def head_errors(cal, cam, rng, n=400, scale=1.0):
+    """Robot-frame head error of workers at random spots 3-8 m from the camera."""
+    errs = []
+    eye = cam.position_m
+    while len(errs) < n:
+        xz = rng.uniform([-2.5, -1.0], [2.5, 3.5])
+        d = np.hypot(xz[0] - eye[0], xz[1] - eye[2])
+        if not 3.0 <= d <= 8.0:
+            continue
+        j = standing(xz, rng.uniform(-np.pi, np.pi))
+        seen = cam.to_camera(j[HEAD]) * scale + rng.normal(0, 1, 3) * NOISE_M
+        errs.append(np.linalg.norm(cal.apply(seen) - j[HEAD]))
+    return np.array(errs)
+
+
+def test_recovers_a_known_camera_from_a_noisy_recording_and_rigid_beats_eq2(tmp_path):
+    rng = np.random.default_rng(0)
+    cam = camera()
+    t, cam_j, label = recording(cam, rng)
+    results = {}
+    for method in ("rigid", "eq2"):
+        cal = from_recording(t, cam_j, CalibrationParams(method=method))  # segmentation finds the 3 stands
+        errs = head_errors(cal, cam, np.random.default_rng(1))
+        results[method] = (np.median(errs), np.percentile(errs, 95))
+        if method == "rigid":
+            # the transform itself: robot = R^T (cam - t)
+            assert np.allclose(cal.A, cam.R.T, atol=0.03)
+            assert np.allclose(cal.b, -cam.R.T @ cam.t, atol=0.1)
+            assert cal.scale == pytest.approx(1.0, abs=0.03)
+            assert cal.worker_height_m == pytest.approx(BODY.height_m * (1 - 0.039), abs=0.03)
+            assert max(cal.residuals_m()["head"] + cal.residuals_m()["ankle"]) < 0.1
+    print({k: (round(float(a), 3), round(float(b), 3)) for k, (a, b) in results.items()})
+    assert results["rigid"][0] < 0.12 and results["rigid"][1] < 0.25
+    assert results["rigid"][1] < results["eq2"][1]
+
+
+def test_labelled_frames_and_a_lifter_scale_bias():
+    rng = np.random.default_rng(3)
+    cam = camera((-2.0, 2.2, 6.5))
+    t, cam_j, label = recording(cam, rng, scale=1.15)  # the lifter's depths are 15 % too large
+    cal = from_recording(t, cam_j, CalibrationParams(), marker=label)
+    assert cal.scale == pytest.approx(1 / 1.15, rel=0.03)
+    errs = head_errors(cal, cam, np.random.default_rng(4), scale=1.15)
+    assert np.median(errs) < 0.12
+    # eq2 is exact at the markers by construction (per-axis scale)
+    e2 = from_recording(t, cam_j, CalibrationParams(method="eq2"), marker=label)
+    assert max(e2.residuals_m()["head"]) < 1e-6
+
+
+def test_save_and_load_keep_everything(tmp_path):
+    rng = np.random.default_rng(5)
+    cam = camera()
+    t, cam_j, label = recording(cam, rng)
+    cal = from_recording(t, cam_j, marker=label)
+    path = tmp_path / "cal.json"
+    cal.save(path)
+    data = json.loads(path.read_text())
+    assert data["version"] == 1 and data["method"] == "rigid" and len(data["inputs"]["head_cam_m"]) == 3
+    assert data["worker_height_m"] == pytest.approx(cal.worker_height_m)
+    assert set(data["residuals_m"]) == {"head", "ankle"} and data["inputs"]["frames_per_marker"] == [60, 60, 60]
+    again = Calibration.load(path)
+    p = rng.normal(0, 3, (10, 3))
+    assert np.allclose(again.apply(p), cal.apply(p)) and again.params == cal.params
+
+
+@pytest.mark.parametrize("text, match", [
+    ("{", "not JSON"),
+    ('{"version": 9}', "version 9"),
+    ('{"version": 1, "A": [[1, 0], [0, 1]], "b": [0, 0, 0]}', "3x3"),
+    ('{"version": 1, "A": [[0, 0, 0], [0, 0, 0], [0, 0, 0]], "b": [0, 0, 0]}', "singular"),
+])
+def test_bad_calibration_files_say_why(tmp_path, text, match):
+    p = tmp_path / "cal.json"
+    p.write_text(text)
+    with pytest.raises(CalibrationError, match=match) as e:
+        Calibration.load(p)
+    assert str(p) in str(e.value)
+    with pytest.raises(CalibrationError, match="cannot read"):
+        Calibration.load(tmp_path / "missing.json")
+
+
+def test_degenerate_inputs_are_refused():
+    cam = camera()
+    heads, ankles = head_and_ankles(cam.to_camera(np.stack([standing(m) for m in MARKERS])))
+    fit(heads, ankles)  # fine
+    with pytest.raises(CalibrationError, match="collinear"):
+        fit(heads, ankles, CalibrationParams(markers_xz_m=((0, 1), (1, 1), (2, 1))))
+    with pytest.raises(CalibrationError, match="did not move from marker 1 to marker 2"):
+        fit(heads[[0, 0, 2]], ankles[[0, 0, 2]])
+    line = np.stack([heads[0], heads[1], 2 * heads[1] - heads[0]])
+    with pytest.raises(CalibrationError, match="collinear"):
+        fit(line, ankles)
+    bad = heads.copy()
+    bad[1, 0] = np.nan
+    with pytest.raises(CalibrationError, match="non-finite"):
+        fit(bad, ankles)
+    # a recording in which the worker never moves has one standing period
+    still = cam.to_camera(np.stack([standing(MARKERS[0])] * 200))
+    with pytest.raises(CalibrationError, match="found 1 standing period"):
+        from_recording(np.arange(200) / 30, still)
+    with pytest.raises(CalibrationError, match="marker 3: 0 usable frames"):
+        from_recording(np.arange(200) / 30, still, marker=np.r_[np.ones(100), 2 * np.ones(100)])
+    with pytest.raises(ValueError, match="method"):
+        CalibrationParams(method="magic")
+
+
+def test_pnp_ignores_the_lifters_depth_scale():
+    """The pnp fit uses only the points' directions: a lifter that sees everything 25 % too
+    far still gives the camera's pose (scale 1); the floor anchoring then removes the depth
+    error of a worker elsewhere."""
+    rng = np.random.default_rng(3)
+    cam = camera()
+    t, cam_j, label = recording(cam, rng, scale=1.25)
+    pnp = from_recording(t, cam_j, CalibrationParams(method="pnp"), marker=label)
+    assert pnp.scale == pytest.approx(1.0, abs=1e-9)
+    assert np.linalg.norm(pnp.b - cam.position_m) < 0.6
+    angle = np.degrees(np.arccos(np.clip((np.trace(pnp.A @ cam.R) - 1) / 2, -1, 1)))
+    assert angle < 3.0
+    truth = standing((-1.0, 2.5))
+    lifted = cam.to_camera(truth) * 1.25
+    robot, applied = pnp.anchor_to_floor(lifted)
+    assert applied
+    assert np.linalg.norm(robot[HEAD] - truth[HEAD]) < 0.5 * np.linalg.norm(pnp.apply(lifted[HEAD]) - truth[HEAD])

@@ -1,0 +1,211 @@
+"""Head tracking, the two-level zones of Eq. 4-5 and the state machine (edge_runtime.robot.hazard)."""
+import math
+
+import numpy as np
+import pytest
+
+from edge_runtime.robot.hazard import (
+    HazardMonitor,
+    HeadTracker,
+    State,
+    TrackerParams,
+    ZoneParams,
+    retract_direction,
+    tool_yaw_toward_base,
+)
+
+EFF = np.array([0.0, 0.14, 0.8])   # end effector, robot frame
+HEAD_Y = 0.75                        # a 1.75 m worker's head, robot frame (floor at -0.914)
+FPS = 30.0
+
+
+def head_at(dist_m, direction=(0.0, 1.0)):
+    """A head ``dist_m`` from the end effector on the ground, along ``direction`` (x, z)."""
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    return np.array([EFF[0] + dist_m * d[0], HEAD_Y, EFF[2] + dist_m * d[1]])
+
+
+def ready(zones=ZoneParams()):
+    """A monitor past its start-up fault: poses of a far worker have flowed for dwell_s."""
+    mon = HazardMonitor(zones)
+    n = int((zones.dwell_s + 0.2) * FPS)
+    run(mon, [head_at(20.0)] * n, t0=-10.0)
+    assert mon.state == State.NORMAL
+    return mon
+
+
+def run(mon, heads, t0=0.0, fps=FPS):
+    """Feed one head per frame; return the states."""
+    out = []
+    for i, h in enumerate(heads):
+        out.append(mon.observe(t0 + i / fps, {0: h}, EFF).state)
+    return out
+
+
+def test_zone_radii_follow_eq4_and_eq5_from_their_parameters():
+    z = ZoneParams()
+    assert z.r2_m == pytest.approx(1.4 * (1.0 - 0.5) + 0.3) and z.r2_m == pytest.approx(1.0)
+    assert z.r1_m == pytest.approx(3.0)
+    faster = ZoneParams(worker_speed_mps=2.0, retract_time_s=1.5, margin2_m=0.5, margin1_m=1.0)
+    assert faster.r2_m == pytest.approx(2.0 * 1.0 + 0.5) and faster.r1_m == pytest.approx(3.5)
+    iso = ZoneParams(sizing="iso15066")
+    sp = 1.6 * (0.15 + 0.3) + 0.6 * 0.15 + 0.09 + 0.85 + 0.1 + 0.01
+    assert iso.protective_distance_m == pytest.approx(sp) and iso.r1_m == pytest.approx(sp)
+    assert iso.r2_m == pytest.approx(1.0)
+    # S_p can never shrink the stop zone below the retraction zone
+    assert ZoneParams(sizing="iso15066", iso_intrusion_m=0.0, iso_human_speed_mps=0.1).r1_m == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="sizing"):
+        ZoneParams(sizing="big")
+
+
+def test_walking_straight_at_the_effector_triggers_level1_then_level2_at_the_predicted_distances():
+    speed = 1.2
+    mon = ready()
+    dists = [6.0 - speed * i / FPS for i in range(int(5.5 * FPS))]
+    states = run(mon, [head_at(d) for d in dists])
+    first = {s: dists[states.index(s)] for s in (State.LEVEL1, State.LEVEL2)}
+    lead = speed * 0.5  # Eq. 3: the predicted head is 0.6 m ahead of the real one
+    assert 3.0 + lead - 0.1 <= first[State.LEVEL1] <= 3.0 + lead + 1 / FPS * speed + 0.05
+    assert 1.0 + lead - 0.1 <= first[State.LEVEL2] <= 1.0 + lead + 1 / FPS * speed + 0.05
+    assert states.index(State.LEVEL1) < states.index(State.LEVEL2)
+    # monotone: approaching never de-escalates
+    assert all(b >= a for a, b in zip(states, states[1:]))
+
+
+def test_noise_alone_never_makes_the_state_chatter():
+    rng = np.random.default_rng(1)
+    for dist, expected in ((2.5, State.LEVEL1), (3.0, None), (1.0, None), (4.5, State.NORMAL)):
+        mon = ready()
+        heads = [head_at(dist) + rng.normal(0, 0.03, 3) for _ in range(int(60 * FPS))]
+        states = run(mon, heads)
+        changes = sum(a != b for a, b in zip(states, states[1:]))
+        if expected is not None:
+            assert changes == 0 and states[-1] == expected, (dist, changes)
+        else:
+            # on a zone boundary the noise may push the worker in once; the hysteresis and
+            # dwell keep it there instead of flickering
+            assert changes <= 1, (dist, changes)
+
+
+def test_least_squares_velocity_rejects_keypoint_noise():
+    rng = np.random.default_rng(2)
+    n = int(30 * FPS)
+    truth_v = np.array([0.8, 0.0, -0.5])
+    pos = np.array([1.0, HEAD_Y, 4.0]) + np.outer(np.arange(n) / FPS, truth_v)
+    noisy = pos + rng.normal(0, 0.03, pos.shape)
+    tr = HeadTracker(TrackerParams(), predict_s=0.5)
+    est = [tr.update(i / FPS, p) for i, p in enumerate(noisy)]
+    v_ls = np.array([e.velocity_mps for e in est[30:]])
+    v_fd = np.diff(noisy, axis=0)[30:] * FPS
+    err_ls = np.linalg.norm(v_ls - truth_v, axis=1)
+    err_fd = np.linalg.norm(v_fd - truth_v, axis=1)
+    print(f"velocity error rms: least squares {np.sqrt(np.mean(err_ls ** 2)):.3f} m/s, "
+          f"finite difference {np.sqrt(np.mean(err_fd ** 2)):.3f} m/s")
+    assert np.sqrt(np.mean(err_ls ** 2)) < 0.25
+    assert np.sqrt(np.mean(err_ls ** 2)) < np.sqrt(np.mean(err_fd ** 2)) / 4
+    pred_err = np.linalg.norm([e.predicted_m - (p + 0.5 * truth_v) for e, p in zip(est[30:], pos[30:])], axis=1)
+    assert np.median(pred_err) < 0.1
+
+
+def test_leaving_needs_the_exit_radius_and_the_dwell_time():
+    z = ZoneParams()
+    mon = ready(z)
+    run(mon, [head_at(2.0)] * 30)
+    assert mon.state == State.LEVEL1
+    # just outside R1 but inside the exit radius: stays in level 1 however long
+    assert set(run(mon, [head_at(3.1)] * 120, t0=1.0)) == {State.LEVEL1}
+    # beyond the exit radius: level 1 until the dwell time has passed
+    t0 = 5.0
+    states = run(mon, [head_at(3.5)] * 60, t0=t0)
+    k = states.index(State.NORMAL)
+    assert k / FPS == pytest.approx(z.dwell_s, abs=1.5 / FPS)
+    assert mon.reason == "clear"
+
+
+def test_level2_steps_down_through_level1():
+    mon = ready()
+    run(mon, [head_at(0.5)] * 30)
+    assert mon.state == State.LEVEL2
+    states = run(mon, [head_at(5.0)] * 90, t0=1.0)
+    seq = [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s]
+    assert seq == [State.LEVEL2, State.LEVEL1, State.NORMAL]
+
+
+def test_stale_pose_stops_within_one_cycle_after_200_ms():
+    mon = HazardMonitor()
+    assert mon.check(0.0).state == State.FAULT and mon.reason == "no_pose_yet"
+    run(mon, [head_at(5.0)] * 60)  # 2 s of a far worker: the start-up fault has cleared
+    t_last = 59 / FPS
+    assert mon.state == State.NORMAL
+    cycle = 0.01
+    t = t_last
+    while mon.check(t).state == State.NORMAL:
+        t += cycle
+    assert mon.reason == "pose_stale" and 0.2 < t - t_last <= 0.2 + cycle + 1e-9
+    assert mon.stale_events == 1
+    # frames again: the fault clears only after the dwell time of valid frames
+    states = run(mon, [head_at(5.0)] * 45, t0=t + 0.01)
+    assert states[0] == State.FAULT and states.index(State.NORMAL) / FPS == pytest.approx(1.0, abs=1.5 / FPS)
+
+
+def test_invalid_lifter_output_stops_with_its_own_reason():
+    mon = ready()
+    run(mon, [head_at(5.0)] * 60)
+    d = mon.invalid(2.0, "too few keypoints")
+    assert d.state == State.FAULT and d.reason == "pose_invalid: too few keypoints" and d.changed
+
+
+def test_a_fault_during_a_retraction_lets_the_retraction_finish():
+    mon = ready()
+    run(mon, [head_at(0.5)] * 30)
+    d = mon.check(30 / FPS + 0.3)
+    assert d.state == State.LEVEL2 and "pose_stale" in d.reason
+
+
+def test_a_worker_lost_inside_the_zone_holds_the_arm():
+    z = ZoneParams()
+    mon = ready(z)
+    run(mon, [head_at(2.0)] * 30)
+    t = 1.0
+    for i in range(int(z.lost_hold_s * FPS) - 1):
+        d = mon.observe(t + i / FPS, {}, EFF)
+        assert d.state == State.LEVEL1 and d.reason == "worker_lost"
+    # after the hold and the dwell of an empty scene the arm may work again
+    for i in range(int((z.dwell_s + 0.5) * FPS)):
+        d = mon.observe(t + z.lost_hold_s + i / FPS, {}, EFF)
+    assert d.state == State.NORMAL
+    # nobody ever seen near: an empty scene is simply clear
+    mon2 = ready(z)
+    run(mon2, [head_at(6.0)] * 60)
+    assert mon2.observe(3.0, {}, EFF).state == State.NORMAL
+
+
+def test_the_nearest_of_several_workers_decides():
+    mon = ready()
+    for i in range(60):
+        d = mon.observe(i / FPS, {7: head_at(6.0), 3: head_at(2.0, (1.0, 0.2))}, EFF)
+    assert d.state == State.LEVEL1 and d.worker == 3 and d.distance_m == pytest.approx(2.0, abs=0.05)
+
+
+def test_retract_direction_is_eq6_and_the_tool_turns_to_the_base():
+    tr = HeadTracker(TrackerParams(), 0.5)
+    # a worker walking along -x, passing in front (+z side) of the effector
+    for i in range(20):
+        est = tr.update(i / FPS, [1.0 - 1.0 * i / FPS, HEAD_Y, EFF[2] + 0.8])
+    L = retract_direction(EFF, est)
+    away = np.array([0.0, -1.0])  # from the head (at +z) to the effector: -z (head is nearly straight ahead)
+    path = np.array([-1.0, 0.0])
+    g = L[[0, 2]]
+    assert L[1] == 0.0
+    c = EFF[[0, 2]] - est.position_m[[0, 2]]
+    expect = 0.3 * c / np.linalg.norm(c) + 0.2 * path
+    assert np.allclose(g, expect, atol=0.02)
+    assert g[1] < 0 and g[0] < 0 and np.dot(g, away) > 0
+    # a standing worker: only the step away from him
+    still = HeadTracker(TrackerParams(), 0.5)
+    for i in range(10):
+        est = still.update(i / FPS, head_at(0.8))
+    assert np.allclose(retract_direction(EFF, est)[[0, 2]], [0.0, -0.3], atol=1e-6)
+    # yaw: from (1, y, 0) the base is along -x; from (0, y, 1) along -z
+    assert tool_yaw_toward_base([1.0, 0.1, 0.0]) == pytest.approx(-math.pi / 2)
+    assert abs(tool_yaw_toward_base([0.0, 0.1, 1.0])) == pytest.approx(math.pi)

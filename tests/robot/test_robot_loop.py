@@ -1,0 +1,330 @@
+"""RobotLoop: poses in, commands out, on a simulated clock against a fake robot link.
+
+The fake link stands in for edge_runtime.robot.link.base.RobotLink (same method names); its
+arm moves toward the last target at a fixed speed when ``advance`` is called."""
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from support.robot import FakeLink
+
+from edge_runtime.core.skeleton import HEAD
+from edge_runtime.robot.hazard import ZoneParams
+from edge_runtime.robot.loop import LoopParams, RobotLoop
+
+HEAD_Y = 0.75
+
+
+
+
+class Clock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def worker(x, z):
+    """(17, 3) robot-frame joints with the head at (x, HEAD_Y, z) (the rest is irrelevant here)."""
+    j = np.zeros((17, 3))
+    j[:] = (x, -0.5, z)
+    j[HEAD] = (x, HEAD_Y, z)
+    return j
+
+
+def drive(loop, link, clock, path, fps=30.0, tick_s=0.01):
+    """Feed ``path(t) -> joints or None`` at ``fps`` while ticking the loop every ``tick_s``."""
+    frames = []
+    t_end = path.duration
+    next_frame = 0.0
+    while clock.t < t_end:
+        if clock.t + 1e-9 >= next_frame:
+            j = path(clock.t)
+            if j is not path.SKIP:
+                frames.append(loop.feed_joints(j))
+            next_frame += 1 / fps
+        loop.tick()
+        link.advance(tick_s)
+        clock.t = round(clock.t + tick_s, 9)
+    return frames
+
+
+class Path:
+    SKIP = object()
+
+    def __init__(self, fn, duration):
+        self.fn, self.duration = fn, duration
+
+    def __call__(self, t):
+        return self.fn(t)
+
+
+def make(**kw):
+    clock, link = Clock(), FakeLink()
+    loop = RobotLoop(link, clock=clock, **kw)
+    return loop, link, clock
+
+
+def test_normal_work_cycles_the_waypoints_without_flooding_the_link():
+    loop, link, clock = make()
+    far = Path(lambda t: worker(4.0, 5.0), 12.0)
+    drive(loop, link, clock, far)
+    s = loop.status()
+    assert s["state"] == "NORMAL" and s["reason"] == "clear" and s["frames"] == 360
+    moves = [c[1] for c in link.calls if c[0] == "move_to"]
+    wps = [tuple(w) for w in LoopParams().task_waypoints_m]
+    assert len(moves) >= 4 and set(moves) == set(wps)
+    assert all(a != b for a, b in zip(moves, moves[1:]))  # each move once, only when it changes
+    # start-up: stopped (no pose yet, yellow), then green and resume() before the first move
+    names = link.names()
+    assert names[:2] == ["set_alarm", "stop"] and link.calls[0][1] == "yellow"
+    assert names.index("resume") < names.index("move_to")
+    beats = names.count("heartbeat")
+    assert 12.0 / 0.05 * 0.9 <= beats <= 12.0 / 0.05 + 1  # every 50 ms, not every tick
+    assert len(link.calls) - beats < 20
+
+
+def test_a_worker_walking_at_the_effector_stops_then_retracts_the_arm():
+    loop, link, clock = make()
+    speed = 1.2
+    # the arm works; a worker comes straight at the effector from +z, 6 m away, after 2 s
+    path = Path(lambda t: worker(0.0, 0.8 + max(0.5, 6.0 - speed * max(0.0, t - 2.0))), 8.0)
+    frames = drive(loop, link, clock, path)
+    states = [f.state for f in frames]
+    i1, i2 = states.index("LEVEL1"), states.index("LEVEL2")
+    assert i1 < i2
+    names = link.names()
+    first_move = names.index("move_to")
+    assert names.index("stop", first_move) < names.index("retract")  # level 1 stopped the arm first
+    retract = [c for c in link.calls if c[0] == "retract"]
+    assert len(retract) == 1  # once per entry, not once per frame
+    target = np.array(retract[0][1])
+    # Eq. 6 for a head-on approach from +z: 0.3 m away from the worker and 0.2 m along his
+    # walk, both roughly -z, from where the effector was when level 2 began
+    L = target - link.retract_from
+    assert L[1] == pytest.approx(0.0) and 0.1 < np.linalg.norm(L) <= 0.5 + 1e-9 and L[2] < -0.1 and abs(L[0]) < 0.1
+    # never closer to the base's axis than retract_min_radius_m (the Sawyer cannot hold its tool
+    # pointed at the base there): the step is shortened instead
+    assert np.hypot(target[0], target[2]) >= LoopParams().retract_min_radius_m - 1e-9
+    assert retract[0][3] == pytest.approx(math.atan2(-target[0], -target[2]))  # tool toward the base
+    alarms = [c[1:] for c in link.calls if c[0] == "set_alarm"]
+    assert ("red", 2000.0, 70.0) in alarms and ("red", 4000.0, 80.0) in alarms
+    # the frame that crossed into level 2 carried the command: measurable reaction time
+    rec = frames[i2]
+    assert rec.command == "retract" and rec.t_command_s is not None and rec.t_command_s >= rec.t_in_s
+    assert loop.status()["retracts"] == 1 and loop.status()["stops"] >= 2
+
+
+def test_the_arm_returns_to_work_when_the_worker_leaves():
+    loop, link, clock = make()
+    path = Path(lambda t: worker(0.0, 2.3) if t < 3.0 else worker(4.0, 6.0), 7.0)
+    frames = drive(loop, link, clock, path)
+    assert "LEVEL1" in [f.state for f in frames] and frames[-1].state == "NORMAL"
+    names = link.names()
+    last_stop = len(names) - 1 - names[::-1].index("stop")
+    assert "resume" in names[last_stop:] and "move_to" in names[last_stop:]
+    assert link.calls[-1][0] in ("heartbeat", "move_to", "set_alarm")
+
+
+def test_stale_pose_stops_the_arm_within_one_cycle_after_200_ms():
+    loop, link, clock = make()
+    path = Path(lambda t: worker(4.0, 5.0) if t < 3.0 else Path.SKIP, 4.0)
+    drive(loop, link, clock, path)
+    stops = [i for i, c in enumerate(link.calls) if c[0] == "stop"]
+    assert loop.status()["reason"] == "pose_stale" and loop.status()["stale"] == 1
+    # replay the timeline: the last frame came at t <= 3.0; find when the stop went out
+    loop2, link2, clock2 = make()
+    times = []
+    orig = link2.stop
+    link2.stop = lambda: (times.append(clock2.t), orig())
+    frames = drive(loop2, link2, clock2, Path(path.fn, 4.0))
+    last_frame = frames[-1].t_in_s
+    late = [t for t in times if t > 2.0]
+    assert len(late) == 1 and 0.2 < late[0] - last_frame <= 0.2 + 0.01 + 1e-9
+    assert stops
+
+
+def test_invalid_lifter_output_and_nan_joints_stop_the_arm():
+    @dataclass
+    class Lifted:
+        joints_cam_m: np.ndarray
+        valid: bool
+        reason: str | None
+
+    for bad in ("lifter", "nan", "shape"):
+        loop, link, clock = make()
+        drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 3.0))
+        assert loop.status()["state"] == "NORMAL"
+        if bad == "lifter":
+            rec = loop.feed_lifted(Lifted(np.full((17, 3), np.nan), False, "missing_joints: head"))
+            assert rec.reason == "pose_invalid: missing_joints: head"
+        elif bad == "nan":
+            j = worker(4.0, 5.0)
+            j[HEAD, 1] = np.nan
+            rec = loop.feed_joints(j)
+            assert rec.reason == "pose_invalid: non-finite joints"
+        else:
+            rec = loop.feed_joints(np.zeros((15, 3)))
+            assert rec.reason == "pose_invalid: joints of shape (1, 15, 3)"
+        assert rec.state == "FAULT" and rec.command == "stop" and link.calls[-1][0] == "stop"
+        assert link.calls[-2][:2] == ("set_alarm", "yellow") and loop.status()["invalid"] == 1
+
+
+def test_no_person_from_the_lifter_is_an_empty_scene_not_a_fault():
+    @dataclass
+    class Lifted:
+        joints_cam_m: np.ndarray
+        valid: bool
+        reason: str | None
+
+    loop, link, clock = make()
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 3.0))
+    rec = loop.feed_lifted(Lifted(np.full((17, 3), np.nan), False, "no_person: nobody detected"))
+    assert rec.state == "NORMAL" and loop.status()["invalid"] == 0
+
+
+def test_a_worker_the_camera_cannot_see_holds_the_arm():
+    loop, link, clock = make()
+    z = ZoneParams()
+    # far away, then 2 m from the effector, then gone from view (None: nobody detected)
+    path = Path(lambda t: worker(0.0, 6.0) if t < 2.0 else worker(0.0, 2.8) if t < 3.0 else None,
+                3.0 + z.lost_hold_s - 0.2)
+    frames = drive(loop, link, clock, path)
+    assert frames[-1].state == "LEVEL1" and frames[-1].reason == "worker_lost"
+    names = link.names()
+    assert "move_to" in names and "move_to" not in names[names.index("stop", names.index("move_to")):]
+
+
+def test_an_unreachable_retract_target_falls_back_to_stop():
+    loop, link, clock = make()
+    link.unreachable_retract = True
+    path = Path(lambda t: worker(0.0, 0.8 + max(0.5, 4.0 - 1.2 * t)), 4.0)
+    drive(loop, link, clock, path)
+    s = loop.status()
+    assert s["state"] == "LEVEL2" and s["reason"] == "retract_unreachable" and s["unreachable"] == 2
+    names = link.names()
+    r = names.index("retract")
+    # Eq. 6's target, then one retraction straight toward the base, then stop
+    assert [n for n in names[r:] if n in ("retract", "stop", "move_to")] == ["retract", "retract", "stop"]
+    first, second = (np.array(c[1]) for c in link.calls if c[0] == "retract")
+    eff = link.state.ee_position_m
+    assert np.hypot(second[0], second[2]) < np.hypot(eff[0], eff[2]) - 0.1  # radially in
+    assert second[0] * eff[2] - second[2] * eff[0] == pytest.approx(0.0, abs=1e-6)  # along the radius
+
+
+def test_a_lost_link_is_reported_and_retried():
+    loop, link, clock = make()
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 2.0))
+    link.fail = True
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 3.0))
+    s = loop.status()
+    assert s["link"] == "lost" and "ConnectionError" in s["link_error"] and s["link_errors"] >= 1
+    errors_while_down = s["link_errors"]
+    assert errors_while_down <= 1 + 1.0 / LoopParams().link_retry_s + 1  # retried at its period, not every tick
+    n = len(link.calls)
+    link.fail = False
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 4.0))
+    s = loop.status()
+    assert s["link"] == "ok" and s["link_error"] == ""
+    names = [c[0] for c in link.calls[n:]]
+    # after the link comes back: heartbeat, then the current motion (resume + move) and beacon again
+    assert names[0] == "heartbeat" and {"resume", "move_to", "set_alarm"} <= set(names)
+
+
+def test_several_workers_the_nearest_decides_and_each_keeps_a_tracker():
+    loop, link, clock = make()
+    both = Path(lambda t: np.stack([worker(4.0, 5.0), worker(1.5, 2.0)]), 3.0)
+    frames = drive(loop, link, clock, both)
+    assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(np.hypot(1.5, 1.2), abs=0.1)
+
+
+def test_camera_frame_joints_go_through_the_calibration():
+    class Shift:
+        def apply(self, p):
+            return np.asarray(p) + [0.0, 0.0, -10.0]
+
+    clock, link = Clock(), FakeLink()
+    loop = RobotLoop(link, calibration=Shift(), clock=clock)
+    frames = drive(loop, link, clock, Path(lambda t: worker(0.0, 12.8), 2.0))  # 2 m in the robot frame
+    assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(2.0, abs=0.05)
+
+
+# ------------------------------------------------------------------ against the simulated Sawyer
+
+def sim_run(kind, path, duration_s, zones=ZoneParams(), params=LoopParams(), fps=30.0):
+    """The loop against firmware_sim's controller over a real link (CAN on a virtual bus,
+    or signed MAVLink on a socket pair), all on one simulated clock."""
+    from firmware_sim.robot.controller import SimulatedRobot
+
+    sim = SimulatedRobot(kind)
+    loop = RobotLoop(sim.link, zones=zones, params=params, clock=sim.clock)
+    frames, states, next_frame = [], [], 0.0
+    try:
+        while sim.clock() < duration_s:
+            t = sim.clock()
+            if t + 1e-9 >= next_frame:
+                j = path(t)
+                if j is not Path.SKIP:
+                    frames.append(loop.feed_joints(j))
+                next_frame += 1 / fps
+            loop.tick()
+            states.append((t, loop.monitor.state.name, sim.link.state))  # as decided at t
+            sim.step(0.01)
+    finally:
+        sim.close()
+    return loop, frames, states
+
+
+def body_at(x, z, heading=0.0):
+    from firmware_sim.people import human
+
+    return human.joints(human.Body.from_height(1.75), human.Posture(), pelvis_xz_m=(x, z), heading_rad=heading)
+
+
+@pytest.mark.parametrize("kind", ["can", "mavlink"])
+def test_closed_loop_on_the_simulated_sawyer_stop_retract_and_back_to_work(kind):
+    # from 6.5 m in front, 1.4 m/s straight at the arm, a pause 0.4 m short, then away again
+    def z_of(t):
+        return 0.9 + max(0.4, 6.5 - 1.4 * max(0.0, t - 3.0)) if t < 9.0 else 0.9 + 0.4 + 2.0 * (t - 9.0)
+
+    loop, frames, states = sim_run(kind, lambda t: body_at(0.1, z_of(t), math.pi), 16.0)
+    seq = [f.state for i, f in enumerate(frames) if i == 0 or frames[i - 1].state != f.state]
+    assert seq == ["FAULT", "NORMAL", "LEVEL1", "LEVEL2", "LEVEL1", "NORMAL"], seq
+    by_state = {}
+    for t, s, st in states:
+        by_state.setdefault(s, []).append((t, st))
+    # the controller shows what the runtime decided: red + 2000 Hz, red + 4000 Hz, green
+    lv1 = [st for t, st in by_state["LEVEL1"] if st is not None][-5:]
+    lv2 = [st for t, st in by_state["LEVEL2"] if st is not None]
+    assert any((st.light, st.tone_hz, st.tone_db) == ("red", 4000.0, 80.0) for st in lv2)
+    assert lv2[-1].mode == "retract" and not lv2[-1].moving  # the retraction is done before the worker stops
+    assert all(st.mode == "stopped" and st.ee_speed_mps < 0.01 for st in lv1)
+    assert (states[-1][2].light, states[-1][2].mode) == ("green", "run") and states[-1][2].moving
+    # the effector moved away from the worker: Eq. 6 for a head-on approach is -z
+    start = next(st.ee_position_m for t, st in by_state["LEVEL2"] if st is not None)
+    assert lv2[-1].ee_position_m[2] < start[2] - 0.3
+    s = loop.status()
+    # once on entry, and again while the worker kept coming after the first was done
+    assert 1 <= s["retracts"] <= 3 and s["link_errors"] == 0 and s["refused"] == 0 and s["link"] == "ok"
+
+
+@pytest.mark.parametrize("kind", ["can", "mavlink"])
+def test_closed_loop_unreachable_retract_and_stale_camera_stop_the_arm(kind):
+    # a retraction 2.5 m long cannot be reached: the controller says so and the arm is stopped
+    # (targets 2.5 m out and, as the fallback, on the base's axis: both refused by the IK)
+    zones = ZoneParams(retract_weight_away_m=2.5)
+    loop, frames, states = sim_run(kind, lambda t: body_at(0.1, 0.9 + max(0.3, 6.5 - 1.4 * max(0.0, t - 3.0)),
+                                                          math.pi), 9.0, zones=zones,
+                                   params=LoopParams(retract_min_radius_m=0.0, retract_max_radius_m=5.0))
+    s = loop.status()
+    assert s["state"] == "LEVEL2" and s["reason"] == "retract_unreachable" and s["unreachable"] == 2
+    assert states[-1][2].mode == "stopped" and not states[-1][2].moving
+    # the camera stalls while the arm works: stopped within one cycle after 200 ms
+    loop, frames, states = sim_run(kind, lambda t: body_at(3.0, 6.0) if t < 3.0 else Path.SKIP, 4.0)
+    t_last = frames[-1].t_in_s
+    t_fault = next(t for t, s, st in states if t > t_last and s == "FAULT")
+    assert t_fault - t_last <= 0.2 + 0.01 + 1e-6
+    assert loop.status()["reason"] == "pose_stale"
+    assert states[-1][2].mode == "stopped" and states[-1][2].ee_speed_mps < 0.01

@@ -1,0 +1,40 @@
+"""python -m firmware_sim head-error: a tiny run through the CLI."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+from firmware_sim.scenarios.head_error import BINS_M
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "firmware_sim", "head-error", *args],
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_a_tiny_run_writes_the_figures(tmp_path):
+    out = tmp_path / "he.json"
+    r = run("--placements", "2", "--seed", "4", "--json", str(out), "--plot", str(tmp_path / "he.png"))
+    assert r.returncode == 0, r.stderr
+    data = json.loads(out.read_text())
+    assert set(data["methods"]) == {"off", "on"} and len(data["per_placement"]) == 2
+    assert data["frames"] > 100
+    for m in data["methods"].values():
+        assert list(m["by_distance"]) == [f"{lo}-{lo + 1}m" for lo in BINS_M[:-1]]
+        a = m["all"]
+        assert a["n"] == data["frames"] and 0 < a["error_ground_m"]["median"] <= a["error_3d_m"]["median"]
+        assert a["error_3d_m"]["median"] <= a["error_3d_m"]["p95"]
+        assert sum(b["n"] for b in m["by_distance"].values()) <= a["n"]
+    assert 0 <= data["anchoring"]["applied_fraction"] <= 1
+    assert (tmp_path / "he.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize("args, word", [(["--placements", "0"], "--placements"),
+                                        (["--anchor", "maybe"], "--anchor"),
+                                        (["--json", "/nonexistent/dir/x.json"], "/nonexistent/dir")])
+def test_bad_arguments_are_one_line_and_exit_2(tmp_path, args, word):
+    if "--json" not in args:
+        args = [*args, "--json", str(tmp_path / "x.json")]
+    r = run(*args)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and word in r.stderr

@@ -1,0 +1,93 @@
+"""The controller's command line and its handling of damaged serial bytes."""
+from __future__ import annotations
+
+import io
+import json
+import subprocess
+import sys
+
+import pytest
+
+from edge_runtime.robot.link.base import make_mavlink
+from firmware_sim.__main__ import main as firmware_main
+from firmware_sim.devices.can_hub import CanHub
+from firmware_sim.robot.controller import LinkFaults, SimulatedRobot
+
+
+def sawyer_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "firmware_sim", "sawyer", *args], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.mark.parametrize("args,words", [
+    (["--link", "mavlink"], "--pty or --serial"),
+    (["--link", "can"], "--can-port"),
+    (["--link", "mavlink", "--pty", "--signing-key", "abc"], "--signing-key"),
+    (["--link", "mavlink", "--serial", "/nonexistent/tty"], "/nonexistent/tty"),
+    (["--link", "can", "--can-port", "70000"], "--can-port"),
+    (["--link", "can", "--can-port", "1", "--can-interface", "nosuchbus"], "not allowed"),
+    (["--link", "bluetooth"], "--link"),
+])
+def test_bad_input_is_one_line_and_exit_2(args, words, capsys):
+    try:
+        rc = firmware_main(["sawyer", *args])
+    except SystemExit as e:  # argparse
+        rc = e.code
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err
+
+
+def test_a_controller_nobody_talks_to_trips_its_watchdog_and_reports_it(tmp_path):
+    with CanHub(port=0) as hub:
+        out = tmp_path / "sawyer.json"
+        r = sawyer_cli("--link", "can", "--can-port", str(hub.port), "--duration", "0.6", "--rate-hz", "50",
+                       "--json", str(out))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[0] == f"socketcand:127.0.0.1:{hub.port}:vcan0"
+    summary = json.loads(out.read_text())
+    assert summary["watchdog"] is True and summary["mode"] == "stopped"
+    assert summary["counters"]["watchdog_trips"] == 1 and summary["counters"]["commands"] == 0
+    assert 20 <= summary["counters"]["states_sent"] <= 40  # 50 Hz for 0.6 s
+
+
+def test_damaged_mavlink_bytes_are_counted_and_ignored():
+    with SimulatedRobot("mavlink") as sim:
+        sim.step(0.05)
+        buf = io.BytesIO()
+        mav = make_mavlink(buf, 1, 191, sim.controller.port.mav.signing.secret_key, link_id=3)
+        mav.command_long_send(1, 1, 193, 0, 1, 0, 0, 0, 0, 0, 500.0)  # a genuine, signed resume ...
+        packet = bytearray(buf.getvalue())
+        packet[12] ^= 0xFF  # ... with one payload byte flipped on the line
+        sim.link.stream.write(bytes(packet) + b"\x00garbage\xfd")
+        sim.step(0.05)
+        counters = sim.controller.all_counters()
+        assert counters["crc_errors"] >= 1 and counters["integrity_errors"] >= 1
+        assert sim.link.state.mode == "stopped" and sim.controller.last_seq == 0
+        sim.step(0.3)  # the stray start byte swallows no heartbeat: the parser rescans behind it
+        assert sim.controller.counters["watchdog_trips"] == 0
+        ok = sim.link.resume()
+        sim.step(0.05)
+        assert sim.link.result(ok) == "ok" and sim.link.state.mode == "run"
+
+
+@pytest.mark.parametrize("kind", ["can", "mavlink"])
+def test_a_damaged_command_is_never_executed(kind):
+    """Over a link that corrupts or drops 30% of the traffic, the controller only ever adopts
+    tones the runtime asked for, and the errors are counted on both ends."""
+    with SimulatedRobot(kind, faults=LinkFaults(drop=0.1, corrupt=0.2, seed=4)) as sim:
+        sim.step(0.05)
+        sent = set()
+        adopted = set()
+        for i in range(150):
+            hz = 1000.0 + 7 * i
+            sim.link.set_alarm("red", hz, 60.0)
+            sent.add(hz)
+            sim.step(0.02)
+            adopted.add(sim.controller.tone_hz)
+        adopted.discard(0.0)
+        assert adopted and adopted <= sent
+        assert len(adopted) > 40  # most commands do get through
+        assert sim.faults.stats["corrupted"] > 50 and sim.faults.stats["dropped"] > 20
+        assert sim.controller.all_counters()["integrity_errors"] > 10
+        assert sim.link.stats.integrity_errors > 10

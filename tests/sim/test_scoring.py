@@ -1,0 +1,29 @@
+from firmware_sim.scenarios.scoring import score_alerts
+
+EVENTS = [
+    {"start_s": 10.0, "end_s": 15.0, "label": "Drink"},
+    {"start_s": 40.0, "end_s": 44.0, "label": "Texting"},
+    {"start_s": 70.0, "end_s": 72.0, "label": "Other"},  # never counted as a distraction
+]
+
+
+def _d(t, label, alerted=True):
+    return {"t_trigger_s": t, "label": label, "alerted": alerted}
+
+
+def test_event_level_precision_recall_and_label_accuracy():
+    decisions = [
+        _d(9.5, "Drink"),  # within the 1 s tolerance before the start
+        _d(12.0, "Drink"),  # a second alert on the same event: recall counts the event once
+        _d(41.0, "Phone"),  # on a distraction, wrong class
+        _d(70.5, "Marker"),  # on an Other motion: a false alert
+        _d(90.0, "Phone", alerted=False),  # not alerted: ignored
+    ]
+    s = score_alerts(decisions, EVENTS)
+    assert (s.distractions, s.detected, s.alerts) == (2, 2, 4)
+    assert s.recall == 1.0 and s.precision == 0.75 and s.label_accuracy == 2 / 3
+
+
+def test_trigger_after_the_event_or_long_before_does_not_match():
+    s = score_alerts([_d(15.01, "Drink"), _d(8.9, "Drink")], EVENTS)
+    assert s.detected == 0 and s.precision == 0.0

@@ -1,0 +1,220 @@
+"""MavlinkImuSource against the simulated IMU firmware over a real pseudo-terminal pair."""
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from edge_runtime.wearable.mavlink_source import MG_TO_MPS2, MavlinkImuSource, SourceStatus
+from edge_runtime.wearable.sources import ImuBlock
+from firmware_sim.devices.imu_firmware import FaultConfig, ImuFirmware, close_pty_pair, open_pty_pair
+
+G = 9.80665
+KEY = bytes(range(32))
+
+
+def ramp(n: int = 60) -> np.ndarray:
+    """Distinct, in-range (< 2 g) samples whose values identify their index."""
+    k = np.arange(n)
+    return np.stack([k * 0.05 - 3.0, 4 * np.sin(k * 0.3), 9.0 + np.cos(k * 0.7)], 1).astype(np.float32)
+
+
+@pytest.fixture
+def pty():
+    master, path = open_pty_pair()
+    yield master, path
+    close_pty_pair(master)
+
+
+def stream(acc, pty, *, message="highres", key=None, src_key=None, faults=None, max_s=None, **src_kw):
+    """Run the firmware to the end of ``acc``; collect events until the sensor goes silent."""
+    master, path = pty
+    src = MavlinkImuSource(path, signing_key=src_key, **src_kw)
+    fw = ImuFirmware(acc, master, message=message, signing_key=key, faults=faults)
+    events, arrival = [], []
+    state = None
+    stop_after = faults is not None and faults.stop_after_s is not None
+    max_s = max_s if max_s is not None else len(acc) / 100 + 0.6
+    fw.start()
+    try:
+        for ev in src.blocks(duration_s=max_s):
+            events.append(ev)
+            arrival.append(time.monotonic())
+            if isinstance(ev, SourceStatus):
+                state = ev.state
+            if state == "silent" and (stop_after or fw.wait(0)):
+                break
+    finally:
+        fw.stop()
+        src.close()
+    return fw, src, events, arrival
+
+
+def samples(events):
+    blocks = [e for e in events if isinstance(e, ImuBlock)]
+    t = np.concatenate([b.t0_s + np.arange(len(b.acc_mps2)) / 100.0 for b in blocks]) if blocks else np.zeros(0)
+    a = np.concatenate([b.acc_mps2 for b in blocks]) if blocks else np.zeros((0, 3), np.float32)
+    return blocks, t, a
+
+
+def index_of(fw, t):
+    return np.rint((t - fw.t0_boot_s) * 100).astype(int)
+
+
+def test_highres_roundtrip_exact_in_order(pty):
+    acc = ramp()
+    fw, src, events, arrival = stream(acc, pty)
+    blocks, t, a = samples(events)
+    assert src.stats.samples == len(acc) and len(a) == len(acc)
+    assert a.dtype == np.float32 and np.array_equal(a, acc)  # exact to float32
+    assert np.all(np.diff(t) > 0)
+    assert np.allclose(np.diff(t), 0.01)
+    assert t[0] == pytest.approx(fw.t0_boot_s)  # boot-relative, not wall clock
+    assert t[0] < 60.0
+    assert blocks[0].continuous is False and all(b.continuous for b in blocks[1:])
+    # each read is handed over at once (a capture's last sample must not wait for a full block),
+    # stamped with its host arrival time, which precedes the moment the caller gets it
+    assert max(len(b.acc_mps2) for b in blocks) <= 10
+    got = [when for e, when in zip(events, arrival) if isinstance(e, ImuBlock)]
+    assert all(b.rx_monotonic_s is not None and b.rx_monotonic_s <= when for b, when in zip(blocks, got))
+    assert all(b2.rx_monotonic_s >= b1.rx_monotonic_s for b1, b2 in zip(blocks, blocks[1:]))
+    assert src.stats.crc_errors == src.stats.dropped == src.stats.out_of_order == 0
+    assert src.stats.heartbeats >= 1
+
+
+def test_scaled_roundtrip_within_quantisation(pty):
+    acc = ramp()
+    fw, src, events, _ = stream(acc, pty, message="scaled")
+    _, t, a = samples(events)
+    assert len(a) == len(acc)
+    assert np.max(np.abs(a - acc)) <= 0.5 * MG_TO_MPS2 + 1e-5
+    assert np.allclose(np.diff(t), 0.01)
+    assert src.stats.saturated == 0
+
+
+def test_corrupted_bytes_fail_crc_and_never_deliver_wrong_samples(pty):
+    acc = ramp(80)
+    fw, src, events, _ = stream(acc, pty, faults=FaultConfig(corrupt_prob=0.25, seed=3))
+    blocks, t, a = samples(events)
+    assert fw.stats.packets_corrupted > 0
+    assert src.stats.crc_errors > 0 and src.stats.bad_bytes > 0
+    assert 0 < len(a) < len(acc)
+    k = index_of(fw, t)
+    assert np.array_equal(a, acc[k])  # every delivered sample is the right one
+    assert src.stats.dropped == len(acc) - len(a) - (len(acc) - 1 - k[-1]) - k[0]
+    assert any(not b.continuous for b in blocks[1:])
+
+
+def test_dropped_samples_break_continuity(pty):
+    acc = ramp()
+    fw, src, events, _ = stream(acc, pty, faults=FaultConfig(drop_ranges=[(30, 5)]))
+    blocks, t, a = samples(events)
+    assert src.stats.dropped == 5 and src.stats.gaps == 1
+    assert len(a) == len(acc) - 5
+    after = [b for b in blocks if b.t0_s == pytest.approx(fw.time_of_sample(35))]
+    assert len(after) == 1 and after[0].continuous is False
+    assert sum(not b.continuous for b in blocks) == 2  # stream start + the gap
+    assert np.array_equal(a, acc[index_of(fw, t)])
+
+
+@pytest.mark.parametrize("message", ["highres", "scaled"])
+def test_nan_burst_passed_through(pty, message):
+    acc = ramp()
+    fw, src, events, _ = stream(acc, pty, message=message, faults=FaultConfig(nan_ranges=[(30, 4)]))
+    _, t, a = samples(events)
+    k = index_of(fw, t)
+    bad = np.isnan(a).any(1)
+    assert list(k[bad]) == [30, 31, 32, 33]
+    assert np.isnan(a[bad]).all()
+    assert src.stats.nan_samples == 4 and len(a) == len(acc)
+
+
+def test_saturation_clipped_and_counted(pty):
+    acc = ramp()
+    acc[20:25, 0] = 3.5 * G
+    acc[40, 2] = -2.5 * G
+    fw, src, events, _ = stream(acc, pty, faults=FaultConfig(saturate_g=2.0))
+    _, _, a = samples(events)
+    assert np.max(np.abs(a)) == pytest.approx(2 * G, rel=1e-6)
+    assert src.stats.saturated == 6
+
+
+def test_scaled_int16_limit_counted(pty):
+    acc = ramp()
+    acc[10:13, 1] = 40 * G  # beyond int16 mG: the firmware clips to +-32767 mG
+    _, src, events, _ = stream(acc, pty, message="scaled", saturation_mps2=50 * G)
+    _, _, a = samples(events)
+    assert src.stats.saturated == 3
+    assert np.allclose(a[10:13, 1], 32767 * MG_TO_MPS2)
+
+
+def test_silent_sensor_reported_quickly(pty):
+    acc = ramp(300)
+    fw, src, events, arrival = stream(acc, pty, faults=FaultConfig(stop_after_s=0.3))
+    idx = [i for i, e in enumerate(events) if isinstance(e, SourceStatus) and e.state == "silent"]
+    assert idx, "no silent status"
+    last_block = max(i for i, e in enumerate(events[: idx[0]]) if isinstance(e, ImuBlock))
+    assert arrival[idx[0]] - arrival[last_block] < 0.5
+    assert events[idx[0]].since_s >= 0.2
+    assert src.stats.silent_events >= 1
+    assert 10 <= src.stats.samples < 300
+
+
+def test_no_sensor_at_all_does_not_block(pty):
+    _, path = pty
+    src = MavlinkImuSource(path, silence_timeout_s=0.1)
+    t0 = time.monotonic()
+    try:
+        gen = src.blocks(duration_s=3.0)
+        ev = next(gen)
+        t1 = time.monotonic()
+        again = next(gen)  # the caller keeps getting control while the sensor is silent
+        t2 = time.monotonic()
+    finally:
+        src.close()
+    assert isinstance(ev, SourceStatus) and ev.state == "silent"
+    assert t1 - t0 < 1.0 and t2 - t1 < 0.5
+    assert isinstance(again, SourceStatus) and again.state == "silent" and again.since_s > ev.since_s
+    assert src.stats.silent_events == 1
+
+
+def test_signed_stream_accepted(pty):
+    acc = ramp(60)
+    _, src, events, _ = stream(acc, pty, key=KEY, src_key=KEY)
+    _, _, a = samples(events)
+    assert np.array_equal(a, acc)
+    assert src.stats.signature_failures == 0
+
+
+@pytest.mark.parametrize("fw_key", [None, bytes(32)], ids=["unsigned", "wrong-key"])
+def test_unsigned_or_wrongly_signed_rejected(pty, fw_key):
+    acc = ramp(60)
+    _, src, events, _ = stream(acc, pty, key=fw_key, src_key=KEY)
+    assert src.stats.samples == 0 and not any(isinstance(e, ImuBlock) for e in events)
+    assert src.stats.signature_failures >= 60
+
+
+def test_duplicate_and_out_of_order_timestamps_dropped(pty):
+    master, path = pty
+    src = MavlinkImuSource(path, silence_timeout_s=0.1)
+    tx = mavlink2.MAVLink(None, 1, 200)
+    times_ms = [1000, 1010, 1020, 1020, 1015, 1030, 1040, 10, 20]  # dup, backwards, then a reboot
+    buf = b"".join(bytes(mavlink2.MAVLink_scaled_imu_message(t, t, 0, 1000, 0, 0, 0, 0, 0, 0).pack(tx))
+                   for t in times_ms)
+    os.write(master, buf)
+    events = []
+    try:
+        for ev in src.blocks(duration_s=3.0):
+            events.append(ev)
+            if isinstance(ev, SourceStatus):
+                break
+    finally:
+        src.close()
+    blocks, t, a = samples(events)
+    assert src.stats.out_of_order == 2 and src.stats.reboots == 1
+    assert np.allclose(t, [1.0, 1.01, 1.02, 1.03, 1.04, 0.01, 0.02])
+    assert np.allclose(a[:, 0] / MG_TO_MPS2, [1000, 1010, 1020, 1030, 1040, 10, 20], atol=1e-3)
+    assert [b.continuous for b in blocks] == [False, False]
