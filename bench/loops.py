@@ -79,8 +79,10 @@ class _Wearable:
     def __init__(self, cfg: WearableConfig):
         import os
 
-        from edge_runtime.core.onnx import ASSETS_DIR, Engine
-        from edge_runtime.wearable.alerts import AlertPublisher, open_bus
+        from edge_runtime.canbus.bus import open_bus
+        from edge_runtime.core.manifest import ASSETS_DIR
+        from edge_runtime.wearable.alerts import AlertPublisher
+        from edge_runtime.wearable.classifier import Engine
         from edge_runtime.wearable.loop import WearableLoop
 
         self.engine = Engine.from_manifest(cfg.assets or ASSETS_DIR, cfg.model, threads=cfg.threads)

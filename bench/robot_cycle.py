@@ -120,7 +120,7 @@ def _schedule(seconds: float) -> list[tuple[float, int]]:
 
 def measure_robot(cfg: RobotConfig) -> list[dict]:
     """Run in a child process: see the module docstring."""
-    from edge_runtime.core.onnx import ASSETS_DIR
+    from edge_runtime.core.manifest import ASSETS_DIR
     from edge_runtime.robot.loop import RobotLoop
 
     data = np.load(cfg.worker_npz)

@@ -138,7 +138,7 @@ def _loops(opts: BenchOptions, assets: Path, entries: list[dict], log: Callable[
 
 def run_bench(opts: BenchOptions, log: Callable[[str], None] = lambda s: print(s, file=sys.stderr)) -> dict:
     """The whole report (see bench.report for its shape)."""
-    from edge_runtime.core.onnx import ASSETS_DIR
+    from edge_runtime.core.manifest import ASSETS_DIR
 
     assets = Path(opts.assets) if opts.assets else ASSETS_DIR
     entries = _entries(assets, opts.models)

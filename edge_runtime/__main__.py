@@ -72,7 +72,7 @@ def run_wearable(args: argparse.Namespace) -> int:
     else:
         live = _open_live_source(args.imu, cfg)
         blocks = live.blocks(args.duration)
-    from edge_runtime.core.onnx import Engine
+    from edge_runtime.wearable.classifier import Engine
 
     engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
     unknown = sorted(set(cfg.alerts.never_alert) - set(engine.classes))
@@ -161,13 +161,13 @@ def run_wearable(args: argparse.Namespace) -> int:
 
 def _open_publisher(cfg, can_log, engine, status_provider):
     """The CAN side: the configured python-can bus, alerts and the WEARABLE_STATUS heartbeat."""
-    from edge_runtime.wearable.alerts import AlertPublisher, open_bus
+    from edge_runtime.canbus.bus import open_bus
+    from edge_runtime.wearable.alerts import AlertPublisher
 
     c = cfg.can
-    extra = {"host": c.host, "port": c.port} if c.interface == "socketcand" else {}
 
     def bus_factory():
-        return open_bus(c.interface, c.channel, c.bitrate, **extra)
+        return open_bus(c.interface, c.channel, c.bitrate, host=c.host, port=c.port)
 
     try:
         pub = AlertPublisher(bus_factory(), heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
@@ -258,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     from edge_runtime.errors import InputError
 
     args = build_parser().parse_args(argv)
-    from edge_runtime.wearable.alerts import CanLinkError
+    from edge_runtime.canbus.bus import CanLinkError
 
     bad = (InputError, ModelIntegrityError, ConfigError, CanLinkError, *getattr(args, "bad_input", ()))
     return run(lambda: args.func(args), bad_input=bad)

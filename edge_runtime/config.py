@@ -20,16 +20,13 @@ from dataclasses import asdict, dataclass, field, fields, make_dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from edge_runtime.canbus.bus import BUS_INTERFACES
 from edge_runtime.errors import ConfigError
 
 if TYPE_CHECKING:  # the real class is made from SECTIONS at run time (see _registry)
     BoxConfig = Any
 
 
-BUS_INTERFACES = ("virtual", "socketcand", "socketcan", "slcan", "pcan", "kvaser", "vector", "ixxat", "gs_usb",
-                  "canalystii", "seeedstudio", "serial")
-"""python-can interfaces a box may use: a vehicle bus adapter, the socketcand hub, or the
-in-process virtual bus. Interfaces that are not a CAN bus (network broadcasts) are refused."""
 
 
 @dataclass(frozen=True)

@@ -41,7 +41,8 @@ else:
     raise SystemExit("torch is importable: the blocker does not work")
 import numpy as np
 import edge_runtime
-from edge_runtime.core.onnx import Engine, ASSETS_DIR
+from edge_runtime.core.manifest import ASSETS_DIR
+from edge_runtime.wearable.classifier import Engine
 from edge_runtime.core.manifest import verify_all
 verify_all(ASSETS_DIR)
 out = {}

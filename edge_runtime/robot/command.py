@@ -228,7 +228,7 @@ class KeypointSource:
 def _keypoint_source(args, cfg) -> KeypointSource:
     """--keypoints or --camera, with the shipped lifter ([lifter]) and the camera model
     ([camera] intrinsics; else a 100 degree camera at the video's size, or 1280 x 720)."""
-    from edge_runtime.core.onnx import ASSETS_DIR
+    from edge_runtime.core.manifest import ASSETS_DIR
     from edge_runtime.robot.keypoints import CameraModel, PersonSelector, read_keypoints_jsonl
     from edge_runtime.robot.lifter import StreamingLifter
 

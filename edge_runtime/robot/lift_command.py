@@ -130,7 +130,7 @@ def _frames_from_video(args, stats: dict, threads: int):
 
 
 def cmd(args) -> int:
-    from edge_runtime.core.onnx import ASSETS_DIR
+    from edge_runtime.core.manifest import ASSETS_DIR
     from edge_runtime.robot.lifter import StreamingLifter
 
     params = _params(args)

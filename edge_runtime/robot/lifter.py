@@ -70,8 +70,8 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from edge_runtime.core.manifest import PRECISIONS, ModelIntegrityError
-from edge_runtime.core.onnx import ASSETS_DIR, session_from_manifest
+from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
+from edge_runtime.core.onnx import session_from_manifest
 from edge_runtime.core.skeleton import JOINTS, N_JOINTS
 from edge_runtime.robot.keypoints import FORMATS, CameraModel, image_to_canonical, to_h36m
 

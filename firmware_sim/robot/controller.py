@@ -740,7 +740,7 @@ def _open_port(args, config: ControllerConfig):
 
 
 def cmd(args) -> int:
-    from edge_runtime.wearable.alerts import CanLinkError
+    from edge_runtime.canbus.bus import CanLinkError
 
     config = ControllerConfig(watchdog_s=args.watchdog_ms / 1000.0, state_rate_hz=args.rate_hz)
     try:

@@ -246,7 +246,7 @@ def lifter_available(assets_dir=None) -> bool:
     """Does the manifest list a pose lifter (arch "lifter")?"""
     import json
 
-    from edge_runtime.core.onnx import ASSETS_DIR
+    from edge_runtime.core.manifest import ASSETS_DIR
 
     try:
         manifest = json.loads((Path(assets_dir or ASSETS_DIR) / "manifest.json").read_text())

@@ -14,8 +14,7 @@ from support import REPO_ROOT
 
 from bench.__main__ import main
 from bench.report import compare, format_markdown
-from edge_runtime.core.manifest import load_manifest, sha256_file, write_manifest
-from edge_runtime.core.onnx import ASSETS_DIR
+from edge_runtime.core.manifest import ASSETS_DIR, load_manifest, sha256_file, write_manifest
 
 ROOT = REPO_ROOT
 ROW_KEYS = {"model", "precision", "runtime", "threads", "p50_us", "p99_us", "mean_us", "n", "file_bytes",

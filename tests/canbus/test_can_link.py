@@ -9,15 +9,9 @@ from types import SimpleNamespace
 import can
 import pytest
 
-from edge_runtime.wearable.alerts import (
-    DBC_PATH,
-    AlertEncoder,
-    AlertPublisher,
-    CanLinkError,
-    E2EChecker,
-    load_dbc,
-    open_bus,
-)
+from edge_runtime.canbus.bus import CanLinkError, open_bus
+from edge_runtime.canbus.e2e import E2EChecker
+from edge_runtime.wearable.alerts import DBC_PATH, AlertEncoder, AlertPublisher, load_vehicle_dbc
 from edge_runtime.wearable.labels import CLASSES
 
 
@@ -27,7 +21,7 @@ def decision(label="Phone", conf=0.87, alerted=True, status="alert"):
 
 
 def test_dbc_loads_with_version_and_labels():
-    db = load_dbc()
+    db = load_vehicle_dbc()
     assert db.version == "1.0.0"
     alert = db.get_message_by_name("DISTRACTION_ALERT")
     status = db.get_message_by_name("WEARABLE_STATUS")
@@ -65,7 +59,7 @@ def test_alert_round_trip():
 
 
 def test_e2e_counter_crc_repeat_loss():
-    enc, chk = AlertEncoder(), E2EChecker()
+    enc, chk = AlertEncoder(), E2EChecker(load_vehicle_dbc())
     msgs = [enc.encode_alert(decision()) for _ in range(20)]
     counters = [m.data[1] & 0x0F for m in msgs]
     assert counters[:16] == list(range(15)) + [0]  # Profile 1: 0..14 then wraps
@@ -117,7 +111,7 @@ def test_heartbeat_rate_and_log(tmp_path):
     assert 3 <= len(hb) <= 8, len(hb)
     assert sum(m.arbitration_id == 0x3A0 for m in rx_msgs) == 1
     assert pub.frames_sent == len(rx_msgs) and pub.send_errors == 0
-    chk = E2EChecker()
+    chk = E2EChecker(load_vehicle_dbc())
     assert all(chk.check(m).valid for m in hb)
     assert AlertEncoder().decode(hb[-1])["State"] == "running"
     logged = list(can.LogReader(str(path)))

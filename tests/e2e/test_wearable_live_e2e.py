@@ -14,7 +14,8 @@ import time
 
 import can
 
-from edge_runtime.wearable.alerts import AlertEncoder, E2EChecker
+from edge_runtime.canbus.e2e import E2EChecker
+from edge_runtime.wearable.alerts import AlertEncoder, load_vehicle_dbc
 
 KEY = "ab" * 32
 SPEED = 6.0
@@ -104,7 +105,7 @@ def test_signed_live_imu_through_a_hub_outage(hub, tmp_path):
     assert "alert latency" in out
 
     # after the outage: heartbeats resumed, and every alert decided after it reached a fresh client
-    enc, e2e = AlertEncoder(), E2EChecker()
+    enc, e2e = AlertEncoder(), E2EChecker(load_vehicle_dbc())
     ours = [m for m in receiver.frames if m.arbitration_id in (0x3A0, 0x3A1)]
     assert all(e2e.check(m).valid for m in ours)  # CRC good, alive counters in order
     assert e2e.errors == 0

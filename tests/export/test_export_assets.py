@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from edge_runtime.core.manifest import load_manifest, verify_all
-from edge_runtime.core.onnx import Engine
+from edge_runtime.wearable.classifier import Engine
 from edge_runtime.wearable.labels import CLASSES
 
 

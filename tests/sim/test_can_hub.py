@@ -11,7 +11,8 @@ import can
 import pytest
 from support.can import LISTENER
 
-from edge_runtime.wearable.alerts import DBC_PATH, AlertEncoder, AlertPublisher, E2EChecker
+from edge_runtime.canbus.e2e import E2EChecker
+from edge_runtime.wearable.alerts import DBC_PATH, AlertEncoder, AlertPublisher, load_vehicle_dbc
 from edge_runtime.wearable.labels import DISTRACTIONS
 
 
@@ -59,7 +60,7 @@ def test_drop_all(hub):
 def test_corrupt_is_caught_by_e2e(hub):
     hub.corrupt = 1.0
     a, b = client(hub), client(hub)
-    enc, chk = AlertEncoder(), E2EChecker()
+    enc, chk = AlertEncoder(), E2EChecker(load_vehicle_dbc())
     try:
         d = SimpleNamespace(t_trigger_s=0.0, t_alert_s=0.7, label="Phone", confidence=0.9, alerted=True,
                             status="alert", compute_us=0.0)

@@ -22,7 +22,7 @@ exponential backoff (``stats.reconnects``). Nothing here raises on a link fault.
 
 **CAN** (``assets/robot_link.dbc``, the single source of truth; cantools encodes and
 decodes, AUTOSAR E2E Profile 1 protects every frame through ``autosar-e2e``, checked
-with :class:`edge_runtime.wearable.alerts.E2EChecker`). A target is two frames, the direction
+with :class:`edge_runtime.canbus.e2e.E2EChecker`). A target is two frames, the direction
 half (with the 16-bit sequence number) then the position half (with ``Seq mod 16``).
 The robot's state is seven frames every 10 ms; ``ROBOT_STATUS`` comes last and
 completes a state.
@@ -82,10 +82,11 @@ import serial
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.quaternion import QuaternionBase
 
-from edge_runtime.config import BUS_INTERFACES
+from edge_runtime.canbus.bus import CanLinkError, check_interface, open_bus
+from edge_runtime.canbus.dbc import load_dbc
+from edge_runtime.canbus.e2e import E2EChecker, E2EProtector
 from edge_runtime.core.manifest import ASSETS_DIR
 from edge_runtime.core.serial_line import parse_serial_spec
-from edge_runtime.wearable.alerts import CanLinkError, E2EChecker, E2EProtector, load_dbc, open_bus
 
 DBC_PATH = ASSETS_DIR / "robot_link.dbc"
 
@@ -353,20 +354,8 @@ class RobotCanCodec:
 
 def open_can_bus(interface: str, channel: str, host: str | None = None, port: int | None = None,
                  bitrate: int | None = None) -> can.BusABC:
-    """A python-can bus for the robot link (``open_bus``'s allow-list and one-line errors).
-
-    For socketcand the hub is probed first (connect, wait 0.2 s for its ``< hi >``):
-    python-can retries a refused connection for 10 s and waits for the greeting without
-    a timeout, so a missing or hung hub costs one quick OSError instead and the caller's
-    backoff decides when to try again.
-    """
-    kw = {}
-    if interface == "socketcand":
-        with socket.create_connection((host, port), timeout=0.2) as probe:
-            if not probe.recv(16).startswith(b"< hi >"):
-                raise ConnectionError(f"no socketcand greeting from {host}:{port}")
-        kw = {"host": host, "port": port, "tcp_tune": True}
-    return open_bus(interface, channel, bitrate, **kw)
+    """A python-can bus for the robot link (both ends): :func:`edge_runtime.canbus.bus.open_bus`."""
+    return open_bus(interface, channel, bitrate, host=host, port=port)
 
 
 class CanStateAssembler:
@@ -819,8 +808,8 @@ class CanRobotLink(RobotLink):
     def __init__(self, interface: str = "socketcand", channel: str = "vcan0", host: str | None = "127.0.0.1",
                  port: int | None = None, bitrate: int | None = None, bus: can.BusABC | None = None,
                  config: LinkConfig | None = None, clock: Clock | None = None):
-        if bus is None and interface not in BUS_INTERFACES:
-            raise ValueError(f"CAN interface {interface!r} is not allowed; use one of {', '.join(BUS_INTERFACES)}")
+        if bus is None:
+            check_interface(interface)
         if bus is None and interface == "socketcand" and port is None:
             raise ValueError("the socketcand interface needs port= (and host=)")
         self.interface, self.channel, self.host, self.port, self.bitrate = interface, channel, host, port, bitrate

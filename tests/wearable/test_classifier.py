@@ -1,4 +1,4 @@
-"""edge_runtime.core.onnx + manifest: hash-checked loading, session settings, classify shapes, bad input."""
+"""edge_runtime.wearable.classifier + core.onnx + core.manifest: hash-checked loading, session settings, classify shapes, bad input."""
 import json
 import shutil
 import subprocess
@@ -10,6 +10,7 @@ import pytest
 from support import REPO_ROOT
 
 from edge_runtime.core.manifest import (
+    ASSETS_DIR,
     SCHEMA_VERSION,
     ManifestError,
     ModelIntegrityError,
@@ -18,7 +19,8 @@ from edge_runtime.core.manifest import (
     sha256_file,
     write_manifest,
 )
-from edge_runtime.core.onnx import ASSETS_DIR, Engine, session_options
+from edge_runtime.core.onnx import session_options
+from edge_runtime.wearable.classifier import Engine
 from edge_runtime.wearable.labels import CLASSES
 from edge_runtime.wearable.preprocess import preprocess
 

@@ -1,0 +1,64 @@
+"""One way to open a python-can bus on the box: the interface allow-list, a socketcand probe,
+and one-line errors. The vehicle alerts and the robot link both open their bus here."""
+from __future__ import annotations
+
+import socket
+
+import can
+
+from edge_runtime.errors import LinkError
+
+BUS_INTERFACES = ("virtual", "socketcand", "socketcan", "slcan", "pcan", "kvaser", "vector", "ixxat", "gs_usb",
+                  "canalystii", "seeedstudio", "serial")
+"""python-can interfaces a box may use: a vehicle bus adapter, the socketcand hub, or the
+in-process virtual bus. Interfaces that are not a CAN bus (network broadcasts) are refused."""
+
+SOCKETCAND_PROBE_S = 0.2
+"""How long to wait for a socketcand server's ``< hi >`` before giving up on it."""
+
+
+class CanLinkError(LinkError):
+    """A CAN bus that cannot be opened or used; the message is one line naming it."""
+
+
+def check_interface(interface: str) -> None:
+    """The allow-list, in one place: CanLinkError unless ``interface`` is in BUS_INTERFACES."""
+    if interface not in BUS_INTERFACES:
+        raise CanLinkError(f"CAN interface {interface!r} is not allowed; use one of {', '.join(BUS_INTERFACES)}")
+
+
+def probe_socketcand(host: str | None, port: int | None, timeout_s: float = SOCKETCAND_PROBE_S) -> None:
+    """Connect to a socketcand server and wait for its greeting.
+
+    python-can retries a refused connection for 10 s and waits for the greeting without a
+    timeout, so a missing or hung hub costs one quick CanLinkError instead and the caller's
+    backoff decides when to try again."""
+    if port is None:
+        raise CanLinkError("the socketcand interface needs a port (and a host)")
+    try:
+        with socket.create_connection((host or "127.0.0.1", port), timeout=timeout_s) as probe:
+            greeting = probe.recv(16)
+    except OSError as exc:
+        raise CanLinkError(f"no socketcand server at {host}:{port}: {exc.strerror or exc}") from exc
+    if not greeting.startswith(b"< hi >"):
+        raise CanLinkError(f"no socketcand greeting from {host}:{port}")
+
+
+def open_bus(interface: str, channel: str | None = None, bitrate: int | None = None,
+             host: str | None = None, port: int | None = None, **kw) -> can.BusABC:
+    """``can.Bus`` for an allow-listed interface, with a one-line CanLinkError instead of a traceback.
+
+    ``host``/``port`` are the socketcand server's (probed first, see :func:`probe_socketcand`);
+    ``bitrate`` is passed to interfaces that set one (not socketcand or virtual)."""
+    check_interface(interface)
+    args = dict(kw)
+    if interface == "socketcand":
+        probe_socketcand(host, port)
+        args.update(host=host, port=port, tcp_tune=True)
+    if bitrate is not None and interface not in ("socketcand", "virtual"):
+        args["bitrate"] = bitrate
+    try:
+        return can.Bus(interface=interface, channel=channel, **args)
+    except Exception as exc:  # noqa: BLE001 - whatever the interface raises becomes one line
+        where = f"{interface}:{channel}" + (f" at {host}:{port}" if host is not None else "")
+        raise CanLinkError(f"cannot open CAN bus {where}: {type(exc).__name__}: {exc}".replace("\n", " ")) from exc

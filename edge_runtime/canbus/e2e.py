@@ -1,0 +1,100 @@
+"""AUTOSAR E2E Profile 1 for any DBC message, through the ``autosar-e2e`` package.
+
+CRC-8 in byte 0, alive counter 0..14 in the low nibble of byte 1, data ID from the
+DBC's ``E2E_DataID`` message attribute (mode BOTH). The sender (:class:`E2EProtector`)
+and the receiver (:class:`E2EChecker`) are shared by the vehicle alerts and the robot link.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+import e2e.p01 as p01
+
+COUNTER_MAX = 14  # AUTOSAR E2E Profile 1: 0..14, 15 is invalid
+
+
+def e2e_data_id(message) -> int:
+    """The E2E data ID of a DBC message (``E2E_DataID`` attribute, default: its CAN ID)."""
+    attrs = message.dbc.attributes if message.dbc is not None else {}
+    attr = attrs.get("E2E_DataID")
+    return int(attr.value) if attr is not None else int(message.frame_id)
+
+
+class E2EProtector:
+    """Send side of E2E Profile 1 for any DBC message: cantools encodes the signals, then
+    the alive counter (one per frame ID, wrapping at COUNTER_MAX) and the CRC go in.
+    Thread-safe: a heartbeat thread and the main loop may send at once."""
+
+    def __init__(self):
+        self._counters: dict[int, int] = {}
+        self._lock = threading.Lock()
+
+    def protect(self, message, signals: dict) -> can.Message:
+        with self._lock:
+            counter = self._counters.get(message.frame_id, 0)
+            self._counters[message.frame_id] = (counter + 1) % (COUNTER_MAX + 1)
+        data = bytearray(message.encode(dict(signals, E2E_CRC=0, AliveCounter=counter), strict=True))
+        p01.e2e_p01_protect(data, e2e_data_id(message), length=len(data), increment_counter=False)
+        return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
+
+
+@dataclass
+class E2EResult:
+    status: str
+    """'ok', 'initial' (first frame seen), 'wrong_crc', 'repeated', 'lost' (lost > 0 frames in between), 'unknown_id'."""
+    lost: int = 0
+
+    @property
+    def valid(self) -> bool:
+        return self.status in ("ok", "initial", "lost")
+
+
+@dataclass
+class E2EChecker:
+    """Receive side of E2E Profile 1: CRC, then the alive counter against the last good frame."""
+
+    db: Any = field(default=None, repr=False)
+    counts: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.db is None:
+            raise ValueError("E2EChecker needs the DBC whose messages it checks (db=...)")
+        self._ids = {m.frame_id: e2e_data_id(m) for m in self.db.messages}
+        self._last: dict[int, int] = {}
+
+    def check(self, msg: can.Message) -> E2EResult:
+        res = self._check(msg)
+        self.counts[res.status] = self.counts.get(res.status, 0) + 1
+        if res.lost:
+            self.counts["lost_frames"] = self.counts.get("lost_frames", 0) + res.lost
+        return res
+
+    def _check(self, msg: can.Message) -> E2EResult:
+        data_id = self._ids.get(msg.arbitration_id)
+        if data_id is None:
+            return E2EResult("unknown_id")
+        data = bytearray(msg.data)
+        if len(data) < 2 or not p01.e2e_p01_check(data, data_id, length=len(data)):
+            return E2EResult("wrong_crc")
+        counter = data[1] & 0x0F
+        if counter > COUNTER_MAX:
+            return E2EResult("wrong_crc")
+        last = self._last.get(msg.arbitration_id)
+        self._last[msg.arbitration_id] = counter
+        if last is None:
+            return E2EResult("initial")
+        delta = (counter - last) % (COUNTER_MAX + 1)
+        if delta == 0:
+            return E2EResult("repeated")
+        if delta == 1:
+            return E2EResult("ok")
+        return E2EResult("lost", lost=delta - 1)
+
+    @property
+    def errors(self) -> int:
+        return self.counts.get("wrong_crc", 0) + self.counts.get("repeated", 0) + self.counts.get("lost_frames", 0)
+
+
