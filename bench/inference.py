@@ -5,7 +5,7 @@ process (``bench.worker``) so that its peak resident memory is its own:
 
 * ``onnxruntime``: the manifest entry's file, sha256-checked
   (``edge_runtime.core.manifest.read_verified``), on the box's session settings
-  (``edge_runtime.core.onnx.session_options``: N intra-op threads, 1 inter-op,
+  (``edge_runtime.core.onnx.open_session``: N intra-op threads, 1 inter-op,
   no spinning, all graph optimisations); ``session.run`` with a pre-built feed.
   The child imports numpy and onnxruntime only (no torch), as a box would.
 * ``torch-eager``: the same network rebuilt in torch, in eval mode under
@@ -82,10 +82,9 @@ def _ort_runner(cfg: InferenceConfig, entry: dict, feed: dict) -> tuple[Callable
     import onnxruntime as ort
 
     from edge_runtime.core.manifest import read_verified
-    from edge_runtime.core.onnx import session_options
+    from edge_runtime.core.onnx import open_session
 
-    sess = ort.InferenceSession(read_verified(cfg.assets, entry), session_options(cfg.threads),
-                                providers=["CPUExecutionProvider"])
+    sess = open_session(read_verified(cfg.assets, entry), cfg.threads, str(Path(cfg.assets) / entry["file"]))
     outputs = [o.name for o in sess.get_outputs()]
     ro = ort.RunOptions()
     return (lambda: sess.run(outputs, feed, ro)), {}

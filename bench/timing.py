@@ -1,7 +1,8 @@
 """Timing and memory primitives shared by every bench measurement (numpy and the standard library).
 
 * :func:`time_calls` times each call alone with ``time.perf_counter_ns``, the
-  garbage collector paused, after an untimed warm-up;
+  garbage collector paused, after an untimed warm-up; :func:`interleaved_calls` does the
+  same for several functions in turn (``export.quantize`` compares int8 variants with it);
 * :func:`summarize` turns per-call nanoseconds into the reported statistics
   (microseconds: p50, p99, mean, min, max);
 * :func:`rss_mb` / :func:`peak_rss_mb` read the process's resident memory now and
@@ -19,21 +20,34 @@ import numpy as np
 
 def time_calls(fn: Callable[[], object], n: int, warmup: int) -> np.ndarray:
     """Wall time of ``n`` single calls of ``fn`` in ns, after ``warmup`` untimed calls."""
-    for _ in range(warmup):
-        fn()
-    out = np.empty(n, np.int64)
+    return interleaved_calls({"": fn}, n, rounds=1, warmup=warmup)[""]
+
+
+def interleaved_calls(fns: dict[str, Callable[[], object]], n: int, rounds: int, warmup: int
+                      ) -> dict[str, np.ndarray]:
+    """Wall time in ns of each single call of every function of ``fns``, after ``warmup`` untimed
+    calls of each: ``rounds`` rounds in which each function in turn makes ``n // rounds`` calls
+    (at least one), so that functions compared with each other share the machine's noise."""
+    for fn in fns.values():
+        for _ in range(warmup):
+            fn()
+    per = max(1, n // rounds) if n > 0 else 0
+    times = {k: np.empty(per * rounds, np.int64) for k in fns}
     clock = time.perf_counter_ns
     was = gc.isenabled()
     gc.disable()
     try:
-        for i in range(n):
-            t0 = clock()
-            fn()
-            out[i] = clock() - t0
+        for r in range(rounds):
+            for k, fn in fns.items():
+                buf = times[k]
+                for i in range(r * per, (r + 1) * per):
+                    t0 = clock()
+                    fn()
+                    buf[i] = clock() - t0
     finally:
         if was:
             gc.enable()
-    return out
+    return times
 
 
 def summarize(times_ns) -> dict:

@@ -202,9 +202,8 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
                  train_npz: str | None = None, test_npz: str | None = None, loso_dir: str | None = None,
                  variants: Sequence[str] | None = None, command: str | None = None, auto_loso: bool = True,
                  log: Callable[[str], None] = print, progress: bool = True) -> dict:
-    from models.dataset import build_cohort_datasets, load_npz
-    from models.nets import keras_param_count, torch_param_count
-    from models.train import DEFAULT_EPOCHS, fit, save_checkpoint
+    """The module docstring's steps 1-6, one function each; returns the manifest written."""
+    from models.train import DEFAULT_EPOCHS
 
     t0 = time.time()
     out = Path(out)
@@ -216,47 +215,84 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
         raise ExportError(f"--subjects: must be at least 1, got {subjects}")
     command = command or "python -m export " + " ".join(shlex.quote(a) for a in sys.argv[1:])
 
-    # 1. data
+    train_npz, test_npz, data_info = _cohort(train_npz, test_npz, subjects=subjects, seed=seed, minutes=minutes,
+                                             work=work, log=log, progress=progress)
+    train, test = _load_cohort(train_npz, test_npz, data_info)
+    model, train_s = _train(train, epochs=epochs, seed=seed, work=work,
+                            data={"train": str(train_npz), "test": str(test_npz)}, log=log, progress=progress)
+    X_train, X_test = preprocess(train.X), preprocess(test.X)
+    version, commit = f"{package_version()}+{ARCH}.seed{seed}", git_commit()
+    # models are staged in the work directory and copied next to the manifest only when
+    # everything passed: a failed build never leaves half-updated assets
+    fp32_path, parity = _export_fp32(model, train, X_test, seed=seed, epochs=epochs, version=version,
+                                     commit=commit, stage=work / "stage", log=log)
+    int8_path, quant = _quantise(fp32_path, X_train, train.y, X_test, test.y, seed=seed, variants=variants, log=log)
+    scores = _score(fp32_path, int8_path, X_test, test.y, list(train.classes), method=quant["method"],
+                    loso_dir=_loso_dir(loso_dir, auto_loso), log=log)
+
+    provenance = {"command": command, "seed": seed, "data": data_info,
+                  "training": {"arch": ARCH, "epochs": epochs, "seed": seed, "windows": len(train),
+                               "function": "models.train.fit", "threads": 1, "seconds": round(train_s, 1)},
+                  "git_commit": commit, "versions": versions(), "opset": DEFAULT_OPSET,
+                  "exporter": "torch.onnx.export(dynamo=False) via export.onnx_export.to_onnx"}
+    entries = _entries(fp32_path, int8_path, _common(model, list(train.classes), version, provenance),
+                       parity, quant, scores)
+    manifest, path = _install(out, entries, (fp32_path, int8_path), command)
+    log(f"wrote {out / fp32_path.name}, {out / int8_path.name}, {path} in {time.time() - t0:.0f} s")
+    return manifest
+
+
+def _cohort(train_npz: str | None, test_npz: str | None, *, subjects: int, seed: int, minutes: float, work: Path,
+            log: Callable[[str], None], progress: bool) -> tuple[str, str, dict]:
+    """1. (training NPZ, test NPZ, data provenance): the given files, else a simulated cohort."""
+    from models.dataset import build_cohort_datasets
+
     if train_npz or test_npz:
         if not (train_npz and test_npz):
             raise ExportError("--train and --test go together")
-        detector = None
-        data_info = {"source": "given NPZ files", "train": str(train_npz), "test": str(test_npz)}
-    else:
-        log(f"[1/5] simulating {subjects} subjects (seed {seed}, {minutes:g} min per trial) -> {work / 'data'}")
-        d = build_cohort_datasets(subjects, seed, minutes, work / "data", progress=progress)
-        train_npz, test_npz, detector = d["train"], d["test"], d["detector"]
-        data_info = {"source": "firmware_sim.devices.wrist.simulate_cohort via models.dataset.build_cohort_datasets",
-                     "subjects": subjects, "seed": seed, "minutes_per_trial": minutes,
-                     "detector": {k: detector[k] for k in ("recall", "precision", "distractions", "captures",
-                                                           "false_alarms")}}
+        return train_npz, test_npz, {"source": "given NPZ files", "train": str(train_npz), "test": str(test_npz)}
+    log(f"[1/5] simulating {subjects} subjects (seed {seed}, {minutes:g} min per trial) -> {work / 'data'}")
+    d = build_cohort_datasets(subjects, seed, minutes, work / "data", progress=progress)
+    detector = d["detector"]
+    return d["train"], d["test"], {
+        "source": "firmware_sim.devices.wrist.simulate_cohort via models.dataset.build_cohort_datasets",
+        "subjects": subjects, "seed": seed, "minutes_per_trial": minutes,
+        "detector": {k: detector[k] for k in ("recall", "precision", "distractions", "captures", "false_alarms")}}
+
+
+def _load_cohort(train_npz: str, test_npz: str, data_info: dict):
+    """1. The two window sets (same classes, in the same order); their counts go into ``data_info``."""
+    from models.dataset import load_npz
+
     train, test = load_npz(train_npz), load_npz(test_npz)
     if list(train.classes) != list(test.classes):
         raise ExportError(f"{test_npz}: field 'classes': {test.classes} differ from {train_npz}'s {train.classes}")
-    classes = list(train.classes)
     data_info.update(train_windows=len(train), test_windows=len(test), train_counts=train.counts(),
                      test_counts=test.counts(),
                      train_kind="ground-truth segments (1 s before each truth event, 700 frames)",
                      test_kind="detector captures (false alarms labelled Other)")
+    return train, test
 
-    # 2. train
+
+def _train(train, *, epochs: int, seed: int, work: Path, data: dict, log: Callable[[str], None], progress: bool):
+    """2. (the ConvLSTM trained on every ground-truth window, training seconds); checkpoint in ``work``."""
+    from models.train import fit, save_checkpoint
+
     log(f"[2/5] training {ARCH} on {len(train)} ground-truth windows of all subjects ({epochs} epochs, seed {seed})")
     t = time.time()
-    model = fit(ARCH, train.X, train.y, len(classes), epochs=epochs, seed=seed, progress=progress,
+    model = fit(ARCH, train.X, train.y, len(train.classes), epochs=epochs, seed=seed, progress=progress,
                 desc=f"{ARCH} assets")
     train_s = time.time() - t
-    save_checkpoint(work / ARCH, model, arch=ARCH, classes=classes, seed=seed, epochs=epochs, metrics={},
-                    data={"train": str(train_npz), "test": str(test_npz)})
+    save_checkpoint(work / ARCH, model, arch=ARCH, classes=list(train.classes), seed=seed, epochs=epochs, metrics={},
+                    data=data)
+    return model, train_s
 
-    # 3. export fp32 (models are staged in the work directory and copied next to the manifest
-    #    only when everything passed: a failed build never leaves half-updated assets)
-    stage = work / "stage"
+
+def _export_fp32(model, train, X_test: np.ndarray, *, seed: int, epochs: int, version: str, commit: str | None,
+                 stage: Path, log: Callable[[str], None]) -> tuple[Path, dict]:
+    """3. ``stage/convlstm.fp32.onnx`` and its parity with torch on the test captures (raises when off)."""
     stage.mkdir(parents=True, exist_ok=True)
-    X_test = preprocess(test.X)
-    X_train = preprocess(train.X)
-    version = f"{package_version()}+{ARCH}.seed{seed}"
-    commit = git_commit()
-    onx = to_onnx(model, classes, opset=DEFAULT_OPSET, model_version=version, commit=commit,
+    onx = to_onnx(model, list(train.classes), opset=DEFAULT_OPSET, model_version=version, commit=commit,
                   extra_meta={"training": {"seed": seed, "epochs": epochs, "windows": len(train)}})
     fp32_path = save_onnx(onx, stage / f"{ARCH}.fp32.onnx")
     parity = check_parity(model, onx, X_test[:512])
@@ -264,63 +300,88 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
         f"probs {parity['max_abs_probs']:.2e}")
     if not parity["ok"]:
         raise ExportError(f"{fp32_path}: torch/onnxruntime parity exceeds {parity['tol']:g}")
+    return fp32_path, parity
 
-    # 4. int8
+
+def _quantise(fp32_path: Path, X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray, *,
+              seed: int, variants: Sequence[str] | None, log: Callable[[str], None]) -> tuple[Path, dict]:
+    """4. The int8 model next to the fp32 one, calibrated on training windows, the variant chosen by
+    :func:`export.quantize.choose` gated on the test captures; and its quantisation report."""
     log("[4/5] quantising: candidates timed with 1 thread, gated on the test captures")
-    calib_idx = pick_windows(train.y, N_CALIB, seed)
-    int8_path = stage / f"{ARCH}.int8.onnx"
-    quant = choose(fp32_path, int8_path, X_train[calib_idx], eval_x=X_test, eval_y=test.y, variants=variants,
-                   log=log)
+    int8_path = fp32_path.with_name(f"{ARCH}.int8.onnx")
+    quant = choose(fp32_path, int8_path, X_train[pick_windows(y_train, N_CALIB, seed)], eval_x=X_test, eval_y=y_test,
+                   variants=variants, log=log)
     quant["calibration"].update(source="training windows (ground-truth segments), stratified by class",
                                 seed=seed)
     log(f"      chose {quant['method']}: int8 operators {quant['int8_operators']}")
+    return int8_path, quant
 
-    # 5. metrics
-    p32 = probs_of(fp32_path, X_test)
-    p8 = probs_of(int8_path, X_test)
-    m32 = _metrics(test.y, p32, classes)
-    m8 = _metrics(test.y, p8, classes)
-    delta = m8["macro_f1"] - m32["macro_f1"]
-    eval_note = ("detector-captured test windows of the training subjects (all subjects are in training: "
-                 "an in-sample-subject figure; between-subject figures are under 'loso')")
-    loso = None
+
+def _loso_dir(loso_dir: str | None, auto_loso: bool) -> str | None:
+    """The LOSO directory to compare fp32 and int8 over: the given one, else the report's when
+    ``python -m models report`` has written its folds."""
     if loso_dir is None and auto_loso and (DEFAULT_LOSO / "folds").is_dir() and (DEFAULT_LOSO / "metrics.json").exists():
-        loso_dir = str(DEFAULT_LOSO)  # the report's LOSO folds (python -m models report) are there: use them
+        return str(DEFAULT_LOSO)
+    return loso_dir
+
+
+def _score(fp32_path: Path, int8_path: Path, X_test: np.ndarray, y_test: np.ndarray, classes: list[str], *,
+           method: str, loso_dir: str | None, log: Callable[[str], None]) -> dict:
+    """5. fp32 and int8 metrics on the test captures (and over the LOSO folds); raises when int8's
+    macro-F1 is more than 0.01 from fp32's."""
+    p32, p8 = probs_of(fp32_path, X_test), probs_of(int8_path, X_test)
+    m32, m8 = _metrics(y_test, p32, classes), _metrics(y_test, p8, classes)
+    delta = m8["macro_f1"] - m32["macro_f1"]
+    loso = None
     if loso_dir:
         log(f"      LOSO fp32 vs int8 over {loso_dir}")
-        loso = compare_int8(loso_dir, method=quant["method"], log=log)
+        loso = compare_int8(loso_dir, method=method, log=log)
         loso = {k: v for k, v in loso.items() if k not in ("fp32", "int8")}
     log(f"[5/5] test captures: fp32 macro-F1 {m32['macro_f1']:.4f}, int8 {m8['macro_f1']:.4f} (d {delta:+.4f})"
         + (f"; LOSO fp32 {loso['fp32_macro_f1']:.4f} int8 {loso['int8_macro_f1']:.4f}" if loso else ""))
     if abs(delta) > 0.01:
         raise QuantizeError(f"{int8_path}: int8 macro-F1 differs from fp32 by {delta:+.4f} (> 0.01)")
+    return {"fp32": m32, "int8": m8, "delta": delta, "agreement": float(np.mean(p32.argmax(1) == p8.argmax(1))),
+            "loso": loso}
 
-    params = {"torch": torch_param_count(model), "keras": keras_param_count(model)}
+
+def _common(model, classes: list[str], version: str, provenance: dict) -> dict:
+    """6. What both manifest entries say alike: the model contract and its provenance."""
+    from models.nets import keras_param_count, torch_param_count
+
     inputs, outputs = io_spec(len(classes))
-    provenance = {"command": command, "seed": seed, "data": data_info,
-                  "training": {"arch": ARCH, "epochs": epochs, "seed": seed, "windows": len(train),
-                               "function": "models.train.fit", "threads": 1, "seconds": round(train_s, 1)},
-                  "git_commit": commit, "versions": versions(), "opset": DEFAULT_OPSET,
-                  "exporter": "torch.onnx.export(dynamo=False) via export.onnx_export.to_onnx"}
-    common = {"arch": ARCH, "model_version": version, "parameters": params, "inputs": inputs,
-              "outputs": outputs, "classes": classes, "provenance": provenance}
-    entries = [
+    return {"arch": ARCH, "model_version": version,
+            "parameters": {"torch": torch_param_count(model), "keras": keras_param_count(model)},
+            "inputs": inputs, "outputs": outputs, "classes": classes, "provenance": provenance}
+
+
+def _entries(fp32_path: Path, int8_path: Path, common: dict, parity: dict, quant: dict, scores: dict) -> list[dict]:
+    """6. The fp32 and int8 manifest entries."""
+    eval_note = ("detector-captured test windows of the training subjects (all subjects are in training: "
+                 "an in-sample-subject figure; between-subject figures are under 'loso')")
+    loso = scores["loso"]
+    return [
         {"name": f"{ARCH}-fp32", "file": fp32_path.name, "sha256": sha256_file(fp32_path), "precision": "fp32",
          "size_bytes": fp32_path.stat().st_size, **common,
-         "metrics": {"test_captures": m32, "evaluated_on": eval_note, "parity_vs_torch": parity,
+         "metrics": {"test_captures": scores["fp32"], "evaluated_on": eval_note, "parity_vs_torch": parity,
                      **({"loso": {"macro_f1": loso["fp32_macro_f1"], "accuracy": loso["fp32_accuracy"],
                                   "folds": loso["folds"], "n": loso["n"]}} if loso else {})}},
         {"name": f"{ARCH}-int8", "file": int8_path.name, "sha256": sha256_file(int8_path), "precision": "int8",
          "size_bytes": int8_path.stat().st_size, **common,
-         "metrics": {"test_captures": m8, "evaluated_on": eval_note,
-                     "macro_f1_delta_vs_fp32": delta,
-                     "agreement_with_fp32": float(np.mean(p32.argmax(1) == p8.argmax(1))),
+         "metrics": {"test_captures": scores["int8"], "evaluated_on": eval_note,
+                     "macro_f1_delta_vs_fp32": scores["delta"],
+                     "agreement_with_fp32": scores["agreement"],
                      **({"loso": {"macro_f1": loso["int8_macro_f1"], "fp32_macro_f1": loso["fp32_macro_f1"],
                                   "macro_f1_delta_vs_fp32": loso["macro_f1_delta"], "folds": loso["folds"],
                                   "n": loso["n"], "method": loso["method"], "holds": loso["holds"]}}
                         if loso else {})},
          "quantization": quant},
     ]
+
+
+def _install(out: Path, entries: list[dict], files: Sequence[Path], command: str) -> tuple[dict, Path]:
+    """6. ``files`` copied into ``out`` and ``out/manifest.json`` written: ``entries`` first, then
+    the entries of other models already there (e.g. a pose lifter), untouched."""
     names = {e["name"] for e in entries}
     kept = []
     try:
@@ -330,8 +391,6 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
     manifest = {"version": SCHEMA_VERSION, "created_by": f"{command} (edge-safety {package_version()})",
                 "models": entries + kept}
     out.mkdir(parents=True, exist_ok=True)
-    for p in (fp32_path, int8_path):
+    for p in files:
         shutil.copyfile(p, out / p.name)
-    path = write_manifest(out, manifest)
-    log(f"wrote {out / fp32_path.name}, {out / int8_path.name}, {path} in {time.time() - t0:.0f} s")
-    return manifest
+    return manifest, write_manifest(out, manifest)

@@ -29,13 +29,13 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from edge_runtime.cli import CliError, positive_int
 from edge_runtime.core.manifest import SCHEMA_VERSION, ManifestError, load_manifest, sha256_file, write_manifest
+from export.variants import Variant
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_ASSETS = REPO_ROOT / "edge_runtime" / "assets"
@@ -147,9 +147,13 @@ def export_onnx(model, path: str | Path, meta: dict | None = None) -> Path:
 
 def onnx_runner(path: str | Path, threads: int = 1):
     """``runner(windows (N, 27, 17, 2)) -> (pose (N, 1, 17, 3), root (N, 1, 3))`` on onnxruntime."""
-    from export.quantize import make_session
+    from edge_runtime.core.onnx import open_session
 
-    sess = make_session(path, threads)
+    return session_runner(open_session(path, threads))
+
+
+def session_runner(sess):
+    """:func:`onnx_runner` of an open onnxruntime session."""
     return lambda x: sess.run([POSE_OUTPUT, ROOT_OUTPUT], {INPUT_NAME: np.ascontiguousarray(x, np.float32)})
 
 
@@ -169,83 +173,29 @@ def check_parity(model, path: str | Path, windows: np.ndarray, tol: float = PARI
 
 
 # --------------------------------------------------------------------------- int8
-@dataclass(frozen=True)
-class QuantCandidate:
-    """One way to make the lifter int8."""
-
-    name: str
-    description: str
-    static: bool = True                  #: static QDQ (calibrated) or dynamic
-    per_channel: bool = True             #: per-channel weight scales (static)
-    keep_last_fp32: bool = False         #: leave the two output convolutions (shrink) in fp32
-
-
-CANDIDATES: tuple[QuantCandidate, ...] = (
-    QuantCandidate("qdq", "static QDQ on every op, per-channel int8 weights, uint8 activations (MinMax)"),
-    QuantCandidate("qdq_fp32_out", "static QDQ, per-channel, output convolutions kept fp32", keep_last_fp32=True),
-    QuantCandidate("qdq_pt", "static QDQ on every op, per-tensor weights", per_channel=False),
-    QuantCandidate("dynamic", "dynamic int8 convolutions (ConvInteger), activations quantised per call",
-                   static=False),
-)
-
-
 def _output_convs(model) -> list[str]:
     """Names of the Conv nodes not followed by a ReLU: the shrink layers (BatchNorm is fused by then)."""
     relu_inputs = {i for n in model.graph.node if n.op_type == "Relu" for i in n.input}
     return [n.name for n in model.graph.node if n.op_type == "Conv" and n.output[0] not in relu_inputs]
 
 
-def build_int8(fp32_path: Path, out_path: Path, cand: QuantCandidate, calib: np.ndarray) -> Path:
-    """Quantise ``fp32_path`` as ``cand`` says into ``out_path`` (metadata carried over)."""
-    import tempfile
-    import warnings
-
-    import onnx
-    from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_dynamic, quantize_static
-
-    from export.onnx_export import get_metadata, set_metadata
-    from export.quantize import WindowReader, _preprocess_model, _quiet_root_logger
-
-    with tempfile.TemporaryDirectory() as td:
-        pre = _preprocess_model(fp32_path, Path(td) / "pre.onnx")
-        with warnings.catch_warnings(), _quiet_root_logger():
-            warnings.simplefilter("ignore")
-            if cand.static:
-                exclude = _output_convs(onnx.load(str(pre))) if cand.keep_last_fp32 else None
-                quantize_static(str(pre), str(out_path), WindowReader(calib, 64, INPUT_NAME),
-                                quant_format=QuantFormat.QDQ, per_channel=cand.per_channel,
-                                activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                                calibrate_method=CalibrationMethod.MinMax, nodes_to_exclude=exclude,
-                                extra_options={"CalibTensorRangeSymmetric": False})
-            else:
-                quantize_dynamic(str(pre), str(out_path), op_types_to_quantize=["Conv"], weight_type=QuantType.QInt8)
-    q = onnx.load(str(out_path))
-    meta = get_metadata(fp32_path)
-    meta.update(precision="int8", quantization=cand.name)
-    set_metadata(q, meta)
-    out_path.write_bytes(q.SerializeToString(deterministic=True))
-    return out_path
+CANDIDATES: tuple[Variant, ...] = (
+    Variant("qdq", "static QDQ on every op, per-channel int8 weights, uint8 activations (MinMax)", static_ops=None),
+    Variant("qdq_fp32_out", "static QDQ, per-channel, output convolutions kept fp32", static_ops=None,
+            keep_fp32=_output_convs),
+    Variant("qdq_pt", "static QDQ on every op, per-tensor weights", static_ops=None, per_channel=False),
+    Variant("dynamic", "dynamic int8 convolutions (ConvInteger), activations quantised per call",
+            dynamic_ops=("Conv",)),
+)
 
 
-def latency_us(paths: dict[str, Path], runs: int, rf: int = 27) -> dict[str, dict]:
-    """Per-frame (batch 1) latency on one onnxruntime thread, interleaved: {name: {p50_us, mean_us, p99_us}}."""
-    from export.quantize import interleaved_latency, make_session
-
-    x = np.random.default_rng(0).normal(0, 0.3, (1, rf, 17, 2)).astype(np.float32)
-    sessions = {k: make_session(p, 1) for k, p in paths.items()}
-    runners = {k: (lambda s=s: s.run(None, {INPUT_NAME: x})) for k, s in sessions.items()}
-    t = interleaved_latency(runners, n=runs, rounds=5, warmup=max(20, runs // 10))
-    return {k: {"p50_us": float(np.median(v) / 1e3), "mean_us": float(v.mean() / 1e3),
-                "p99_us": float(np.percentile(v, 99) / 1e3), "n": int(v.size)} for k, v in t.items()}
-
-
-def choose_int8(fp32_mm: float, cands: dict[str, dict]) -> str:
+def choose_int8(fp32_mm: float, mpjpe_mm: dict[str, float], p50_us: dict[str, float]) -> str:
     """The fastest candidate within the allowed MPJPE loss; else the most accurate."""
+    from export.quantize import fastest
+
     allowed = fp32_mm + max(MAX_INT8_LOSS_MM, MAX_INT8_LOSS_REL * fp32_mm)
-    ok = [k for k, c in cands.items() if c["mpjpe_mm"] <= allowed]
-    if ok:
-        return min(ok, key=lambda k: cands[k]["latency"]["p50_us"])
-    return min(cands, key=lambda k: cands[k]["mpjpe_mm"])
+    ok = [k for k, mm in mpjpe_mm.items() if mm <= allowed]
+    return fastest(p50_us, ok) if ok else min(mpjpe_mm, key=mpjpe_mm.get)
 
 
 # --------------------------------------------------------------------------- manifest
@@ -316,20 +266,43 @@ def run_size(channels: int, epochs: int, splits: dict, a, work: Path, log) -> tu
     """Train (or reuse), evaluate, export and quantise one size; returns (row, fp32 path, int8 path, model)."""
     import torch
 
-    from models.lifter import LifterConfig
-    from models.lifter_train import (
-        TrainConfig,
-        eval_frames,
-        evaluate,
-        fit,
-        fmt_metrics,
-        load_checkpoint,
-        save_checkpoint,
-        state_digest,
-    )
+    from models.lifter_train import evaluate, fmt_metrics
 
     d = work / f"c{channels}"
     d.mkdir(parents=True, exist_ok=True)
+    say = lambda s: log(f"c{channels}: {s}")
+    model, mcfg, train = _trained(channels, epochs, splits, a, d, say)
+    torch.set_num_threads(a.threads)
+    fp32_torch = {s: evaluate(model, splits[s], a.eval_frames) for s in ("test_subjects", "test")}
+    say(f"torch held-out subjects+cameras: {fmt_metrics(fp32_torch['test'])}")
+    fp32_path, parity = _export_checked(model, channels, mcfg, a.seed, splits["test"], d)
+    int8_path, quantization, latency = _quantise(model, fp32_path, splits, a, d, say)
+    runners = {"fp32": onnx_runner(fp32_path), "int8": onnx_runner(int8_path)}
+    res = {prec: {s: evaluate(model, splits[s], a.eval_frames, runner=r) for s in ("test_subjects", "test")}
+           for prec, r in runners.items()}
+    row = {
+        "channels": channels, "config": mcfg.to_dict(), "parameters": model.parameter_counts(),
+        "epochs": epochs, "train": train,
+        "torch": {s: _slim(m) for s, m in fp32_torch.items()},
+        "fp32": {s: _slim(m) for s, m in res["fp32"].items()},
+        "int8": {s: _slim(m) for s, m in res["int8"].items()},
+        "parity": parity,
+        "latency": latency,
+        "bytes": {"fp32": fp32_path.stat().st_size, "int8": int8_path.stat().st_size},
+        "quantization": quantization,
+    }
+    say(f"fp32 {fmt_metrics(res['fp32']['test'])}; int8 MPJPE {res['int8']['test']['mpjpe_mm']:.1f} mm; "
+        f"{latency['fp32']['p50_us']:.0f} / {latency['int8']['p50_us']:.0f} us per frame; "
+        f"int8 {row['bytes']['int8'] / 1e6:.2f} MB")
+    return row, fp32_path, int8_path, model
+
+
+def _trained(channels: int, epochs: int, splits: dict, a, d: Path, say) -> tuple[object, object, dict]:
+    """(model, its LifterConfig, the row's "train") of ``d/model.pt``: reused with ``--reuse`` when
+    its settings and data match, else trained and saved there."""
+    from models.lifter import LifterConfig
+    from models.lifter_train import TrainConfig, fit, load_checkpoint, save_checkpoint, state_digest
+
     mcfg = LifterConfig(channels=channels, trajectory_channels=a.trajectory_channels)
     tcfg = TrainConfig(epochs=epochs, frames_per_epoch=a.frames_per_epoch, batch_size=a.batch_size, seed=a.seed,
                        threads=a.threads)
@@ -340,69 +313,64 @@ def run_size(channels: int, epochs: int, splits: dict, a, work: Path, log) -> tu
         m, ck = load_checkpoint(ck_path)
         if ck.get("config") == mcfg.to_dict() and ck.get("train_config") == tcfg.to_dict() and ck.get("data") == data_key:
             model, history, t_train = m, ck.get("history"), ck.get("train_seconds", 0.0)
-            log(f"c{channels}: reusing {ck_path}")
+            say(f"reusing {ck_path}")
     if model is None:
         t0 = time.time()
-        model, history = fit(splits["train"], mcfg, tcfg, progress=not a.no_progress, log=lambda s: log(f"c{channels}: {s}"))
+        model, history = fit(splits["train"], mcfg, tcfg, progress=not a.no_progress, log=say)
         t_train = time.time() - t0
         save_checkpoint(ck_path, model, tcfg, data=data_key, history=history, train_seconds=t_train)
-    torch.set_num_threads(a.threads)
-    fp32_torch = {s: evaluate(model, splits[s], a.eval_frames) for s in ("test_subjects", "test")}
-    log(f"c{channels}: torch held-out subjects+cameras: {fmt_metrics(fp32_torch['test'])}")
+    return model, mcfg, {"history": history, "seconds": round(t_train, 1), "config": tcfg.to_dict(),
+                         "weights_sha256_16": state_digest(model)}
+
+
+def _export_checked(model, channels: int, mcfg, seed: int, test, d: Path) -> tuple[Path, dict]:
+    """``d/lifter.fp32.onnx`` and its parity with torch on held-out windows (raises when it differs)."""
+    from models.lifter_train import eval_frames
+
     meta = {"arch": ARCH, "channels": str(channels), "receptive_field": str(mcfg.receptive_field),
-            "joints": "h36m-17", "seed": str(a.seed), "precision": "fp32"}
+            "joints": "h36m-17", "seed": str(seed), "precision": "fp32"}
     fp32_path = export_onnx(model, d / "lifter.fp32.onnx", meta)
-    test = splits["test"]
-    probe = test.windows(eval_frames(test, 256)).astype(np.float32)
-    parity = check_parity(model, fp32_path, probe)
+    parity = check_parity(model, fp32_path, test.windows(eval_frames(test, 256)).astype(np.float32))
     if not parity["ok"]:
         worst = max(parity["max_abs_pose_m"], parity["max_abs_root_m"])
         raise LifterExportError(f"{fp32_path}: onnxruntime differs from torch by {worst:.2e} m")
-    calib_idx = eval_frames(splits["train"], N_CALIB)
-    calib = splits["train"].windows(calib_idx).astype(np.float32)
-    quick = max(1000, a.eval_frames // 4)
-    fp32_quick = evaluate(model, test, quick, runner=onnx_runner(fp32_path))
-    cands = {}
-    for c in CANDIDATES:
-        p = build_int8(fp32_path, d / f"lifter.int8.{c.name}.onnx", c, calib)
-        cands[c.name] = {"path": p, "description": c.description, "bytes": p.stat().st_size,
-                         "mpjpe_mm": evaluate(model, test, quick, runner=onnx_runner(p))["mpjpe_mm"]}
-    lat = latency_us({"fp32": fp32_path, **{k: v["path"] for k, v in cands.items()}}, a.latency_runs)
-    for k, v in cands.items():
-        v["latency"] = lat[k]
-    best = choose_int8(fp32_quick["mpjpe_mm"], cands)
-    int8_path = d / "lifter.int8.onnx"
-    shutil.copyfile(cands[best]["path"], int8_path)
-    log(f"c{channels}: int8 candidates (MPJPE on {quick} frames, fp32 {fp32_quick['mpjpe_mm']:.1f} mm): " +
-        ", ".join(f"{k} {v['mpjpe_mm']:.1f} mm {v['latency']['p50_us']:.0f} us" for k, v in cands.items()) +
-        f"; fp32 {lat['fp32']['p50_us']:.0f} us -> {best}")
-    runners = {"fp32": onnx_runner(fp32_path), "int8": onnx_runner(int8_path)}
-    res = {prec: {s: evaluate(model, splits[s], a.eval_frames, runner=r) for s in ("test_subjects", "test")}
-           for prec, r in runners.items()}
-    from export.quantize import int8_report
+    return fp32_path, parity
 
-    row = {
-        "channels": channels, "config": mcfg.to_dict(), "parameters": model.parameter_counts(),
-        "epochs": epochs, "train": {"history": history, "seconds": round(t_train, 1), "config": tcfg.to_dict(),
-                                    "weights_sha256_16": state_digest(model)},
-        "torch": {s: _slim(m) for s, m in fp32_torch.items()},
-        "fp32": {s: _slim(m) for s, m in res["fp32"].items()},
-        "int8": {s: _slim(m) for s, m in res["int8"].items()},
-        "parity": parity,
-        "latency": {"fp32": lat["fp32"], "int8": lat[best]},
-        "bytes": {"fp32": fp32_path.stat().st_size, "int8": int8_path.stat().st_size},
-        "quantization": {"method": best, "description": cands[best]["description"],
-                         "calibration": f"{len(calib)} windows of training subjects and cameras (MinMax)",
-                         "rule": f"fastest candidate within max({MAX_INT8_LOSS_MM} mm, {MAX_INT8_LOSS_REL:.0%}) "
-                                 "MPJPE of fp32, else the most accurate",
-                         "candidates": {k: {"mpjpe_mm": round(v["mpjpe_mm"], 2), "bytes": v["bytes"],
-                                            "p50_us": round(v["latency"]["p50_us"], 1),
-                                            "description": v["description"]} for k, v in cands.items()},
-                         "scored_on_frames": quick, **int8_report(int8_path)},
-    }
-    log(f"c{channels}: fp32 {fmt_metrics(res['fp32']['test'])}; int8 MPJPE {res['int8']['test']['mpjpe_mm']:.1f} mm; "
-        f"{lat['fp32']['p50_us']:.0f} / {lat[best]['p50_us']:.0f} us per frame; int8 {row['bytes']['int8'] / 1e6:.2f} MB")
-    return row, fp32_path, int8_path, model
+
+def _quantise(model, fp32_path: Path, splits: dict, a, d: Path, say) -> tuple[Path, dict, dict]:
+    """Every :data:`CANDIDATES` built (calibrated on training windows), scored on held-out frames
+    and timed per frame against fp32; the :func:`choose_int8` one copied to ``d/lifter.int8.onnx``.
+    Returns (that path, the row's "quantization", the row's "latency")."""
+    from export.quantize import compare_variants, int8_report
+    from models.lifter_train import eval_frames, evaluate
+
+    train, test = splits["train"], splits["test"]
+    calib = train.windows(eval_frames(train, N_CALIB)).astype(np.float32)
+    quick = max(1000, a.eval_frames // 4)
+    fp32_mm = evaluate(model, test, quick, runner=onnx_runner(fp32_path))["mpjpe_mm"]
+    frame = np.random.default_rng(0).normal(0, 0.3, (1, model.config.receptive_field, 17, 2)).astype(np.float32)
+    comp = compare_variants(
+        fp32_path, CANDIDATES, calib, d, stem="lifter.int8.", describe=False,
+        score=lambda s: {"mpjpe_mm": evaluate(model, test, quick, runner=session_runner(s))["mpjpe_mm"]},
+        feed={INPUT_NAME: frame}, n_timing=a.latency_runs, warmup=max(20, a.latency_runs // 10), log=say)
+    if not comp.paths:
+        raise LifterExportError(f"{fp32_path}: no int8 candidate could be built")
+    mm = {k: comp.results[k]["mpjpe_mm"] for k in comp.paths}
+    p50 = {k: lat["p50_us"] for k, lat in comp.latency.items()}
+    best = choose_int8(fp32_mm, mm, p50)
+    int8_path = d / "lifter.int8.onnx"
+    shutil.copyfile(comp.paths[best], int8_path)
+    say(f"int8 candidates (MPJPE on {quick} frames, fp32 {fp32_mm:.1f} mm): " +
+        ", ".join(f"{k} {mm[k]:.1f} mm {p50[k]:.0f} us" for k in mm) + f"; fp32 {p50['fp32']:.0f} us -> {best}")
+    quantization = {
+        "method": best, "description": comp.results[best]["description"],
+        "calibration": f"{len(calib)} windows of training subjects and cameras (MinMax)",
+        "rule": f"fastest candidate within max({MAX_INT8_LOSS_MM} mm, {MAX_INT8_LOSS_REL:.0%}) MPJPE of fp32, "
+                "else the most accurate",
+        "candidates": {k: {"mpjpe_mm": round(mm[k], 2), "bytes": comp.results[k]["size_bytes"],
+                           "p50_us": round(p50[k], 1), "description": comp.results[k]["description"]} for k in mm},
+        "scored_on_frames": quick, **int8_report(int8_path)}
+    return int8_path, quantization, {"fp32": comp.latency["fp32"], "int8": comp.latency[best]}
 
 
 # --------------------------------------------------------------------------- report

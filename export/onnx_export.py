@@ -351,13 +351,10 @@ def save_onnx(onx: onnx.ModelProto, path: str | Path) -> Path:
 def check_parity(model: nn.Module, onnx_model: onnx.ModelProto | str | Path, x: np.ndarray | None = None,
                  tol: float = PARITY_TOL) -> dict:
     """Max |torch - onnxruntime| over logits and probs (torch module in eval mode, 1 thread)."""
-    import onnxruntime as ort
-
-    from edge_runtime.core.onnx import session_options
+    from edge_runtime.core.onnx import open_session
 
     x = example_input(64, seed=1) if x is None else np.asarray(x, np.float32)
-    data = onnx_model.SerializeToString() if isinstance(onnx_model, onnx.ModelProto) else Path(onnx_model).read_bytes()
-    sess = ort.InferenceSession(data, session_options(1), providers=["CPUExecutionProvider"])
+    sess = open_session(onnx_model.SerializeToString() if isinstance(onnx_model, onnx.ModelProto) else onnx_model)
     probs, logits = sess.run([PROBS, LOGITS], {INPUT_NAME: x})
     was = model.training
     model.eval()

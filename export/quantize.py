@@ -31,15 +31,18 @@ records every candidate's latency and drift, and which operators ended up
 int8: graph op types, the op types onnxruntime actually runs after its
 optimisations (QLinearConv, QGemm, DynamicQuantizeLSTM, ...), and per source
 op type whether it computes in int8 or fp32.
+
+Building, scoring and timing the candidates (:func:`compare_variants`) and the
+fastest-with-ties rule (:func:`fastest`) are shared with the pose lifter's
+export (``export.lifter_assets``), which brings its own candidates and scores
+them by MPJPE instead of argmax agreement.
 """
 from __future__ import annotations
 
 import contextlib
-import gc
 import json
 import logging
 import tempfile
-import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,8 +61,10 @@ from onnxruntime.quantization import (
 )
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from edge_runtime.core.onnx import session_options
+from bench.timing import interleaved_calls
+from edge_runtime.core.onnx import open_session
 from export.onnx_export import INPUT_NAME, PROBS, get_metadata, op_counts, set_metadata
+from export.variants import Variant
 
 MIN_AGREEMENT = 0.98
 MAX_F1_DELTA = 0.01
@@ -119,15 +124,8 @@ def pick_windows(y: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
 
 # --------------------------------------------------------------------------- variants
 
-@dataclass(frozen=True)
-class Variant:
-    name: str
-    description: str
-    static_ops: tuple[str, ...] = ()
-    dynamic_ops: tuple[str, ...] = ()
-    per_channel: bool = True
-    activation: QuantType = QuantType.QUInt8
-    exclude_first_conv: bool = False
+def _first_conv(model: onnx.ModelProto) -> list[str]:
+    return [n.name for n in model.graph.node if n.op_type == "Conv"][:1]
 
 
 _CONV_STACK = ("Conv", "Relu", "MaxPool", "Squeeze", "Transpose", "Reshape", "Flatten")
@@ -139,9 +137,9 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in (
     Variant("qdq_conv_pt", "static QDQ conv stack, per-tensor weights; LSTM, head fp32",
             static_ops=_CONV_STACK, per_channel=False),
     Variant("qdq_conv_s8", "static QDQ conv stack, int8 activations (S8S8); LSTM, head fp32",
-            static_ops=_CONV_STACK, activation=QuantType.QInt8),
+            static_ops=_CONV_STACK, activation="int8"),
     Variant("qdq_conv2", "static QDQ on the second conv only; first conv, LSTM, head fp32",
-            static_ops=_CONV_STACK, exclude_first_conv=True),
+            static_ops=_CONV_STACK, keep_fp32=_first_conv),
     Variant("qdq_conv+dyn_lstm", "static QDQ conv stack + dynamic LSTM (DynamicQuantizeLSTM); head fp32",
             static_ops=_CONV_STACK, dynamic_ops=("LSTM",)),
     Variant("qdq_all", "static QDQ conv stack and dense head (QGemm); LSTM fp32",
@@ -149,10 +147,6 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in (
     Variant("qdq_all+dyn_lstm", "static QDQ conv stack and head + dynamic LSTM",
             static_ops=_CONV_STACK + ("Gemm", "MatMul"), dynamic_ops=("LSTM",)),
 )}
-
-
-def _first_conv(model: onnx.ModelProto) -> list[str]:
-    return [n.name for n in model.graph.node if n.op_type == "Conv"][:1]
 
 
 def _preprocess_model(src: Path, dst: Path) -> Path:
@@ -176,8 +170,12 @@ def _quiet_root_logger():
 
 
 def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant | str,
-                  calib: np.ndarray, *, pre_processed: str | Path | None = None) -> Path:
-    """Quantise ``fp32_path`` with ``variant`` into ``out_path``; metadata carried over."""
+                  calib: np.ndarray, *, pre_processed: str | Path | None = None, describe: bool = True) -> Path:
+    """Quantise ``fp32_path`` with ``variant`` into ``out_path``; metadata carried over.
+
+    ``calib`` holds calibration inputs of the graph's (single) input. ``describe`` appends the
+    variant's description to the doc string (the ConvLSTM assets carry it; the lifter's never
+    did, and their bytes stay as shipped)."""
     v = VARIANTS[variant] if isinstance(variant, str) else variant
     fp32_path, out_path = Path(fp32_path), Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
@@ -186,16 +184,17 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
         cur = src
         with warnings.catch_warnings(), _quiet_root_logger():
             warnings.simplefilter("ignore")
-            if v.static_ops:
+            if v.static:
                 model = onnx.load(str(src))
                 present = {n.op_type for n in model.graph.node}
-                ops = [o for o in v.static_ops if o in present]
+                ops = None if v.static_ops is None else [o for o in v.static_ops if o in present]
                 stage = Path(td) / "static.onnx"
-                quantize_static(str(cur), str(stage), WindowReader(calib), quant_format=QuantFormat.QDQ,
-                                op_types_to_quantize=ops, per_channel=v.per_channel,
-                                activation_type=v.activation, weight_type=QuantType.QInt8,
+                quantize_static(str(cur), str(stage), WindowReader(calib, input_name=model.graph.input[0].name),
+                                quant_format=QuantFormat.QDQ, op_types_to_quantize=ops, per_channel=v.per_channel,
+                                activation_type=QuantType.QInt8 if v.activation == "int8" else QuantType.QUInt8,
+                                weight_type=QuantType.QInt8,
                                 calibrate_method=CalibrationMethod.MinMax,
-                                nodes_to_exclude=_first_conv(model) if v.exclude_first_conv else None,
+                                nodes_to_exclude=v.keep_fp32(model) if v.keep_fp32 else None,
                                 extra_options={"CalibTensorRangeSymmetric": False})
                 cur = stage
             if v.dynamic_ops:
@@ -207,7 +206,8 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
     meta = get_metadata(fp32_path)
     meta.update(precision="int8", quantization=v.name)
     set_metadata(q, meta)
-    q.doc_string = onnx.load(str(fp32_path), load_external_data=False).doc_string + f" [int8: {v.description}]"
+    if describe:
+        q.doc_string = onnx.load(str(fp32_path), load_external_data=False).doc_string + f" [int8: {v.description}]"
     out_path.write_bytes(q.SerializeToString(deterministic=True))
     return out_path
 
@@ -217,10 +217,9 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
 def runtime_op_types(model_path: str | Path) -> dict[str, int]:
     """Op types onnxruntime runs after its graph optimisations (level ALL, CPU provider)."""
     with tempfile.TemporaryDirectory() as td:
-        so = session_options(1)
-        so.optimized_model_filepath = str(Path(td) / "opt.onnx")
-        ort.InferenceSession(str(model_path), so, providers=["CPUExecutionProvider"])
-        return op_counts(onnx.load(so.optimized_model_filepath))
+        optimized = Path(td) / "opt.onnx"
+        open_session(model_path, optimized_model_path=optimized)
+        return op_counts(onnx.load(str(optimized)))
 
 
 def int8_report(model_path: str | Path) -> dict:
@@ -266,34 +265,66 @@ def int8_report(model_path: str | Path) -> dict:
 
 # --------------------------------------------------------------------------- measurement
 
-def make_session(model: str | Path | bytes, threads: int = 1) -> ort.InferenceSession:
-    data = model if isinstance(model, bytes) else Path(model).read_bytes()
-    return ort.InferenceSession(data, session_options(threads), providers=["CPUExecutionProvider"])
+def latency_stats(times_ns: np.ndarray) -> dict:
+    """Median, 99th percentile and mean of per-call times in microseconds, and how many calls."""
+    return {"p50_us": float(np.median(times_ns) / 1e3), "p99_us": float(np.percentile(times_ns, 99) / 1e3),
+            "mean_us": float(times_ns.mean() / 1e3), "n": int(len(times_ns))}
 
 
-def interleaved_latency(runners: dict[str, Callable[[], object]], n: int = 2000, rounds: int = 5,
-                        warmup: int = 200) -> dict[str, np.ndarray]:
-    """Per-call wall times (ns) of each runner, measured in interleaved rounds."""
-    for f in runners.values():
-        for _ in range(warmup):
-            f()
-    per = max(1, n // rounds)
-    times = {k: np.empty(per * rounds, np.int64) for k in runners}
-    clock = time.perf_counter_ns
-    gc_was = gc.isenabled()
-    gc.disable()
-    try:
-        for r in range(rounds):
-            for k, f in runners.items():
-                buf = times[k]
-                for i in range(r * per, (r + 1) * per):
-                    t0 = clock()
-                    f()
-                    buf[i] = clock() - t0
-    finally:
-        if gc_was:
-            gc.enable()
-    return times
+@dataclass
+class Comparison:
+    """What :func:`compare_variants` found.
+
+    ``paths``: the variants that built and quantised something; ``results``: per variant, its
+    description, the caller's scores, ``size_bytes`` and :func:`int8_report` (or only ``error``);
+    ``latency``: :func:`latency_stats` of "fp32" and of every variant in ``paths``."""
+
+    paths: dict[str, Path]
+    results: dict[str, dict]
+    latency: dict[str, dict]
+
+
+def compare_variants(fp32_path: str | Path, variants: Sequence[Variant], calib: np.ndarray, out_dir: str | Path, *,
+                     score: Callable[[ort.InferenceSession], dict], feed: dict[str, np.ndarray],
+                     outputs: list[str] | None = None, threads: int = 1, n_timing: int, warmup: int,
+                     stem: str = "", describe: bool = True, log: Callable[[str], None] = lambda s: None
+                     ) -> Comparison:
+    """Build every variant of ``fp32_path`` into ``out_dir/<stem><name>.onnx``, score each
+    (``score(session)``: the caller's accuracy against fp32), then time fp32 and the variants at
+    ``feed`` on ``threads`` onnxruntime thread(s), interleaved in rounds so that they share the
+    machine's noise. A variant the graph does not support is skipped, not fatal."""
+    fp32_path, out_dir = Path(fp32_path), Path(out_dir)
+    paths: dict[str, Path] = {}
+    results: dict[str, dict] = {}
+    sessions = {"fp32": open_session(fp32_path, threads)}
+    with tempfile.TemporaryDirectory() as td:
+        pre = _preprocess_model(fp32_path, Path(td) / "pre.onnx")
+        for v in variants:
+            path = out_dir / f"{stem}{v.name}.onnx"
+            try:
+                build_variant(fp32_path, path, v, calib, pre_processed=pre, describe=describe)
+            except Exception as e:  # onnxruntime.quantization raises whatever its passes raise
+                results[v.name] = {"error": f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"}
+                log(f"  {v.name}: failed ({results[v.name]['error']})")
+                continue
+            rep = int8_report(path)
+            if not rep["int8_operators"]:
+                results[v.name] = {"error": "no operator was quantised"}
+                continue
+            paths[v.name] = path
+            sessions[v.name] = open_session(path, threads)
+            results[v.name] = {"description": v.description, **score(sessions[v.name]),
+                               "size_bytes": path.stat().st_size, **rep}
+    runners = {k: (lambda s=s: s.run(outputs, feed)) for k, s in sessions.items()}
+    times = interleaved_calls(runners, n_timing, rounds=5, warmup=warmup)
+    return Comparison(paths, results, {k: latency_stats(t) for k, t in times.items()})
+
+
+def fastest(p50_us: dict[str, float], among: Sequence[str], tie: float = 0.0) -> str:
+    """The fastest of ``among``; of those within ``tie`` (a fraction) of it, the first in
+    ``among``'s order (so that timing noise does not flip a choice between equally fast ones)."""
+    best = min(p50_us[k] for k in among)
+    return next(k for k in among if p50_us[k] <= best * (1 + tie))
 
 
 def _macro_f1(y_true: np.ndarray, y_pred: np.ndarray) -> float:
@@ -308,7 +339,7 @@ def _macro_f1(y_true: np.ndarray, y_pred: np.ndarray) -> float:
 
 
 def probs_of(model: str | Path | ort.InferenceSession, x: np.ndarray, batch: int = 512) -> np.ndarray:
-    s = model if isinstance(model, ort.InferenceSession) else make_session(model)
+    s = model if isinstance(model, ort.InferenceSession) else open_session(model)
     return np.concatenate([s.run([PROBS], {INPUT_NAME: x[i:i + batch]})[0] for i in range(0, len(x), batch)])
 
 
@@ -324,71 +355,70 @@ def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, ev
         if v not in VARIANTS:
             raise QuantizeError(f"unknown quantisation variant {v!r}; choose from {', '.join(VARIANTS)}")
     eval_x = np.ascontiguousarray(eval_x, np.float32)
-    x1 = np.ascontiguousarray(eval_x[:1])
-    ref = probs_of(fp32_path, eval_x)
-    ref_pred = ref.argmax(1)
-    f1_fp32 = _macro_f1(np.asarray(eval_y), ref_pred) if eval_y is not None else None
-    results: dict[str, dict] = {}
-    sessions: dict[str, ort.InferenceSession] = {"fp32": make_session(fp32_path, threads)}
     with tempfile.TemporaryDirectory() as td:
-        pre = _preprocess_model(fp32_path, Path(td) / "pre.onnx")
-        paths = {}
-        for name in names:
-            p = Path(td) / f"{name}.onnx"
-            try:
-                build_variant(fp32_path, p, name, calib, pre_processed=pre)
-            except Exception as e:  # a variant the graph does not support is skipped, not fatal
-                results[name] = {"error": f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"}
-                log(f"  {name}: failed ({results[name]['error']})")
-                continue
-            rep = int8_report(p)
-            if not rep["int8_operators"]:
-                results[name] = {"error": "no operator was quantised"}
-                continue
-            paths[name] = p
-            sessions[name] = make_session(p, threads)
-            pr = probs_of(sessions[name], eval_x)
-            pred = pr.argmax(1)
-            r = {"description": VARIANTS[name].description, "agreement": float(np.mean(pred == ref_pred)),
-                 "max_abs_probs": float(np.abs(pr - ref).max()), "size_bytes": p.stat().st_size, **rep}
-            if eval_y is not None:
-                r["macro_f1"] = _macro_f1(np.asarray(eval_y), pred)
-                r["macro_f1_delta"] = r["macro_f1"] - f1_fp32
-            results[name] = r
-        runners = {k: (lambda s=s: s.run([PROBS], {INPUT_NAME: x1})) for k, s in sessions.items()}
-        times = interleaved_latency(runners, n=n_timing)
-        for k, t in times.items():
-            stats = {"p50_us": float(np.median(t) / 1e3), "p99_us": float(np.percentile(t, 99) / 1e3),
-                     "mean_us": float(t.mean() / 1e3), "n": int(len(t))}
-            if k == "fp32":
-                fp32_lat = stats
-            else:
-                results[k].update(stats)
-        ok = [k for k in paths if results[k]["agreement"] >= MIN_AGREEMENT and
-              (eval_y is None or abs(results[k]["macro_f1_delta"]) <= MAX_F1_DELTA)]
-        for k in paths:
-            results[k]["accepted"] = k in ok
-            log(f"  {k:18s} p50 {results[k]['p50_us']:7.1f} us  agreement {results[k]['agreement']:.4f}"
-                + (f"  dF1 {results[k]['macro_f1_delta']:+.4f}" if eval_y is not None else "")
-                + ("" if k in ok else "  (refused)"))
+        comp = compare_variants(fp32_path, [VARIANTS[n] for n in names], calib, td,
+                                score=_drift_from(probs_of(fp32_path, eval_x), eval_x, eval_y),
+                                feed={INPUT_NAME: np.ascontiguousarray(eval_x[:1])}, outputs=[PROBS],
+                                threads=threads, n_timing=n_timing, warmup=200, log=log)
+        ok = _faithful(comp, eval_y, log)
         if not ok:
             raise QuantizeError(f"{fp32_path}: no int8 variant keeps predictions within "
                                 f"agreement {MIN_AGREEMENT} / macro-F1 {MAX_F1_DELTA} of fp32")
-        best = min(results[k]["p50_us"] for k in ok)
-        tied = [k for k in ok if results[k]["p50_us"] <= best * (1 + TIE)]
-        chosen = next(k for k in names if k in tied)
+        chosen = fastest({k: comp.latency[k]["p50_us"] for k in ok}, ok, TIE)
         out_path.parent.mkdir(parents=True, exist_ok=True)
-        out_path.write_bytes(paths[chosen].read_bytes())
-    c = results[chosen]
+        out_path.write_bytes(comp.paths[chosen].read_bytes())
+    return _choice_report(chosen, comp, n_calib=len(calib), n_eval=len(eval_x), labelled=eval_y is not None,
+                          threads=threads)
+
+
+def _drift_from(ref_probs: np.ndarray, eval_x: np.ndarray, eval_y: np.ndarray | None
+                ) -> Callable[[ort.InferenceSession], dict]:
+    """The score of a variant: argmax agreement with fp32's ``ref_probs`` and the largest
+    probability change on ``eval_x``; with labels, macro-F1 and its change from fp32's."""
+    ref_pred = ref_probs.argmax(1)
+    f1_fp32 = _macro_f1(np.asarray(eval_y), ref_pred) if eval_y is not None else None
+
+    def score(session: ort.InferenceSession) -> dict:
+        pr = probs_of(session, eval_x)
+        pred = pr.argmax(1)
+        r = {"agreement": float(np.mean(pred == ref_pred)), "max_abs_probs": float(np.abs(pr - ref_probs).max())}
+        if eval_y is not None:
+            r["macro_f1"] = _macro_f1(np.asarray(eval_y), pred)
+            r["macro_f1_delta"] = r["macro_f1"] - f1_fp32
+        return r
+
+    return score
+
+
+def _faithful(comp: Comparison, eval_y: np.ndarray | None, log: Callable[[str], None]) -> list[str]:
+    """The variants whose predictions stay with fp32's, in candidate order; each variant's
+    result gains its latency and ``accepted``, and a log line."""
+    ok = []
+    for k in comp.paths:
+        r = comp.results[k]
+        r.update(comp.latency[k])
+        r["accepted"] = r["agreement"] >= MIN_AGREEMENT and (eval_y is None or abs(r["macro_f1_delta"]) <= MAX_F1_DELTA)
+        if r["accepted"]:
+            ok.append(k)
+        log(f"  {k:18s} p50 {r['p50_us']:7.1f} us  agreement {r['agreement']:.4f}"
+            + (f"  dF1 {r['macro_f1_delta']:+.4f}" if eval_y is not None else "")
+            + ("" if r["accepted"] else "  (refused)"))
+    return ok
+
+
+def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, labelled: bool, threads: int
+                   ) -> dict:
+    """The quantisation report of :func:`choose` (the manifest's ``quantization``)."""
+    c, v = comp.results[chosen], VARIANTS[chosen]
     return {
         "method": chosen,
         "description": c["description"],
-        "format": "QDQ" if VARIANTS[chosen].static_ops else "dynamic",
-        "dynamic_ops": list(VARIANTS[chosen].dynamic_ops),
-        "per_channel": VARIANTS[chosen].per_channel if VARIANTS[chosen].static_ops else False,
-        "activation_type": "uint8" if VARIANTS[chosen].activation == QuantType.QUInt8 else "int8",
+        "format": "QDQ" if v.static else "dynamic",
+        "dynamic_ops": list(v.dynamic_ops),
+        "per_channel": v.per_channel if v.static else False,
+        "activation_type": v.activation,
         "weight_type": "int8",
-        "calibration": {"method": "MinMax", "windows": int(len(calib)),
+        "calibration": {"method": "MinMax", "windows": int(n_calib),
                         "reader": "export.quantize.WindowReader (preprocessed capture windows)"},
         "pre_process": "onnxruntime.quantization.shape_inference.quant_pre_process",
         "int8_operators": c["int8_operators"],
@@ -397,12 +427,12 @@ def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, ev
         "runtime_op_types": c["runtime_op_types"],
         "agreement_with_fp32": c["agreement"],
         "selection": {"rule": f"fastest p50 at batch 1 with {threads} thread(s) among variants with argmax "
-                              f"agreement >= {MIN_AGREEMENT}" + (f" and |dF1| <= {MAX_F1_DELTA}" if eval_y is not None else "")
+                              f"agreement >= {MIN_AGREEMENT}" + (f" and |dF1| <= {MAX_F1_DELTA}" if labelled else "")
                               + f"; variants within {TIE:.0%} of the fastest are tied and the first in the "
                               "candidate order wins",
-                      "eval_windows": int(len(eval_x)), "threads": threads, "fp32": fp32_lat,
+                      "eval_windows": int(n_eval), "threads": threads, "fp32": comp.latency["fp32"],
                       "candidates": {k: {f: v for f, v in r.items() if f not in ("graph_op_types", "fp32_operators")}
-                                     for k, r in results.items()}},
+                                     for k, r in comp.results.items()}},
         "onnxruntime": ort.__version__,
     }
 

@@ -31,13 +31,18 @@ def session_options(threads: int = 1) -> ort.SessionOptions:
     return so
 
 
-def open_session(model: bytes | str | os.PathLike, threads: int = 1, source: str = "") -> ort.InferenceSession:
+def open_session(model: bytes | str | os.PathLike, threads: int = 1, source: str = "", *,
+                 optimized_model_path: str | os.PathLike | None = None) -> ort.InferenceSession:
     """An onnxruntime CPU session for a model file or its bytes, with :func:`session_options`.
 
     An unreadable file or a model onnxruntime refuses raises :class:`ModelIntegrityError`
-    naming ``source`` (default: the path)."""
+    naming ``source`` (default: the path). ``optimized_model_path``: onnxruntime also saves
+    there the graph it runs after its optimisations (the export's int8 report lists the
+    operators the box really executes, e.g. QLinearConv, from it)."""
     source = source or (str(model) if not isinstance(model, bytes) else "<model bytes>")
     so = session_options(threads)
+    if optimized_model_path is not None:
+        so.optimized_model_filepath = str(optimized_model_path)
     if not isinstance(model, bytes):
         try:
             model = Path(model).read_bytes()

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import onnx
-import onnxruntime as ort
 import pytest
 import torch
 from support import REPO_ROOT
 
+from edge_runtime.core.onnx import open_session
 from edge_runtime.wearable.labels import CLASSES
 from edge_runtime.wearable.preprocess import preprocess
 from export import onnx_export as ox
@@ -73,7 +73,7 @@ def test_parity_with_torch(arch):
     assert r["max_abs_logits"] < 1e-4 and r["max_abs_probs"] < 1e-4
     with torch.no_grad():
         assert float(m(torch.from_numpy(x)).abs().max()) > 1.0  # the logits are not trivially small
-    sess = ort.InferenceSession(onx.SerializeToString(), providers=["CPUExecutionProvider"])
+    sess = open_session(onx.SerializeToString())
     for n in (1, 7):  # dynamic batch
         probs, logits = sess.run(None, {"imu": x[:n]})
         assert probs.shape == logits.shape == (n, len(CLASSES))
@@ -92,7 +92,7 @@ def test_metadata_round_trips():
     assert meta["parameters_torch"] == "79998" and meta["parameters_keras"] == "79598"
     assert meta["git_commit"] == "abc123" and meta["precision"] == "fp32"
     # onnxruntime reads the same metadata (what the torch-free engine sees)
-    sess = ort.InferenceSession(onx.SerializeToString(), providers=["CPUExecutionProvider"])
+    sess = open_session(onx.SerializeToString())
     assert sess.get_modelmeta().custom_metadata_map["classes"] == meta["classes"]
 
 
@@ -142,6 +142,14 @@ def test_choose_measures_and_reports(toy_onnx, tmp_path):
     assert rep["int8_operators"] and (tmp_path / "c.onnx").exists()
     with pytest.raises(qz.QuantizeError):
         qz.choose(fp, tmp_path / "d.onnx", X[:8], eval_x=X, variants=["nope"])
+
+
+def test_fastest_breaks_near_ties_by_candidate_order():
+    p50 = {"a": 100.0, "b": 98.0, "c": 90.0}
+    assert qz.fastest(p50, ["a", "b", "c"]) == "c"
+    assert qz.fastest(p50, ["a", "b"]) == "b"                # strictly fastest without a tie margin
+    assert qz.fastest(p50, ["a", "b"], tie=0.03) == "a"      # 2 % apart: tied, the earlier candidate wins
+    assert qz.fastest(p50, ["b", "a"], tie=0.03) == "b"
 
 
 def _write_checkpoint(model, d: Path):
