@@ -90,10 +90,13 @@ class LifterConfig:
 
 
 class TemporalModelBase(nn.Module):
-    """What both variants share: the expand and shrink layers, padding and causal shifts."""
+    """Both variants: the layers, padding and causal shifts, the residual blocks; a variant only
+    says whether it is strided."""
 
-    def __init__(self, joints_in: int, in_features: int, joints_out: int, filter_widths, causal: bool,
-                 dropout: float, channels: int):
+    STRIDED: bool  #: set by each variant
+
+    def __init__(self, joints_in: int, in_features: int, joints_out: int, filter_widths, causal: bool = False,
+                 dropout: float = 0.25, channels: int = 1024):
         super().__init__()
         for w in filter_widths:
             assert w % 2 == 1, "only odd filter widths are supported"
@@ -105,6 +108,7 @@ class TemporalModelBase(nn.Module):
         self.expand_bn = nn.BatchNorm1d(channels, momentum=0.1)
         self.shrink = nn.Conv1d(channels, joints_out * 3, 1)
         self.causal = causal
+        self._build_layers(joints_in, in_features, filter_widths, causal, channels, strided=self.STRIDED)
 
     def _build_layers(self, joints_in: int, in_features: int, filter_widths, causal: bool, channels: int,
                       strided: bool) -> None:
@@ -139,40 +143,34 @@ class TemporalModelBase(nn.Module):
         return x.permute(0, 2, 1).reshape(n, -1, self.joints_out, 3)
 
 
-class TemporalModel(TemporalModelBase):
-    """Dilated temporal convolutions: a sequence of T frames in, T - rf + 1 poses out."""
-
-    def __init__(self, joints_in: int, in_features: int, joints_out: int, filter_widths, causal: bool = False,
-                 dropout: float = 0.25, channels: int = 1024):
-        super().__init__(joints_in, in_features, joints_out, filter_widths, causal, dropout, channels)
-        self._build_layers(joints_in, in_features, filter_widths, causal, channels, strided=False)
-
     def _forward_blocks(self, x: torch.Tensor) -> torch.Tensor:
         x = self.drop(self.relu(self.expand_bn(self.expand_conv(x))))
         for i in range(len(self.pad) - 1):
-            pad, shift = self.pad[i + 1], self.causal_shift[i + 1]
-            res = x[:, :, pad + shift: x.shape[2] - pad + shift]
+            res = self._residual(x, i)
             x = self.drop(self.relu(self.layers_bn[2 * i](self.layers_conv[2 * i](x))))
             x = res + self.drop(self.relu(self.layers_bn[2 * i + 1](self.layers_conv[2 * i + 1](x))))
         return self.shrink(x)
+
+    def _residual(self, x: torch.Tensor, i: int) -> torch.Tensor:
+        """The frames of ``x`` that residual block ``i``'s output lines up with."""
+        shift = self.causal_shift[i + 1]
+        if self.STRIDED:
+            w = self.filter_widths[i + 1]
+            return x[:, :, shift + w // 2:: w]
+        pad = self.pad[i + 1]
+        return x[:, :, pad + shift: x.shape[2] - pad + shift]
+
+
+class TemporalModel(TemporalModelBase):
+    """Dilated temporal convolutions: a sequence of T frames in, T - rf + 1 poses out."""
+
+    STRIDED = False
 
 
 class TemporalModelOptimized1f(TemporalModelBase):
     """The strided variant: exactly one output per receptive-field window (training and export)."""
 
-    def __init__(self, joints_in: int, in_features: int, joints_out: int, filter_widths, causal: bool = False,
-                 dropout: float = 0.25, channels: int = 1024):
-        super().__init__(joints_in, in_features, joints_out, filter_widths, causal, dropout, channels)
-        self._build_layers(joints_in, in_features, filter_widths, causal, channels, strided=True)
-
-    def _forward_blocks(self, x: torch.Tensor) -> torch.Tensor:
-        x = self.drop(self.relu(self.expand_bn(self.expand_conv(x))))
-        for i in range(len(self.pad) - 1):
-            w = self.filter_widths[i + 1]
-            res = x[:, :, self.causal_shift[i + 1] + w // 2:: w]
-            x = self.drop(self.relu(self.layers_bn[2 * i](self.layers_conv[2 * i](x))))
-            x = res + self.drop(self.relu(self.layers_bn[2 * i + 1](self.layers_conv[2 * i + 1](x))))
-        return self.shrink(x)
+    STRIDED = True
 
 
 def condition_input(x: torch.Tensor) -> torch.Tensor:
