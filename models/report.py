@@ -90,15 +90,43 @@ def run_report(out: str, *, seed: int = 0, subjects: int = 20, epochs: int | Non
     out_p = Path(out)
     out_p.mkdir(parents=True, exist_ok=True)
     t_start = time.time()
-    detector = None
-    if data is None:
-        built = build_cohort_datasets(subjects, seed, minutes, out_p / "data", progress=progress)
-        data, test, detector = built["train"], built["test"], built["detector"]
+    data, test, detector = _cohort(out_p, data, test, seed=seed, subjects=subjects, minutes=minutes,
+                                   progress=progress)
     train = load_npz(data)
     test_ws = load_npz(test) if test else None
-    if detector is None and Path(data).with_name("detector.json").exists():
-        detector = json.loads(Path(data).with_name("detector.json").read_text())
+    loso, wit, timing = _run_archs(archs, train, test_ws, out_p, epochs=epochs, seed=seed, jobs=jobs, within=within,
+                                   progress=progress, reuse=reuse, t_start=t_start)
+    command = command or "python -m models " + " ".join(shlex.quote(x) for x in sys.argv[1:])
+    md = _markdown(loso, wit, detector, command=command, seed=seed, data=data, test=test, train=train,
+                   test_ws=test_ws, wall_s=time.time() - t_start)
+    (out_p / "report.md").write_text("\n".join(md))
+    summary = {"command": command, "seed": seed, "train": data, "test": test, "detector": detector,
+               "timing_s": timing, "wall_s": round(time.time() - t_start, 1),
+               "loso": {a: {k: m.get(k) for k in ("accuracy", "macro_f1", "macro_f1_distractions", "per_class",
+                                                  "onset_only",
+                                                  "confusion", "per_subject", "per_subject_mean", "epochs")}
+                        for a, m in loso.items()},
+               "within": {a: {k: m.get(k) for k in ("accuracy", "macro_f1", "macro_f1_distractions", "per_class",
+                                                    "per_subject", "per_subject_mean", "protocol")}
+                          for a, m in wit.items()}}
+    (out_p / "report.json").write_text(json.dumps(summary, indent=2))
+    return summary
 
+
+def _cohort(out_p: Path, data: str | None, test: str | None, *, seed: int, subjects: int, minutes: float,
+            progress: bool) -> tuple[str, str | None, dict | None]:
+    """(training NPZ, test NPZ, detector statistics): the given files (the detector's from the
+    detector.json beside them, if any), else a cohort simulated into ``out_p/data``."""
+    if data is None:
+        built = build_cohort_datasets(subjects, seed, minutes, out_p / "data", progress=progress)
+        return built["train"], built["test"], built["detector"]
+    detector_json = Path(data).with_name("detector.json")
+    return data, test, json.loads(detector_json.read_text()) if detector_json.exists() else None
+
+
+def _run_archs(archs, train, test_ws, out_p: Path, *, epochs: int | None, seed: int, jobs: int, within: bool,
+               progress: bool, reuse: bool, t_start: float) -> tuple[dict, dict, dict]:
+    """(LOSO metrics, within-subject metrics, seconds) per arch, each run (or read back) in turn."""
     loso, wit, timing = {}, {}, {}
     for a in archs:
         t0 = time.time()
@@ -115,14 +143,18 @@ def run_report(out: str, *, seed: int = 0, subjects: int = 20, epochs: int | Non
             print(f"{NAMES[a]:>8}: LOSO macro-F1 {loso[a]['macro_f1']:.3f} (acc {loso[a]['accuracy']:.3f})"
                   + (f", within {wit[a]['macro_f1']:.3f}" if a in wit else "")
                   + f"  [{time.time() - t_start:.0f} s]", file=sys.stderr)
+    return loso, wit, timing
 
-    command = command or "python -m models " + " ".join(shlex.quote(x) for x in sys.argv[1:])
+
+def _markdown(loso: dict, wit: dict, detector: dict | None, *, command: str, seed: int, data: str, test: str | None,
+              train, test_ws, wall_s: float) -> list[str]:
+    """report.md's lines: data, detector, summary, the chapter's tables, confusion matrices."""
     md = ["# Wearable distraction classifiers: chapter-2 style report", "",
           f"Command: `{command}`", "",
           f"Data: train `{data}` ({len(train)} ground-truth windows, {len(np.unique(train.subject))} subjects), "
           f"test `{test}` ({len(test_ws) if test_ws is not None else 0} detector captures). "
           "Train on ground-truth segments, test on detector captures (false alarms labelled Other). "
-          f"Seed {seed}; wall time {time.time() - t_start:.0f} s.", ""]
+          f"Seed {seed}; wall time {wall_s:.0f} s.", ""]
     if detector:
         md += ["## Detector (section 2.3.1)", "",
                f"Recall {_f(detector['recall'])} ({detector['detected']}/{detector['distractions']} distractions "
@@ -147,15 +179,4 @@ def run_report(out: str, *, seed: int = 0, subjects: int = 20, epochs: int | Non
                *class_table(wit, "Per class (within-participant)")]
     md += ["## Confusion matrices (LOSO, rows = truth)", ""]
     md += [f"![{NAMES[a]}]({a}/loso/confusion.png)" for a in loso] + [""]
-    (out_p / "report.md").write_text("\n".join(md))
-    summary = {"command": command, "seed": seed, "train": data, "test": test, "detector": detector,
-               "timing_s": timing, "wall_s": round(time.time() - t_start, 1),
-               "loso": {a: {k: m.get(k) for k in ("accuracy", "macro_f1", "macro_f1_distractions", "per_class",
-                                                  "onset_only",
-                                                  "confusion", "per_subject", "per_subject_mean", "epochs")}
-                        for a, m in loso.items()},
-               "within": {a: {k: m.get(k) for k in ("accuracy", "macro_f1", "macro_f1_distractions", "per_class",
-                                                    "per_subject", "per_subject_mean", "protocol")}
-                          for a, m in wit.items()}}
-    (out_p / "report.json").write_text(json.dumps(summary, indent=2))
-    return summary
+    return md
