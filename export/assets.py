@@ -115,15 +115,9 @@ def compare_int8(loso_dir: str | Path, *, method: str | None = None, train_npz: 
     """For every fold checkpoint DIR/folds/*/model.pt: export, quantise (``method``; default the
     shipped recipe), score fp32 and int8 on the held-out subject's test windows; pooled macro-F1."""
     from models.dataset import load_npz
-    from models.train import load_checkpoint
 
     loso_dir = Path(loso_dir)
-    if not loso_dir.is_dir():
-        raise ExportError(f"{loso_dir}: LOSO directory not found")
-    ckpts = sorted((loso_dir / "folds").glob("*/model.pt"), key=lambda p: (len(p.parent.name), p.parent.name))
-    if not ckpts:
-        raise ExportError(f"{loso_dir}: no fold checkpoints (folds/*/model.pt); run "
-                          "`python -m models train --loso ...` first")
+    ckpts = _fold_checkpoints(loso_dir)
     method = method or _shipped_method() or "qdq_conv"
     if method not in VARIANTS:
         raise ExportError(f"--method: unknown quantisation variant {method!r}; choose from {', '.join(VARIANTS)}")
@@ -131,32 +125,14 @@ def compare_int8(loso_dir: str | Path, *, method: str | None = None, train_npz: 
     train = load_npz(train_src)
     test = load_npz(test_src) if test_src else None
     X_train = preprocess(train.X)
-    X_test = preprocess(test.X) if test is not None else None
+    ev_set, ev_x = (test, preprocess(test.X)) if test is not None else (train, X_train)
     y_true, p32, p8, subj, rows = [], [], [], [], []
     max_parity = 0.0
     with tempfile.TemporaryDirectory() as td:
         for ck in ckpts:
-            model, meta = load_checkpoint(ck)
-            if list(meta["classes"]) != list(train.classes):
-                raise ExportError(f"{ck}: field 'classes': {meta['classes']} differ from {train_src}'s {train.classes}")
-            name = str(meta.get("metrics", {}).get("fold") or ck.parent.name)
-            try:
-                s = int(name.lstrip("s"))
-            except ValueError:
-                raise ExportError(f"{ck}: cannot tell the held-out subject from fold name {name!r}") from None
-            ev_set, ev_x = (test, X_test) if test is not None else (train, X_train)
-            ev = np.flatnonzero(ev_set.subject == s)
-            cal = np.flatnonzero(train.subject != s)
-            cal = cal[pick_windows(train.y[cal], n_calib, seed)]
-            fp = Path(td) / f"{name}.onnx"
-            q = Path(td) / f"{name}.int8.onnx"
-            onx = to_onnx(model, meta["classes"], commit="")
-            save_onnx(onx, fp)
-            par = check_parity(model, onx, ev_x[ev[:64]] if len(ev) else None)
-            max_parity = max(max_parity, par["max_abs_logits"], par["max_abs_probs"])
-            build_variant(fp, q, method, X_train[cal])
-            a = probs_of(fp, ev_x[ev]) if len(ev) else np.zeros((0, len(train.classes)))
-            b = probs_of(q, ev_x[ev]) if len(ev) else np.zeros((0, len(train.classes)))
+            name, ev, a, b, parity = _score_fold(ck, Path(td), train, X_train, ev_set, ev_x, method=method,
+                                                 n_calib=n_calib, seed=seed, train_src=train_src)
+            max_parity = max(max_parity, parity)
             y_true.append(ev_set.y[ev])
             p32.append(a)
             p8.append(b)
@@ -182,6 +158,46 @@ def compare_int8(loso_dir: str | Path, *, method: str | None = None, train_npz: 
         "holds": bool(abs(delta) <= 0.01), "per_fold": rows,
         "fp32": m32, "int8": m8,
     }
+
+
+def _fold_checkpoints(loso_dir: Path) -> list[Path]:
+    """DIR/folds/*/model.pt in fold order (s2 before s10)."""
+    if not loso_dir.is_dir():
+        raise ExportError(f"{loso_dir}: LOSO directory not found")
+    ckpts = sorted((loso_dir / "folds").glob("*/model.pt"), key=lambda p: (len(p.parent.name), p.parent.name))
+    if not ckpts:
+        raise ExportError(f"{loso_dir}: no fold checkpoints (folds/*/model.pt); run "
+                          "`python -m models train --loso ...` first")
+    return ckpts
+
+
+def _score_fold(ck: Path, td: Path, train, X_train: np.ndarray, ev_set, ev_x: np.ndarray, *, method: str,
+                n_calib: int, seed: int, train_src: str) -> tuple[str, np.ndarray, np.ndarray, np.ndarray, float]:
+    """One fold's checkpoint exported to ``td`` and quantised (calibrated on the other subjects'
+    training windows): (fold name, indices of the held-out subject's windows in ``ev_set``, fp32
+    and int8 probabilities on them, the largest torch/onnxruntime difference)."""
+    from models.train import load_checkpoint
+
+    model, meta = load_checkpoint(ck)
+    if list(meta["classes"]) != list(train.classes):
+        raise ExportError(f"{ck}: field 'classes': {meta['classes']} differ from {train_src}'s {train.classes}")
+    name = str(meta.get("metrics", {}).get("fold") or ck.parent.name)
+    try:
+        s = int(name.lstrip("s"))
+    except ValueError:
+        raise ExportError(f"{ck}: cannot tell the held-out subject from fold name {name!r}") from None
+    ev = np.flatnonzero(ev_set.subject == s)
+    cal = np.flatnonzero(train.subject != s)
+    cal = cal[pick_windows(train.y[cal], n_calib, seed)]
+    fp = td / f"{name}.onnx"
+    q = td / f"{name}.int8.onnx"
+    onx = to_onnx(model, meta["classes"], commit="")
+    save_onnx(onx, fp)
+    par = check_parity(model, onx, ev_x[ev[:64]] if len(ev) else None)
+    build_variant(fp, q, method, X_train[cal])
+    a = probs_of(fp, ev_x[ev]) if len(ev) else np.zeros((0, len(train.classes)))
+    b = probs_of(q, ev_x[ev]) if len(ev) else np.zeros((0, len(train.classes)))
+    return name, ev, a, b, max(par["max_abs_logits"], par["max_abs_probs"])
 
 
 def _shipped_method() -> str | None:
