@@ -1,4 +1,4 @@
-"""A simulated CAN bus: a socketcand-protocol hub on 127.0.0.1 (DESIGN.md section 6).
+"""A simulated CAN bus: a socketcand-protocol hub on 127.0.0.1 (docs/design.md section 6).
 
 Every process reaches it with python-can's stock interface::
 

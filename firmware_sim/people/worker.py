@@ -42,7 +42,7 @@ of Fig. 4.10). The scipy solution is the worker's typical posture at (h, a); eac
 repetition adds independent variation to the angles (:attr:`Style.trunk_sd_deg`)
 and to the standing distance, as people never repeat a posture exactly.
 
-Cohort (DESIGN.md section 5): 172 +/- 11 cm, half women, half men (women
+Cohort (docs/design.md section 5): 172 +/- 11 cm, half women, half men (women
 165 +/- 7.5 cm, men 179 +/- 7.5 cm), segment lengths from height (Drillis & Contini).
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``python -m firmware_sim drive|cohort`` (DESIGN.md section 7)."""
+"""``python -m firmware_sim drive|cohort`` (docs/design.md section 7)."""
 from __future__ import annotations
 
 import csv
