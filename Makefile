@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test venv clean assets report bench bundle
+.PHONY: demo test test-fast lint venv clean assets report bench bundle
 
 $(STAMP): setup.cfg pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -18,9 +18,17 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m firmware_sim.demo --out demo_out
 
-## make test: the whole suite (under 15 minutes on 2 cores)
-test: $(STAMP)
+## make test: lint, then the whole suite (what .ci/run runs; under 15 minutes on 2 cores)
+test: lint
 	$(PY) -m pytest -q
+
+## make test-fast: lint, then every test that starts no process (the `slow` marker; tests/README.md)
+test-fast: lint
+	$(PY) -m pytest -q -m "not slow"
+
+## make lint: ruff with the rules in pyproject.toml
+lint: $(STAMP)
+	$(PY) -m ruff check .
 
 ## rebuild the shipped models in edge_runtime/assets from a seed
 assets: $(STAMP)

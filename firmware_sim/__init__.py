@@ -1,4 +1,4 @@
-"""Simulated devices and world (DESIGN.md section 2).
+"""Simulated devices and world (docs/design.md section 2).
 
 * :mod:`firmware_sim.devices.wrist` -- the physically motivated right-wrist accelerometer
   of the dissertation's chapter 2 (kinematic arm chain, gravity projection, driving,

@@ -1,7 +1,7 @@
 """Window datasets: the NPZ format, and recordings -> train/test windows.
 
 NPZ format (docs/design.md section 7; extend, never rename)
--------------------------------------------------------
+-----------------------------------------------------------
 ``X``        float32 (N, 700, 3)  capture windows in m/s^2 at 100 Hz (x, y, z)
 ``y``        int (N,)             class index into ``classes``
 ``subject``  int (N,)             subject id (leave-one-subject-out groups)

@@ -1,7 +1,12 @@
-"""Fixtures shared across the suite. Helpers that are not fixtures live in ``support/``."""
+"""Fixtures shared across the suite. Helpers that are not fixtures live in ``support/``.
+
+Plugins: ``support.process_guard`` fails a test that starts a process without the ``slow``
+marker; ``pytester`` runs pytest inside a test (for that guard's own test)."""
 import pytest
 
 from firmware_sim.devices.can_hub import CanHub
+
+pytest_plugins = ["support.process_guard", "pytester"]
 
 
 @pytest.fixture

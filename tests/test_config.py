@@ -53,6 +53,7 @@ def _cli(*args):
     return subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", *args], capture_output=True, text=True)
 
 
+@pytest.mark.slow
 def test_cli_print_config_and_one_line_error(tmp_path):
     p = tmp_path / "box.toml"
     p.write_text("[detector]\nthreshold_mps2 = 4.0\n")
@@ -66,6 +67,7 @@ def test_cli_print_config_and_one_line_error(tmp_path):
     assert len(r.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_never_alert_must_name_model_classes(tmp_path):
     csv = tmp_path / "r.csv"
     csv.write_text("t,ax,ay,az\n" + "".join(f"{i / 100:.2f},0,0,9.81\n" for i in range(300)))

@@ -33,7 +33,7 @@ order, robot frame: y up). All the reference vectors, stated once:
   RULA's lower-arm angle.
 * **knee flexion** = 180 - the angle hip-knee-ankle (0 = straight leg).
 
-The RULA bands (DESIGN.md section 5) and the CAP knots, at band midpoints
+The RULA bands (docs/design.md section 5) and the CAP knots, at band midpoints
 (an open-ended band is taken as wide as the band before it):
 
 =========  ==========================================  ==========================================

@@ -41,6 +41,7 @@ def _torch_importable() -> bool:
     return True
 
 
+@pytest.mark.slow
 def test_rows_follow_the_manifest(quick):
     report, _ = quick
     assert {"cpu", "cores", "python", "onnxruntime", "torch", "cpus_used"} <= set(report["machine"])
@@ -68,6 +69,7 @@ def test_rows_follow_the_manifest(quick):
         assert ("convlstm-fp32", 1) in torch_rows  # models.nets rebuilds the ConvLSTM
 
 
+@pytest.mark.slow
 def test_each_configuration_has_its_own_process(quick):
     """onnxruntime children never load torch, so their peak memory is not torch's."""
     report, _ = quick
@@ -80,6 +82,7 @@ def test_each_configuration_has_its_own_process(quick):
                                                                if r["runtime"] == "onnxruntime")
 
 
+@pytest.mark.slow
 def test_loops(quick):
     report, _ = quick
     loops = {lp["name"]: lp for lp in report["loops"]}
@@ -96,6 +99,7 @@ def test_loops(quick):
     assert r.get("available") is False and r["note"] or (r["frames"] == r["n"] == 30 and r["cpu_share_pct"] > 0)
 
 
+@pytest.mark.slow
 def test_profiles_and_markdown(quick):
     report, md = quick
     entries = {e["name"]: e for e in load_manifest(ASSETS_DIR)["models"]}
@@ -109,6 +113,7 @@ def test_profiles_and_markdown(quick):
     assert md == format_markdown(report)
 
 
+@pytest.mark.slow
 def test_compare_flags_regressions(quick):
     new, _ = quick
     old = copy.deepcopy(new)
@@ -125,6 +130,7 @@ def test_compare_flags_regressions(quick):
     assert compare(new, new)[1] == 0
 
 
+@pytest.mark.slow
 def test_threads_and_compare_cli_exit_status(tmp_path, capsys):
     base = ["--quick", "--no-torch", "--no-loops", "--threads", "1", "2", "--models", "convlstm-int8"]
     out = tmp_path / "now.json"
@@ -138,6 +144,7 @@ def test_threads_and_compare_cli_exit_status(tmp_path, capsys):
     assert "REGRESSION" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_unknown_arch_is_timed_on_onnxruntime_and_skipped_on_torch(tmp_path):
     """Entries come from the manifest: a model torch cannot rebuild still gets its onnxruntime rows."""
     assets = tmp_path / "assets"
@@ -155,6 +162,7 @@ def test_unknown_arch_is_timed_on_onnxruntime_and_skipped_on_torch(tmp_path):
         assert "mystery" in rep["skipped"][0]["note"]
 
 
+@pytest.mark.slow
 def test_a_failing_configuration_is_reported_not_hidden(tmp_path, capsys):
     """A model onnxruntime cannot load (hash fine, bytes garbage): a FAILED row, exit status 1."""
     assets = tmp_path / "assets"
@@ -221,6 +229,7 @@ def _run_bench(args, blocked=()) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
 
 
+@pytest.mark.slow
 def test_cpus_pins_the_run(tmp_path):
     out = tmp_path / "b.json"
     r = _run_bench(["--quick", "--no-loops", "--no-torch", "--threads", "1", "--models", "convlstm-int8",
@@ -231,6 +240,7 @@ def test_cpus_pins_the_run(tmp_path):
     assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith("error: --cpus")
 
 
+@pytest.mark.slow
 def test_bench_runs_without_torch():
     """The box has no torch: bench skips the torch rows and times the shipped models."""
     r = _run_bench(["--quick", "--no-loops", "--threads", "1"], blocked=("torch", "onnx", "models", "export"))

@@ -38,6 +38,7 @@ def test_dbc_loads_with_version_and_labels():
         assert enc.decode(enc.encode_alert(decision(label)))["Class"] == label
 
 
+@pytest.mark.slow
 def test_cantools_dump_cli():
     out = subprocess.run([sys.executable, "-m", "cantools", "dump", str(DBC_PATH)], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr

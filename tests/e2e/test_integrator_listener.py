@@ -8,10 +8,13 @@ import time
 from types import SimpleNamespace
 
 import can
+import pytest
 from support import REPO_ROOT
 
 from edge_runtime.wearable.alerts import DBC_PATH, AlertPublisher
 from firmware_sim.devices.can_hub import CanHub
+
+pytestmark = pytest.mark.slow  # every test here starts a process
 
 LISTENER = REPO_ROOT / "docs" / "examples" / "listen_alerts.py"
 

@@ -5,6 +5,7 @@ polling without raising, and reopens the transport with backoff.
 """
 from __future__ import annotations
 
+import pytest
 from support.robot import InProcessController, can_link, pump
 
 from edge_runtime.robot.link.base import open_link
@@ -31,6 +32,7 @@ def test_a_vanished_hub_is_reported_and_retried_until_it_is_back():
             hub.stop()
 
 
+@pytest.mark.slow
 def test_mavlink_link_reports_a_closed_pty_and_keeps_polling():
     with SawyerProcess("mavlink") as proc:
         link = open_link("mavlink", path=proc.endpoint)

@@ -5,9 +5,12 @@ import subprocess
 import sys
 import time
 
+import pytest
 from support.can import LISTENER  # the stock-tools listener script
 
 from edge_runtime.wearable.alerts import DBC_PATH
+
+pytestmark = pytest.mark.slow  # every test here starts a process
 
 
 def _wearable(csv, tmp_path, name, extra=()):

@@ -13,9 +13,12 @@ import threading
 import time
 
 import can
+import pytest
 
 from edge_runtime.canbus.e2e import E2EChecker
 from edge_runtime.wearable.alerts import AlertEncoder, load_vehicle_dbc
+
+pytestmark = pytest.mark.slow  # every test here starts a process
 
 KEY = "ab" * 32
 SPEED = 6.0

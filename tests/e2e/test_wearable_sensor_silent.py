@@ -6,10 +6,13 @@ import time
 
 import can
 import numpy as np
+import pytest
 
 from edge_runtime.wearable.alerts import AlertEncoder
 from firmware_sim.devices.can_hub import CanHub
 from firmware_sim.devices.imu_firmware import FaultConfig, ImuFirmware, close_pty_pair, open_pty_pair
+
+pytestmark = pytest.mark.slow  # every test here starts a process
 
 
 def test_silent_sensor_reaches_the_heartbeat(tmp_path):

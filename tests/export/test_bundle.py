@@ -31,6 +31,7 @@ def _sha(p: Path) -> str:
     return hashlib.sha256(p.read_bytes()).hexdigest()
 
 
+@pytest.mark.slow
 def test_bundle_contents_and_checksums(bundle):
     out = bundle.out
     listed = dict(reversed(line.split("  ", 1)) for line in (out / SUMS_NAME).read_text().splitlines())
@@ -44,6 +45,7 @@ def test_bundle_contents_and_checksums(bundle):
     assert bundle.wheel.name in (out / "INSTALL.md").read_text()
 
 
+@pytest.mark.slow
 def test_wheel_is_the_runtime_only(bundle):
     with zipfile.ZipFile(bundle.wheel) as z:
         names = z.namelist()
@@ -87,6 +89,7 @@ def test_cli_refuses_a_foreign_directory(tmp_path, capsys):
     assert (tmp_path / "precious.txt").exists()
 
 
+@pytest.mark.slow
 def test_cli_replaces_a_previous_bundle(bundle, tmp_path, capsys):
     out = tmp_path / "b"
     shutil.copytree(bundle.out, out)

@@ -158,6 +158,7 @@ def _write_checkpoint(model, d: Path):
     return save_checkpoint(d, model, arch="convlstm", classes=CLASSES, seed=0, epochs=6, metrics={}, data={})
 
 
+@pytest.mark.slow
 def test_cli_onnx_and_quantize(toy, tmp_path, capsys):
     from export.__main__ import main
     from models.dataset import save_npz
@@ -189,6 +190,7 @@ def test_cli_bad_input_is_one_line(argv, needle, capsys):
     assert len(err.splitlines()) == 1 and needle in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_cli_bad_checkpoint_file_subprocess(tmp_path):
     bad = tmp_path / "model.pt"
     bad.write_bytes(b"not a torch file")

@@ -21,6 +21,7 @@ def small_assets(tmp_path_factory):
     return out, work
 
 
+@pytest.mark.slow
 def test_assets_build_writes_a_valid_manifest(small_assets):
     out, _ = small_assets
     m = verify_all(out)
@@ -42,6 +43,7 @@ def test_assets_build_writes_a_valid_manifest(small_assets):
     assert eng.classify(np.zeros((6, 33, 3), np.float32)).shape == (len(CLASSES),)
 
 
+@pytest.mark.slow
 def test_rebuild_keeps_entries_of_other_models(small_assets, tmp_path):
     """A manifest entry this command does not build (e.g. a pose lifter) is kept on rebuild."""
     import shutil

@@ -11,6 +11,8 @@ from support import REPO_ROOT
 from edge_runtime.core.manifest import load_manifest, sha256_file
 from edge_runtime.robot.lifter import LifterParams, StreamingLifter
 
+pytestmark = pytest.mark.slow  # every test here starts a process
+
 REPO = REPO_ROOT
 TINY = ["--channels", "16", "--trajectory-channels", "16", "--subjects", "2", "--test-subjects", "1",
         "--seconds", "10", "--cameras", "2", "--test-cameras", "1", "--views", "1", "--epochs", "1",

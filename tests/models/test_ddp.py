@@ -7,11 +7,14 @@ import socket
 import subprocess
 import sys
 
+import pytest
 import torch
 from support import REPO_ROOT
 
 from models.dataset import save_npz
 from models.toy import toy_windows
+
+pytestmark = pytest.mark.slow  # every test here starts a process
 
 ROOT = REPO_ROOT
 

@@ -52,6 +52,7 @@ def files(tmp_path_factory):
     return write_stream(d / "rec.csv"), write_events(d / "events.csv")
 
 
+@pytest.mark.slow
 def test_import_test_and_train_splits(tmp_path, files):
     rec, ev = files
     r = run("--csv", rec, "--events", ev, "--subject", 4, "--out", tmp_path / "test.npz")
@@ -88,6 +89,7 @@ def _err(r, *needles):
         assert n in err, (n, err)
 
 
+@pytest.mark.slow
 def test_import_errors(tmp_path, files):
     rec, ev = files
     out = tmp_path / "o.npz"
@@ -131,6 +133,7 @@ def test_import_errors(tmp_path, files):
     _err(run("--csv", tmp_path / "missing.csv", "--events", ev, "--subject", 1, "--out", out), "missing.csv")
 
 
+@pytest.mark.slow
 def test_import_truth_json_events(tmp_path, files):
     import json
 

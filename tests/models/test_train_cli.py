@@ -13,6 +13,8 @@ from support import REPO_ROOT
 from models.dataset import save_npz
 from models.toy import toy_windows
 
+pytestmark = pytest.mark.slow  # every test here starts a process
+
 ROOT = REPO_ROOT
 
 

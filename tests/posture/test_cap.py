@@ -11,7 +11,7 @@ from firmware_sim.people.human import Body, Posture, joints
 
 BODY = Body.from_height(1.75, "M")
 
-# RULA bands as DESIGN.md section 5 states them: (part, band midpoint in deg, RULA score)
+# RULA bands as docs/design.md section 5 states them: (part, band midpoint in deg, RULA score)
 RULA_MIDPOINTS = [
     ("upper_arm", 0.0, 1), ("upper_arm", 32.5, 2), ("upper_arm", 67.5, 3),
     ("lower_arm", 80.0, 1), ("lower_arm", 30.0, 2),

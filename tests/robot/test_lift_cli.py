@@ -150,6 +150,7 @@ def test_video_errors_exit_2(assets, tmp_path, capsys):
     assert rc == 2 and "--pose-model" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_subprocess_exit_status_and_no_traceback(tmp_path):
     p = tmp_path / "kp.jsonl"
     p.write_text('{"t": 0, "people": [{"keypoints": [1, 2]}]\n')

@@ -60,6 +60,7 @@ def fake_link(monkeypatch):
     return link
 
 
+@pytest.mark.slow
 def test_print_config_shows_the_robot_sections_with_flags_applied(tmp_path):
     p = tmp_path / "box.toml"
     p.write_text('[zones]\nmargin1_m = 1.5\n[robot_loop]\ntask_waypoints_m = [[0.3, 0.1, 0.6]]\n')
@@ -71,6 +72,7 @@ def test_print_config_shows_the_robot_sections_with_flags_applied(tmp_path):
     assert "wearable" not in r.stdout and eff["can"]["interface"] == "virtual"  # the wearable sections are kept
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("toml, key", [
     ("[zones]\nmargin_1 = 2\n", "margin_1"),
     ("[zones]\nsizing = \"huge\"\n", "sizing"),
@@ -120,6 +122,7 @@ def test_robot_frame_joints_need_no_calibration(tmp_path, fake_link):
     assert ("stop",) in fake_link.calls and any(c[0] == "heartbeat" for c in fake_link.calls)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("line, match", [
     ('{"t": 0.0, "joints_robot_m": [[0, 0, 0]]}', r"walk.jsonl:2: joints_robot_m: expected 17 \[x, y, z\] rows"),
     ('{"t": 0.0}', r"walk.jsonl:2: no joints_cam_m, joints_robot_m or people"),
@@ -140,6 +143,7 @@ def test_bad_joints_files_are_one_line_naming_the_line(tmp_path, line, match):
     assert re.search(match, r.stderr), r.stderr
 
 
+@pytest.mark.slow
 def test_camera_frame_joints_without_a_calibration_and_bad_calibration_files(tmp_path):
     walk = approach(tmp_path / "walk.jsonl", frame="camera", seconds=0.2)
     r = _cli("--joints", str(walk))
@@ -156,6 +160,7 @@ def test_camera_frame_joints_without_a_calibration_and_bad_calibration_files(tmp
     assert r.returncode == 2 and "standing period" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_against_the_simulated_sawyer_process_over_signed_mavlink(tmp_path):
     """The real thing: the controller as its own process on a pseudo-terminal, the runtime
     as another, a recording of a worker walking in; the controller ends retracted."""

@@ -311,6 +311,7 @@ def exercise_live_controller(link) -> None:
     assert np.linalg.norm(link.state.ee_position_m - TARGET) > 0.01  # halted on the way
 
 
+@pytest.mark.slow
 def test_can_process_moves_and_recovers_after_the_hub_drops_everyone(hub, tmp_path):
     with SawyerProcess("can", can_port=hub.port, json_path=tmp_path / "sawyer.json") as proc:
         assert proc.endpoint == f"socketcand:127.0.0.1:{hub.port}:vcan0"
@@ -338,6 +339,7 @@ def test_can_process_moves_and_recovers_after_the_hub_drops_everyone(hub, tmp_pa
 # ----------------------------------------------------------------------------------------------
 # MAVLink on a pseudo-terminal against the controller process
 
+@pytest.mark.slow
 def test_mavlink_process_refuses_unsigned_forged_and_replayed_commands(tmp_path):
     key = bytes.fromhex("5a" * 32)
     with SawyerProcess("mavlink", signing_key=key, json_path=tmp_path / "sawyer.json") as proc:

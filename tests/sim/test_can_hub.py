@@ -118,6 +118,7 @@ def test_publisher_reconnects_after_hub_disconnect(hub):
 
 
 
+@pytest.mark.slow
 def test_stock_tools_listener_process_decodes_alerts(hub, tmp_path):
     script = tmp_path / "listener.py"
     script.write_text(LISTENER)
@@ -150,6 +151,7 @@ def test_stock_tools_listener_process_decodes_alerts(hub, tmp_path):
     assert tail == {"project_modules": []}
 
 
+@pytest.mark.slow
 def test_cli_prints_port_and_stops():
     proc = subprocess.Popen([sys.executable, "-m", "firmware_sim.devices.can_hub", "--port", "0", "--duration", "0.5"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

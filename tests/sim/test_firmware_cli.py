@@ -1,4 +1,4 @@
-"""``python -m firmware_sim drive|cohort`` (DESIGN.md section 7)."""
+"""``python -m firmware_sim drive|cohort`` (docs/design.md section 7)."""
 from __future__ import annotations
 
 import csv
@@ -25,6 +25,7 @@ def run(*args: str) -> subprocess.CompletedProcess:
                           cwd=ROOT, env=env, timeout=120)
 
 
+@pytest.mark.slow
 def test_drive_writes_csv_and_truth(tmp_path):
     out = tmp_path / "drive"
     p = run("drive", "--minutes", "1.5", "--seed", "4", "--out", str(out), "--plot")
@@ -72,6 +73,7 @@ def test_cohort_one_command(tmp_path, capsys):
     assert "recall" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, needle", [
     (["drive", "--minutes", "-2", "--seed", "1", "--out", "OUT"], "--minutes"),
     (["drive", "--minutes", "abc", "--seed", "1", "--out", "OUT"], "--minutes"),

@@ -6,6 +6,8 @@ import sys
 import pytest
 from support import REPO_ROOT
 
+pytestmark = pytest.mark.slow  # every test here starts a process
+
 ROOT = REPO_ROOT
 CONDITIONS = ("Fixed", "ElbowHeight", "Learnt", "WorkerSelected")
 

@@ -7,6 +7,8 @@ import pytest
 
 from firmware_sim.scenarios.head_error import BINS_M
 
+pytestmark = pytest.mark.slow  # every test here starts a process
+
 
 def run(*args):
     return subprocess.run([sys.executable, "-m", "firmware_sim", "head-error", *args],

@@ -38,6 +38,7 @@ def test_bad_input_is_one_line_and_exit_2(args, words, capsys):
     assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_a_controller_nobody_talks_to_trips_its_watchdog_and_reports_it(tmp_path):
     with CanHub(port=0) as hub:
         out = tmp_path / "sawyer.json"
@@ -51,6 +52,7 @@ def test_a_controller_nobody_talks_to_trips_its_watchdog_and_reports_it(tmp_path
     assert 20 <= summary["counters"]["states_sent"] <= 40  # 50 Hz for 0.6 s
 
 
+@pytest.mark.slow
 def test_damaged_mavlink_bytes_are_counted_and_ignored():
     with SimulatedRobot("mavlink") as sim:
         sim.step(0.05)

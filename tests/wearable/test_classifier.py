@@ -144,6 +144,7 @@ def test_classes_disagreeing_with_model_metadata_are_refused(assets, tmp_path):
         Engine.from_manifest(d, "int8")
 
 
+@pytest.mark.slow
 def test_wearable_cli_refuses_tampered_model_in_one_line(assets, tmp_path):
     d = _copy(assets, tmp_path / "d")
     (d / "convlstm.int8.onnx").write_bytes(b"\x00" * 100)

@@ -60,6 +60,7 @@ def test_malformed_csv_names_the_line(tmp_path, body, match):
         read_imu_csv(p)
 
 
+@pytest.mark.slow
 def test_cli_reports_bad_csv_in_one_line_without_traceback(tmp_path):
     p = tmp_path / "bad.csv"
     p.write_text("t,ax,ay,az\n0,1,2,3\n0.01,1,2,oops\n")
