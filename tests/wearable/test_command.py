@@ -1,6 +1,7 @@
 """wearable/command.py (``python -m edge_runtime wearable``), and the command table it is
 registered in (edge_runtime/__main__.py, cli.run_command)."""
 import argparse
+import importlib
 import json
 import subprocess
 import sys
@@ -39,7 +40,7 @@ def test_every_command_is_registered_through_its_module():
     sub = next(a for a in table.build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     assert list(sub.choices) == ["wearable", "lift", "robot"]
     for name, module, _ in table.COMMANDS:
-        mod = __import__(f"edge_runtime.{module}", fromlist=["cmd"])
+        mod = importlib.import_module(f"edge_runtime.{module}")
         assert callable(mod.add_arguments) and isinstance(mod.BAD_INPUT, tuple)
         assert sub.choices[name].get_default("func") is mod.cmd
     args = table.build_parser().parse_args(["wearable", "--replay", "x.csv"])
