@@ -12,7 +12,7 @@ import importlib
 import sys
 from typing import Callable, Iterable
 
-from edge_runtime.errors import CliError  # noqa: F401 - commands import it from here
+from edge_runtime.errors import BAD_INPUT, CliError, LinkError
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
@@ -58,6 +58,15 @@ def run(func: Callable[[], int | None], bad_input: Iterable[type[BaseException]]
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Run the subcommand ``args`` were parsed for (``args.func``, see :func:`add_module_commands`).
+
+    One line and exit status 2 for the error tree's bad input (``errors.BAD_INPUT``), for
+    the command's own ``BAD_INPUT``, and for a ``LinkError`` (a bus or line that cannot be
+    opened is named in one line too, not shown as a traceback)."""
+    return run(lambda: args.func(args), bad_input=(*BAD_INPUT, LinkError, *getattr(args, "bad_input", ())))
 
 
 def _number(s: str, cast, what: str, ok) -> float:

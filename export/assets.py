@@ -35,7 +35,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from edge_runtime.core.manifest import SCHEMA_VERSION, ManifestError, load_manifest, sha256_file, write_manifest
-from edge_runtime.wearable.preprocess import preprocess
+from edge_runtime.wearable.classifier import preprocess
 from export.onnx_export import (
     DEFAULT_OPSET,
     INPUT_LAYOUT,
@@ -80,7 +80,7 @@ def _metrics(y_true, probs, classes, subject=None) -> dict:
 
 def io_spec(k: int) -> tuple[list, list]:
     inputs = [{"name": INPUT_NAME, "shape": ["N", 6, 33, 3], "dtype": "float32", "layout": INPUT_LAYOUT,
-               "units": "m/s^2", "preprocess": "edge_runtime.wearable.preprocess.preprocess(capture (N, 700, 3) at 100 Hz)"}]
+               "units": "m/s^2", "preprocess": "edge_runtime.wearable.classifier.preprocess(capture (N, 700, 3) at 100 Hz)"}]
     outputs = [{"name": PROBS, "shape": ["N", k], "dtype": "float32", "meaning": "softmax, classes order"},
                {"name": LOGITS, "shape": ["N", k], "dtype": "float32", "meaning": "pre-softmax scores"}]
     return inputs, outputs

@@ -3,7 +3,7 @@
 Graph contract (what ``edge_runtime.core.onnx`` and integrators rely on)
 ---------------------------------------------------------------------
 * input  ``imu``    float32 (N, 6, 33, 3): 6 subsequences x 33 frames x axis x/y/z, m/s^2
-  (``edge_runtime.wearable.preprocess.preprocess`` of a 700-frame capture at 100 Hz);
+  (``edge_runtime.wearable.classifier.preprocess`` of a 700-frame capture at 100 Hz);
 * output ``probs``  float32 (N, K): softmax, appended in the graph;
 * output ``logits`` float32 (N, K): the pre-softmax scores (parity checks, calibration);
 * the batch axis N is dynamic; opset 17 by default;
@@ -45,7 +45,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from edge_runtime.wearable.preprocess import CAPTURE_FRAMES, DOWN, MODEL_INPUT_SHAPE, RESAMPLED_FRAMES, UP
+from edge_runtime.wearable.classifier import CAPTURE_FRAMES, DOWN, MODEL_INPUT_SHAPE, RESAMPLED_FRAMES, UP
 from models import nets
 
 DEFAULT_OPSET = 17
@@ -266,7 +266,7 @@ def model_metadata(model: nn.Module, classes: Sequence[str], *, arch: str | None
         "sample_rate_hz": str(SAMPLE_RATE_HZ),
         "resampled_rate_hz": repr(RESAMPLED_RATE_HZ),
         "resampling": f"{CAPTURE_FRAMES} -> {RESAMPLED_FRAMES} frames, polyphase {UP}/{DOWN} "
-                      "(edge_runtime.wearable.preprocess), first 198 frames -> 6 x 33",
+                      "(edge_runtime.wearable.classifier), first 198 frames -> 6 x 33",
         "capture_frames": str(CAPTURE_FRAMES),
         "arch": arch,
         "model_version": model_version or f"{package_version()}+{arch}",

@@ -441,7 +441,7 @@ def quantize_file(fp32_path: str | Path, calib_npz: str | Path, out_path: str | 
                   n_calib: int = 1000, seed: int = 0, variants: Sequence[str] | None = None,
                   log: Callable[[str], None] = lambda s: None) -> dict:
     """CLI path: calibrate on part of an NPZ of capture windows, check on the rest, choose."""
-    from edge_runtime.wearable.preprocess import preprocess
+    from edge_runtime.wearable.classifier import preprocess
     from models.dataset import load_npz
 
     ws = load_npz(calib_npz)

@@ -19,14 +19,14 @@ from typing import Sequence
 import numpy as np
 from sklearn.metrics import accuracy_score, confusion_matrix, precision_recall_fscore_support
 
+from edge_runtime.wearable.classifier import preprocess
 from edge_runtime.wearable.labels import OTHER
-from edge_runtime.wearable.preprocess import preprocess
 
 
 def predict(model, X700: np.ndarray, batch_size: int = 512) -> np.ndarray:
     """Class probabilities (N, K) for capture windows (N, 700, 3) m/s^2.
 
-    ``model``: a torch module (applies :func:`edge_runtime.wearable.preprocess.preprocess`,
+    ``model``: a torch module (applies :func:`edge_runtime.wearable.classifier.preprocess`,
     then softmax) or anything with ``predict_proba(X700)`` (the LDA baseline).
     """
     X700 = np.asarray(X700, dtype=np.float32)

@@ -3,7 +3,7 @@
 The dissertation gives LDA no feature extraction and explains its low score by
 the data not being Gaussian with equal class covariances, which reads as LDA on
 the signal itself. So by default LDA sees exactly what the networks see: the
-preprocessed capture (``edge_runtime.wearable.preprocess.preprocess``: 700 -> 200 frames,
+preprocessed capture (``edge_runtime.wearable.classifier.preprocess``: 700 -> 200 frames,
 6 x 33 x 3), flattened to 594 numbers. Classifier: scikit-learn's
 ``LinearDiscriminantAnalysis`` (lsqr solver with Ledoit-Wolf shrinkage, which is
 stable with 594 features and few windows per class).
@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
-from edge_runtime.wearable.preprocess import preprocess, resample_capture
+from edge_runtime.wearable.classifier import preprocess, resample_capture
 
 FEATURES = ("input", "summary")
 

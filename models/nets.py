@@ -1,7 +1,7 @@
 """The wearable classifiers of chapter 2 in one file: ConvLSTM, CNN and LSTM.
 
 All three take the detector's capture after preprocessing
-(``edge_runtime.wearable.preprocess.preprocess``): a float32 tensor (N, 6, 33, 3) in
+(``edge_runtime.wearable.classifier.preprocess``): a float32 tensor (N, 6, 33, 3) in
 m/s^2 (6 subsequences x 33 frames x x/y/z) and return logits (N, n_classes).
 Softmax is applied by the caller (the ONNX graph appends it; see export/).
 

@@ -3,7 +3,7 @@
     model = fit("convlstm", X, y, n_classes=6, epochs=40, seed=0)
 
 * Input: capture windows ``X`` (N, 700, 3) m/s^2 at 100 Hz and labels ``y``.
-  They go through :func:`edge_runtime.wearable.preprocess.preprocess`, the one
+  They go through :func:`edge_runtime.wearable.classifier.preprocess`, the one
   preprocessing path the product also runs (700 -> 200 frames, 6 x 33 x 3),
   once per run (or pass ``X`` already preprocessed, (N, 6, 33, 3)).
 * Loss: cross-entropy with class-balanced weights (N / (K * count)), so the
@@ -58,7 +58,7 @@ from torch.nn.parallel import DistributedDataParallel as DDP
 from torch.utils.data.distributed import DistributedSampler
 from tqdm import tqdm
 
-from edge_runtime.wearable.preprocess import preprocess
+from edge_runtime.wearable.classifier import preprocess
 from models.lda import LDAClassifier
 from models.nets import ARCHS, build
 

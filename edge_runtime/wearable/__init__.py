@@ -1,1 +1,1 @@
-"""The wearable distraction product: IMU sources -> detector -> preprocessing -> classifier -> alert decisions -> CAN."""
+"""The wearable distraction product: IMU source -> loop -> detector -> classifier (capture in, probabilities out) -> alerts on CAN; ``command`` runs it."""

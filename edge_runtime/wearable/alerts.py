@@ -1,13 +1,19 @@
-"""Vehicle CAN link: DISTRACTION_ALERT and the WEARABLE_STATUS heartbeat (DESIGN.md section 6).
+"""Vehicle CAN link: DISTRACTION_ALERT, and WEARABLE_STATUS with the health behind it (docs/design.md section 6).
 
 Frames are laid out by ``assets/vehicle_alerts.dbc`` only: signals are encoded and
 decoded with cantools, then protected with AUTOSAR E2E Profile 1 (``e2e`` package):
 CRC-8 in byte 0, alive counter 0..14 in the low nibble of byte 1, data ID from the
 DBC's ``E2E_DataID`` message attribute (mode BOTH).
 
-``AlertPublisher`` sends one DISTRACTION_ALERT per alerted decision (use
-``publisher.on_decision`` as the WearableLoop callback) and a heartbeat from a
-background thread. A bus error never stops it: the error is counted and the
+:class:`WearableStatus` is the one place for what the heartbeat says: the sensor state
+and the health counters (samples, non-finite samples, detector restarts, the live
+source's saturated and dropped samples, alert latencies). The loop and the command
+write them while the heartbeat thread reads them, so they live behind one lock.
+
+:class:`AlertPublisher` sends one DISTRACTION_ALERT per alert it is handed
+(:meth:`AlertPublisher.send_alert`: the loop hands it a would-alert verdict and learns
+whether the frame went out) and the WEARABLE_STATUS of its :class:`WearableStatus`
+from a background thread. A bus error never stops it: the error is counted and the
 next frame is tried again (with ``bus_factory`` the bus is reopened).
 """
 from __future__ import annotations
@@ -15,8 +21,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
 import can
 
@@ -30,11 +37,118 @@ DBC_PATH = ASSETS_DIR / "vehicle_alerts.dbc"
 ALERT = "DISTRACTION_ALERT"
 STATUS = "WEARABLE_STATUS"
 NO_CLASS = "None"
+DROPPED_SAMPLES_MAX = 65535
+"""WEARABLE_STATUS DroppedSamples is 16 bits: the count saturates there."""
 
 
 def load_vehicle_dbc():
     """The vehicle DBC the box ships (DISTRACTION_ALERT, WEARABLE_STATUS)."""
     return load_dbc(DBC_PATH)
+
+
+@dataclass(frozen=True)
+class HealthCounts:
+    """The health counters at one moment (a snapshot of :class:`WearableStatus`)."""
+
+    sensor: str = "ok"
+    """The live source's state: "ok", "silent" (no sample for the silence timeout) or "disconnected"."""
+    samples: int = 0
+    """Samples fed to the loop."""
+    non_finite: int = 0
+    """Samples with a NaN or infinite axis (never classified)."""
+    detector_restarts: int = 0
+    """Gaps and runs of non-finite samples: each restarts the detector."""
+    saturated: int = 0
+    """Samples of the live source with an axis at the sensor's range limit."""
+    source_dropped: int = 0
+    """Samples missing from the live source's stream (timestamp gaps)."""
+
+    @property
+    def dropped_samples(self) -> int:
+        """WEARABLE_STATUS DroppedSamples: samples the classifier never saw, saturating at 16 bits."""
+        return min(self.non_finite + self.source_dropped, DROPPED_SAMPLES_MAX)
+
+
+def heartbeat_state(now: HealthCounts, before: HealthCounts) -> tuple[str, str]:
+    """(State, SensorHealth) of WEARABLE_STATUS from the counters ``now`` and at the previous
+    heartbeat: a counter that grew since then marks the sensor degraded for this period."""
+    if now.sensor != "ok":
+        return "sensor_silent", "silent"
+    if now.samples == 0:
+        return "starting", "ok"  # no sample yet: nothing to vouch for
+    if now.non_finite > before.non_finite:
+        return "degraded", "nan_samples"
+    if now.saturated > before.saturated:
+        return "degraded", "saturated"
+    if now.detector_restarts > before.detector_restarts:
+        return "degraded", "gaps"
+    return "running", "ok"
+
+
+class WearableStatus:
+    """WEARABLE_STATUS content and the health counters it is made from, behind one lock.
+
+    Written by the loop (samples, non-finite samples, detector restarts, alert latencies)
+    and the command (the live source's state and counters); read by the heartbeat thread
+    (:meth:`heartbeat`) and the summary (:meth:`counts`, :meth:`alert_latencies_ms`)."""
+
+    def __init__(self, model_version: int = 0):
+        self.model_version = model_version  # the classifier in use (ModelVersion, 8 bits)
+        self._t0 = time.monotonic()
+        self._lock = threading.Lock()
+        self._sensor = "ok"
+        self._samples = self._non_finite = self._restarts = self._saturated = self._source_dropped = 0
+        self._latencies_ms: list[float] = []
+        self._reported = HealthCounts()  # as of the previous heartbeat
+
+    # -- writers ----------------------------------------------------------
+    def count_samples(self, n: int, non_finite: int = 0) -> None:
+        with self._lock:
+            self._samples += n
+            self._non_finite += non_finite
+
+    def count_detector_restart(self) -> None:
+        with self._lock:
+            self._restarts += 1
+
+    def set_sensor(self, state: str) -> bool:
+        """The live source's state; True if it changed."""
+        with self._lock:
+            changed, self._sensor = state != self._sensor, state
+        return changed
+
+    def set_source_counts(self, saturated: int, dropped: int) -> None:
+        """The live source's own running totals of saturated and dropped samples."""
+        with self._lock:
+            self._saturated, self._source_dropped = saturated, dropped
+
+    def add_alert_latency(self, latency_ms: float) -> None:
+        """Arrival of a capture's last sample -> its DISTRACTION_ALERT handed to the bus."""
+        with self._lock:
+            self._latencies_ms.append(latency_ms)
+
+    # -- readers ----------------------------------------------------------
+    def counts(self) -> HealthCounts:
+        with self._lock:
+            return self._counts()
+
+    def _counts(self) -> HealthCounts:
+        return HealthCounts(self._sensor, self._samples, self._non_finite, self._restarts, self._saturated,
+                            self._source_dropped)
+
+    def alert_latencies_ms(self) -> list[float]:
+        with self._lock:
+            return list(self._latencies_ms)
+
+    def heartbeat(self) -> dict[str, Any]:
+        """The WEARABLE_STATUS signals now (:meth:`AlertEncoder.encode_status`'s arguments);
+        what is reported becomes the baseline of the next heartbeat."""
+        with self._lock:
+            now, before = self._counts(), self._reported
+            self._reported = now
+        state, health = heartbeat_state(now, before)
+        return {"state": state, "sensor_health": health, "dropped_samples": now.dropped_samples,
+                "model_version": self.model_version, "uptime_s": time.monotonic() - self._t0}
 
 
 class AlertEncoder:
@@ -87,49 +201,28 @@ class AlertEncoder:
 
 
 class AlertPublisher:
-    """Publishes alerts and a periodic WEARABLE_STATUS heartbeat on a python-can bus."""
+    """Publishes alerts and the periodic WEARABLE_STATUS heartbeat of ``status`` on a python-can bus."""
 
     def __init__(self, bus: can.BusABC | None, encoder: AlertEncoder | None = None, heartbeat_period_s: float = 0.1,
                  log_path: str | Path | None = None, bus_factory: Callable[[], can.BusABC] | None = None,
-                 status_provider: Callable[[], Mapping[str, Any]] | None = None):
+                 status: WearableStatus | None = None):
         if heartbeat_period_s <= 0:
             raise ValueError("heartbeat_period_s must be > 0")
         self.bus = bus
         self.encoder = encoder or AlertEncoder()
         self.period = heartbeat_period_s
         self.bus_factory = bus_factory
-        self.status_provider = status_provider
-        self.status: dict[str, Any] = {"state": "starting", "sensor_health": "ok", "dropped_samples": 0, "model_version": 0}
+        self.status = status if status is not None else WearableStatus()
         self.frames_sent = 0
         self.alerts_sent = 0
         self.heartbeats_sent = 0
         self.send_errors = 0
         self.reconnects = 0
         self.last_error: str | None = None
-        self._t0 = time.monotonic()
         self._send_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._logger = can.Logger(str(log_path)) if log_path else None
-
-    # -- status -----------------------------------------------------------
-    def set_status(self, **fields: Any) -> None:
-        """Update heartbeat fields: state, sensor_health, dropped_samples, model_version."""
-        unknown = set(fields) - set(self.status)
-        if unknown:
-            raise KeyError(f"unknown status field(s): {sorted(unknown)}")
-        self.status.update(fields)
-
-    def _status_fields(self) -> dict:
-        fields = dict(self.status)
-        if self.status_provider is not None:
-            try:
-                fields.update(self.status_provider())
-            except Exception as exc:  # noqa: BLE001 - a bad provider must not stop the heartbeat
-                fields["state"] = "fault"
-                self.last_error = f"status provider: {exc}"
-        fields["uptime_s"] = time.monotonic() - self._t0
-        return fields
 
     # -- sending ----------------------------------------------------------
     def send(self, msg: can.Message) -> bool:
@@ -172,16 +265,20 @@ class AlertPublisher:
             self.bus = bus
         self.reconnects += 1
 
-    def on_decision(self, decision: Any) -> bool:
-        """WearableLoop callback: sends a DISTRACTION_ALERT if the decision is alerted."""
-        if not getattr(decision, "alerted", False):
-            return False
-        ok = self.send(self.encoder.encode_alert(decision))
+    def send_alert(self, alert: Any) -> bool:
+        """A DISTRACTION_ALERT for an alert the policy made (the loop's would-alert verdict:
+        t_trigger_s, t_alert_s, label, confidence, status, compute_us); True if the bus took it."""
+        ok = self.send(self.encoder.encode_alert(alert))
         self.alerts_sent += ok
         return ok
 
+    def on_decision(self, decision: Any) -> bool:
+        """For a decision made elsewhere (a recording's, a test's): its DISTRACTION_ALERT if it is alerted."""
+        return self.send_alert(decision) if getattr(decision, "alerted", False) else False
+
     def send_heartbeat(self) -> bool:
-        ok = self.send(self.encoder.encode_status(**self._status_fields()))
+        """WEARABLE_STATUS now: the heartbeat thread's, or at once on a change of the sensor's state."""
+        ok = self.send(self.encoder.encode_status(**self.status.heartbeat()))
         self.heartbeats_sent += ok
         return ok
 

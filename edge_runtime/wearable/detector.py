@@ -15,7 +15,7 @@ Two implementations with one meaning:
 * :func:`detect_triggers` scans a whole recording at once (the reference);
 * :class:`StreamingDetector` is fed samples one by one or in blocks of any
   size, as a firmware loop would, and gives exactly the same triggers and
-  captures (``tests/test_detector.py`` checks this over random block splits).
+  captures (``tests/wearable/test_detector.py`` checks this over random block splits).
 
 Sample indices are absolute: frame 0 is the first sample since the stream
 started. :meth:`StreamingDetector.reset` marks a loss of continuity (a gap,

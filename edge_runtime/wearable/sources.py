@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from edge_runtime.errors import InputError
-from edge_runtime.wearable.preprocess import resample_poly
+from edge_runtime.wearable.classifier import resample_poly
 
 SAMPLE_RATE_HZ = 100
 CSV_HEADER = ("t", "ax", "ay", "az")

@@ -33,7 +33,7 @@ def test_listener_counts_alerts_e2e_errors_and_heartbeat_loss(tmp_path):
         time.sleep(0.1)
         bus = can.Bus(interface="socketcand", host="127.0.0.1", port=hub.port, channel="vcan0")
         with AlertPublisher(bus, heartbeat_period_s=0.05) as pub:
-            pub.set_status(state="running")
+            pub.status.count_samples(100)  # samples arrived: the heartbeat says running
             for i in range(20):
                 pub.on_decision(_alert(i, ["Phone", "Drink", "Texting", "Marker"][i % 4]))
                 time.sleep(0.02)

@@ -11,8 +11,8 @@ import torch
 from support import REPO_ROOT
 
 from edge_runtime.core.onnx import open_session
+from edge_runtime.wearable.classifier import preprocess
 from edge_runtime.wearable.labels import CLASSES
-from edge_runtime.wearable.preprocess import preprocess
 from export import onnx_export as ox
 from export import quantize as qz
 from models.nets import build

@@ -1,17 +1,17 @@
-"""Vehicle CAN link: DBC, cantools encoding, AUTOSAR E2E, heartbeat, bus errors."""
+"""wearable/alerts.py: the vehicle DBC, cantools encoding, the heartbeat and its status, bus errors."""
 from __future__ import annotations
 
 import subprocess
 import sys
+import threading
 import time
 from types import SimpleNamespace
 
 import can
 import pytest
 
-from edge_runtime.canbus.bus import CanLinkError, open_bus
 from edge_runtime.canbus.e2e import E2EChecker
-from edge_runtime.wearable.alerts import DBC_PATH, AlertEncoder, AlertPublisher, load_vehicle_dbc
+from edge_runtime.wearable.alerts import DBC_PATH, AlertEncoder, AlertPublisher, WearableStatus, load_vehicle_dbc
 from edge_runtime.wearable.labels import CLASSES
 
 
@@ -59,25 +59,6 @@ def test_alert_round_trip():
         ("degraded", "nan_samples", 65535, 3, 12)
 
 
-def test_e2e_counter_crc_repeat_loss():
-    enc, chk = AlertEncoder(), E2EChecker(load_vehicle_dbc())
-    msgs = [enc.encode_alert(decision()) for _ in range(20)]
-    counters = [m.data[1] & 0x0F for m in msgs]
-    assert counters[:16] == list(range(15)) + [0]  # Profile 1: 0..14 then wraps
-    assert chk.check(msgs[0]).status == "initial"
-    assert [chk.check(m).status for m in msgs[1:16]] == ["ok"] * 15
-    assert chk.check(msgs[15]).status == "repeated"
-    res = chk.check(msgs[18])
-    assert (res.status, res.lost) == ("lost", 2)
-    bad = can.Message(arbitration_id=0x3A0, data=bytearray(msgs[19].data), is_extended_id=False)
-    bad.data[5] ^= 0x10
-    assert chk.check(bad).status == "wrong_crc"
-    # masquerading: a valid alert payload under the status ID fails (different data ID)
-    fake = can.Message(arbitration_id=0x3A1, data=msgs[19].data, is_extended_id=False)
-    assert chk.check(fake).status == "wrong_crc"
-    assert chk.errors == 1 + 2 + 2
-
-
 class RaisingBus(can.BusABC):
     def __init__(self):
         super().__init__(channel="x")
@@ -97,8 +78,8 @@ def test_heartbeat_rate_and_log(tmp_path):
     bus = can.Bus(interface="virtual", channel="hb", receive_own_messages=False)
     rx = can.Bus(interface="virtual", channel="hb")
     path = tmp_path / "frames.log"
-    pub = AlertPublisher(bus, heartbeat_period_s=0.1, log_path=path)
-    pub.set_status(state="running", model_version=2)
+    pub = AlertPublisher(bus, heartbeat_period_s=0.1, log_path=path, status=WearableStatus(model_version=2))
+    pub.status.count_samples(100)  # samples arrived: the status vouches for the sensor
     pub.start()
     time.sleep(0.5)
     assert pub.on_decision(decision())
@@ -114,7 +95,7 @@ def test_heartbeat_rate_and_log(tmp_path):
     assert pub.frames_sent == len(rx_msgs) and pub.send_errors == 0
     chk = E2EChecker(load_vehicle_dbc())
     assert all(chk.check(m).valid for m in hb)
-    assert AlertEncoder().decode(hb[-1])["State"] == "running"
+    assert AlertEncoder().decode(hb[-1])["State"] == "running" and AlertEncoder().decode(hb[-1])["ModelVersion"] == 2
     logged = list(can.LogReader(str(path)))
     assert len(logged) == pub.frames_sent
 
@@ -131,9 +112,68 @@ def test_publisher_survives_raising_bus():
     pub.close()
 
 
-def test_open_bus_one_line_error():
-    with pytest.raises(CanLinkError) as e:
-        open_bus("no_such_interface", "can0")
-    assert "\n" not in str(e.value) and "no_such_interface" in str(e.value)
-    with pytest.raises(CanLinkError, match="not allowed"):
-        open_bus("udp", "x")  # only the allow-listed bus interfaces open
+# ---------------------------------------------------------------------------- WearableStatus
+
+
+def _signals(status: WearableStatus) -> dict:
+    hb = status.heartbeat()
+    return {k: hb[k] for k in ("state", "sensor_health", "dropped_samples")}
+
+
+def test_starting_then_running_then_each_fault_for_one_period():
+    st = WearableStatus()
+    assert _signals(st)["state"] == "starting"  # no sample yet: nothing to vouch for
+    st.count_samples(100)
+    assert _signals(st) == {"state": "running", "sensor_health": "ok", "dropped_samples": 0}
+    st.set_source_counts(saturated=3, dropped=5)
+    st.count_samples(100, non_finite=2)
+    assert _signals(st) == {"state": "degraded", "sensor_health": "nan_samples", "dropped_samples": 7}
+    st.count_samples(100)
+    assert _signals(st)["state"] == "running"  # nothing new since the previous heartbeat
+    st.set_source_counts(saturated=4, dropped=5)
+    assert _signals(st)["sensor_health"] == "saturated"
+    st.count_detector_restart()
+    assert _signals(st)["sensor_health"] == "gaps"
+    assert st.set_sensor("silent") and not st.set_sensor("silent")  # True on a change only
+    assert _signals(st)["state"] == "sensor_silent"
+    assert st.counts().sensor == "silent" and st.counts().samples == 300
+
+
+def test_dropped_samples_saturate_at_the_signal_range():
+    st = WearableStatus()
+    st.count_samples(1, non_finite=70000)
+    assert _signals(st)["dropped_samples"] == 65535
+
+
+def test_heartbeat_carries_model_version_and_uptime():
+    hb = WearableStatus(model_version=0xAB).heartbeat()
+    assert hb["model_version"] == 0xAB and 0 <= hb["uptime_s"] < 5
+    msg = AlertEncoder().decode(AlertEncoder().encode_status(**hb))
+    assert msg["ModelVersion"] == 0xAB and str(msg["State"]) == "starting"
+
+
+@pytest.mark.parametrize("access", [
+    lambda st: st.count_samples(10, non_finite=1), lambda st: st.count_detector_restart(),
+    lambda st: st.set_sensor("silent"), lambda st: st.set_source_counts(1, 2), lambda st: st.add_alert_latency(1.0),
+    lambda st: st.heartbeat(), lambda st: st.counts(), lambda st: st.alert_latencies_ms(),
+], ids=["count_samples", "count_detector_restart", "set_sensor", "set_source_counts", "add_alert_latency",
+        "heartbeat", "counts", "alert_latencies_ms"])
+def test_every_access_waits_while_another_thread_holds_the_status(access):
+    """The heartbeat thread reads while the loop writes: each access goes through the one lock."""
+    st = WearableStatus()
+    done = threading.Event()
+    with st._lock:  # another thread is in the middle of an update
+        worker = threading.Thread(target=lambda: (access(st), done.set()), daemon=True)
+        worker.start()
+        assert not done.wait(0.05)
+    assert done.wait(10)
+    worker.join()
+
+
+def test_alert_latencies_are_kept_in_order_and_handed_out_as_a_copy():
+    st = WearableStatus()
+    st.add_alert_latency(1.5)
+    st.add_alert_latency(0.5)
+    got = st.alert_latencies_ms()
+    got.append(99.0)
+    assert st.alert_latencies_ms() == [1.5, 0.5]

@@ -1,0 +1,273 @@
+"""``python -m edge_runtime wearable``: IMU -> detector -> ConvLSTM -> alert decisions on CAN (docs/design.md section 7).
+
+    python -m edge_runtime wearable (--replay FILE.csv | --imu serial:PATH[?key=HEX] | --imu sim[?options])
+        [--config BOX.toml] [--alerts OUT.jsonl] [--can-log OUT.log] [--duration S] [--realtime] [--quiet]
+    python -m edge_runtime wearable [--config BOX.toml] --print-config
+
+The command wires the parts together and drives them; it decides nothing itself. Each
+block of samples goes to the loop (:mod:`edge_runtime.wearable.loop`), which classifies
+the captures, sends the alerts and returns its decisions; each decision goes to the
+output handlers (the ``--alerts`` JSONL log, the console), which only read it; each
+change of a live sensor's state goes to the status (:mod:`edge_runtime.wearable.alerts`)
+and at once onto the bus. At the end (source exhausted, ``--duration`` reached or
+Ctrl-C) it prints the summary.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from contextlib import ExitStack, suppress
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
+
+from edge_runtime.cli import CliError
+from edge_runtime.core.manifest import ASSETS_DIR
+
+if TYPE_CHECKING:
+    from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
+    from edge_runtime.wearable.classifier import Engine
+    from edge_runtime.wearable.loop import Decision, WearableLoop
+    from edge_runtime.wearable.mavlink_source import MavlinkImuSource
+    from edge_runtime.wearable.sources import ImuBlock, ReplayStats
+
+BAD_INPUT: tuple[type[BaseException], ...] = ()
+"""Everything the wearable refuses is in the error tree already (``errors.BAD_INPUT``, ``LinkError``)."""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--replay", metavar="FILE.csv", help="a recording t,ax,ay,az (s, m/s^2), processed as fast as possible")
+    src.add_argument("--imu", metavar="serial:PATH[?key=HEX] | sim[?minutes=M&seed=S&...]",
+                     help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line (key: MAVLink 2 signing "
+                          "key), or 'sim': the simulated IMU firmware on a pseudo-terminal (development checkouts)")
+    p.add_argument("--duration", type=float, metavar="S", help="stop a live source after S seconds")
+    p.add_argument("--can-log", metavar="OUT.log|.asc|.blf|.csv", help="write every CAN frame sent (python-can formats)")
+    p.add_argument("--alerts", metavar="OUT.jsonl", help="write one JSON object per classifier decision")
+    p.add_argument("--config", metavar="BOX.toml", help="the box configuration (see edge_runtime/box.example.toml)")
+    p.add_argument("--print-config", action="store_true", help="print the effective configuration as TOML and exit")
+    p.add_argument("--assets", metavar="DIR", help="model directory with manifest.json [model] assets")
+    p.add_argument("--model", help="manifest entry: a name, or a precision (int8, fp32) [model] name")
+    p.add_argument("--threads", type=int, help="onnxruntime intra-op threads [model] threads")
+    p.add_argument("--min-confidence", type=float, help="below this the decision is 'uncertain' [alerts] min_confidence")
+    p.add_argument("--threshold", type=float, help="detector threshold (m/s^2) [detector] threshold_mps2")
+    p.add_argument("--realtime", action="store_true", help="pace a replay at its own sample rate")
+    p.add_argument("--quiet", action="store_true", help="print only the summary")
+
+
+def effective_config(args: argparse.Namespace):
+    """The config file, then the command-line flags on top, validated as one."""
+    from edge_runtime import config
+
+    cfg = config.load(args.config)
+    cfg = config.override(cfg, "model", assets=args.assets, name=args.model, threads=args.threads)
+    cfg = config.override(cfg, "alerts", min_confidence=args.min_confidence)
+    return config.override(cfg, "detector", threshold_mps2=args.threshold)
+
+
+def cmd(args: argparse.Namespace) -> int:
+    from edge_runtime.wearable.detector import DetectorConfig
+    from edge_runtime.wearable.loop import AlertPolicy, WearableLoop
+
+    cfg = effective_config(args)
+    if args.print_config:
+        print(cfg.to_toml(), end="")
+        return 0
+    if not (args.replay or args.imu):
+        raise CliError("wearable: give a source: --replay FILE.csv, --imu serial:PATH or --imu sim")
+    policy = AlertPolicy(min_confidence=cfg.alerts.min_confidence, never_alert=cfg.alerts.never_alert)
+    d = cfg.detector
+    detector = DetectorConfig(window_frames=d.window_frames, threshold_mps2=d.threshold_mps2,
+                              pre_frames=d.pre_frames, post_frames=d.post_frames)
+    source = _open_source(args, cfg)  # bad input is reported before the model loads
+    with ExitStack() as stack:
+        stack.callback(source.close)
+        engine = _load_classifier(cfg)
+        for note in source.replay_stats.notices:
+            print(f"notice: {note}", file=sys.stderr)
+        outputs = _outputs(stack, args.alerts, args.quiet)
+        pub = _open_publisher(cfg, args.can_log, _status_of(engine))
+        stack.callback(pub.close)
+        loop = WearableLoop(engine, detector, policy, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
+        t_wall = time.perf_counter()
+        with suppress(KeyboardInterrupt):
+            _drive(source, loop, outputs)
+    _print_summary(loop, source, cfg, args.can_log, time.perf_counter() - t_wall)
+    return 0
+
+
+# ---------------------------------------------------------------------------- wiring
+
+
+@dataclass
+class _Source:
+    """Where the samples come from: the events that drive the loop (ImuBlocks, and a live
+    source's SourceStatus events), the live source if it is one, what reading a recording found."""
+
+    events: Iterable[Any]
+    replay_stats: ReplayStats
+    live: MavlinkImuSource | None = None
+
+    def close(self) -> None:
+        if self.live is not None:
+            self.live.close()
+
+
+def _open_source(args: argparse.Namespace, cfg) -> _Source:
+    from edge_runtime.wearable.sources import ReplayStats, read_imu_csv
+
+    stats = ReplayStats()
+    if args.replay:
+        blocks = read_imu_csv(args.replay, stats)
+        if args.realtime:
+            blocks = (b for block in blocks for b in _paced(block, cfg.imu.sample_rate_hz))
+        return _Source(blocks, stats)
+    live = _open_live_source(args.imu, cfg)
+    return _Source(live.blocks(args.duration), stats, live)
+
+
+def _open_live_source(spec: str, cfg) -> MavlinkImuSource:
+    """``serial:PATH[?key=HEX]`` -> a MAVLink IMU source on that serial line;
+    ``sim[?options]`` -> the simulated IMU firmware as a child process on a pseudo-terminal."""
+    if spec == "sim" or spec.startswith("sim?"):
+        from edge_runtime.wearable.sim_source import SimImuSource, SimSourceError
+
+        try:
+            return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s)
+        except SimSourceError as e:
+            raise CliError(str(e)) from None
+    from edge_runtime.core.serial_line import parse_serial_spec
+
+    try:
+        path, key = parse_serial_spec(spec)
+    except ValueError as e:
+        raise CliError(f"--imu: {e}") from None
+    from edge_runtime.wearable.mavlink_source import MavlinkImuSource
+
+    try:
+        return MavlinkImuSource(path, signing_key=key, silence_timeout_s=cfg.imu.silence_timeout_s)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+
+
+def _paced(block: ImuBlock, rate_hz: float) -> Iterator[ImuBlock]:
+    """A recorded block one sample period at a time, on a monotonic clock (no busy waiting)."""
+    from edge_runtime.wearable.sources import ImuBlock
+
+    start = time.monotonic()
+    for i in range(len(block.acc_mps2)):
+        delay = start + (i + 1) / rate_hz - time.monotonic()  # sample i is complete one period later
+        if delay > 0:
+            time.sleep(delay)
+        yield ImuBlock(block.t0_s + i / rate_hz, block.acc_mps2[i : i + 1], block.continuous or i > 0,
+                       rx_monotonic_s=time.monotonic())
+
+
+def _load_classifier(cfg) -> Engine:
+    from edge_runtime.config import ConfigError
+    from edge_runtime.wearable.classifier import Engine
+
+    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
+    unknown = sorted(set(cfg.alerts.never_alert) - set(engine.classes))
+    if unknown:
+        raise ConfigError(f"[alerts] never_alert: {unknown} are not classes of {engine.name} ({', '.join(engine.classes)})")
+    return engine
+
+
+def _status_of(engine: Engine) -> WearableStatus:
+    from edge_runtime.wearable.alerts import WearableStatus
+
+    # ModelVersion (8 bits): the first byte of the model file's sha256, as listed in manifest.json
+    return WearableStatus(model_version=int(engine.entry.get("sha256", "00")[:2], 16))
+
+
+def _open_publisher(cfg, can_log: str | None, status: WearableStatus) -> AlertPublisher:
+    """The CAN side: the configured python-can bus, alerts and the WEARABLE_STATUS heartbeat, started."""
+    from edge_runtime.canbus.bus import open_bus
+    from edge_runtime.wearable.alerts import AlertPublisher
+
+    c = cfg.can
+
+    def bus_factory():
+        return open_bus(c.interface, c.channel, c.bitrate, host=c.host, port=c.port)
+
+    try:
+        pub = AlertPublisher(bus_factory(), heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
+                             bus_factory=bus_factory, status=status)
+    except ValueError as e:  # python-can's Logger: unknown file suffix
+        raise CliError(f"--can-log {can_log}: {e}") from None
+    return pub.start()
+
+
+def _outputs(stack: ExitStack, alerts_path: str | None, quiet: bool) -> list[Callable[[Decision], None]]:
+    """The output handlers, in order: the ``--alerts`` JSONL log (closed with ``stack``), the console."""
+    handlers: list[Callable[[Decision], None]] = []
+    if alerts_path:
+        log = stack.enter_context(open(alerts_path, "w"))
+        handlers.append(lambda d: log.write(json.dumps(d.to_json()) + "\n"))
+    if not quiet:
+        handlers.append(_print_decision)
+    return handlers
+
+
+# ---------------------------------------------------------------------------- running
+
+
+def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision], None]]) -> None:
+    """Every event of the source: a block goes to the loop and its decisions to the outputs;
+    a live sensor's state goes to the status. A disconnected sensor ends the run."""
+    from edge_runtime.wearable.sources import ImuBlock
+
+    status = loop.status
+    for event in source.events:
+        if source.live is not None:
+            status.set_source_counts(source.live.stats.saturated, source.live.stats.dropped)
+        if not isinstance(event, ImuBlock):  # a live source's SourceStatus
+            _sensor_state(loop.publisher, event.state, f" ({event.since_s:.2f} s since the last sample)")
+            if event.state == "disconnected":
+                break
+            continue
+        _sensor_state(loop.publisher, "ok")
+        for decision in loop.feed(event):
+            for output in outputs:
+                output(decision)
+
+
+def _sensor_state(pub: AlertPublisher, state: str, detail: str = "") -> None:
+    """A change of the sensor's state is printed and reported at once, not at the next heartbeat period."""
+    if pub.status.set_sensor(state):
+        print(f"sensor: {state}{detail}", file=sys.stderr)
+        pub.send_heartbeat()
+
+
+def _print_decision(d: Decision) -> None:
+    mark = "ALERT" if d.alerted else d.status
+    print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}")
+
+
+def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None, wall_s: float) -> None:
+    s, h, r, engine = loop.stats, loop.status.counts(), source.replay_stats, loop.classifier
+    stream_s = h.samples / loop.rate_hz
+    print(
+        f"summary: {stream_s:.1f} s of IMU data ({h.samples} samples) in {wall_s:.3f} s "
+        f"({stream_s / max(wall_s, 1e-9):,.0f}x real time); model {engine.name} ({engine.precision})\n"
+        f"  captures {s.captures}: alerts {s.statuses['alert']}, uncertain {s.statuses['uncertain']}, "
+        f"not alerted {s.statuses['not_alerted']}\n"
+        f"  by class: " + (", ".join(f"{k} {v}" for k, v in sorted(s.labels.items())) or "none") + "\n"
+        f"  bad samples: non-finite {h.non_finite}, dropped (time not advancing) {r.dropped_non_monotonic}, "
+        f"gaps {r.gaps}, detector restarts {h.detector_restarts}"
+    )
+    c = loop.publisher.summary()
+    print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']}, "
+          f"heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, reconnects {c['reconnects']}"
+          + (f"; logged to {can_log}" if can_log else ""))
+    latencies_ms = loop.status.alert_latencies_ms()
+    if latencies_ms:
+        import numpy as np
+
+        print(f"  alert latency (last capture sample arrived -> frame handed to the bus): median "
+              f"{np.median(latencies_ms):.2f} ms, p99 {np.percentile(latencies_ms, 99):.2f} ms, "
+              f"max {max(latencies_ms):.2f} ms over {len(latencies_ms)} alerts")
+    if source.live is not None:
+        print("  serial link: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in vars(source.live.stats).items()))

@@ -1,0 +1,29 @@
+"""canbus/e2e.py: AUTOSAR E2E Profile 1 on a DBC message, sender and receiver."""
+import can
+
+from edge_runtime.canbus.dbc import load_dbc
+from edge_runtime.canbus.e2e import E2EChecker, E2EProtector
+from edge_runtime.core.manifest import ASSETS_DIR
+
+SIGNALS = {"Status": "alert", "Class": "Phone", "Confidence": 0.87, "TimeSinceTrigger": 753, "AlertSeq": 0}
+
+
+def test_e2e_counter_crc_repeat_loss():
+    db = load_dbc(ASSETS_DIR / "vehicle_alerts.dbc")
+    alert = db.get_message_by_name("DISTRACTION_ALERT")
+    protector, chk = E2EProtector(), E2EChecker(db)
+    msgs = [protector.protect(alert, SIGNALS) for _ in range(20)]
+    counters = [m.data[1] & 0x0F for m in msgs]
+    assert counters[:16] == list(range(15)) + [0]  # Profile 1: 0..14 then wraps
+    assert chk.check(msgs[0]).status == "initial"
+    assert [chk.check(m).status for m in msgs[1:16]] == ["ok"] * 15
+    assert chk.check(msgs[15]).status == "repeated"
+    res = chk.check(msgs[18])
+    assert (res.status, res.lost) == ("lost", 2)
+    bad = can.Message(arbitration_id=0x3A0, data=bytearray(msgs[19].data), is_extended_id=False)
+    bad.data[5] ^= 0x10
+    assert chk.check(bad).status == "wrong_crc"
+    # masquerading: a valid alert payload under the status ID fails (different data ID)
+    fake = can.Message(arbitration_id=0x3A1, data=msgs[19].data, is_extended_id=False)
+    assert chk.check(fake).status == "wrong_crc"
+    assert chk.errors == 1 + 2 + 2

@@ -1,0 +1,145 @@
+"""wearable/command.py (``python -m edge_runtime wearable``), and the command table it is
+registered in (edge_runtime/__main__.py, cli.run_command)."""
+import argparse
+import importlib
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from edge_runtime import __main__ as table
+from edge_runtime.cli import run_command
+from edge_runtime.errors import InputError, LinkError, ModelIntegrityError
+from edge_runtime.wearable import command
+from edge_runtime.wearable.alerts import WearableStatus
+from edge_runtime.wearable.labels import CLASSES
+from edge_runtime.wearable.loop import WearableLoop
+from edge_runtime.wearable.mavlink_source import SourceStatus
+from edge_runtime.wearable.sources import ImuBlock, ReplayStats
+
+DECISION_KEYS = ["t_trigger_s", "t_alert_s", "label", "confidence", "alerted", "status", "probs", "compute_us",
+                 "latency_ms"]
+
+
+def _steps_csv(path, n=3000, steps=(1000,)):
+    """A 100 Hz recording at rest with +6 m/s^2 steps on x: each one triggers the detector."""
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1))
+    for t in steps:
+        acc[t:, 0] += 6.0
+    rows = "\n".join(f"{i / 100:.2f},{a:.3f},{b:.3f},{c:.3f}" for i, (a, b, c) in enumerate(acc))
+    path.write_text("t,ax,ay,az\n" + rows + "\n")
+    return path
+
+
+# ---------------------------------------------------------------------------- the command table
+
+
+def test_every_command_is_registered_through_its_module():
+    sub = next(a for a in table.build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert list(sub.choices) == ["wearable", "lift", "robot"]
+    for name, module, _ in table.COMMANDS:
+        mod = importlib.import_module(f"edge_runtime.{module}")
+        assert callable(mod.add_arguments) and isinstance(mod.BAD_INPUT, tuple)
+        assert sub.choices[name].get_default("func") is mod.cmd
+    args = table.build_parser().parse_args(["wearable", "--replay", "x.csv"])
+    assert args.func is command.cmd and args.bad_input == command.BAD_INPUT
+
+
+class Declared(Exception):
+    """An exception a command declares in its BAD_INPUT."""
+
+
+def _raise(exc):
+    def func(args):
+        raise exc
+    return func
+
+
+@pytest.mark.parametrize("exc", [InputError("bad.csv:3:\nnot a number"), ModelIntegrityError("model.onnx: sha256"),
+                                 LinkError("cannot open CAN bus socketcand"), Declared("declared by the command")])
+def test_run_command_makes_bad_input_and_link_errors_one_line_and_exit_2(exc, capsys):
+    assert run_command(argparse.Namespace(func=_raise(exc), bad_input=(Declared,))) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: ") and " ".join(str(exc).split()) in err
+
+
+def test_anything_else_is_a_bug_and_keeps_its_traceback():
+    with pytest.raises(ZeroDivisionError):
+        run_command(argparse.Namespace(func=_raise(ZeroDivisionError("bug")), bad_input=()))
+
+
+def test_no_command_is_a_usage_error():
+    with pytest.raises(SystemExit) as e:
+        table.main([])
+    assert e.value.code == 2
+
+
+# ---------------------------------------------------------------------------- the wearable command
+
+
+def test_replay_writes_each_decision_once_to_the_log_and_the_console(tmp_path, capsys):
+    csv, log = _steps_csv(tmp_path / "steps.csv", n=4000, steps=(1000, 2000)), tmp_path / "alerts.jsonl"
+    assert table.main(["wearable", "--replay", str(csv), "--alerts", str(log)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    decisions = [json.loads(line) for line in log.read_text().splitlines()]
+    assert len(decisions) == 2 and all(list(d) == DECISION_KEYS for d in decisions)
+    assert [d["t_trigger_s"] for d in decisions] == [10.0, 20.0]
+    printed = out[:len(decisions)]
+    for d, line in zip(decisions, printed):
+        assert line.split()[2] == d["label"] and line.endswith("ALERT" if d["alerted"] else d["status"])
+    assert out[len(decisions)].startswith("summary: 40.0 s of IMU data (4000 samples)")
+    assert f"captures {len(decisions)}:" in out[len(decisions) + 1]
+
+
+def test_cli_reports_bad_csv_in_one_line_without_traceback(tmp_path):
+    p = tmp_path / "bad.csv"
+    p.write_text("t,ax,ay,az\n0,1,2,3\n0.01,1,2,oops\n")
+    r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(p)], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.strip().count("\n") == 0 and "bad.csv:3" in r.stderr and "Traceback" not in r.stderr
+
+
+class Classifier:
+    classes = CLASSES
+
+    def classify_capture(self, x700):
+        return np.eye(len(CLASSES), dtype=np.float32)[0]
+
+
+class Publisher:
+    """Stands in for AlertPublisher: the status, and how many heartbeats went out at once."""
+
+    def __init__(self):
+        self.status, self.heartbeats = WearableStatus(), 0
+
+    def send_heartbeat(self):
+        self.heartbeats += 1
+        return True
+
+    def send_alert(self, alert):
+        return True
+
+
+class Live:
+    """A live source's counters."""
+
+    def __init__(self):
+        self.stats = argparse.Namespace(saturated=2, dropped=7)
+
+
+def test_drive_reports_each_change_of_the_sensor_once_and_stops_when_it_is_gone(capsys):
+    pub = Publisher()
+    loop = WearableLoop(Classifier(), publisher=pub)
+    rest = np.tile(np.float32([0, 0, 9.81]), (10, 1))
+    events = [SourceStatus("silent", 0.2), SourceStatus("silent", 0.25), ImuBlock(0.0, rest), ImuBlock(0.1, rest),
+              SourceStatus("disconnected", 1.0), ImuBlock(0.2, rest)]
+    source = command._Source(iter(events), ReplayStats(), live=Live())
+    command._drive(source, loop, outputs=[])
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["sensor: silent (0.20 s since the last sample)", "sensor: ok",
+                   "sensor: disconnected (1.00 s since the last sample)"]
+    assert pub.heartbeats == 3  # one at each change, at once
+    counts = pub.status.counts()
+    assert (counts.sensor, counts.samples, counts.saturated, counts.source_dropped) == ("disconnected", 20, 2, 7)

@@ -1,0 +1,173 @@
+"""wearable/loop.py: the loop's bookkeeping and decisions, with a stand-in classifier (the
+shipped model has its own tests) and a stand-in or a real publisher."""
+import copy
+import time
+
+import can
+import numpy as np
+import pytest
+
+from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher
+from edge_runtime.wearable.detector import DetectorConfig
+from edge_runtime.wearable.labels import CLASSES
+from edge_runtime.wearable.loop import AlertPolicy, Decision, Verdict, WearableLoop
+from edge_runtime.wearable.sources import ImuBlock
+
+
+class Fixed:
+    """Answers with a fixed class and probability, and records what it was given."""
+
+    classes = CLASSES
+
+    def __init__(self, label="Texting", p=0.9):
+        self.k, self.p, self.seen = CLASSES.index(label), p, []
+
+    def classify_capture(self, x700):
+        self.seen.append(x700)
+        probs = np.full(len(CLASSES), (1 - self.p) / (len(CLASSES) - 1), np.float32)
+        probs[self.k] = self.p
+        return probs
+
+
+def _steps(n, at, t_rest=9.81):
+    acc = np.zeros((n, 3), np.float32)
+    acc[:, 2] = t_rest
+    for i, t in enumerate(at):
+        acc[t:, 0] += 6.0 if i % 2 == 0 else -6.0
+    return acc
+
+
+def test_decisions_carry_stream_times_and_the_classifier_gets_the_capture():
+    clf = Fixed()
+    loop = WearableLoop(clf)
+    acc = _steps(3000, [1000, 1300])
+    ds = loop.feed(ImuBlock(t0_s=100.0, acc_mps2=acc))
+    assert [d.t_trigger_s for d in ds] == [110.0]  # second step falls inside the pause
+    assert ds[0].t_alert_s == 115.99  # last capture frame T+599
+    assert clf.seen[0].shape == (700, 3)  # preprocessing is the classifier's (classify_capture)
+    assert ds[0].alerted and ds[0].status == "alert" and loop.stats.captures == 1
+
+
+def test_policy_never_alerts_other_and_flags_low_confidence():
+    acc = _steps(3000, [1000])
+    other = WearableLoop(Fixed("Other", 0.99)).feed(ImuBlock(0.0, acc))[0]
+    unsure = WearableLoop(Fixed("Phone", 0.4), policy=AlertPolicy(min_confidence=0.5)).feed(ImuBlock(0.0, acc))[0]
+    assert (other.alerted, other.status) == (False, "not_alerted")
+    assert (unsure.alerted, unsure.status) == (False, "uncertain")
+
+
+def test_nan_run_is_counted_and_no_capture_spans_it():
+    acc = _steps(4000, [1000])
+    acc[1200:1210] = np.nan  # inside the capture of the trigger at 1000
+    loop = WearableLoop(Fixed())
+    ds = loop.feed(ImuBlock(0.0, acc))
+    counts = loop.status.counts()
+    assert ds == [] and counts.non_finite == 10 and counts.detector_restarts == 1 and counts.samples == 4000
+    # after the hole, a new step triggers at its true stream time
+    more = _steps(2000, [500])
+    more[:, 0] += acc[-1, 0]
+    ds = loop.feed(ImuBlock(40.0, more))
+    assert [d.t_trigger_s for d in ds] == [45.0]
+
+
+def test_gap_block_restarts_detector_and_times_follow_new_block():
+    loop = WearableLoop(Fixed())
+    loop.feed(ImuBlock(0.0, _steps(150, [])))
+    acc = _steps(1500, [300])
+    ds = loop.feed(ImuBlock(20.0, acc, continuous=False))
+    assert loop.status.counts().detector_restarts == 1 and [d.t_trigger_s for d in ds] == [23.0]
+
+
+def test_threshold_comes_from_config():
+    acc = _steps(3000, [1000])
+    acc[:, 0] *= 0.5  # a 3 m/s^2 step
+    assert WearableLoop(Fixed()).feed(ImuBlock(0.0, acc)) == []
+    assert len(WearableLoop(Fixed(), DetectorConfig(threshold_mps2=2.5)).feed(ImuBlock(0.0, acc))) == 1
+
+
+class Publisher:
+    """Stands in for AlertPublisher: records what it is handed, answers whether the frame went out."""
+
+    def __init__(self, goes_out=True):
+        from edge_runtime.wearable.alerts import WearableStatus
+
+        self.status, self.goes_out, self.handed = WearableStatus(), goes_out, []
+
+    def send_alert(self, alert):
+        self.handed.append(copy.deepcopy(alert))
+        return self.goes_out
+
+
+def _one_capture(label="Texting", p=0.9, goes_out=True, rx=None):
+    pub = Publisher(goes_out)
+    loop = WearableLoop(Fixed(label, p), publisher=pub)
+    (d,) = loop.feed(ImuBlock(0.0, _steps(3000, [1000]), rx_monotonic_s=rx))
+    return d, pub, loop
+
+
+def test_a_would_alert_verdict_goes_to_the_publisher_and_the_decision_says_if_it_went_out():
+    sent, pub, loop = _one_capture(rx=time.monotonic())
+    assert (sent.alerted, sent.status) == (True, "alert") and sent.latency_ms >= 0
+    assert loop.status.alert_latencies_ms() == [sent.latency_ms]
+    (verdict,) = pub.handed
+    assert type(verdict) is Verdict and verdict.status == "alert" and verdict.label == "Texting"
+
+    lost, pub, loop = _one_capture(goes_out=False, rx=time.monotonic())
+    assert (lost.alerted, lost.status, lost.latency_ms) == (False, "alert_not_sent", None)
+    assert loop.stats.statuses["alert"] == 1  # the summary counts what the policy said
+    assert loop.status.alert_latencies_ms() == []
+
+    replayed, _, _ = _one_capture()  # a recording: no arrival time to measure a latency from
+    assert replayed.alerted and replayed.latency_ms is None
+
+
+@pytest.mark.parametrize("label, p", [("Other", 0.99), ("Phone", 0.3)])
+def test_what_the_policy_does_not_alert_never_reaches_the_publisher(label, p):
+    d, pub, _ = _one_capture(label, p)
+    assert not d.alerted and d.status in ("not_alerted", "uncertain") and pub.handed == []
+
+
+def test_a_decision_is_complete_when_made_and_never_changed_afterwards():
+    seen = []  # (the object an output handler got, a copy of it as it was then)
+    loop = WearableLoop(Fixed(), publisher=Publisher(goes_out=False),
+                        on_decision=lambda d: seen.append((d, copy.deepcopy(d))))
+    acc = _steps(9000, [1000, 2000, 5000])
+    returned = loop.feed(ImuBlock(0.0, acc[:4000], rx_monotonic_s=time.monotonic()))
+    returned += loop.feed(ImuBlock(40.0, acc[4000:], rx_monotonic_s=time.monotonic()))
+    assert len(returned) == 3 and [d for d, _ in seen] == returned
+    assert all(type(d) is Decision and d.status == "alert_not_sent" for d in returned)  # final when handed out
+    assert all(d == then for d, then in seen)  # untouched after the handlers read it
+
+
+def _heartbeats_until(rx, want, deadline_s=10.0):
+    enc, states = AlertEncoder(), []
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        m = rx.recv(0.05)
+        if m is not None and m.arbitration_id == 0x3A1:
+            sig = enc.decode(m)
+            states.append((str(sig["State"]), str(sig["SensorHealth"])))
+            if states[-1] == want:
+                break
+    return states
+
+
+def test_the_heartbeat_thread_reports_what_the_loop_counts():
+    bus = can.Bus(interface="virtual", channel="loop-hb", receive_own_messages=False)
+    rx = can.Bus(interface="virtual", channel="loop-hb")
+    pub = AlertPublisher(bus, heartbeat_period_s=0.01).start()
+    try:
+        loop = WearableLoop(Fixed(), publisher=pub)
+        assert ("starting", "ok") in _heartbeats_until(rx, ("starting", "ok"))
+        loop.feed(ImuBlock(0.0, _steps(150, [])))
+        assert _heartbeats_until(rx, ("running", "ok"))[-1] == ("running", "ok")
+        holes = _steps(150, [])
+        holes[10:15] = np.nan
+        loop.feed(ImuBlock(1.5, holes))
+        assert _heartbeats_until(rx, ("degraded", "nan_samples"))[-1] == ("degraded", "nan_samples")
+        assert _heartbeats_until(rx, ("running", "ok"))[-1] == ("running", "ok")  # for one period only
+    finally:
+        pub.close()
+        rx.shutdown()
+    counts = pub.status.counts()
+    assert (counts.samples, counts.non_finite, counts.detector_restarts) == (300, 5, 1)
