@@ -93,6 +93,7 @@ def test_replay_writes_each_decision_once_to_the_log_and_the_console(tmp_path, c
     assert f"captures {len(decisions)}:" in out[len(decisions) + 1]
 
 
+@pytest.mark.slow
 def test_cli_reports_bad_csv_in_one_line_without_traceback(tmp_path):
     p = tmp_path / "bad.csv"
     p.write_text("t,ax,ay,az\n0,1,2,3\n0.01,1,2,oops\n")
