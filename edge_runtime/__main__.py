@@ -30,6 +30,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def load_all_sections() -> None:
+    """Import every module of the runtime, so that every component declares its configuration
+    section (for ``box.example.toml``; a command loads only the components it runs)."""
+    import importlib
+    import pkgutil
+
+    import edge_runtime
+
+    for info in pkgutil.walk_packages(edge_runtime.__path__, "edge_runtime."):
+        if not info.name.endswith("__main__"):
+            importlib.import_module(info.name)
+
+
 def main(argv: list[str] | None = None) -> int:
     return run_command(build_parser().parse_args(argv))
 

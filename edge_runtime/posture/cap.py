@@ -64,6 +64,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.core.skeleton import (
     HEAD,
     HIP,
@@ -106,6 +107,7 @@ NEEDED: tuple[int, ...] = (HIP, R_HIP, R_KNEE, R_ANKLE, L_HIP, L_KNEE, L_ANKLE, 
 """Joints CAP reads (all but spine and neck_nose)."""
 
 
+@config.section("cap")
 @dataclass(frozen=True)
 class CapParams:
     """How the part scores combine into one CAP (the box's [cap] configuration section)."""

@@ -62,6 +62,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.core.skeleton import BASE_HEIGHT_M
 from edge_runtime.errors import ConfigError
 from edge_runtime.posture.cap import CapParams, CapResult, cap_score, cycle_cap
@@ -76,6 +77,7 @@ class GolaParamError(ConfigError):
     """Impossible GOLA parameters; the message names the key."""
 
 
+@config.section("gola")
 @dataclass(frozen=True)
 class GolaParams:
     """GOLA-HRC parameters: Table 4.1's defaults plus the box's safety limits (the [gola] section)."""

@@ -27,6 +27,8 @@ from typing import Any, Callable
 
 import can
 
+from edge_runtime import config
+from edge_runtime.canbus.bus import BUS_INTERFACES
 from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EProtector
 from edge_runtime.core.manifest import ASSETS_DIR
@@ -44,6 +46,23 @@ DROPPED_SAMPLES_MAX = 65535
 def load_vehicle_dbc():
     """The vehicle DBC the box ships (DISTRACTION_ALERT, WEARABLE_STATUS)."""
     return load_dbc(DBC_PATH)
+
+
+@config.section("can")
+@dataclass(frozen=True)
+class CanParams:
+    """The vehicle CAN bus the alerts and the WEARABLE_STATUS heartbeat go out on."""
+
+    interface: str = config.setting("virtual", config.one_of(*BUS_INTERFACES))
+    """python-can interface: virtual (in-process), socketcand (the simulated hub), socketcan, slcan, ..."""
+    channel: str = "vcan0"
+    bitrate: int = config.setting(500_000, ("a positive integer", lambda v: v > 0))
+    host: str = "127.0.0.1"
+    """socketcand only: the hub's address."""
+    port: int = config.setting(29536, config.TCP_PORT)
+    """socketcand only: the hub's TCP port."""
+    heartbeat_period_s: float = config.setting(0.1, config.within(0.01, 10))
+    """WEARABLE_STATUS period (s): 10 Hz."""
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Sequence
@@ -45,6 +46,7 @@ from typing import Sequence
 import numpy as np
 import onnxruntime as ort
 
+from edge_runtime import config
 from edge_runtime.core.manifest import (
     ASSETS_DIR,
     CLASSIFIER_ARCHS,
@@ -141,6 +143,19 @@ def preprocess(x700: np.ndarray) -> np.ndarray:
 
 INPUT_NAME = "imu"
 OUTPUT_NAME = "probs"
+
+
+@config.section("model")
+@dataclass(frozen=True)
+class ModelParams:
+    """Which shipped classifier the box runs, and how."""
+
+    assets: str = ""
+    """Directory with manifest.json; empty = the models shipped inside edge_runtime."""
+    name: str = config.setting("int8", ("a non-empty string", bool))
+    """Manifest entry: a model name, or a precision (int8, fp32)."""
+    threads: int = config.setting(1, config.AT_LEAST_1)
+    """onnxruntime intra-op threads."""
 
 
 class Engine:

@@ -57,8 +57,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def effective_config(args: argparse.Namespace):
-    """The config file, then the command-line flags on top, validated as one."""
+    """The config file, then the command-line flags on top, validated as one: the sections of
+    the components imported here (the robot's sections in the same file are left to it)."""
     from edge_runtime import config
+    from edge_runtime.wearable import alerts, classifier, detector, loop, sources  # noqa: F401 - their sections
 
     cfg = config.load(args.config)
     cfg = config.override(cfg, "model", assets=args.assets, name=args.model, threads=args.threads)
@@ -67,8 +69,7 @@ def effective_config(args: argparse.Namespace):
 
 
 def cmd(args: argparse.Namespace) -> int:
-    from edge_runtime.wearable.detector import DetectorConfig
-    from edge_runtime.wearable.loop import AlertPolicy, WearableLoop
+    from edge_runtime.wearable.loop import WearableLoop
 
     cfg = effective_config(args)
     if args.print_config:
@@ -76,10 +77,6 @@ def cmd(args: argparse.Namespace) -> int:
         return 0
     if not (args.replay or args.imu):
         raise CliError("wearable: give a source: --replay FILE.csv, --imu serial:PATH or --imu sim")
-    policy = AlertPolicy(min_confidence=cfg.alerts.min_confidence, never_alert=cfg.alerts.never_alert)
-    d = cfg.detector
-    detector = DetectorConfig(window_frames=d.window_frames, threshold_mps2=d.threshold_mps2,
-                              pre_frames=d.pre_frames, post_frames=d.post_frames)
     source = _open_source(args, cfg)  # bad input is reported before the model loads
     with ExitStack() as stack:
         stack.callback(source.close)
@@ -89,7 +86,7 @@ def cmd(args: argparse.Namespace) -> int:
         outputs = _outputs(stack, args.alerts, args.quiet)
         pub = _open_publisher(cfg, args.can_log, _status_of(engine))
         stack.callback(pub.close)
-        loop = WearableLoop(engine, detector, policy, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
+        loop = WearableLoop(engine, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
         t_wall = time.perf_counter()
         with suppress(KeyboardInterrupt):
             _drive(source, loop, outputs)

@@ -27,18 +27,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from edge_runtime import config
 
+
+@config.section("detector")
 @dataclass(frozen=True)
 class DetectorConfig:
-    window_frames: int = 200
-    """Length of the sliding window; P3 spans window_frames - 1 samples."""
-    threshold_mps2: float = 5.0
+    """The hand-motion detector (dissertation section 2.3.1) and the capture around a trigger."""
+
+    threshold_mps2: float = config.setting(5.0, config.POSITIVE)
     """Trigger when |ax[T] - ax[T - window + 1]| exceeds this (m/s^2)."""
-    pre_frames: int = 100
+    window_frames: int = config.setting(200, ("an integer of at least 2", lambda v: v >= 2))
+    """Length of the sliding window; P3 spans window_frames - 1 samples."""
+    pre_frames: int = config.setting(100, ("a non-negative integer", lambda v: v >= 0))
     """Frames captured before the trigger frame."""
-    post_frames: int = 600
+    post_frames: int = config.setting(600, ("a positive integer", lambda v: v > 0))
     """Frames captured from the trigger frame on (T ... T+599)."""
-    axis: int = 0
+    axis: int = config.setting(0, ("0, 1 or 2", lambda v: v in (0, 1, 2)))
     """Accelerometer axis watched (0 = x, roughly perpendicular to the wheel axis)."""
 
     @property
@@ -55,7 +60,7 @@ class DetectorConfig:
         if not self.threshold_mps2 > 0:
             raise ValueError("threshold_mps2 must be positive")
         if not 0 <= self.pre_frames <= self.window_frames - 1:
-            raise ValueError("pre_frames must lie within the window (0 ... window_frames-1)")
+            raise ValueError(f"[detector] pre_frames: must be below window_frames ({self.window_frames})")
         if self.post_frames < 1:
             raise ValueError("post_frames must be at least 1")
 

@@ -27,6 +27,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
 from edge_runtime.wearable.detector import Capture, DetectorConfig, StreamingDetector
 from edge_runtime.wearable.labels import OTHER
@@ -40,9 +41,12 @@ class Classifier(Protocol):
         """A detector capture (700, 3) m/s^2 at 100 Hz -> (K,) class probabilities."""
 
 
+@config.section("alerts")
 @dataclass(frozen=True)
 class AlertPolicy:
-    min_confidence: float = 0.6
+    """Which classifier decisions become a DISTRACTION_ALERT."""
+
+    min_confidence: float = config.setting(0.6, config.PROBABILITY)
     """Below this top-class probability a decision is 'uncertain' and not alerted."""
     never_alert: tuple[str, ...] = (OTHER,)
     """Classes that are logged but never alerted (non-coupled hand motions)."""

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.errors import InputError
 from edge_runtime.wearable.classifier import resample_poly
 
@@ -25,6 +26,21 @@ SAMPLE_RATE_HZ = 100
 CSV_HEADER = ("t", "ax", "ay", "az")
 MAX_GAP_PERIODS = 1.5
 """A step between timestamps longer than this many sample periods is a gap."""
+
+
+@config.section("imu")
+@dataclass(frozen=True)
+class ImuParams:
+    """The wrist IMU the box reads."""
+
+    sample_rate_hz: int = config.setting(SAMPLE_RATE_HZ, ("100 (the rate the shipped classifier was trained at)",
+                                                          lambda v: v == SAMPLE_RATE_HZ))
+    """Rate the detector and model expect; recordings at other rates are resampled to it."""
+    range_mps2: float = config.setting(156.9, config.POSITIVE)
+    """Accelerometer full scale (m/s^2, 16 g); readings at or beyond it count as saturated."""
+    silence_timeout_s: float = config.setting(0.15, config.POSITIVE)
+    """No sample for this long: the sensor is silent. WEARABLE_STATUS says so at once (an
+    extra heartbeat on every change of state), so within 200 ms of the last sample."""
 
 
 @dataclass
