@@ -54,7 +54,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from edge_runtime.core.serial_line import parse_signing_key
-from edge_runtime.robot.link.base import (
+from edge_runtime.robot.link.protocol import (
     LIGHTS,
     LINK_ERRORS,
     MAV_CMD_ALARM,

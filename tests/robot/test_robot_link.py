@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from support.robot import InProcessController, can_link, pump
 
-from edge_runtime.robot.link.base import (
+from edge_runtime.robot.link.protocol import (
     CanRobotLink,
     CanStateAssembler,
     LinkConfig,

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edge_runtime.robot.link.base import (
+from edge_runtime.robot.link.protocol import (
     open_can_bus,
     open_link,
 )
