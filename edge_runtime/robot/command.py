@@ -315,7 +315,7 @@ def run_calibrate(args, cfg) -> int:
 def _open_link(cfg):
     """The configured robot link (``edge_runtime.robot.link.base.open_link``). The link sends its
     own heartbeat from poll() and reconnects by itself."""
-    from edge_runtime.robot.link.protocol import open_link
+    from edge_runtime.robot.link.base import open_link
 
     r = cfg.robot_link
     if r.kind == "can":

@@ -1,6 +1,6 @@
 """The simulated Sawyer controller: the arm of :mod:`firmware_sim.robot.sawyer` behind a CAN or MAVLink link.
 
-The protocol is the runtime's (``edge_runtime/robot_link.py`` and
+The protocol is the runtime's (``edge_runtime/robot/link/protocol.py`` and
 ``edge_runtime/assets/robot_link.dbc``); this module is the other end of it.
 
 Behaviour (the same on both links):
@@ -48,12 +48,14 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import can
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from edge_runtime.core.serial_line import parse_signing_key
+from edge_runtime.robot.link.base import open_link
 from edge_runtime.robot.link.protocol import (
     LIGHTS,
     LINK_ERRORS,
@@ -65,9 +67,7 @@ from edge_runtime.robot.link.protocol import (
     ROBOT_COMPID,
     ROBOT_SYSID,
     FdStream,
-    LinkConfig,
     RobotCanCodec,
-    RobotLink,
     RobotState,
     SerialStream,
     SocketStream,
@@ -76,7 +76,6 @@ from edge_runtime.robot.link.protocol import (
     make_mavlink,
     mav_to_robot,
     open_can_bus,
-    open_link,
     pack_status,
     robot_to_mav,
     signature_failure,
@@ -84,6 +83,9 @@ from edge_runtime.robot.link.protocol import (
 )
 from firmware_sim.devices.imu_firmware import close_pty_pair, open_pty_pair
 from firmware_sim.robot.sawyer import ArmConfig, SawyerArm, Unreachable, warm_up
+
+if TYPE_CHECKING:  # the runtime's link is only run here, through open_link
+    from edge_runtime.robot.link.base import LinkConfig, RobotLink
 
 DEFAULT_CHANNEL = "vcan0"
 HALF_TARGET_TIMEOUT_S = 0.1

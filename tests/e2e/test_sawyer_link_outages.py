@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from support.robot import InProcessController, can_link, pump
 
-from edge_runtime.robot.link.protocol import open_link
+from edge_runtime.robot.link.base import open_link
 from firmware_sim.devices.can_hub import CanHub
 from firmware_sim.robot.controller import SawyerProcess
 

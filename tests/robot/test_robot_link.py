@@ -13,15 +13,14 @@ import numpy as np
 import pytest
 from support.robot import InProcessController, can_link, pump
 
+from edge_runtime.robot.link.base import LinkConfig, open_link
+from edge_runtime.robot.link.can import CanRobotLink
+from edge_runtime.robot.link.mavlink import MavlinkRobotLink
 from edge_runtime.robot.link.protocol import (
-    CanRobotLink,
     CanStateAssembler,
-    LinkConfig,
-    MavlinkRobotLink,
     RobotCanCodec,
     make_mavlink,
     mav_to_robot,
-    open_link,
     pack_status,
     robot_to_mav,
     tool_pitch_yaw,

@@ -7,10 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edge_runtime.robot.link.protocol import (
-    open_can_bus,
-    open_link,
-)
+from edge_runtime.robot.link.base import open_link
+from edge_runtime.robot.link.protocol import open_can_bus
 from firmware_sim.robot.controller import (
     CanControllerPort,
     SawyerController,

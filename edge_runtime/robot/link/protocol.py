@@ -1,24 +1,16 @@
-"""The runtime's end of the robot link: commands to a Sawyer controller, its state back.
+"""The robot link's wire contract, shared by both ends: the runtime's links
+(:mod:`edge_runtime.robot.link.can`, :mod:`edge_runtime.robot.link.mavlink`) and the
+simulated Sawyer controller (:mod:`firmware_sim.robot.controller`).
 
-``open_link(kind, **options)`` returns a :class:`RobotLink` for ``"can"`` or ``"mavlink"``
-(a registry, like python-can's interfaces). Every link has the same API::
+Here: the names and constants (lights, modes, commands, results), :class:`RobotState`,
+sequence numbers and angles, the checks a target and an alarm must pass, the CAN codec
+and state assembler, the MAVLink conventions (frames, quaternions, the packed status,
+command ids, signing) and the byte streams MAVLink runs on. Nothing here keeps link
+state or timing; that is :mod:`edge_runtime.robot.link.base`.
 
-    link = open_link("can", interface="socketcand", host="127.0.0.1", port=29536, channel="vcan0")
-    link.resume()                                  # the controller boots stopped
-    seq = link.move_to((0.4, 0.2, 0.7), pitch_rad=0.0, yaw_rad=0.0)
-    state = link.poll()                            # never blocks; also sends the heartbeat when due
-    link.result(seq)                               # "ok", "unreachable", "refused", "invalid" or None
-
-Positions are metres in the robot frame (``edge_runtime/skeleton.py``: origin on top of
-the Sawyer base, y up, the work side +z). The tool direction is (pitch, yaw):
+Positions are metres in the robot frame (``edge_runtime/core/skeleton.py``: origin on top
+of the Sawyer base, y up, the work side +z). The tool direction is (pitch, yaw):
 ``d = (cos(pitch)·sin(yaw), sin(pitch), cos(pitch)·cos(yaw))``; roll is left to the arm.
-
-Timing uses an injectable ``clock`` (seconds, default ``time.monotonic``) and the link
-never sleeps, so a simulation can run it faster than real time. ``poll()`` reads what
-has arrived, sends a heartbeat every ``LinkConfig.heartbeat_period_s`` and checks the
-link: no state for ``state_timeout_s`` (200 ms), or a transport error, makes
-``link_ok`` false (``stats.outages`` +1); a broken transport is reopened with
-exponential backoff (``stats.reconnects``). Nothing here raises on a link fault.
 
 **CAN** (``assets/robot_link.dbc``, the single source of truth; cantools encodes and
 decodes, AUTOSAR E2E Profile 1 protects every frame through ``autosar-e2e``, checked
@@ -71,10 +63,8 @@ from __future__ import annotations
 import math
 import os
 import socket
-import threading
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable, ClassVar
 
 import can
 import numpy as np
@@ -82,11 +72,10 @@ import serial
 from pymavlink.dialects.v20 import common as mavlink2
 from pymavlink.quaternion import QuaternionBase
 
-from edge_runtime.canbus.bus import CanLinkError, check_interface, open_bus
+from edge_runtime.canbus.bus import CanLinkError, open_bus
 from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EChecker, E2EProtector
 from edge_runtime.core.manifest import ASSETS_DIR
-from edge_runtime.core.serial_line import parse_serial_spec
 
 DBC_PATH = ASSETS_DIR / "robot_link.dbc"
 
@@ -101,8 +90,8 @@ MAX_TONE_HZ = 20000.0
 MAX_TONE_DB = 127.5
 LINK_ERRORS = (OSError, can.CanError, serial.SerialException, CanLinkError)
 """Transport faults: the link is reported down and reopened, never raised to the caller."""
-
-Clock = Callable[[], float]
+RUNTIME_STATES = ("starting", "running", "degraded", "fault")
+"""What the runtime's heartbeat reports about itself."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -142,43 +131,6 @@ class RobotState:
 def blank_state(t_s: float = 0.0) -> RobotState:
     return RobotState(t_s, np.zeros(N_JOINTS), np.zeros(3), 0.0, 0.0, 0.0, "stopped", False, False, False,
                       "off", 0.0, 0.0, "none", 0, "none", 0.0, {})
-
-
-@dataclass
-class LinkStats:
-    frames_sent: int = 0
-    frames_received: int = 0
-    """Frames or packets received that passed the integrity check."""
-    states: int = 0
-    """Complete state reports received."""
-    integrity_errors: int = 0
-    """Received frames discarded: E2E (CRC, repeated counter) or MAVLink signature/CRC failures."""
-    refused: int = 0
-    """Commands the controller reported as unreachable, refused or invalid."""
-    send_errors: int = 0
-    """Commands or heartbeats that could not be handed to the transport."""
-    outages: int = 0
-    """Times the link went from ok to lost (no state for state_timeout_s, or a transport error)."""
-    reconnects: int = 0
-    """Successful reopenings of the transport after a fault."""
-    heartbeats: int = 0
-
-
-@dataclass(frozen=True)
-class LinkConfig:
-    """Timing of the runtime's end of the link."""
-
-    state_timeout_s: float = 0.2
-    """No complete state for this long: the link is reported lost."""
-    heartbeat_period_s: float | None = 0.05
-    """poll() sends a heartbeat when this much time has passed since the last (None: only heartbeat())."""
-    reconnect_min_s: float = 0.1
-    """First retry delay after a transport fault; doubles per failure up to reconnect_max_s."""
-    reconnect_max_s: float = 2.0
-    stale_reopen_s: float = 1.0
-    """A reopenable transport silent for this long is closed and reopened."""
-    max_frames_per_poll: int = 2000
-    """poll() returns after this many frames even if more are waiting (keeps the loop live)."""
 
 
 def next_seq(seq: int) -> int:
@@ -402,6 +354,9 @@ MAV_CMD_MOVE_ACK = mavlink2.MAV_CMD_USER_3
 RESULT_TO_MAV = {"ok": mavlink2.MAV_RESULT_ACCEPTED, "unreachable": mavlink2.MAV_RESULT_FAILED,
                  "refused": mavlink2.MAV_RESULT_TEMPORARILY_REJECTED, "invalid": mavlink2.MAV_RESULT_DENIED}
 MAV_TO_RESULT = {v: k for k, v in RESULT_TO_MAV.items()}
+RUNTIME_STATE_TO_MAV = {"starting": mavlink2.MAV_STATE_BOOT, "running": mavlink2.MAV_STATE_ACTIVE,
+                        "degraded": mavlink2.MAV_STATE_CRITICAL, "fault": mavlink2.MAV_STATE_EMERGENCY}
+"""The runtime's HEARTBEAT.system_status for each of RUNTIME_STATES."""
 ROBOT_SYSID, ROBOT_COMPID = 1, mavlink2.MAV_COMP_ID_AUTOPILOT1
 RUNTIME_SYSID, RUNTIME_COMPID = 1, mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER
 POSITION_ONLY_MASK = (mavlink2.POSITION_TARGET_TYPEMASK_VX_IGNORE | mavlink2.POSITION_TARGET_TYPEMASK_VY_IGNORE
@@ -535,442 +490,3 @@ def signature_failure(mav: SignedMAVLink, bad) -> str | None:
         return "unsigned"
     why, mav.last_signature_failure = mav.last_signature_failure or "forged", ""
     return why
-
-
-# ----------------------------------------------------------------------------------------------
-# the link
-
-_REGISTRY: dict[str, type["RobotLink"]] = {}
-
-
-def register_link(name: str):
-    """Class decorator: make a RobotLink implementation available to open_link(name)."""
-    def deco(cls):
-        cls.kind = name
-        _REGISTRY[name] = cls
-        return cls
-    return deco
-
-
-def open_link(kind: str, **options) -> "RobotLink":
-    """The RobotLink implementation registered as ``kind`` ("can", "mavlink"), opened with ``options``."""
-    try:
-        cls = _REGISTRY[kind]
-    except KeyError:
-        raise ValueError(f"robot link kind must be one of {', '.join(sorted(_REGISTRY))}, got {kind!r}") from None
-    return cls(**options)
-
-
-class RobotLink:
-    """The runtime's end of a robot link (template methods, like python-can's BusABC).
-
-    Subclasses implement the transport: ``_open_transport``, ``_close_transport``, ``_send_target``,
-    ``_send_mode``, ``_send_alarm``, ``_send_heartbeat`` and ``_receive``. This class does
-    the sequence numbers, input checks, heartbeat timing, link supervision, reconnection
-    with backoff and the statistics. Thread-safe (one lock); it never sleeps.
-    """
-
-    kind: ClassVar[str] = ""
-
-    def __init__(self, config: LinkConfig | None = None, clock: Clock | None = None, reopenable: bool = True):
-        self.config = config or LinkConfig()
-        self.clock: Clock = clock or time.monotonic
-        self.stats = LinkStats()
-        self.last_error: str | None = None
-        self.reopenable = reopenable
-        self._lock = threading.RLock()
-        self._seq = 0
-        self._state: RobotState | None = None
-        self._results: dict[int, str] = {}
-        now = self.clock()
-        self._t0 = now
-        self._last_state_t: float | None = None
-        self._waiting_since_t = now
-        self._last_hb_t = -math.inf
-        self._link_ok = False
-        self._open = False
-        self._backoff_s = self.config.reconnect_min_s
-        self._retry_t = now
-        self._runtime_state = "running"
-        self._connect(now, first=True)
-
-    # -- public API ------------------------------------------------------------------------
-    def move_to(self, position_m, pitch_rad: float, yaw_rad: float) -> int:
-        """Send a target (hand position m, tool pitch/yaw rad); returns its sequence number."""
-        return self._target(position_m, pitch_rad, yaw_rad, retract=False)
-
-    def retract(self, position_m, pitch_rad: float, yaw_rad: float) -> int:
-        """Send a retraction target: accepted even while stopped; an unreachable one stops the arm."""
-        return self._target(position_m, pitch_rad, yaw_rad, retract=True)
-
-    def stop(self) -> int:
-        """Stop: the arm decelerates to rest and refuses moves until resume()."""
-        return self._command(lambda seq: self._send_mode(seq, "stop"))
-
-    def resume(self) -> int:
-        """Leave stop/retract and clear a latched watchdog; the arm holds where it is (mode run)."""
-        return self._command(lambda seq: self._send_mode(seq, "resume"))
-
-    def set_alarm(self, light: str, tone_hz: float, tone_db: float) -> int:
-        """Warning light ("off", "green", "yellow", "red") and tone (Hz, 0 = silent; dB)."""
-        light, tone_hz, tone_db = check_alarm(light, tone_hz, tone_db)
-        return self._command(lambda seq: self._send_alarm(seq, light, tone_hz, tone_db))
-
-    def heartbeat(self) -> bool:
-        """Send the runtime heartbeat now (poll() also does when it is due). True if sent."""
-        with self._lock:
-            now = self.clock()
-            ok = self._transmit(lambda: self._send_heartbeat(self._runtime_state, now - self._t0), now)
-            self._last_hb_t = now
-            self.stats.heartbeats += ok
-            return ok
-
-    def set_runtime_state(self, state: str) -> None:
-        """What the heartbeat reports: "starting", "running", "degraded" or "fault"."""
-        if state not in ("starting", "running", "degraded", "fault"):
-            raise ValueError(f"runtime state must be starting, running, degraded or fault, got {state!r}")
-        self._runtime_state = state
-
-    def poll(self) -> RobotState | None:
-        """Read what has arrived (never blocks); the newest complete state, or None if none came."""
-        with self._lock:
-            now = self.clock()
-            if not self._open:
-                self._maybe_reconnect(now)
-            newest = None
-            if self._open:
-                try:
-                    for st in self._receive(now):
-                        newest = self._on_state(st)
-                except LINK_ERRORS as exc:
-                    self._fault(now, f"receive: {type(exc).__name__}: {exc}")
-            period = self.config.heartbeat_period_s
-            if period is not None and now - self._last_hb_t >= period:
-                self.heartbeat()
-            self._supervise(now)
-            return newest
-
-    @property
-    def state(self) -> RobotState | None:
-        """The latest complete state (check ``link_ok`` for its freshness)."""
-        return self._state
-
-    @property
-    def link_ok(self) -> bool:
-        """A state arrived within state_timeout_s and the transport is open."""
-        return self._link_ok
-
-    def result(self, seq: int) -> str | None:
-        """What the controller answered to command ``seq`` ("ok", "unreachable", "refused", "invalid"), if known."""
-        return self._results.get(seq)
-
-    def close(self) -> None:
-        with self._lock:
-            if self._open:
-                self._open = False
-                self._safe_close()
-            self._link_ok = False
-
-    def __enter__(self) -> "RobotLink":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def summary(self) -> dict:
-        return {"kind": self.kind, "link_ok": self._link_ok, **vars(self.stats)}
-
-    # -- transport hooks (subclasses) -------------------------------------------------------
-    def _open_transport(self) -> None:
-        raise NotImplementedError
-
-    def _close_transport(self) -> None:
-        raise NotImplementedError
-
-    def _send_target(self, seq: int, position_m: np.ndarray, pitch_rad: float, yaw_rad: float, retract: bool) -> None:
-        raise NotImplementedError
-
-    def _send_mode(self, seq: int, command: str) -> None:
-        raise NotImplementedError
-
-    def _send_alarm(self, seq: int, light: str, tone_hz: float, tone_db: float) -> None:
-        raise NotImplementedError
-
-    def _send_heartbeat(self, state: str, uptime_s: float) -> None:
-        raise NotImplementedError
-
-    def _receive(self, now: float) -> list[RobotState]:
-        """Everything waiting, decoded; complete states in order. Raise a LINK_ERRORS fault if broken."""
-        raise NotImplementedError
-
-    # -- helpers for subclasses -------------------------------------------------------------
-    def _record_result(self, seq: int, result: str) -> None:
-        if seq == 0 or result not in RESULTS[1:] or self._results.get(seq) == result:
-            return
-        self._results[seq] = result
-        if len(self._results) > 512:
-            for k in list(self._results)[:256]:
-                del self._results[k]
-        if result in REFUSALS:
-            self.stats.refused += 1
-
-    # -- internals --------------------------------------------------------------------------
-    def _target(self, position_m, pitch_rad: float, yaw_rad: float, retract: bool) -> int:
-        p, pitch, yaw = check_target(position_m, pitch_rad, yaw_rad)
-        return self._command(lambda seq: self._send_target(seq, p, pitch, yaw, retract))
-
-    def _command(self, send: Callable[[int], None]) -> int:
-        with self._lock:
-            self._seq = next_seq(self._seq)
-            seq = self._seq
-            self._transmit(lambda: send(seq), self.clock())
-            return seq
-
-    def _transmit(self, send: Callable[[], None], now: float) -> bool:
-        if not self._open:
-            self._maybe_reconnect(now)
-        if not self._open:
-            self.stats.send_errors += 1
-            return False
-        try:
-            send()
-        except LINK_ERRORS as exc:
-            self.stats.send_errors += 1
-            self._fault(now, f"send: {type(exc).__name__}: {exc}")
-            return False
-        return True
-
-    def _on_state(self, st: RobotState) -> RobotState:
-        self._state = st
-        self._last_state_t = st.t_s
-        self.stats.states += 1
-        self._record_result(st.last_seq, st.last_result)
-        if not self._link_ok:
-            self._link_ok = True
-        return st
-
-    def _supervise(self, now: float) -> None:
-        fresh = self._last_state_t is not None and now - self._last_state_t <= self.config.state_timeout_s
-        if self._link_ok and not fresh:
-            self._link_ok = False
-            self.stats.outages += 1
-            self.last_error = f"no robot state for {self.config.state_timeout_s * 1000:.0f} ms"
-        silent_since = max(self._waiting_since_t, self._last_state_t if self._last_state_t is not None else -math.inf)
-        if self._open and self.reopenable and now - silent_since > self.config.stale_reopen_s:
-            self._fault(now, f"no robot state for {now - silent_since:.1f} s: reopening")
-
-    def _fault(self, now: float, why: str) -> None:
-        self.last_error = why
-        if self._link_ok:
-            self._link_ok = False
-            self.stats.outages += 1
-        if self.reopenable:
-            self._open = False
-            self._safe_close()
-            self._retry_t = now + self._backoff_s
-            self._backoff_s = min(self._backoff_s * 2, self.config.reconnect_max_s)
-        self._waiting_since_t = now
-
-    def _safe_close(self) -> None:
-        try:
-            self._close_transport()
-        except Exception:  # noqa: BLE001 - closing a broken transport may fail too
-            pass
-
-    def _maybe_reconnect(self, now: float) -> None:
-        if self.reopenable and now >= self._retry_t:
-            self._connect(now)
-
-    def _connect(self, now: float, first: bool = False) -> None:
-        try:
-            self._open_transport()
-        except (*LINK_ERRORS, ValueError) as exc:
-            self.last_error = f"open: {type(exc).__name__}: {exc}"
-            self._retry_t = now + self._backoff_s
-            self._backoff_s = min(self._backoff_s * 2, self.config.reconnect_max_s)
-            return
-        self._open = True
-        self._waiting_since_t = now
-        self._backoff_s = self.config.reconnect_min_s
-        if not first:
-            self.stats.reconnects += 1
-
-
-@register_link("can")
-class CanRobotLink(RobotLink):
-    """The robot link on a python-can bus, frames from ``robot_link.dbc`` with E2E Profile 1.
-
-    Options: ``interface`` (default "socketcand"), ``channel`` ("vcan0"), ``host`` and
-    ``port`` (socketcand), ``bitrate``; or ``bus``: an open python-can bus (not reopened
-    on faults). ``config``, ``clock`` as for :class:`RobotLink`.
-    """
-
-    def __init__(self, interface: str = "socketcand", channel: str = "vcan0", host: str | None = "127.0.0.1",
-                 port: int | None = None, bitrate: int | None = None, bus: can.BusABC | None = None,
-                 config: LinkConfig | None = None, clock: Clock | None = None):
-        if bus is None:
-            check_interface(interface)
-        if bus is None and interface == "socketcand" and port is None:
-            raise ValueError("the socketcand interface needs port= (and host=)")
-        self.interface, self.channel, self.host, self.port, self.bitrate = interface, channel, host, port, bitrate
-        self.bus = bus
-        self._given_bus = bus is not None
-        self.codec = RobotCanCodec()
-        self._assembler = CanStateAssembler()
-        super().__init__(config=config, clock=clock, reopenable=bus is None)
-
-    def _open_transport(self) -> None:
-        if not self._given_bus:
-            self.bus = open_can_bus(self.interface, self.channel, self.host, self.port, self.bitrate)
-
-    def _close_transport(self) -> None:
-        bus, self.bus = self.bus, None
-        if bus is not None and not self._given_bus:
-            bus.shutdown()
-
-    def _put(self, *msgs: can.Message) -> None:
-        for m in msgs:
-            self.bus.send(m)
-            self.stats.frames_sent += 1
-
-    def _send_target(self, seq, position_m, pitch_rad, yaw_rad, retract) -> None:
-        self._put(*self.codec.target_frames(seq, position_m, pitch_rad, yaw_rad, retract))
-
-    def _send_mode(self, seq, command) -> None:
-        self._put(self.codec.mode_frame(seq, command))
-
-    def _send_alarm(self, seq, light, tone_hz, tone_db) -> None:
-        self._put(self.codec.alarm_frame(seq, light, tone_hz, tone_db))
-
-    def _send_heartbeat(self, state, uptime_s) -> None:
-        self._put(self.codec.heartbeat_frame(state, uptime_s))
-
-    def _receive(self, now: float) -> list[RobotState]:
-        states = []
-        for _ in range(self.config.max_frames_per_poll):
-            msg = self.bus.recv(timeout=0)
-            if msg is None:
-                break
-            status, name, sig = self.codec.decode(msg)
-            if sig is None:
-                if status != "unknown_id":
-                    self.stats.integrity_errors += 1
-                continue
-            self.stats.frames_received += 1
-            st = self._assembler.feed(name, sig, now)
-            if st is not None:
-                states.append(st)
-        return states
-
-
-@register_link("mavlink")
-class MavlinkRobotLink(RobotLink):
-    """The robot link over MAVLink 2 on a serial line (``path``, or ``serial="serial:PATH[?key=HEX]"``)
-    or a given byte ``stream``.
-
-    ``signing_key`` (32 bytes): sign everything sent and refuse unsigned, forged and
-    replayed packets (counted in ``stats.integrity_errors`` and ``signature_failures``).
-    """
-
-    def __init__(self, path: str | None = None, stream=None, baud: int = 921600, signing_key: bytes | None = None,
-                 link_id: int = 1, serial: str | None = None, config: LinkConfig | None = None,
-                 clock: Clock | None = None):
-        if serial is not None:
-            path, signing_key = parse_serial_spec(serial, signing_key)
-        if (path is None) == (stream is None):
-            raise ValueError("give either path= (a serial line) or stream= (a byte stream)")
-        self.path, self.baud, self.stream = path, baud, stream
-        self._given_stream = stream is not None
-        self.signing_key = signing_key
-        self.signature_failures: dict[str, int] = {}
-        self.mav = make_mavlink(self, RUNTIME_SYSID, RUNTIME_COMPID, signing_key, link_id)
-        self._partial = blank_state()
-        self._boot_ms = 0
-        super().__init__(config=config, clock=clock, reopenable=stream is None)
-
-    # pymavlink writes through this object
-    def write(self, buf: bytes) -> None:
-        if self.stream is None:
-            raise ConnectionError("serial line not open")
-        self.stream.write(bytes(buf))
-        self.stats.frames_sent += 1
-
-    def _open_transport(self) -> None:
-        if not self._given_stream:
-            self.stream = SerialStream(self.path, self.baud)
-
-    def _close_transport(self) -> None:
-        stream, self.stream = self.stream, None
-        if stream is not None and not self._given_stream:
-            stream.close()
-
-    def _send_target(self, seq, position_m, pitch_rad, yaw_rad, retract) -> None:
-        x, y, z = robot_to_mav(position_m)
-        if retract:
-            self._command_long(MAV_CMD_RETRACT, seq, x, y, z, pitch_rad, -yaw_rad)
-            return
-        self.mav.set_attitude_target_send(seq, ROBOT_SYSID, ROBOT_COMPID, ATTITUDE_ONLY_MASK,
-                                          tool_quaternion(pitch_rad, yaw_rad), 0.0, 0.0, 0.0, 0.0)
-        self.mav.set_position_target_local_ned_send(seq, ROBOT_SYSID, ROBOT_COMPID, mavlink2.MAV_FRAME_LOCAL_NED,
-                                                    POSITION_ONLY_MASK, x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                                                    wrap_angle(-yaw_rad), 0.0)
-
-    def _command_long(self, command: int, seq: int, *params: float) -> None:
-        p = list(params) + [0.0] * (6 - len(params))
-        self.mav.command_long_send(ROBOT_SYSID, ROBOT_COMPID, command, 0, *p, float(seq))
-
-    def _send_mode(self, seq, command) -> None:
-        self._command_long(MAV_CMD_STOP_RESUME, seq, 0.0 if command == "stop" else 1.0)
-
-    def _send_alarm(self, seq, light, tone_hz, tone_db) -> None:
-        self._command_long(MAV_CMD_ALARM, seq, float(LIGHTS.index(light)), tone_hz, tone_db)
-
-    def _send_heartbeat(self, state, uptime_s) -> None:
-        status = {"starting": mavlink2.MAV_STATE_BOOT, "running": mavlink2.MAV_STATE_ACTIVE,
-                  "degraded": mavlink2.MAV_STATE_CRITICAL, "fault": mavlink2.MAV_STATE_EMERGENCY}[state]
-        self.mav.heartbeat_send(mavlink2.MAV_TYPE_ONBOARD_CONTROLLER, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, status)
-
-    def _receive(self, now: float) -> list[RobotState]:
-        states = []
-        for _ in range(64):
-            data = self.stream.read()
-            if not data:
-                break
-            for m in self.mav.parse_buffer(data) or ():
-                st = self._handle(m, now)
-                if st is not None:
-                    states.append(st)
-        return states
-
-    def _handle(self, m, now: float) -> RobotState | None:
-        mtype = m.get_type()
-        if mtype == "BAD_DATA":
-            why = signature_failure(self.mav, m)
-            if why is not None:
-                self.signature_failures[why] = self.signature_failures.get(why, 0) + 1
-            self.stats.integrity_errors += 1  # a refused signature, a failed CRC or junk bytes
-            return None
-        if m.get_srcSystem() != ROBOT_SYSID or m.get_srcComponent() != ROBOT_COMPID:
-            return None
-        self.stats.frames_received += 1
-        s = self._partial
-        if mtype == "LOCAL_POSITION_NED":
-            self._partial = replace(s, ee_position_m=mav_to_robot(m.x, m.y, m.z),
-                                    ee_speed_mps=math.sqrt(m.vx ** 2 + m.vy ** 2 + m.vz ** 2),
-                                    robot_time_s=m.time_boot_ms / 1000.0)
-        elif mtype == "ATTITUDE":
-            self._partial = replace(s, pitch_rad=float(m.pitch), yaw_rad=wrap_angle(-m.yaw))
-        elif mtype == "ACTUATOR_OUTPUT_STATUS":
-            a = m.actuator
-            self._partial = replace(s, joint_positions_rad=np.array(a[:N_JOINTS], dtype=float),
-                                    light=LIGHTS[int(round(a[14])) % len(LIGHTS)], tone_hz=float(a[15]),
-                                    tone_db=float(a[16]))
-        elif mtype == "SYS_STATUS":
-            self._partial = replace(s, counters={"integrity_errors": m.errors_comm, "refused": m.errors_count1,
-                                                 "watchdog_trips": m.errors_count2, "rx_valid": m.errors_count3})
-        elif mtype == "COMMAND_ACK":
-            self._record_result(int(m.result_param2), MAV_TO_RESULT.get(m.result, "invalid"))
-        elif mtype == "HEARTBEAT":
-            self._partial = replace(s, t_s=now, **unpack_status(m.custom_mode))
-            return self._partial
-        return None
