@@ -9,7 +9,7 @@ up, origin on top of the Sawyer base). "Ground-projected" distances drop ``y``.
   is ``P_head(T + t) = P_head(T) + t * V_head`` with ``t = 0.5 s``. A finite difference
   of two frames turns 3 cm of head noise per axis at 30 Hz into 2.2 m/s (rms, 3D) of
   velocity noise, i.e. 1.1 m of prediction noise; the 0.5 s fit brings it to 0.09 m/s
-  (tests/test_hazard.py::test_least_squares_velocity_rejects_keypoint_noise measures
+  (tests/robot/test_hazard.py::test_least_squares_velocity_rejects_keypoint_noise measures
   both). The price is lag: a change of walking speed is fully seen after ``window_s``.
 * **Zones (Eq. 4-5).** Two vertical cylinders around the end effector::
 
@@ -33,9 +33,8 @@ up, origin on top of the Sawyer base). "Ground-projected" distances drop ``y``.
   inside R1 and vanishes from view also holds the arm stopped (``worker_lost``).
   The fault clears after ``dwell_s`` of valid frames.
 
-Eq. 6 (retraction): ``L = w1 * unit(P_eff - P_head) + w2 * unit(V_ground)`` with
-``w1 = 0.3 m`` and ``w2 = 0.2 m``, ground-projected, and the tool turned toward the
-robot base (``retract_pose``).
+Where level 2 retracts the arm to (Eq. 6) is :mod:`edge_runtime.robot.retract`; its weights
+are zone parameters (``retract_weight_away_m``, ``retract_weight_path_m``).
 """
 from __future__ import annotations
 
@@ -53,11 +52,6 @@ def ground(v) -> np.ndarray:
     """The ground projection (x, z) of a robot-frame point or vector."""
     v = np.asarray(v, dtype=float)
     return v[..., GROUND_AXES]
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(v))
-    return v / n if n > 1e-9 else np.zeros_like(v)
 
 
 @dataclass(frozen=True)
@@ -231,23 +225,6 @@ def distance_to_effector(est: HeadEstimate, effector_m) -> float:
     the current head (m)."""
     e = ground(effector_m)
     return float(min(np.linalg.norm(ground(est.predicted_m) - e), np.linalg.norm(ground(est.position_m) - e)))
-
-
-def retract_direction(effector_m, est: HeadEstimate, params: ZoneParams = ZoneParams()) -> np.ndarray:
-    """Eq. 6 in the robot frame: ``w1 unit(P_eff - P_head) + w2 unit(V_ground)``, on the
-    ground (y = 0). A standing worker contributes no second term."""
-    away = _unit(ground(effector_m) - ground(est.position_m))
-    path = _unit(ground(est.velocity_mps)) if np.linalg.norm(ground(est.velocity_mps)) > 0.2 else np.zeros(2)
-    L = params.retract_weight_away_m * away + params.retract_weight_path_m * path
-    return np.array([L[0], 0.0, L[1]])
-
-
-def tool_yaw_toward_base(position_m) -> float:
-    """Yaw (rad) that points the tool at the robot base from ``position_m``: the heading of
-    the ground vector toward the base's axis, measured from +z toward +x
-    (yaw = atan2(dx, dz); 0 points the tool along +z, the work side)."""
-    g = -ground(position_m)
-    return float(math.atan2(g[0], g[1]))
 
 
 @dataclass
