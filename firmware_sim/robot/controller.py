@@ -56,6 +56,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from edge_runtime.core.serial_line import parse_signing_key
 from edge_runtime.robot.link.base import open_link
+from edge_runtime.robot.link.options import add_bus_arguments
 from edge_runtime.robot.link.protocol import (
     LIGHTS,
     LINK_ERRORS,
@@ -684,24 +685,12 @@ def _hex_key(s: str) -> bytes:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _port_number(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a TCP port: {s!r}") from None
-    if not 1 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"TCP port must be 1..65535, got {v}")
-    return v
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from edge_runtime.cli import positive_float, positive_int
 
     p.add_argument("--link", choices=("can", "mavlink"), required=True, help="CAN (robot_link.dbc) or MAVLink 2")
-    p.add_argument("--can-interface", default="socketcand", help="python-can interface (default socketcand)")
-    p.add_argument("--can-host", default="127.0.0.1", help="socketcand hub address")
-    p.add_argument("--can-port", type=_port_number, default=None, help="socketcand hub TCP port")
-    p.add_argument("--channel", default=DEFAULT_CHANNEL, help="CAN channel (default vcan0)")
+    add_bus_arguments(p, defaults={"interface": "socketcand", "host": "127.0.0.1", "channel": DEFAULT_CHANNEL},
+                      channel_flag="--channel")
     p.add_argument("--pty", action="store_true", help="MAVLink: create a pseudo-terminal pair and print its path")
     p.add_argument("--serial", default=None, metavar="PATH", help="MAVLink: use this existing serial line")
     p.add_argument("--baud", type=positive_int, default=921600, help="MAVLink --serial: baud rate")

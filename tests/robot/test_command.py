@@ -195,8 +195,7 @@ def test_a_stalled_live_camera_is_caught_by_the_staleness_check():
             yield 0.0, (lambda lp: lp.feed_joints(j))
         time.sleep(0.6)
 
-    seen = []
-    robot_cli._drive_live(loop, camera(), lambda t, fn: seen.append(fn(loop).state), time.monotonic(), None)
+    seen = [feed(loop).state for _, feed in robot_cli._live_frames(loop, camera(), time.monotonic(), None)]
     s = loop.status()
     assert "NORMAL" in seen and s["state"] == "FAULT" and s["reason"] == "pose_stale" and s["stale"] == 1
     assert [c for c in link.calls if c[0] != "heartbeat"][-1] == ("stop",)

@@ -136,6 +136,13 @@ class FakeLink(LinkInterface):
     def names(self):
         return [c[0] for c in self.calls]
 
+    # what the robot command uses of a RobotLink beyond the LinkInterface
+    def close(self):
+        self.closed = True
+
+    def summary(self):
+        return {"kind": "fake", "calls": len(self.calls)}
+
 
 def pump(link, seconds: float, until=None) -> bool:
     end = time.monotonic() + seconds
