@@ -33,7 +33,7 @@ interface:
 Keypoints come back in the camera image's own pixels (the letterbox undone),
 ready for :mod:`edge_runtime.robot.keypoints` (undistortion) and the lifter.
 
-Faults (DESIGN section 8: degrade loudly)
+Faults (docs/design.md section 8: degrade loudly)
 =========================================
 * A source that cannot be opened, or a pose model that is missing or that
   onnxruntime refuses: :class:`CameraError` / ``ModelIntegrityError`` naming it.
