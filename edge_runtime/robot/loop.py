@@ -6,7 +6,8 @@ Per camera frame::
                           or 3D joints given directly (camera or robot frame)
     -> calibration (camera -> robot frame; each skeleton re-anchored on the floor when
        the calibration's ground_anchor is on) -> head tracker (per worker)
-    -> HazardMonitor (zones, hysteresis, fail-safe) -> RobotLink commands
+    -> HazardMonitor (zones, hysteresis, fail-safe) -> in level 2 the retraction
+       (:mod:`edge_runtime.robot.retract`) -> commands on the LinkInterface
 
 ``RobotLoop`` never sleeps and never reads the wall clock itself: time comes from the
 injectable ``clock`` (``time.monotonic`` by default; a scenario runner passes its
@@ -67,12 +68,12 @@ import numpy as np
 
 from edge_runtime.core.skeleton import HEAD
 from edge_runtime.robot.hazard import Decision, HazardMonitor, State, TrackerParams, ZoneParams
-from edge_runtime.robot.link.base import LinkInterface
-from edge_runtime.robot.link.protocol import REFUSALS
 from edge_runtime.robot.retract import Retraction, RetractLimits, eq6_retraction, radial_retraction
 
-if TYPE_CHECKING:  # the lifter is the caller's (it loads onnxruntime); the loop only calls push()
+if TYPE_CHECKING:  # the caller makes the lifter (onnxruntime) and the link (python-can, pymavlink): the
+    # loop only calls them, so importing it (as the box configuration does) stays light
     from edge_runtime.robot.lifter import LiftedPose, StreamingLifter
+    from edge_runtime.robot.link.base import LinkInterface
 
 
 @dataclass(frozen=True)
@@ -336,11 +337,10 @@ class RobotLoop:
         self._waypoint = (self._waypoint + 1) % len(self.params.task_waypoints_m)
 
     def _refused(self, seq: int) -> bool:
-        """Did the controller refuse command ``seq``?"""
-        if self.link.result(seq) in REFUSALS:
-            self.counters.refused += 1
-            return True
-        return False
+        """Did the controller refuse command ``seq``? (counted)"""
+        refused = self.link.refused(seq)
+        self.counters.refused += refused
+        return refused
 
     def _check_health(self) -> None:
         ok = self.link.link_ok

@@ -144,6 +144,10 @@ class LinkInterface(ABC):
     def result(self, seq: int) -> str | None:
         """The controller's answer to command ``seq`` ("ok", "unreachable", "refused", "invalid"), if known."""
 
+    def refused(self, seq: int) -> bool:
+        """Did the controller answer command ``seq`` unreachable, refused or invalid?"""
+        return self.result(seq) in REFUSALS
+
     @property
     @abstractmethod
     def state(self) -> RobotState | None:

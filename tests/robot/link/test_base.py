@@ -187,6 +187,10 @@ def test_robot_links_and_stand_ins_implement_the_whole_link_interface():
     with pytest.raises(TypeError, match="abstract"):
         Partial()
 
+    fake = FakeLink()  # refused() reads result(): unreachable, refused and invalid are refusals
+    fake.unreachable_retract = True
+    assert fake.refused(fake.retract((0.0, 0.14, 0.5), 0.0, 0.0)) and not fake.refused(fake.stop())
+
 
 def test_a_robot_link_heartbeats_itself_only_when_it_has_a_period():
     with SimulatedRobot("can") as sim:
