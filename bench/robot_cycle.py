@@ -37,6 +37,7 @@ import numpy as np
 
 from bench.loops import not_available
 from bench.timing import CpuShare, peak_rss_mb, sleep_until, summarize
+from edge_runtime.robot.link.base import LinkInterface
 
 FRAME_RATE_HZ = 30.0
 TICK_RATE_HZ = 100.0
@@ -90,25 +91,37 @@ def prepare_worker(out_npz: str | Path, lifter: dict | None, seed: int = 0) -> P
 class _KnownTransform:
     """camera -> robot frame by the simulated camera's known pose (stands in for a Calibration)."""
 
-    def apply(self, points_cam_m) -> np.ndarray:
-        return np.asarray(points_cam_m, float) @ CAMERA_FROM_ROBOT + np.asarray(CAMERA_POSITION_M)
+    def to_robot(self, joints_cam_m) -> np.ndarray:
+        return np.asarray(joints_cam_m, float) @ CAMERA_FROM_ROBOT + np.asarray(CAMERA_POSITION_M)
 
 
-class _TimedLink:
-    """A robot link that accepts every command and records when the last call returned."""
+class _TimedLink(LinkInterface):
+    """A robot link that accepts every command and records when the last call returned.
+    No controller answers: no state, no refusals, and the loop sends the heartbeats."""
+
+    state = None
+    link_ok = True
+    heartbeats_itself = False
 
     def __init__(self):
         self.last_call_s = 0.0
         self.calls = 0
 
-    def _done(self, *args, **kwargs) -> None:
+    def _done(self, *args, **kwargs) -> int:
         self.calls += 1
         self.last_call_s = time.perf_counter()
+        return self.calls  # the command's sequence number
 
     move_to = retract = stop = resume = set_alarm = heartbeat = _done
 
     def poll(self) -> None:
         return None
+
+    def result(self, seq: int) -> None:
+        return None
+
+    def set_runtime_state(self, state: str) -> None:
+        """Nobody receives the heartbeat's runtime state here."""
 
 
 def _schedule(seconds: float) -> list[tuple[float, int]]:

@@ -12,11 +12,10 @@
     └── LinkError             a bus, serial line or arm link that cannot be opened or used
 
 Feature modules subclass these for their own messages; the command layer
-(``edge_runtime.cli.run``) turns ``InputError`` and ``ModelIntegrityError`` into one
-line and exit status 2. ``LinkError`` is a runtime fault, not bad input: the
-command that meets it names it in one line and exits non-zero too, but the loops
-themselves never raise it on a fault they can ride out (they count it and report it
-in their status instead).
+(``edge_runtime.cli.run_command``) turns ``InputError``, ``ModelIntegrityError`` and a
+``LinkError`` that stops a command (a bus or line that cannot be opened) into one line
+and exit status 2. The loops themselves never raise ``LinkError`` on a fault they can
+ride out: they count it and report it in their status instead.
 
 The input kinds subclass ``ValueError`` (and ``LinkError`` subclasses ``RuntimeError``)
 so that code written against the standard types keeps working.

@@ -7,9 +7,13 @@ from pathlib import Path
 import pytest
 
 from edge_runtime import config
-from edge_runtime.config import BoxConfig, ConfigError
+from edge_runtime.__main__ import load_all_sections
+from edge_runtime.config import ConfigError
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "edge_runtime" / "box.example.toml"
+
+load_all_sections()  # every component declares its section: the whole box's file is validated here
+BoxConfig = config.box_config_type()
 
 
 def test_example_file_is_the_defaults_and_print_config_round_trips(tmp_path):
@@ -77,18 +81,53 @@ def test_never_alert_must_name_model_classes(tmp_path):
     assert r.returncode == 2 and "never_alert" in r.stderr and "Othr" in r.stderr
 
 
-def test_every_section_and_key_is_in_the_example_file():
-    example = tomllib.loads(EXAMPLE.read_text())
-    cfg = BoxConfig()
-    from dataclasses import asdict, fields
-
+def test_the_example_file_is_generated_from_every_declared_section():
     regen = "regenerate it: python -m edge_runtime.config > edge_runtime/box.example.toml"
-    for sec in fields(cfg):
-        assert sec.name in example, f"[{sec.name}] missing from box.example.toml; {regen}"
-        assert set(example[sec.name]) == set(asdict(getattr(cfg, sec.name))), f"[{sec.name}]: {regen}"
-    # the robot-side sections are registered, and so are the other modules' when present
-    assert {"robot_link", "camera", "calibration", "tracker", "zones", "robot_loop"} <= set(config.SECTION_TYPES)
-    assert set(config.SECTION_TYPES) | set(config.MISSING_SECTIONS) == {name for name, _ in config.SECTIONS}
+    assert tuple(config.registered()) == config.BOX_SECTIONS, "a section is declared but not in BOX_SECTIONS"
+    assert EXAMPLE.read_text() == config.example_toml(), regen
+    example = tomllib.loads(EXAMPLE.read_text())
+    assert tuple(example) == config.BOX_SECTIONS
+
+
+def test_a_section_is_declared_once_by_a_frozen_dataclass_with_defaults():
+    from dataclasses import dataclass
+
+    with pytest.raises(ValueError, match="not a box section"):
+        config.section("zonez")
+    with pytest.raises(TypeError, match="frozen"):
+        config.section("zones")(dataclass(type("Mutable", (), {"__annotations__": {"x": int}, "x": 1})))
+    with pytest.raises(ValueError, match="declared twice"):
+        config.section("zones")(dataclass(frozen=True)(type("Other", (), {"__annotations__": {"x": int}, "x": 1})))
+
+
+PROBE = """
+import json, sys
+from edge_runtime import config
+from edge_runtime.wearable import command
+box = sys.argv[1]
+cfg = command.effective_config(type("Args", (), dict(config=box, assets=None, model=None, threads=None,
+                                                     min_confidence=None, threshold=None))())
+print(json.dumps({"sections": [f for f in cfg.__dataclass_fields__],
+                  "robot_or_posture_loaded": sorted(m for m in sys.modules
+                                                    if m.startswith(("edge_runtime.robot", "edge_runtime.posture")))}))
+"""
+
+
+@pytest.mark.slow
+def test_the_wearable_reads_the_shared_file_without_loading_the_robot_side(tmp_path):
+    """A wearable box validates its own sections; the robot's sections in the same file are the
+    robot command's to check, and reading them loads neither the lifter nor the posture code."""
+    import json
+
+    box = tmp_path / "box.toml"
+    box.write_text("[detector]\nthreshold_mps2 = 4.0\n[zones]\nnot_a_key = 1\n")
+    r = subprocess.run([sys.executable, "-c", PROBE, str(box)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["sections"] == ["imu", "detector", "model", "alerts", "can"]
+    assert out["robot_or_posture_loaded"] == []
+    with pytest.raises(ConfigError, match=r"\[zones\] not_a_key: unknown key"):
+        config.load(box)  # this process has the robot side loaded: the section is checked
 
 
 @pytest.mark.parametrize(

@@ -21,7 +21,7 @@ Schema (``SCHEMA_VERSION`` 1; ``python -m export assets`` writes it)::
           "outputs": [{"name": "probs", "shape": ["N", 6], "dtype": "float32"}, ...],
           "classes": ["Phone", ...],    # model-output order; [] for a model that is not a
                                         # classifier (arch "lifter", which adds "receptive_field",
-                                        # "joints" and "camera": see edge_runtime/lifter.py)
+                                        # "joints" and "camera": see edge_runtime/robot/lifter.py)
           "metrics": {...},             # how well it does, and on what
           "quantization": {...},        # int8 only: method, calibration, int8 operators, candidates
           "provenance": {"command", "seed", "data", "git_commit", "versions": {...}}

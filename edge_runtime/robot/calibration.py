@@ -21,7 +21,7 @@ Two fits, both giving ``p_robot = A @ p_cam + b``:
 * ``"rigid"`` (default) -- a least-squares similarity (rotation by SVD, one scale,
   translation; Umeyama 1991) over all six correspondences, every head and every ankle
   at every marker. It cannot shear, uses twice the data, and its residuals measure
-  how well the recording fits. tests/test_calibration.py compares the two on simulated
+  how well the recording fits. tests/robot/test_calibration.py compares the two on simulated
   cameras with keypoint noise; the rigid fit's head error is the lower, hence the
   default. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
   transform).
@@ -52,6 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, L_ANKLE, R_ANKLE
 from edge_runtime.errors import InputError
 
@@ -63,6 +64,7 @@ class CalibrationError(InputError):
     """A calibration that cannot be made or loaded; the message says why."""
 
 
+@config.section("calibration")
 @dataclass(frozen=True)
 class CalibrationParams:
     """The marker layout and the fit ([calibration] in the box configuration)."""
@@ -70,12 +72,12 @@ class CalibrationParams:
     markers_xz_m: tuple[tuple[float, float], ...] = ((0.0, 1.0), (1.0, 1.0), (0.0, 2.0))
     """Ground positions (x, z) of markers 1, 2 and 3 in the robot frame (m). Marker 2 lies
     along +x from marker 1 and marker 3 along +z, as in the dissertation's Fig. 3.1."""
-    base_height_m: float = BASE_HEIGHT_M
+    base_height_m: float = config.setting(BASE_HEIGHT_M, config.POSITIVE)
     """Height of the robot frame's origin (top of the base) above the floor (m)."""
-    worker_height_m: float = 0.0
+    worker_height_m: float = config.setting(0.0, ("0 (measure) or a number in [1, 2.5]", lambda v: v == 0 or 1 <= v <= 2.5))
     """L_y: head-joint height above the ankle midpoint of the calibrating worker (m);
     0 = measure it from the recording."""
-    ankle_height_m: float = 0.07
+    ankle_height_m: float = config.setting(0.07, config.within(0, 0.2))
     """Height of the ankle joints above the floor (m; 0.039 of body height). The
     dissertation puts the ankle midpoint on the marker (0); this lifts it to the joint."""
     method: str = "rigid"
@@ -83,23 +85,23 @@ class CalibrationParams:
     "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1)."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
-    min_frames: int = 10
+    min_frames: int = config.setting(10, config.AT_LEAST_1)
     """Frames needed at each marker."""
-    min_move_m: float = 0.3
+    min_move_m: float = config.setting(0.3, config.POSITIVE)
     """The head must move at least this far between markers (m), else the worker did not move."""
-    still_speed_mps: float = 0.15
+    still_speed_mps: float = config.setting(0.15, config.POSITIVE)
     """Recording segmentation: the ankle midpoint moving slower than this is standing (m/s)."""
-    still_min_s: float = 1.0
+    still_min_s: float = config.setting(1.0, config.POSITIVE)
     """Recording segmentation: a stand at a marker lasts at least this long (s)."""
     ground_anchor: bool = True
     """Re-anchor lifted skeletons on the floor (:func:`anchor_factor`): scale each about the
     camera centre so that its lower ankle is ``ankle_height_m`` above the floor. Fixes most of
     the lifter's depth error (depth from apparent body size); see reports/robot/head_error.md."""
-    anchor_min_ray_deg: float = 3.0
+    anchor_min_ray_deg: float = config.setting(3.0, config.within(0, 45))
     """Anchoring guard: the ray from the camera to the lower ankle must point at least this
     far below the horizontal (deg), else the floor crossing is too ill-conditioned and the
     lifter's depth is kept."""
-    anchor_min_camera_height_m: float = 0.5
+    anchor_min_camera_height_m: float = config.setting(0.5, config.NON_NEGATIVE)
     """Anchoring guard: the camera centre must be at least this high above the ankle plane (m)."""
     anchor_min_scale: float = 0.7
     """Anchoring clamps its scale factor to [anchor_min_scale, anchor_max_scale]."""

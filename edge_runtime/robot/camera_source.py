@@ -33,7 +33,7 @@ interface:
 Keypoints come back in the camera image's own pixels (the letterbox undone),
 ready for :mod:`edge_runtime.robot.keypoints` (undistortion) and the lifter.
 
-Faults (DESIGN section 8: degrade loudly)
+Faults (docs/design.md section 8: degrade loudly)
 =========================================
 * A source that cannot be opened, or a pose model that is missing or that
   onnxruntime refuses: :class:`CameraError` / ``ModelIntegrityError`` naming it.
@@ -60,6 +60,7 @@ from typing import Iterator
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.core.manifest import ModelIntegrityError
 from edge_runtime.errors import InputError
 from edge_runtime.robot.keypoints import FORMATS, Person
@@ -76,6 +77,25 @@ class BadImageError(InputError):
     """An image the pose model cannot take (zero-size, wrong shape or type)."""
 
 
+@config.section("camera")
+@dataclass(frozen=True)
+class CameraParams:
+    """The camera and keypoint input of the robot loop."""
+
+    device: str = ""
+    """The robot loop's camera when no input flag is given: an OpenCV device index ("0"), a
+    video file or a stream URL; empty = none configured."""
+    rate_hz: float = config.setting(30.0, ("a number in (0, 240]", lambda v: 0 < v <= 240))
+    """Frames per second the camera delivers and the loop expects."""
+    keypoint_format: str = config.setting("coco", config.one_of("coco", "h36m"))
+    """2D keypoint layout of the input: "coco" (COCO-17) or "h36m"."""
+    intrinsics: str = ""
+    """JSON file with the camera model (K, distortion, size); empty = the lifter's own camera."""
+    pose_model: str = ""
+    """ONNX 2D pose model for --camera; empty = none configured."""
+
+
+@config.section("camera_source")
 @dataclass(frozen=True)
 class CameraSourceParams:
     """Tunables of the camera path."""

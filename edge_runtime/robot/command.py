@@ -47,12 +47,16 @@ keypoints), writes the calibration and prints its residuals; no link is opened.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
+import queue
 import sys
+import threading
 import time
-from dataclasses import asdict, dataclass
-from typing import Any
+from contextlib import closing
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -60,6 +64,11 @@ from edge_runtime.cli import CliError, positive_float
 from edge_runtime.core.manifest import ManifestError
 from edge_runtime.errors import InputError
 from edge_runtime.robot.calibration import Calibration, CalibrationError
+from edge_runtime.robot.link.options import add_bus_arguments
+
+if TYPE_CHECKING:  # imported when the loop runs, not for every command's options
+    from edge_runtime.robot.link.base import RobotLink
+    from edge_runtime.robot.loop import FrameRecord, RobotLoop
 
 TICK_S = 0.01
 """Control cycle of the real-time driver (s)."""
@@ -83,10 +92,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
     link = parser.add_argument_group("robot link (override [robot_link])")
     link.add_argument("--link", choices=("can", "mavlink"), help="[robot_link] kind")
-    link.add_argument("--can-interface", help="python-can interface [robot_link] interface")
-    link.add_argument("--can-channel", help="python-can channel [robot_link] channel")
-    link.add_argument("--can-host", help="socketcand hub address [robot_link] host")
-    link.add_argument("--can-port", type=int, help="socketcand hub port [robot_link] port")
+    add_bus_arguments(link, config_section="robot_link")
     link.add_argument("--serial", metavar="serial:PATH[?key=HEX]", help="MAVLink serial line [robot_link] serial")
     parser.add_argument("--calibration", metavar="CAL.json", help="camera -> robot calibration for camera-frame joints")
     parser.add_argument("--calibrate", metavar="OUT.json", help="run the 3-marker calibration on the recording, write it")
@@ -97,7 +103,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def effective_config(args):
+    """The config file, then the command-line flags on top, validated as one: the sections of
+    the components imported here (the wearable's sections in the same file are left to it)."""
     from edge_runtime import config
+    from edge_runtime.robot import calibration, camera_source, hazard, lifter, loop  # noqa: F401 - their sections
+    from edge_runtime.robot.link import options  # noqa: F401 - [robot_link]
 
     cfg = config.load(args.config)
     cfg = config.override(cfg, "robot_link", kind=args.link, interface=args.can_interface, channel=args.can_channel,
@@ -155,35 +165,44 @@ def parse_joints_line(line: str, where: str) -> JointsFrame | None:
         raise JointsInputError(f"{where}: expected a JSON object per line")
     if "summary" in obj:
         return None
+    t_s, valid, reason, marker = _frame_fields(obj, where)
+    if "people" in obj:
+        joints, frame, ids = _people(obj["people"], where)
+        return JointsFrame(t_s, joints, frame, valid, reason, ids, marker)
+    joints, frame = _pick_joints(obj, where)
+    if frame is None:
+        raise JointsInputError(f"{where}: no joints_cam_m, joints_robot_m or people")
+    if joints is None and valid:
+        raise JointsInputError(f"{where}: joints are null in a frame marked valid")
+    return JointsFrame(t_s, None if joints is None else joints[None], frame, valid, reason, None, marker)
+
+
+def _frame_fields(obj: dict, where: str) -> tuple[float, bool, str, int]:
+    """A joints line's t (s), valid, reason and marker, checked."""
     t = obj.get("t", obj.get("t_s"))
     if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
         raise JointsInputError(f"{where}: t: expected a finite number of seconds, got {t!r}")
     valid = obj.get("valid", True)
     if not isinstance(valid, bool):
         raise JointsInputError(f"{where}: valid: expected true/false, got {valid!r}")
-    reason = obj.get("reason") or ""
     marker = obj.get("marker", 0)
     if marker not in (0, 1, 2, 3):
         raise JointsInputError(f"{where}: marker: expected 1, 2 or 3, got {marker!r}")
-    if "people" in obj:
-        people = obj["people"]
-        if not isinstance(people, list):
-            raise JointsInputError(f"{where}: people: expected a list")
-        picked = [_pick_joints(p if isinstance(p, dict) else {}, f"{where}: people[{i}]") for i, p in enumerate(people)]
-        if any(j is None for j, _ in picked):
-            raise JointsInputError(f"{where}: every person needs joints_cam_m or joints_robot_m")
-        frames = {f for _, f in picked}
-        if len(frames) > 1:
-            raise JointsInputError(f"{where}: people mix camera- and robot-frame joints")
-        joints = np.stack([j for j, _ in picked]) if picked else None
-        ids = [p.get("id", i) for i, p in enumerate(people)]
-        return JointsFrame(float(t), joints, frames.pop() if frames else "robot", valid, reason, ids, marker)
-    joints, frame = _pick_joints(obj, where)
-    if frame is None:
-        raise JointsInputError(f"{where}: no joints_cam_m, joints_robot_m or people")
-    if joints is None and valid:
-        raise JointsInputError(f"{where}: joints are null in a frame marked valid")
-    return JointsFrame(float(t), None if joints is None else joints[None], frame, valid, reason, None, marker)
+    return float(t), valid, obj.get("reason") or "", marker
+
+
+def _people(people, where: str) -> tuple[np.ndarray | None, str, list]:
+    """A ``people`` list: joints (P, 17, 3) or None for nobody, their frame and their ids."""
+    if not isinstance(people, list):
+        raise JointsInputError(f"{where}: people: expected a list")
+    picked = [_pick_joints(p if isinstance(p, dict) else {}, f"{where}: people[{i}]") for i, p in enumerate(people)]
+    if any(j is None for j, _ in picked):
+        raise JointsInputError(f"{where}: every person needs joints_cam_m or joints_robot_m")
+    frames = {f for _, f in picked}
+    if len(frames) > 1:
+        raise JointsInputError(f"{where}: people mix camera- and robot-frame joints")
+    joints = np.stack([j for j, _ in picked]) if picked else None
+    return joints, frames.pop() if frames else "robot", [p.get("id", i) for i, p in enumerate(people)]
 
 
 def read_joints_jsonl(path: str) -> list[JointsFrame]:
@@ -312,7 +331,7 @@ def run_calibrate(args, cfg) -> int:
 # ---------------------------------------------------------------------------- the live loop
 
 
-def _open_link(cfg):
+def _open_link(cfg) -> RobotLink:
     """The configured robot link (``edge_runtime.robot.link.base.open_link``). The link sends its
     own heartbeat from poll() and reconnects by itself."""
     from edge_runtime.robot.link.base import open_link
@@ -355,96 +374,88 @@ def run_loop(args, cfg) -> int:
 
     calibration = Calibration.load(args.calibration) if args.calibration else None
     frames, camera_frame, live = _frames(args, cfg, calibration)
-    first = None if live else next(frames, None)  # a bad file is reported before the link opens
-    if first is None and not live:
-        raise CliError("no frames")
-    try:
-        log = open(args.log, "w", encoding="utf-8") if args.log else None
-    except OSError as e:
-        raise CliError(f"--log {args.log}: cannot write ({e.strerror or e})") from None
+    if not live:
+        frames = _first_read(frames)  # a bad file is reported before the link opens
+    log = _open_log(args.log)
     link = _open_link(cfg)
     loop = RobotLoop(link, calibration if camera_frame else None, cfg.zones, cfg.tracker, cfg.robot_loop,
                      clock=time.monotonic, on_record=(lambda r: log.write(json.dumps(asdict(r)) + "\n")) if log else None)
-    states: dict[str, int] = {}
-    last = None
-
-    def feed(t_rel_s: float, fn) -> None:
-        nonlocal last
-        rec = fn(loop)
-        states[rec.state] = states.get(rec.state, 0) + 1
-        now = (rec.state, rec.reason, loop.link_state, loop.link_error)
-        if not args.quiet and now != last:
-            print(f"t={t_rel_s:8.2f}s  {rec.state:<7} {rec.reason}  d={rec.distance_m:.2f} m  link {loop.link_state}"
-                  + (f" ({loop.link_error})" if loop.link_error else ""), file=sys.stderr)
-            last = now
-
+    progress = _Progress(loop, args.quiet)
     start = time.monotonic()
     try:
-        if live:
-            _drive_live(loop, frames, feed, start, args.duration)
-        else:
-            _drive_replay(loop, _chain(first, frames), feed, start, args.duration)
+        timed = _live_frames if live else _replayed_frames
+        with closing(timed(loop, frames, start, args.duration)) as due_frames:
+            for t_rel_s, feed in due_frames:
+                progress.show(t_rel_s, feed(loop))
     except KeyboardInterrupt:
         pass
     finally:
         _safe_stop(link)
-        summary = _summary(loop, link, states, time.monotonic() - start)
+        summary = _summary(loop, link, progress.states, time.monotonic() - start)
         if log:
             log.write(json.dumps({"summary": summary}) + "\n")
             log.close()
-        close = getattr(link, "close", None)
-        if close:
-            close()
-    s = summary
-    rt = s["reaction_ms"]
-    print(f"summary: {s['frames']} frames in {s['wall_s']:.1f} s; states {s['states']}\n"
-          f"  stops {s['stops']}, retracts {s['retracts']}, unreachable {s['unreachable']}, invalid frames "
-          f"{s['invalid']}, stale {s['stale']}; link {s['link']} (errors {s['link_errors']})\n"
-          f"  reaction (frame in -> command on the link): median {rt['median']} ms, p99 {rt['p99']} ms "
-          f"over {rt['n']} commands"
-          + ("\n  robot link: " + ", ".join(f"{k} {v}" for k, v in s["robot_link"].items()) if "robot_link" in s else "")
-          + (f"\n  log: {args.log}" if args.log else ""))
+        link.close()
+    print(_summary_text(summary, args.log))
     return 0
 
 
-def _drive_replay(loop, frames, feed, start: float, duration: float | None) -> None:
-    """A recording at its own pace: each frame at its timestamp, ticks every TICK_S between."""
+def _first_read(frames):
+    """``frames`` with its first frame read now (CliError when there is none)."""
+    first = next(frames, None)
+    if first is None:
+        raise CliError("no frames")
+    return itertools.chain([first], frames)
+
+
+def _open_log(path: str | None):
+    try:
+        return open(path, "w", encoding="utf-8") if path else None
+    except OSError as e:
+        raise CliError(f"--log {path}: cannot write ({e.strerror or e})") from None
+
+
+@dataclass
+class _Progress:
+    """The states of the frames (for the summary) and, unless ``quiet``, a line on stderr
+    whenever the state, its reason or the link changes."""
+
+    loop: RobotLoop
+    quiet: bool
+    states: dict[str, int] = field(default_factory=dict)
+    _last: tuple | None = None
+
+    def show(self, t_rel_s: float, rec: FrameRecord) -> None:
+        self.states[rec.state] = self.states.get(rec.state, 0) + 1
+        loop = self.loop
+        now = (rec.state, rec.reason, loop.link_state, loop.link_error)
+        if not self.quiet and now != self._last:
+            print(f"t={t_rel_s:8.2f}s  {rec.state:<7} {rec.reason}  d={rec.distance_m:.2f} m  link {loop.link_state}"
+                  + (f" ({loop.link_error})" if loop.link_error else ""), file=sys.stderr)
+            self._last = now
+
+
+def _replayed_frames(loop: RobotLoop, frames, start: float, duration: float | None):
+    """A recording at its own pace: yields (t from the first frame s, feed) at each frame's
+    timestamp, ticking the loop every TICK_S in between."""
     t0 = None
-    for t_s, fn in frames:
+    for t_s, feed in frames:
         t0 = t_s if t0 is None else t0
         due = start + (t_s - t0)
         if duration and due - start > duration:
             return
         _tick_until(loop, due)
-        feed(t_s - t0, fn)
+        yield t_s - t0, feed
     _tick_until(loop, time.monotonic() + TICK_S)
 
 
-def _drive_live(loop, frames, feed, start: float, duration: float | None) -> None:
+def _live_frames(loop: RobotLoop, frames, start: float, duration: float | None):
     """A camera: a reader thread pulls frames (and runs the pose model) while this thread
-    ticks the loop every TICK_S and feeds each frame as it arrives, so a stalled camera
-    is noticed by the staleness check, not by a blocked loop."""
-    import queue
-    import threading
-
+    ticks the loop every TICK_S and yields (t since start s, feed) for each frame as it
+    arrives, so a stalled camera is noticed by the staleness check, not by a blocked loop."""
     q: queue.Queue = queue.Queue(maxsize=2)
-    done = object()
     stop = threading.Event()
-
-    def reader():
-        try:
-            for item in frames:
-                if stop.is_set():
-                    break
-                try:
-                    q.put_nowait(item)
-                except queue.Full:  # the loop is behind: the newest frame matters, drop the oldest
-                    q.get_nowait()
-                    q.put_nowait(item)
-        finally:
-            q.put(done)
-
-    threading.Thread(target=reader, name="robot-camera", daemon=True).start()
+    threading.Thread(target=_read_frames, args=(frames, q, stop), name="robot-camera", daemon=True).start()
     try:
         while not (duration and time.monotonic() - start > duration):
             try:
@@ -452,20 +463,35 @@ def _drive_live(loop, frames, feed, start: float, duration: float | None) -> Non
             except queue.Empty:
                 loop.tick()
                 continue
-            if item is done:
+            if item is _END:
                 return
-            feed(time.monotonic() - start, item[1])
+            yield time.monotonic() - start, item[1]
             loop.tick()
     finally:
         stop.set()
 
 
-def _chain(first, rest):
-    yield first
-    yield from rest
+_END = object()
+"""What the camera reader queues after the last frame."""
 
 
-def _tick_until(loop, due: float) -> None:
+def _read_frames(frames, q: queue.Queue, stop: threading.Event) -> None:
+    """The camera reader: frames into ``q``, then _END. When the loop is behind, the newest
+    frame matters: the oldest waiting one is dropped."""
+    try:
+        for item in frames:
+            if stop.is_set():
+                break
+            try:
+                q.put_nowait(item)
+            except queue.Full:
+                q.get_nowait()
+                q.put_nowait(item)
+    finally:
+        q.put(_END)
+
+
+def _tick_until(loop: RobotLoop, due: float) -> None:
     """Tick the loop every TICK_S until the monotonic clock reaches ``due``."""
     while True:
         loop.tick()
@@ -475,22 +501,30 @@ def _tick_until(loop, due: float) -> None:
         time.sleep(min(TICK_S, left))
 
 
-def _safe_stop(link) -> None:
+def _safe_stop(link: RobotLink) -> None:
     try:
         link.stop()
     except Exception as e:  # noqa: BLE001 - reported, the controller's watchdog stops the arm anyway
         print(f"warning: final stop not sent ({type(e).__name__}: {e}); the arm's watchdog stops it", file=sys.stderr)
 
 
-def _summary(loop, link, states: dict, wall_s: float) -> dict:
+def _summary(loop: RobotLoop, link: RobotLink, states: dict, wall_s: float) -> dict:
     react = [1e3 * (r.t_command_s - r.t_in_s) for r in loop.records if r.t_command_s is not None]
     rt = {"median": round(float(np.median(react)), 3) if react else None,
           "p99": round(float(np.percentile(react, 99)), 3) if react else None, "n": len(react)}
-    out = {**loop.status(), "states": states, "wall_s": round(wall_s, 3), "reaction_ms": rt}
-    link_summary = getattr(link, "summary", None)
-    if link_summary is not None:
-        out["robot_link"] = link_summary()
-    return out
+    return {**loop.status(), "states": states, "wall_s": round(wall_s, 3), "reaction_ms": rt,
+            "robot_link": link.summary()}
+
+
+def _summary_text(s: dict, log_path: str | None) -> str:
+    rt = s["reaction_ms"]
+    return (f"summary: {s['frames']} frames in {s['wall_s']:.1f} s; states {s['states']}\n"
+            f"  stops {s['stops']}, retracts {s['retracts']}, unreachable {s['unreachable']}, invalid frames "
+            f"{s['invalid']}, stale {s['stale']}; link {s['link']} (errors {s['link_errors']})\n"
+            f"  reaction (frame in -> command on the link): median {rt['median']} ms, p99 {rt['p99']} ms "
+            f"over {rt['n']} commands\n"
+            "  robot link: " + ", ".join(f"{k} {v}" for k, v in s["robot_link"].items())
+            + (f"\n  log: {log_path}" if log_path else ""))
 
 
 def cmd(args) -> int:

@@ -9,7 +9,7 @@ up, origin on top of the Sawyer base). "Ground-projected" distances drop ``y``.
   is ``P_head(T + t) = P_head(T) + t * V_head`` with ``t = 0.5 s``. A finite difference
   of two frames turns 3 cm of head noise per axis at 30 Hz into 2.2 m/s (rms, 3D) of
   velocity noise, i.e. 1.1 m of prediction noise; the 0.5 s fit brings it to 0.09 m/s
-  (tests/test_hazard.py::test_least_squares_velocity_rejects_keypoint_noise measures
+  (tests/robot/test_hazard.py::test_least_squares_velocity_rejects_keypoint_noise measures
   both). The price is lag: a change of walking speed is fully seen after ``window_s``.
 * **Zones (Eq. 4-5).** Two vertical cylinders around the end effector::
 
@@ -33,9 +33,8 @@ up, origin on top of the Sawyer base). "Ground-projected" distances drop ``y``.
   inside R1 and vanishes from view also holds the arm stopped (``worker_lost``).
   The fault clears after ``dwell_s`` of valid frames.
 
-Eq. 6 (retraction): ``L = w1 * unit(P_eff - P_head) + w2 * unit(V_ground)`` with
-``w1 = 0.3 m`` and ``w2 = 0.2 m``, ground-projected, and the tool turned toward the
-robot base (``retract_pose``).
+Where level 2 retracts the arm to (Eq. 6) is :mod:`edge_runtime.robot.retract`; its weights
+are zone parameters (``retract_weight_away_m``, ``retract_weight_path_m``).
 """
 from __future__ import annotations
 
@@ -46,6 +45,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from edge_runtime import config
+
 GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
 
 
@@ -55,79 +56,76 @@ def ground(v) -> np.ndarray:
     return v[..., GROUND_AXES]
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(v))
-    return v / n if n > 1e-9 else np.zeros_like(v)
-
-
+@config.section("tracker")
 @dataclass(frozen=True)
 class TrackerParams:
     """Head tracking ([tracker] in the box configuration)."""
 
-    window_s: float = 0.5
+    window_s: float = config.setting(0.5, config.POSITIVE)
     """Length of the least-squares window for velocity and position (s). Longer rejects
     more noise but reacts later to a change of walking direction."""
-    min_samples: int = 3
+    min_samples: int = config.setting(3, ("an integer of at least 2", lambda v: v >= 2))
     """Frames a fit needs; with fewer (a new track) the velocity is taken as zero. At
     5.8 Hz a 0.5 s window holds 3 frames."""
-    max_speed_mps: float = 3.0
+    max_speed_mps: float = config.setting(3.0, config.POSITIVE)
     """Head speeds above this (m/s) are clipped: faster than a running worker, so noise."""
-    jump_m: float = 1.0
+    jump_m: float = config.setting(1.0, config.POSITIVE)
     """A head that moves further than this between two frames (beyond what
     ``max_speed_mps`` allows) is a new track: the window restarts."""
 
 
+@config.section("zones")
 @dataclass(frozen=True)
 class ZoneParams:
     """Hazard-zone sizing and the state machine ([zones] in the box configuration)."""
 
     sizing: str = "eq45"
     """"eq45": the dissertation's Eq. 4-5; "iso15066": R1 is ISO/TS 15066's S_p."""
-    predict_s: float = 0.5
+    predict_s: float = config.setting(0.5, config.POSITIVE)
     """Prediction horizon t of Eq. 3 (s)."""
-    worker_speed_mps: float = 1.4
+    worker_speed_mps: float = config.setting(1.4, config.POSITIVE)
     """V_worker of Eq. 4: the assumed walking speed (m/s; Bohannon & Andrews 2011)."""
-    retract_time_s: float = 1.0
+    retract_time_s: float = config.setting(1.0, config.POSITIVE)
     """T_retract of Eq. 4: time the arm needs to retract (s; from the Sawyer's joint speeds)."""
-    margin2_m: float = 0.3
+    margin2_m: float = config.setting(0.3, config.NON_NEGATIVE)
     """R_margin2 of Eq. 4 (m)."""
-    margin1_m: float = 2.0
+    margin1_m: float = config.setting(2.0, config.NON_NEGATIVE)
     """R_margin1 of Eq. 5 (m)."""
-    iso_human_speed_mps: float = 1.6
+    iso_human_speed_mps: float = config.setting(1.6, config.POSITIVE)
     """ISO/TS 15066 v_h: the human's approach speed (m/s; ISO 13855's walking speed)."""
-    iso_robot_speed_mps: float = 0.6
+    iso_robot_speed_mps: float = config.setting(0.6, config.NON_NEGATIVE)
     """v_r: the robot's speed toward the human (m/s; Intera's default Cartesian limit)."""
-    iso_reaction_time_s: float = 0.15
+    iso_reaction_time_s: float = config.setting(0.15, config.NON_NEGATIVE)
     """T_r: camera frame + lifting + link until the stop command lands (s)."""
-    iso_stop_time_s: float = 0.3
+    iso_stop_time_s: float = config.setting(0.3, config.NON_NEGATIVE)
     """T_s: the robot's stopping time (s)."""
-    iso_stop_distance_m: float = 0.09
+    iso_stop_distance_m: float = config.setting(0.09, config.NON_NEGATIVE)
     """S_s: the robot's stopping distance (m)."""
-    iso_intrusion_m: float = 0.85
+    iso_intrusion_m: float = config.setting(0.85, config.NON_NEGATIVE)
     """C: intrusion distance (m; ISO 13855's 850 mm reach for coarse body detection, since
     a hand reaches ahead of the tracked head)."""
-    iso_sensing_uncertainty_m: float = 0.1
+    iso_sensing_uncertainty_m: float = config.setting(0.1, config.NON_NEGATIVE)
     """Z_d: uncertainty of the worker's position (m; calibrated head error)."""
-    iso_robot_uncertainty_m: float = 0.01
+    iso_robot_uncertainty_m: float = config.setting(0.01, config.NON_NEGATIVE)
     """Z_r: uncertainty of the robot's position (m)."""
-    hysteresis_m: float = 0.2
+    hysteresis_m: float = config.setting(0.2, config.NON_NEGATIVE)
     """Exit radii are the entry radii plus this (m)."""
-    dwell_s: float = 1.0
+    dwell_s: float = config.setting(1.0, config.NON_NEGATIVE)
     """A lower level is entered only after this long (s) beyond its exit radius, and a
     fault clears only after this long of valid frames."""
-    stale_after_s: float = 0.2
+    stale_after_s: float = config.setting(0.2, ("a number in (0, 1]", lambda v: 0 < v <= 1))
     """No pose for longer than this (s) and the arm stops (reason ``pose_stale``)."""
-    lost_hold_s: float = 3.0
+    lost_hold_s: float = config.setting(3.0, config.NON_NEGATIVE)
     """A worker last seen inside R1 who vanishes holds the arm stopped this long (s) of
     empty frames before the scene counts as clear (reason ``worker_lost``)."""
-    retract_weight_away_m: float = 0.3
+    retract_weight_away_m: float = config.setting(0.3, config.NON_NEGATIVE)
     """Eq. 6 weight factor 1: the step away from the head (m)."""
-    retract_weight_path_m: float = 0.2
+    retract_weight_path_m: float = config.setting(0.2, config.NON_NEGATIVE)
     """Eq. 6 weight factor 2: the step along the worker's walking direction (m)."""
-    level1_tone_hz: float = 2000.0
-    level1_tone_db: float = 70.0
-    level2_tone_hz: float = 4000.0
-    level2_tone_db: float = 80.0
+    level1_tone_hz: float = config.setting(2000.0, config.POSITIVE)
+    level1_tone_db: float = config.setting(70.0, config.NON_NEGATIVE)
+    level2_tone_hz: float = config.setting(4000.0, config.POSITIVE)
+    level2_tone_db: float = config.setting(80.0, config.NON_NEGATIVE)
 
     def __post_init__(self):
         if self.sizing not in ("eq45", "iso15066"):
@@ -231,23 +229,6 @@ def distance_to_effector(est: HeadEstimate, effector_m) -> float:
     the current head (m)."""
     e = ground(effector_m)
     return float(min(np.linalg.norm(ground(est.predicted_m) - e), np.linalg.norm(ground(est.position_m) - e)))
-
-
-def retract_direction(effector_m, est: HeadEstimate, params: ZoneParams = ZoneParams()) -> np.ndarray:
-    """Eq. 6 in the robot frame: ``w1 unit(P_eff - P_head) + w2 unit(V_ground)``, on the
-    ground (y = 0). A standing worker contributes no second term."""
-    away = _unit(ground(effector_m) - ground(est.position_m))
-    path = _unit(ground(est.velocity_mps)) if np.linalg.norm(ground(est.velocity_mps)) > 0.2 else np.zeros(2)
-    L = params.retract_weight_away_m * away + params.retract_weight_path_m * path
-    return np.array([L[0], 0.0, L[1]])
-
-
-def tool_yaw_toward_base(position_m) -> float:
-    """Yaw (rad) that points the tool at the robot base from ``position_m``: the heading of
-    the ground vector toward the base's axis, measured from +z toward +x
-    (yaw = atan2(dx, dz); 0 points the tool along +z, the work side)."""
-    g = -ground(position_m)
-    return float(math.atan2(g[0], g[1]))
 
 
 @dataclass

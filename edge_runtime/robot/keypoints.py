@@ -35,7 +35,7 @@ have no COCO counterpart and are built from the nearest COCO points:
                     ``e + HEAD_UP * (e - thorax)`` with ``e`` the midpoint of the
                     ears, ``HEAD_UP`` = 0.5. With anthropometric proportions
                     (thorax at 0.818 of body height, ears at about 0.93, head top
-                    1.0; DESIGN section 5) the ears lie two thirds of the way from
+                    1.0; docs/design.md section 5) the ears lie two thirds of the way from
                     thorax to head top, hence 1/2. When the ears are missing or
                     score under half the eyes' score (a face turned to the camera
                     hides them) the eyes' midpoint stands in for ``e`` (it lies a

@@ -89,6 +89,7 @@ def _camera(args, size: tuple[int, int] | None) -> CameraModel:
 def _params(args):
     """The [lifter] section of --config (defaults without one), the flags on top."""
     from edge_runtime import config
+    from edge_runtime.robot import lifter  # noqa: F401 - [lifter]
 
     cfg = config.override(config.load(args.config), "lifter", precision=args.precision, threads=args.threads,
                           min_score=args.min_score, hold_frames=args.hold_frames)
@@ -136,12 +137,7 @@ def cmd(args) -> int:
     params = _params(args)
     selector = _selector(args.person, params.min_score)
     camera_stats: dict = {}
-    if args.keypoints:
-        if args.pose_model:
-            raise CliError("--pose-model goes with --video, not --keypoints")
-        frames, size = _frames_from_file(args)
-    else:
-        frames, size = _frames_from_video(args, camera_stats, params.threads)
+    frames, size = _frames(args, camera_stats, params.threads)
     camera = _camera(args, size)
     lifter = StreamingLifter.from_manifest(args.assets or ASSETS_DIR, params, camera=camera,
                                            keypoint_format=args.format)
@@ -151,31 +147,50 @@ def cmd(args) -> int:
         raise CliError(f"--out {args.out}: cannot write ({e.strerror or e})") from None
     t_wall = time.perf_counter()
     try:
-        for t_s, index, people in frames:
-            person = selector.select(people)
-            pose = lifter.push(t_s, None if person is None else person.keypoints)
-            if out:
-                rec = {"t": t_s, "frame": index, "person": None if person is None else person.id}
-                rec.update(pose.to_json())
-                out.write(json.dumps(rec) + "\n")
+        _lift_all(frames, selector, lifter, out)
     except KeyboardInterrupt:
         pass
     finally:
-        wall = time.perf_counter() - t_wall
         summary = {"model": lifter.name, "precision": lifter.precision, "threads": params.threads,
-                   "camera": camera.to_dict(), "wall_s": round(wall, 3), **lifter.stats.to_json()}
+                   "camera": camera.to_dict(), "wall_s": round(time.perf_counter() - t_wall, 3),
+                   **lifter.stats.to_json()}
         if camera_stats:
             summary["camera_source"] = camera_stats
         if out:
             out.write(json.dumps({"summary": summary}) + "\n")
             out.close()
+    print(_summary_text(lifter, summary, args.out))
+    return 0
+
+
+def _frames(args, camera_stats: dict, threads: int):
+    """(frames, the video's size or None) from --keypoints or --video."""
+    if args.keypoints:
+        if args.pose_model:
+            raise CliError("--pose-model goes with --video, not --keypoints")
+        return _frames_from_file(args)
+    return _frames_from_video(args, camera_stats, threads)
+
+
+def _lift_all(frames, selector: PersonSelector, lifter, out) -> None:
+    """Every frame's followed person through the lifter; one JSON line each to ``out``."""
+    for t_s, index, people in frames:
+        person = selector.select(people)
+        pose = lifter.push(t_s, None if person is None else person.keypoints)
+        if out:
+            rec = {"t": t_s, "frame": index, "person": None if person is None else person.id}
+            rec.update(pose.to_json())
+            out.write(json.dumps(rec) + "\n")
+
+
+def _summary_text(lifter, summary: dict, out_path: str | None) -> str:
     s = lifter.stats
     invalid = ", ".join(f"{k} {v}" for k, v in sorted(s.invalid.items())) or "none"
     mean = f"{s.mean_infer_ms:.3f} ms" if s.inferences else "n/a"
-    print(f"summary: {s.frames} frames, valid {s.valid} ({summary['valid_share']:.1%}; warming up {s.warming_up}), "
-          f"mean lifter time {mean} per frame ({lifter.name}, {params.threads} thread(s))\n"
-          f"  invalid: {invalid}; joints held {s.joints_held}, frames dropped {s.frames_dropped}, "
-          f"interpolated {s.frames_interpolated}, resets {s.resets}"
-          + ("\n  camera: " + ", ".join(f"{k} {v}" for k, v in camera_stats.items()) if camera_stats else "")
-          + (f"\n  written to {args.out}" if args.out else ""))
-    return 0
+    camera_stats = summary.get("camera_source")
+    return (f"summary: {s.frames} frames, valid {s.valid} ({summary['valid_share']:.1%}; warming up "
+            f"{s.warming_up}), mean lifter time {mean} per frame ({lifter.name}, {summary['threads']} thread(s))\n"
+            f"  invalid: {invalid}; joints held {s.joints_held}, frames dropped {s.frames_dropped}, "
+            f"interpolated {s.frames_interpolated}, resets {s.resets}"
+            + ("\n  camera: " + ", ".join(f"{k} {v}" for k, v in camera_stats.items()) if camera_stats else "")
+            + (f"\n  written to {out_path}" if out_path else ""))

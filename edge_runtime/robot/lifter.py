@@ -70,6 +70,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
 from edge_runtime.core.onnx import session_from_manifest
 from edge_runtime.core.skeleton import JOINTS, N_JOINTS
@@ -89,6 +90,7 @@ TIME_NOT_INCREASING = "time_not_increasing"
 BAD_TIME = "bad_time"
 
 
+@config.section("lifter")
 @dataclass(frozen=True)
 class LifterParams:
     """Tunables of :class:`StreamingLifter` (a TOML section of the box configuration)."""

@@ -6,7 +6,8 @@ Per camera frame::
                           or 3D joints given directly (camera or robot frame)
     -> calibration (camera -> robot frame; each skeleton re-anchored on the floor when
        the calibration's ground_anchor is on) -> head tracker (per worker)
-    -> HazardMonitor (zones, hysteresis, fail-safe) -> RobotLink commands
+    -> HazardMonitor (zones, hysteresis, fail-safe) -> in level 2 the retraction
+       (:mod:`edge_runtime.robot.retract`) -> commands on the LinkInterface
 
 ``RobotLoop`` never sleeps and never reads the wall clock itself: time comes from the
 injectable ``clock`` (``time.monotonic`` by default; a scenario runner passes its
@@ -26,16 +27,16 @@ state      motion                                                 beacon
 NORMAL     the task: cycle through ``task_waypoints_m``            green
 LEVEL1     ``stop()``                                              red, 2000 Hz 70 dB
 LEVEL2     ``retract(P_eff + L)`` on entry (Eq. 6; again when it  red, 4000 Hz 80 dB
-           is done and the worker still comes closer), the tool
-           turned toward the base by up to 45 deg, the target
-           kept 0.3-0.7 m (``retract_min/max_radius_m``) off the
-           base's axis; if the controller reports it unreachable,
-           one retraction straight toward the base, and if that
-           is refused too: ``stop()`` (``retract_unreachable``)
+           is done and the worker still comes closer), planned
+           by :mod:`edge_runtime.robot.retract`; if the
+           controller reports it unreachable, one retraction
+           straight toward the base, and if that is refused too:
+           ``stop()`` (``retract_unreachable``)
 FAULT      ``stop()`` (pose stale / invalid / no pose yet)          yellow
 =========  =====================================================  ==================
 
-The link (``edge_runtime.robot.link.base.RobotLink``) never raises on a transport fault; it
+The link is a :class:`edge_runtime.robot.link.base.LinkInterface` (a ``RobotLink``, or a
+stand-in). A ``RobotLink`` never raises on a transport fault; it
 reports ``link_ok`` and reconnects by itself. The loop reads ``link_ok`` at every poll:
 a drop is counted (``link_errors``) and reported (status ``link``: ``connecting``, ``ok``,
 ``lost``; ``link_error`` from the link), and when the link is back the current motion
@@ -47,9 +48,8 @@ is counted (``refused``); for a retraction the arm is stopped instead, and a tas
 waypoint is skipped. The beacon is sent just before the motion, because the controller
 reports the answer to its latest command only.
 
-Heartbeats: a ``RobotLink`` whose ``config.heartbeat_period_s`` is set sends them
-itself from ``poll()``; otherwise the loop calls ``heartbeat()`` every
-``heartbeat_period_s``.
+Heartbeats: a link that ``heartbeats_itself`` sends them from ``poll()``; otherwise the
+loop calls ``heartbeat()`` every ``heartbeat_period_s``.
 
 Every frame leaves a ``FrameRecord`` with ``t_in_s`` (the clock when the frame
 arrived) and ``t_command_s`` (the clock after the link call it caused returned, or
@@ -57,103 +57,103 @@ None), so the reaction time keypoints-in -> command-on-link can be measured.
 """
 from __future__ import annotations
 
+import enum
 import math
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Callable, Protocol
+from typing import TYPE_CHECKING, Callable, Protocol
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.core.skeleton import HEAD
-from edge_runtime.robot.hazard import (
-    HazardMonitor,
-    State,
-    TrackerParams,
-    ZoneParams,
-    ground,
-    retract_direction,
-    tool_yaw_toward_base,
-)
+from edge_runtime.robot.hazard import Decision, HazardMonitor, State, TrackerParams, ZoneParams
+from edge_runtime.robot.retract import Retraction, RetractLimits, eq6_retraction, radial_retraction
+
+if TYPE_CHECKING:  # the caller makes the lifter (onnxruntime) and the link (python-can, pymavlink): the
+    # loop only calls them, so importing it (as the box configuration does) stays light
+    from edge_runtime.robot.lifter import LiftedPose, StreamingLifter
+    from edge_runtime.robot.link.base import LinkInterface
 
 
+@config.section("robot_loop")
 @dataclass(frozen=True)
 class LoopParams:
     """The loop's timing and the arm's normal work ([robot_loop] in the box configuration)."""
 
-    heartbeat_period_s: float = 0.05
+    heartbeat_period_s: float = config.setting(0.05, ("a number in [0.005, 0.15] (the arm's watchdog is 200 ms)", lambda v: 0.005 <= v <= 0.15))
     """heartbeat() period (s); the controller's watchdog stops the arm after 200 ms without
     a valid command or heartbeat."""
-    link_retry_s: float = 0.5
+    link_retry_s: float = config.setting(0.5, config.POSITIVE)
     """A link whose calls raise is retried this often (s); a latched watchdog is cleared
     at most this often."""
-    task_waypoints_m: tuple[tuple[float, float, float], ...] = (
-        (0.45, 0.14, 0.55), (0.0, 0.14, 0.8), (-0.45, 0.14, 0.55))
+    task_waypoints_m: tuple[tuple[float, float, float], ...] = config.setting(
+        ((0.45, 0.14, 0.55), (0.0, 0.14, 0.8), (-0.45, 0.14, 0.55)),
+        ("at least one [x, y, z] waypoint", lambda v: len(v) >= 1))
     """The task: robot-frame end-effector positions (m) the arm cycles through while NORMAL
     (y = 0.14 m is 1.055 m above the floor, the dissertation's P0)."""
     task_pitch_rad: float = 0.0
     """Tool pitch during the task (rad)."""
     task_yaw_rad: float = 0.0
     """Tool yaw during the task (rad; 0 points the tool along +z, the work side)."""
-    waypoint_tolerance_m: float = 0.03
+    waypoint_tolerance_m: float = config.setting(0.03, config.POSITIVE)
     """A waypoint counts as reached within this distance (m)."""
     min_height_m: float = -0.3
     """Retraction targets are kept at or above this robot-frame height (m)."""
-    retract_min_radius_m: float = 0.3
+    retract_min_radius_m: float = config.setting(0.3, config.NON_NEGATIVE)
     """A retraction stops short of this ground distance from the base's axis (m): closer in,
     the Sawyer cannot hold its tool pointed at the base (its IK refuses the target)."""
-    re_retract_m: float = 0.15
+    re_retract_m: float = config.setting(0.15, config.POSITIVE)
     """In level 2, the arm retracts again (Eq. 6 from where it is) once its retraction is done
     and the worker has come this much closer (m) since it began."""
-    retract_max_turn_deg: float = 45.0
+    retract_max_turn_deg: float = config.setting(45.0, config.within(0, 180))
     """The tool turns toward the base while retracting (the dissertation's Sec. 3.2.4.4) by
     at most this much (deg); 180 turns it all the way. A large turn makes the hand swing
     through joint space: in the simulated Sawyer a full turn swept it 0.3 m toward the
     worker, which 45 deg avoids."""
-    retract_max_radius_m: float = 0.7
+    retract_max_radius_m: float = config.setting(0.7, config.POSITIVE)
     """Retraction targets further than this from the base's axis (ground distance, m) are
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
-    records: int = 100_000
+    records: int = config.setting(100_000, config.AT_LEAST_1)
     """Frame records kept in memory (the oldest are dropped)."""
 
     def __post_init__(self):
         if not 0 <= self.retract_min_radius_m < self.retract_max_radius_m:
             raise ValueError("retract_max_radius_m: must be above retract_min_radius_m (and both >= 0)")
 
+    @property
+    def retract_limits(self) -> RetractLimits:
+        return RetractLimits(self.retract_min_radius_m, self.retract_max_radius_m, self.min_height_m,
+                             self.retract_max_turn_deg)
 
-class RobotLinkLike(Protocol):
-    """What the loop uses of ``edge_runtime.robot.link.base.RobotLink``.
 
-    Optional, used when present: ``state`` (``ee_position_m``, ``yaw_rad``, ``watchdog``;
-    a link without ``result`` may flag ``unreachable`` here), ``link_ok`` and
-    ``last_error``, ``result(seq)`` (the controller's answer to a command whose call
-    returned ``seq``), ``config.heartbeat_period_s`` (the link heartbeats by itself) and
-    ``set_runtime_state(state)``."""
+class CameraToRobot(Protocol):
+    """What the loop uses of :class:`edge_runtime.robot.calibration.Calibration`."""
 
-    def move_to(self, position_m, pitch_rad: float, yaw_rad: float) -> Any: ...
-    def retract(self, position_m, pitch_rad: float, yaw_rad: float) -> Any: ...
-    def stop(self) -> Any: ...
-    def resume(self) -> Any: ...
-    def set_alarm(self, light: str, tone_hz: float, tone_db: float) -> Any: ...
-    def heartbeat(self) -> Any: ...
-    def poll(self) -> Any: ...
+    def to_robot(self, joints_cam_m) -> np.ndarray:
+        """Robot-frame joints (P, 17, 3) of camera-frame ones (P, 17, 3)."""
+
+
+class MotionKind(enum.Enum):
+    MOVE = "move"
+    RETRACT = "retract"
+    STOP = "stop"
 
 
 @dataclass(frozen=True)
 class Motion:
-    """One motion command: kind is "move", "retract" or "stop"."""
+    """One motion command (the arm's position m and tool pitch/yaw rad for a move or retraction)."""
 
-    kind: str
+    kind: MotionKind
     position_m: tuple[float, float, float] | None = None
     pitch_rad: float = 0.0
     yaw_rad: float = 0.0
 
 
-STOP = Motion("stop")
+STOP = Motion(MotionKind.STOP)
 INVALID = "invalid"
 """What ``_call`` returns for a command the link refused as invalid (ValueError)."""
-REFUSALS = ("unreachable", "refused", "invalid")
-"""Controller answers (``RobotLink.result``) that mean a command was not carried out."""
 NO_PERSON = "no_person"
 """The lifter's reason code for a frame in which nobody was detected."""
 
@@ -185,29 +185,6 @@ class LoopCounters:
     commands: int = 0
 
 
-def _step_outside_radius(e: np.ndarray, L: np.ndarray, r: float) -> float:
-    """The largest fraction (0..1) of the ground step ``L`` from ``e`` that stays at least
-    ``r`` from the origin all the way."""
-    a, b, c = float(L @ L), 2.0 * float(e @ L), float(e @ e) - r * r
-    if c <= 0:
-        return 0.0  # already inside: turn the tool, do not move
-    disc = b * b - 4 * a * c
-    if a == 0 or disc < 0:
-        return 1.0
-    first = (-b - math.sqrt(disc)) / (2 * a)
-    return min(1.0, first) if first > 0 else 1.0
-
-
-def _robot_heads(calibration, persons: np.ndarray) -> np.ndarray:
-    """Robot-frame heads (P, 3) of camera-frame skeletons (P, 17, 3): through
-    ``calibration.to_robot`` (each skeleton re-anchored on the floor when the calibration's
-    ``ground_anchor`` is on) when it has one, else ``calibration.apply``."""
-    to_robot = getattr(calibration, "to_robot", None)
-    if to_robot is None:
-        return calibration.apply(persons[:, HEAD, :])
-    return to_robot(persons)[:, HEAD, :]
-
-
 def _vec3(v) -> tuple[float, float, float]:
     return tuple(float(x) for x in np.asarray(v, float).reshape(3))
 
@@ -216,10 +193,11 @@ class RobotLoop:
     """See the module docstring.
 
     ``calibration``: an ``edge_runtime.robot.calibration.Calibration`` mapping camera-frame
-    joints to the robot frame, or None when the joints given are in the robot frame
+    joints to the robot frame (each skeleton re-anchored on the floor when its
+    ``ground_anchor`` is on), or None when the joints given are in the robot frame
     already (the simulator's true joints)."""
 
-    def __init__(self, link: RobotLinkLike, calibration=None, zones: ZoneParams = ZoneParams(),
+    def __init__(self, link: LinkInterface, calibration: CameraToRobot | None = None, zones: ZoneParams = ZoneParams(),
                  tracker: TrackerParams = TrackerParams(), params: LoopParams = LoopParams(),
                  clock: Callable[[], float] = time.monotonic,
                  on_record: Callable[[FrameRecord], None] | None = None):
@@ -237,16 +215,16 @@ class RobotLoop:
         self.link_state = "connecting"
         self.link_error = ""
         self._raised = False  # the last link call raised: retry at link_retry_s
-        self._auto_heartbeat = getattr(getattr(link, "config", None), "heartbeat_period_s", None) is not None
+        self._auto_heartbeat = link.heartbeats_itself
         self._waypoint = 0
         self._sent_motion: Motion | None = None
         self._sent_alarm = None
         self._sent_runtime_state = None
         self._retract: Motion | None = None
-        self._retract_seq = None
+        self._retract_seq: int | None = None
         self._retract_fallback = False
         self._retract_distance_m = math.inf
-        self._move_seq = None
+        self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
         self._next_retry_s = -math.inf
@@ -275,7 +253,7 @@ class RobotLoop:
         shaped = persons.ndim == 3 and persons.shape[1:] == (17, 3)
         heads = persons[:, HEAD, :] if shaped and len(persons) else np.empty((0, 3))
         if self.calibration is not None and len(heads):
-            heads = _robot_heads(self.calibration, persons)
+            heads = self.calibration.to_robot(persons)[:, HEAD, :]
         if not valid or not shaped or not np.isfinite(heads).all():
             self.counters.invalid += 1
             why = reason if not valid else "non-finite joints" if shaped else f"joints of shape {persons.shape}"
@@ -285,13 +263,12 @@ class RobotLoop:
             decision = self.monitor.observe(t_in, dict(zip(keys, heads)), self.effector_m())
         return self._act(t_in, decision, record=True)
 
-    def feed_lifted(self, out, t_in_s: float | None = None) -> FrameRecord:
+    def feed_lifted(self, out: LiftedPose, t_in_s: float | None = None) -> FrameRecord:
         """A StreamingLifter output (``joints_cam_m`` (17, 3), ``valid``, ``reason``), judged
         as in ``feed_joints``."""
-        reason = str(getattr(out, "reason", "") or "")
-        return self.feed_joints(out.joints_cam_m, bool(out.valid), reason, t_in_s=t_in_s)
+        return self.feed_joints(out.joints_cam_m, bool(out.valid), str(out.reason or ""), t_in_s=t_in_s)
 
-    def feed_keypoints(self, lifter, t_frame_s: float, keypoints) -> FrameRecord:
+    def feed_keypoints(self, lifter: StreamingLifter, t_frame_s: float, keypoints) -> FrameRecord:
         """One frame of 2D keypoints (one person, or None for nobody) through ``lifter``
         (``StreamingLifter.push(t_s, keypoints)``). The frame's ``t_in_s`` is taken before
         lifting, so the reaction time includes the lifter."""
@@ -304,7 +281,7 @@ class RobotLoop:
         self._poll_link()
         self._act(now, self.monitor.check(now), record=False)
         due = now - self._last_hb_s >= self.params.heartbeat_period_s - 1e-6
-        if not self._auto_heartbeat and not self._raised and due and self._call("heartbeat") is not None:
+        if not self._auto_heartbeat and not self._raised and due and self._call(self.link.heartbeat) is not None:
             self.counters.heartbeats += 1
             self._last_hb_s = now
 
@@ -331,7 +308,7 @@ class RobotLoop:
     def _poll_link(self) -> None:
         """Read the controller's state (end effector, watchdog, answers) and the link's health."""
         if self._raised:
-            if self.clock() < self._next_retry_s or self._call("heartbeat") is None:
+            if self.clock() < self._next_retry_s or self._call(self.link.heartbeat) is None:
                 return
             self._raised = False
         try:
@@ -340,22 +317,21 @@ class RobotLoop:
             self._link_raised("poll", e)
             return
         self._check_health()
-        state = getattr(self.link, "state", None)
+        state = self.link.state
         if state is None:
             return
-        pos = getattr(state, "ee_position_m", None)
-        if pos is not None and np.isfinite(np.asarray(pos, float)).all():
-            self._last_effector = np.asarray(pos, float).reshape(3)
-        yaw = getattr(state, "yaw_rad", None)
-        self._last_yaw = float(yaw) if yaw is not None and math.isfinite(yaw) else None
+        pos = np.asarray(state.ee_position_m, float)
+        if np.isfinite(pos).all():
+            self._last_effector = pos.reshape(3)
+        self._last_yaw = float(state.yaw_rad) if math.isfinite(state.yaw_rad) else None
         now = self.clock()
-        if getattr(state, "watchdog", False) and self._sent_motion is not None and self._sent_motion.kind == "move" \
+        if state.watchdog and self._sent_motion is not None and self._sent_motion.kind is MotionKind.MOVE \
                 and now - self._last_watchdog_fix_s >= self.params.link_retry_s:
             self._last_watchdog_fix_s = now  # the controller latched a stop: send everything again
             self._sent_motion = self._sent_alarm = None
-        if self._retract_seq is not None and self._refused(self._retract_seq, state):
+        if self._retract_seq is not None and self._refused(self._retract_seq):
             self._retract_refused()
-        if self._move_seq is not None and self._refused(self._move_seq, state):
+        if self._move_seq is not None and self._refused(self._move_seq):
             self._skip_waypoint()
 
     def _skip_waypoint(self) -> None:
@@ -363,19 +339,14 @@ class RobotLoop:
         self._move_seq = None
         self._waypoint = (self._waypoint + 1) % len(self.params.task_waypoints_m)
 
-    def _refused(self, seq, state) -> bool:
-        """Did the controller refuse command ``seq``? (``RobotLink.result``; a link without
-        it may flag ``state.unreachable``.)"""
-        result = getattr(self.link, "result", None)
-        if result is not None and type(seq) is int:
-            if result(seq) in REFUSALS:
-                self.counters.refused += 1
-                return True
-            return False
-        return bool(getattr(state, "unreachable", False))
+    def _refused(self, seq: int) -> bool:
+        """Did the controller refuse command ``seq``? (counted)"""
+        refused = self.link.refused(seq)
+        self.counters.refused += refused
+        return refused
 
     def _check_health(self) -> None:
-        ok = bool(getattr(self.link, "link_ok", True))
+        ok = self.link.link_ok
         if ok and self.link_state != "ok":
             self.link_state, self.link_error = "ok", ""
             self._sent_motion = self._sent_alarm = None  # (re)connected: send the current commands
@@ -383,7 +354,7 @@ class RobotLoop:
             if self.link_state == "ok":
                 self.counters.link_errors += 1
                 self.link_state = "lost"
-            self.link_error = str(getattr(self.link, "last_error", "") or "no state from the robot yet")
+            self.link_error = str(self.link.last_error or "no state from the robot yet")
 
     def _link_raised(self, name: str, e: Exception) -> None:
         if self.link_state != "lost":
@@ -392,7 +363,7 @@ class RobotLoop:
         self._raised = True
         self._next_retry_s = self.clock() + self.params.link_retry_s
 
-    def _desired_motion(self, state: State, decision) -> Motion:
+    def _desired_motion(self, state: State, decision: Decision) -> Motion:
         if state == State.NORMAL:
             self._retract, self._retract_seq, self._unreachable = None, None, False
             return self._task_motion()
@@ -409,65 +380,47 @@ class RobotLoop:
         p = self.params
         target = p.task_waypoints_m[self._waypoint]
         s = self._sent_motion
-        if (s is not None and s.kind == "move" and s.position_m == tuple(target) and self._last_effector is not None
+        if (s is not None and s.kind is MotionKind.MOVE and s.position_m == tuple(target)
+                and self._last_effector is not None
                 and np.linalg.norm(self._last_effector - target) <= p.waypoint_tolerance_m):
             self._waypoint = (self._waypoint + 1) % len(p.task_waypoints_m)
             target = p.task_waypoints_m[self._waypoint]
-        return Motion("move", _vec3(target), p.task_pitch_rad, p.task_yaw_rad)
+        return Motion(MotionKind.MOVE, _vec3(target), p.task_pitch_rad, p.task_yaw_rad)
 
-    def _retract_again(self, decision) -> bool:
+    def _retract_again(self, decision: Decision) -> bool:
         """Retract once more when the last retraction is done and the worker has come
         ``re_retract_m`` closer since it began (he keeps walking at the arm), and there is
         still room to go (the new target differs from where the hand is)."""
         r = self._retract
-        if r is None or r.kind != "retract" or self._last_effector is None or decision.head is None:
+        if r is None or r.kind is not MotionKind.RETRACT or self._last_effector is None or decision.head is None:
             return False
         done = np.linalg.norm(self._last_effector - r.position_m) <= self.params.waypoint_tolerance_m
         closer = decision.distance_m < self._retract_distance_m - self.params.re_retract_m
         if not (done and closer):
             return False
         nxt = self._retract_motion(decision)
-        return nxt.kind == "retract" and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
+        return nxt.kind is MotionKind.RETRACT and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
 
-    def _retract_motion(self, decision) -> Motion:
-        """Eq. 6's step from the effector, kept between ``retract_min_radius_m`` and
-        ``retract_max_radius_m`` of the base's axis, tool turned toward the base."""
-        eff = self.effector_m()
+    def _retract_motion(self, decision: Decision) -> Motion:
+        """Eq. 6's retraction from the effector (:func:`edge_runtime.robot.retract.eq6_retraction`)."""
         if decision.head is None:  # level 2 held without a current head (should not happen): stop
             return STOP
-        L = retract_direction(eff, decision.head, self.zones)
-        target = eff + _step_outside_radius(ground(eff), ground(L), self.params.retract_min_radius_m) * L
-        r = float(np.linalg.norm(ground(target)))
-        if r > self.params.retract_max_radius_m:
-            target[[0, 2]] *= self.params.retract_max_radius_m / r
-        return self._retract_to(target)
-
-    def _retract_to(self, target: np.ndarray) -> Motion:
-        """A retraction to ``target`` with the tool turned toward the base, by at most
-        ``retract_max_turn_deg`` from where it points now. A repeat retraction (the worker
-        keeps coming) keeps the first one's tool yaw: turning again would swing the joints,
-        and with them the hand, through the cell."""
-        target = np.array(target, float)
-        target[1] = max(target[1], self.params.min_height_m)
-        if self._retract is not None and self._retract.kind == "retract":
-            return Motion("retract", _vec3(target), self.params.task_pitch_rad, self._retract.yaw_rad)
-        yaw = tool_yaw_toward_base(target)
-        if self._last_yaw is not None:
-            turn = math.radians(self.params.retract_max_turn_deg)
-            yaw = self._last_yaw + max(-turn, min(turn, math.remainder(yaw - self._last_yaw, 2 * math.pi)))
-        return Motion("retract", _vec3(target), self.params.task_pitch_rad, yaw)
+        return self._retraction(eq6_retraction(self.effector_m(), decision.head, self.zones,
+                                               self.params.retract_limits, self._last_yaw, self._held_yaw()))
 
     def _radial_retract(self) -> Motion:
-        """The fallback retraction: straight toward the base's axis (away from anyone in
-        front of the arm), as far as Eq. 6's step but not inside ``retract_min_radius_m``."""
-        eff = self.effector_m()
-        g = ground(eff)
-        r = float(np.linalg.norm(g))
-        step = self.zones.retract_weight_away_m + self.zones.retract_weight_path_m
-        new_r = min(r, max(self.params.retract_min_radius_m, min(r, self.params.retract_max_radius_m) - step))
-        target = eff.copy()
-        target[[0, 2]] = g * (new_r / r) if r > 1e-9 else g
-        return self._retract_to(target)
+        """The fallback retraction, straight toward the base's axis
+        (:func:`edge_runtime.robot.retract.radial_retraction`)."""
+        return self._retraction(radial_retraction(self.effector_m(), self.zones, self.params.retract_limits,
+                                                  self._last_yaw, self._held_yaw()))
+
+    def _held_yaw(self) -> float | None:
+        """The tool yaw of the retraction under way (a repeat one keeps it), or None."""
+        r = self._retract
+        return r.yaw_rad if r is not None and r.kind is MotionKind.RETRACT else None
+
+    def _retraction(self, r: Retraction) -> Motion:
+        return Motion(MotionKind.RETRACT, _vec3(r.position_m), self.params.task_pitch_rad, r.yaw_rad)
 
     def _retract_refused(self) -> None:
         """The controller (or the link) refused the retraction: try the radial fallback once,
@@ -481,7 +434,7 @@ class RobotLoop:
             self._retract_fallback = True
             self._retract = self._radial_retract()
 
-    def _act(self, t_s: float, decision, record: bool) -> FrameRecord | None:
+    def _act(self, t_s: float, decision: Decision, record: bool) -> FrameRecord | None:
         state = decision.state
         motion = self._desired_motion(state, decision)
         alarm = self.monitor.alarm(state)
@@ -489,11 +442,11 @@ class RobotLoop:
         # the beacon first: the controller reports the answer to its latest command only,
         # and the motion's answer (unreachable?) is the one that matters
         if alarm != self._sent_alarm and not self._raised \
-                and self._call("set_alarm", alarm.light, alarm.tone_hz, alarm.tone_db) is not None:
+                and self._call(self.link.set_alarm, alarm.light, alarm.tone_hz, alarm.tone_db) is not None:
             self._sent_alarm = alarm
             t_cmd, sent = self.clock(), "alarm"
         if motion != self._sent_motion and not self._raised and self._send_motion(motion):
-            t_cmd, sent = self.clock(), motion.kind
+            t_cmd, sent = self.clock(), motion.kind.value
         self._report_runtime_state(state)
         if not record:
             return None
@@ -505,18 +458,18 @@ class RobotLoop:
 
     def _send_motion(self, motion: Motion) -> bool:
         c = self.counters
-        if motion.kind == "stop":
-            ok = self._call("stop") is not None
+        if motion.kind is MotionKind.STOP:
+            ok = self._call(self.link.stop) is not None
             c.stops += ok
             self._move_seq = None
         else:
-            if motion.kind == "move" and (self._sent_motion is None or self._sent_motion.kind != "move") \
-                    and self._call("resume") is None:
+            moving = self._sent_motion is not None and self._sent_motion.kind is MotionKind.MOVE
+            if motion.kind is MotionKind.MOVE and not moving and self._call(self.link.resume) is None:
                 return False
-            method = "move_to" if motion.kind == "move" else "retract"
-            seq = self._call(method, motion.position_m, pitch_rad=motion.pitch_rad, yaw_rad=motion.yaw_rad)
+            send = self.link.move_to if motion.kind is MotionKind.MOVE else self.link.retract
+            seq = self._call(send, motion.position_m, pitch_rad=motion.pitch_rad, yaw_rad=motion.yaw_rad)
             ok = seq is not None
-            if motion.kind == "retract":
+            if motion.kind is MotionKind.RETRACT:
                 c.retracts += ok
                 self._retract_seq, self._move_seq = seq, None
                 if seq is INVALID:  # refused before it left: the fallback now
@@ -531,24 +484,23 @@ class RobotLoop:
             self._sent_motion = motion
         return ok
 
-    def _call(self, name: str, *args, **kwargs):
-        """A link call: its result (True for None), ``INVALID`` when the link refused the
-        arguments (ValueError), or None when it raised (the link is then lost)."""
+    def _call(self, command: Callable, *args, **kwargs):
+        """``command`` (a method of the link) called: its result, ``INVALID`` when the link
+        refused the arguments (ValueError), or None when it raised (the link is then lost)."""
         try:
-            result = getattr(self.link, name)(*args, **kwargs)
+            result = command(*args, **kwargs)
         except ValueError:
             self.counters.refused += 1
             return INVALID
         except Exception as e:  # noqa: BLE001 - any link failure is a lost link, never a crash
-            self._link_raised(name, e)
+            self._link_raised(command.__name__, e)
             return None
         self.counters.commands += 1
-        return True if result is None else result
+        return result
 
     def _report_runtime_state(self, state: State) -> None:
         """What the link's heartbeat says about the runtime: degraded while in FAULT."""
         want = "degraded" if state == State.FAULT else "running"
-        setter = getattr(self.link, "set_runtime_state", None)
-        if setter is not None and want != self._sent_runtime_state:
-            setter(want)
+        if want != self._sent_runtime_state:
+            self.link.set_runtime_state(want)
             self._sent_runtime_state = want

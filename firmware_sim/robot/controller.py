@@ -1,6 +1,6 @@
 """The simulated Sawyer controller: the arm of :mod:`firmware_sim.robot.sawyer` behind a CAN or MAVLink link.
 
-The protocol is the runtime's (``edge_runtime/robot_link.py`` and
+The protocol is the runtime's (``edge_runtime/robot/link/protocol.py`` and
 ``edge_runtime/assets/robot_link.dbc``); this module is the other end of it.
 
 Behaviour (the same on both links):
@@ -48,13 +48,16 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import can
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
 from edge_runtime.core.serial_line import parse_signing_key
-from edge_runtime.robot.link.base import (
+from edge_runtime.robot.link.base import open_link
+from edge_runtime.robot.link.options import add_bus_arguments
+from edge_runtime.robot.link.protocol import (
     LIGHTS,
     LINK_ERRORS,
     MAV_CMD_ALARM,
@@ -65,9 +68,7 @@ from edge_runtime.robot.link.base import (
     ROBOT_COMPID,
     ROBOT_SYSID,
     FdStream,
-    LinkConfig,
     RobotCanCodec,
-    RobotLink,
     RobotState,
     SerialStream,
     SocketStream,
@@ -76,7 +77,6 @@ from edge_runtime.robot.link.base import (
     make_mavlink,
     mav_to_robot,
     open_can_bus,
-    open_link,
     pack_status,
     robot_to_mav,
     signature_failure,
@@ -84,6 +84,9 @@ from edge_runtime.robot.link.base import (
 )
 from firmware_sim.devices.imu_firmware import close_pty_pair, open_pty_pair
 from firmware_sim.robot.sawyer import ArmConfig, SawyerArm, Unreachable, warm_up
+
+if TYPE_CHECKING:  # the runtime's link is only run here, through open_link
+    from edge_runtime.robot.link.base import LinkConfig, RobotLink
 
 DEFAULT_CHANNEL = "vcan0"
 HALF_TARGET_TIMEOUT_S = 0.1
@@ -682,24 +685,12 @@ def _hex_key(s: str) -> bytes:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
-def _port_number(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a TCP port: {s!r}") from None
-    if not 1 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"TCP port must be 1..65535, got {v}")
-    return v
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from edge_runtime.cli import positive_float, positive_int
 
     p.add_argument("--link", choices=("can", "mavlink"), required=True, help="CAN (robot_link.dbc) or MAVLink 2")
-    p.add_argument("--can-interface", default="socketcand", help="python-can interface (default socketcand)")
-    p.add_argument("--can-host", default="127.0.0.1", help="socketcand hub address")
-    p.add_argument("--can-port", type=_port_number, default=None, help="socketcand hub TCP port")
-    p.add_argument("--channel", default=DEFAULT_CHANNEL, help="CAN channel (default vcan0)")
+    add_bus_arguments(p, defaults={"interface": "socketcand", "host": "127.0.0.1", "channel": DEFAULT_CHANNEL},
+                      channel_flag="--channel")
     p.add_argument("--pty", action="store_true", help="MAVLink: create a pseudo-terminal pair and print its path")
     p.add_argument("--serial", default=None, metavar="PATH", help="MAVLink: use this existing serial line")
     p.add_argument("--baud", type=positive_int, default=921600, help="MAVLink --serial: baud rate")

@@ -21,7 +21,7 @@ hand      0, 0, 0.0245 (fixed)           0, 0, 1.570796                      -- 
 
 Frames. The URDF base frame (``right_arm_base_link``) is z-up with the arm's forward
 direction +x. Everything this module exposes is in the project's **robot frame**
-(``edge_runtime/skeleton.py``): origin on top of the base, y up, the work side +z,
+(``edge_runtime/core/skeleton.py``): origin on top of the base, y up, the work side +z,
 obtained by the cyclic permutation robot (x, y, z) = urdf (y, z, x). The floor is
 ``y = -0.914`` m (the pedestal puts the base top 0.914 m above it).
 

@@ -1,14 +1,20 @@
-"""The 3-marker calibration (Eq. 1-2) recovers a simulated camera's placement."""
+"""The 3-marker calibration (Eq. 1-2) recovers a simulated camera's placement; ground
+anchoring of lifted skeletons: the floor fixes the lifter's depth."""
 import json
 
 import numpy as np
 import pytest
+from support.robot import anchored_worker, true_calibration
 
-from edge_runtime.core.skeleton import HEAD
+from edge_runtime.core.skeleton import HEAD, L_ANKLE, R_ANKLE
 from edge_runtime.robot.calibration import (
+    ANCHOR_CAMERA_LOW,
+    ANCHOR_NO_ANKLE,
+    ANCHOR_RAY_FLAT,
     Calibration,
     CalibrationError,
     CalibrationParams,
+    anchor_factor,
     fit,
     from_recording,
     head_and_ankles,
@@ -170,3 +176,93 @@ def test_pnp_ignores_the_lifters_depth_scale():
     robot, applied = pnp.anchor_to_floor(lifted)
     assert applied
     assert np.linalg.norm(robot[HEAD] - truth[HEAD]) < 0.5 * np.linalg.norm(pnp.apply(lifted[HEAD]) - truth[HEAD])
+
+
+# ------------------------------------------------------------------ ground anchoring
+
+def project(p):
+    return p[..., :2] / p[..., 2:3]
+
+
+@pytest.mark.parametrize("scale", [0.8, 0.93, 1.12, 1.3])
+def test_recovers_a_known_depth_and_keeps_the_2d_projections(scale):
+    cam = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))
+    cal = true_calibration(cam)
+    truth = anchored_worker((0.5, 1.5))
+    lifted = cam.to_camera(truth) * scale               # a lifter that misjudged the depth
+    k, reason = anchor_factor(lifted, cal.A, cal.b, cal.params)
+    assert reason is None and k == pytest.approx(1 / scale, rel=1e-6)
+    robot, applied = cal.anchor_to_floor(lifted)
+    assert applied
+    np.testing.assert_allclose(robot, truth, atol=1e-6)
+    np.testing.assert_allclose(project(cam.to_camera(robot)), project(lifted), atol=1e-9)
+    # without the anchoring the head is off by the depth error
+    off = np.linalg.norm(cal.apply(lifted[HEAD]) - truth[HEAD])
+    assert off > 0.2 * abs(scale - 1) * np.linalg.norm(cam.to_camera(truth[HEAD]))
+
+
+def test_uses_the_lower_ankle_of_a_stride():
+    cam = Camera.look_at((0.0, 1.5, 6.0), (0.0, -0.2, 1.0))
+    cal = true_calibration(cam)
+    truth = anchored_worker((0.0, 1.5))
+    truth[R_ANKLE, 1] += 0.25                           # right foot swinging through the air
+    robot, applied = cal.anchor_to_floor(cam.to_camera(truth) * 1.15)
+    assert applied
+    np.testing.assert_allclose(robot, truth, atol=1e-6)
+
+
+def test_refuses_a_flat_ray_and_a_low_camera_and_clamps_the_factor():
+    truth = anchored_worker((0.0, 1.5))
+    flat = Camera.look_at((0.0, -0.7, 30.0), (0.0, -0.8, 1.5))     # camera 0.21 m above the floor, far off
+    cal = true_calibration(flat)
+    lifted = flat.to_camera(truth) * 1.2
+    assert anchor_factor(lifted, cal.A, cal.b, cal.params) == (1.0, ANCHOR_CAMERA_LOW)
+    robot, applied = cal.anchor_to_floor(lifted)
+    assert not applied and np.allclose(robot, cal.apply(lifted))
+    far = Camera.look_at((0.0, 0.0, 40.0), (0.0, -0.5, 1.5))       # 0.91 m high, 38 m away: ray ~1.3 deg
+    cal = true_calibration(far)
+    assert anchor_factor(far.to_camera(truth), cal.A, cal.b, cal.params)[1] == ANCHOR_RAY_FLAT
+    near = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))
+    cal = true_calibration(near)
+    k, reason = anchor_factor(near.to_camera(truth) * 2.0, cal.A, cal.b, cal.params)
+    assert reason is None and k == cal.params.anchor_min_scale
+
+
+def test_switched_off_it_is_apply():
+    cam = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))
+    cal = true_calibration(cam, CalibrationParams(ground_anchor=False))
+    lifted = cam.to_camera(anchored_worker((0.5, 1.5))) * 1.2
+    robot, applied = cal.anchor_to_floor(lifted)
+    assert not applied and np.allclose(robot, cal.apply(lifted))
+    np.testing.assert_allclose(cal.to_robot(lifted[None]), cal.apply(lifted[None]))
+
+
+def test_nan_joints_give_a_defined_result():
+    cam = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))
+    cal = true_calibration(cam)
+    lifted = cam.to_camera(anchored_worker((0.5, 1.5))) * 1.2
+    one = lifted.copy()
+    one[L_ANKLE] = np.nan                              # the other ankle anchors
+    k, reason = anchor_factor(one, cal.A, cal.b, cal.params)
+    assert reason is None and np.isfinite(k)
+    both = lifted.copy()
+    both[[L_ANKLE, R_ANKLE]] = np.nan
+    assert anchor_factor(both, cal.A, cal.b, cal.params) == (1.0, ANCHOR_NO_ANKLE)
+    robot, applied = cal.anchor_to_floor(np.full((17, 3), np.nan))
+    assert not applied and np.isnan(robot).all()
+    # several people at once: each anchored on its own
+    two = np.stack([lifted, cam.to_camera(anchored_worker((-1.0, 2.0))) * 0.9])
+    out = cal.to_robot(two)
+    np.testing.assert_allclose(out[1], anchored_worker((-1.0, 2.0)), atol=1e-6)
+
+
+def test_old_calibration_files_still_load(tmp_path):
+    cam = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))
+    data = true_calibration(cam).to_json()
+    for key in ("ground_anchor", "anchor_min_ray_deg", "anchor_min_camera_height_m", "anchor_min_scale",
+                "anchor_max_scale"):
+        del data["params"][key]
+    loaded = Calibration.from_json(data)
+    assert loaded.params == CalibrationParams() and np.allclose(loaded.A, cam.R.T)
+    with pytest.raises(ValueError, match="anchor_min_scale"):
+        CalibrationParams(anchor_min_scale=1.2)

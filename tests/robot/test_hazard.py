@@ -1,8 +1,8 @@
 """Head tracking, the two-level zones of Eq. 4-5 and the state machine (edge_runtime.robot.hazard)."""
-import math
 
 import numpy as np
 import pytest
+from support.robot import EFF, FPS, HEAD_Y, head_at
 
 from edge_runtime.robot.hazard import (
     HazardMonitor,
@@ -10,19 +10,7 @@ from edge_runtime.robot.hazard import (
     State,
     TrackerParams,
     ZoneParams,
-    retract_direction,
-    tool_yaw_toward_base,
 )
-
-EFF = np.array([0.0, 0.14, 0.8])   # end effector, robot frame
-HEAD_Y = 0.75                        # a 1.75 m worker's head, robot frame (floor at -0.914)
-FPS = 30.0
-
-
-def head_at(dist_m, direction=(0.0, 1.0)):
-    """A head ``dist_m`` from the end effector on the ground, along ``direction`` (x, z)."""
-    d = np.asarray(direction, float) / np.linalg.norm(direction)
-    return np.array([EFF[0] + dist_m * d[0], HEAD_Y, EFF[2] + dist_m * d[1]])
 
 
 def ready(zones=ZoneParams()):
@@ -185,27 +173,3 @@ def test_the_nearest_of_several_workers_decides():
     for i in range(60):
         d = mon.observe(i / FPS, {7: head_at(6.0), 3: head_at(2.0, (1.0, 0.2))}, EFF)
     assert d.state == State.LEVEL1 and d.worker == 3 and d.distance_m == pytest.approx(2.0, abs=0.05)
-
-
-def test_retract_direction_is_eq6_and_the_tool_turns_to_the_base():
-    tr = HeadTracker(TrackerParams(), 0.5)
-    # a worker walking along -x, passing in front (+z side) of the effector
-    for i in range(20):
-        est = tr.update(i / FPS, [1.0 - 1.0 * i / FPS, HEAD_Y, EFF[2] + 0.8])
-    L = retract_direction(EFF, est)
-    away = np.array([0.0, -1.0])  # from the head (at +z) to the effector: -z (head is nearly straight ahead)
-    path = np.array([-1.0, 0.0])
-    g = L[[0, 2]]
-    assert L[1] == 0.0
-    c = EFF[[0, 2]] - est.position_m[[0, 2]]
-    expect = 0.3 * c / np.linalg.norm(c) + 0.2 * path
-    assert np.allclose(g, expect, atol=0.02)
-    assert g[1] < 0 and g[0] < 0 and np.dot(g, away) > 0
-    # a standing worker: only the step away from him
-    still = HeadTracker(TrackerParams(), 0.5)
-    for i in range(10):
-        est = still.update(i / FPS, head_at(0.8))
-    assert np.allclose(retract_direction(EFF, est)[[0, 2]], [0.0, -0.3], atol=1e-6)
-    # yaw: from (1, y, 0) the base is along -x; from (0, y, 1) along -z
-    assert tool_yaw_toward_base([1.0, 0.1, 0.0]) == pytest.approx(-math.pi / 2)
-    assert abs(tool_yaw_toward_base([0.0, 0.1, 1.0])) == pytest.approx(math.pi)

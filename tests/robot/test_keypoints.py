@@ -22,7 +22,7 @@ from edge_runtime.robot.keypoints import (
 )
 from edge_runtime.wearable.sources import InputError
 
-H = 1.75  # body height (m); fractions from DESIGN section 5 (Drillis & Contini)
+H = 1.75  # body height (m); fractions from docs/design.md section 5 (Drillis & Contini)
 CANON = CameraModel.from_fov(1280, 720, 100.0)
 
 

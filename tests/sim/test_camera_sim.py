@@ -1,4 +1,4 @@
-"""The simulated camera and 2D detector (firmware_sim/camera.py)."""
+"""The simulated camera and 2D detector (firmware_sim/devices/camera.py)."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The simulated body (firmware_sim/human.py): lengths from height, angles, placement, ranges of motion."""
+"""The simulated body (firmware_sim/people/human.py): lengths from height, angles, placement, ranges of motion."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""Worker motions (firmware_sim/motions.py): paths, speeds, gait, working postures, seams."""
+"""Worker motions (firmware_sim/people/motions.py): paths, speeds, gait, working postures, seams."""
 import math
 
 import numpy as np

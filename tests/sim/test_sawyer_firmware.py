@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from edge_runtime.robot.link.base import make_mavlink
+from edge_runtime.robot.link.protocol import make_mavlink
 from firmware_sim.__main__ import main as firmware_main
 from firmware_sim.devices.can_hub import CanHub
 from firmware_sim.robot.controller import LinkFaults, SimulatedRobot

@@ -1,21 +1,21 @@
 """RobotLoop: poses in, commands out, on a simulated clock against a fake robot link.
 
-The fake link stands in for edge_runtime.robot.link.base.RobotLink (same method names); its
-arm moves toward the last target at a fixed speed when ``advance`` is called."""
+The fake link (support.robot.FakeLink) implements edge_runtime.robot.link.base.LinkInterface;
+its arm moves toward the last target at a fixed speed when ``advance`` is called."""
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from support.robot import FakeLink
+from support.robot import FakeLink, anchored_worker, true_calibration
 
 from edge_runtime.core.skeleton import HEAD
+from edge_runtime.robot.calibration import CalibrationParams
 from edge_runtime.robot.hazard import ZoneParams
 from edge_runtime.robot.loop import LoopParams, RobotLoop
+from firmware_sim.devices.camera import Camera
 
 HEAD_Y = 0.75
-
-
 
 
 class Clock:
@@ -108,7 +108,9 @@ def test_a_worker_walking_at_the_effector_stops_then_retracts_the_arm():
     # never closer to the base's axis than retract_min_radius_m (the Sawyer cannot hold its tool
     # pointed at the base there): the step is shortened instead
     assert np.hypot(target[0], target[2]) >= LoopParams().retract_min_radius_m - 1e-9
-    assert retract[0][3] == pytest.approx(math.atan2(-target[0], -target[2]))  # tool toward the base
+    # the tool turns toward the base, by at most retract_max_turn_deg from the task's yaw (0)
+    toward = math.atan2(-target[0], -target[2])
+    assert retract[0][3] == pytest.approx(math.copysign(math.radians(LoopParams().retract_max_turn_deg), toward))
     alarms = [c[1:] for c in link.calls if c[0] == "set_alarm"]
     assert ("red", 2000.0, 70.0) in alarms and ("red", 4000.0, 80.0) in alarms
     # the frame that crossed into level 2 carried the command: measurable reaction time
@@ -242,13 +244,25 @@ def test_several_workers_the_nearest_decides_and_each_keeps_a_tracker():
 
 def test_camera_frame_joints_go_through_the_calibration():
     class Shift:
-        def apply(self, p):
+        def to_robot(self, p):
             return np.asarray(p) + [0.0, 0.0, -10.0]
 
     clock, link = Clock(), FakeLink()
     loop = RobotLoop(link, calibration=Shift(), clock=clock)
     frames = drive(loop, link, clock, Path(lambda t: worker(0.0, 12.8), 2.0))  # 2 m in the robot frame
     assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(2.0, abs=0.05)
+
+
+@pytest.mark.parametrize("anchor", [True, False])
+def test_the_robot_loop_anchors_camera_frame_joints_when_the_calibration_says_so(anchor):
+    cam = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))
+    truth = anchored_worker((0.8, 2.2))
+    t = iter(np.arange(0, 10, 0.05))
+    seen = RobotLoop(FakeLink(), clock=lambda: next(t)).feed_joints(truth).distance_m
+    loop = RobotLoop(FakeLink(), calibration=true_calibration(cam, CalibrationParams(ground_anchor=anchor)),
+                     clock=lambda: next(t))
+    got = loop.feed_joints(cam.to_camera(truth) * 1.25).distance_m
+    assert (got == pytest.approx(seen, abs=1e-6)) == anchor
 
 
 # ------------------------------------------------------------------ against the simulated Sawyer
