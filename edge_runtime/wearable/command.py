@@ -274,8 +274,9 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
         f"gaps {r.gaps}, detector restarts {h.detector_restarts}"
     )
     c = loop.publisher.summary()
-    print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']}, "
-          f"heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, reconnects {c['reconnects']}"
+    print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']} "
+          f"+ copies {c['alert_copies_sent']}, heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, "
+          f"reconnects {c['reconnects']}"
           + (f"; logged to {can_log}" if can_log else ""))
     latencies_ms = loop.status.alert_latencies_ms()
     if latencies_ms:
