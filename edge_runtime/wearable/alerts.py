@@ -478,7 +478,9 @@ class AlertPublisher:
             self._wake.set()
             self._thread.join(timeout=max(2.0, 3 * self.period))
             self._thread = None
-        self._send_copies_due(float("inf"))  # never started, or the thread could not: late beats none
+        # copies still waiting (the data clock after the recording's end, a publisher never started,
+        # a thread that could not finish): sent now, at their data time on the data clock, not dropped
+        self._send_copies_due(float("inf"))
         if self._logger is not None:
             self._logger.stop()
             self._logger = None
