@@ -9,7 +9,13 @@ what an ECU-side integration looks like, given our DBC (edge_runtime/assets/vehi
 On a real box: ``--interface socketcan --channel can0``, or ``--interface slcan --channel /dev/ttyACM0``.
 It prints one line per alert and per heartbeat state change, warns when the
 heartbeat is missing for more than 300 ms, and on exit (SIGINT/SIGTERM or
---duration) prints a JSON summary: alerts, heartbeats, E2E errors, largest heartbeat gap.
+--duration) prints a JSON summary: alerts, alert copies skipped, heartbeats, E2E errors,
+largest heartbeat gap.
+
+Each alert comes as several DISTRACTION_ALERT frames (the DBC's GenMsgNrOfRepetition copies,
+GenMsgCycleTimeFast ms apart, all with one AlertSeq), so a lost frame costs nothing but the
+wait for the next copy. An alert counts once: the first valid frame of an AlertSeq is the
+alert, a frame with an AlertSeq accepted within the last COPY_WINDOW_S is a copy.
 """
 import argparse
 import json
@@ -23,6 +29,7 @@ import e2e.p01 as p01
 
 COUNTER_MAX = 14  # AUTOSAR E2E Profile 1: alive counter 0..14
 HEARTBEAT_TIMEOUT_S = 0.3
+COPY_WINDOW_S = 1.0  # the DBC: copies of one alert span 200 ms; the same AlertSeq later is a new alert (a restart)
 
 
 def data_id(message):
@@ -52,8 +59,9 @@ def main(argv=None):
         signal.signal(sig, lambda *_: stop.update(now=True))
     print("listening", flush=True)
 
-    counts = {"alerts": 0, "heartbeats": 0, "e2e_wrong_crc": 0, "e2e_repeated": 0, "e2e_lost": 0, "heartbeat_timeouts": 0}
+    counts = {"alerts": 0, "alert_copies": 0, "heartbeats": 0, "e2e_wrong_crc": 0, "e2e_repeated": 0, "e2e_lost": 0, "heartbeat_timeouts": 0}
     last_counter, last_beat, max_gap, state = {}, None, 0.0, None
+    accepted = {}  # AlertSeq -> when its alert was counted (monotonic s)
     t_end = None if a.duration is None else time.monotonic() + a.duration
     while not stop["now"] and (t_end is None or time.monotonic() < t_end):
         msg = bus.recv(0.05)
@@ -86,12 +94,18 @@ def main(argv=None):
                 state = str(sig["State"])
                 print(f"WEARABLE_STATUS {state}, sensor {sig['SensorHealth']}, dropped {sig['DroppedSamples']}", flush=True)
         else:
+            seq = sig["AlertSeq"]
+            if now - accepted.get(seq, float("-inf")) < COPY_WINDOW_S:
+                counts["alert_copies"] += 1  # the alert is already counted: this is a copy
+                continue
+            accepted = {s: t for s, t in accepted.items() if now - t < COPY_WINDOW_S}
+            accepted[seq] = now
             counts["alerts"] += 1
             rec = {k: (v if isinstance(v, (int, float)) else str(v)) for k, v in sig.items()}
             if a.json:
                 print(json.dumps(rec), flush=True)
             else:
-                print(f"ALERT {rec['Class']:<12} confidence {rec['Confidence']:.2f}, "
+                print(f"ALERT {rec['AlertSeq']:>5} {rec['Class']:<12} confidence {rec['Confidence']:.2f}, "
                       f"{rec['TimeSinceTrigger']} ms after the trigger", flush=True)
     bus.shutdown()
     counts["e2e_errors"] = counts["e2e_wrong_crc"] + counts["e2e_repeated"] + counts["e2e_lost"]

@@ -10,18 +10,33 @@ and the health counters (samples, non-finite samples, detector restarts, the liv
 source's saturated and dropped samples, alert latencies). The loop and the command
 write them while the heartbeat thread reads them, so they live behind one lock.
 
-:class:`AlertPublisher` sends one DISTRACTION_ALERT per alert it is handed
-(:meth:`AlertPublisher.send_alert`: the loop hands it a would-alert verdict and learns
-whether the frame went out) and the WEARABLE_STATUS of its :class:`WearableStatus`
-from a background thread. A bus error never stops it: the error is counted and the
-next frame is tried again (with ``bus_factory`` the bus is reopened).
+:class:`AlertPublisher` sends each alert it is handed (:meth:`AlertPublisher.publish_alert`:
+the loop hands it a would-alert verdict and learns the AlertSeq its frames carry, or that
+no frame went out) as a DISTRACTION_ALERT followed by the copies the DBC asks for
+(``GenMsgNrOfRepetition`` frames ``GenMsgCycleTimeFast`` ms apart, same AlertSeq), so a
+listener that loses a frame still gets the alert a copy later and counts it once. It also
+sends the WEARABLE_STATUS of its :class:`WearableStatus` every heartbeat period. A bus
+error never stops it: the error is counted and the next frame is tried again (with
+``bus_factory`` the bus is reopened).
+
+Two clocks (:class:`Clock`). A live source runs on the wall clock: a background thread
+sends the heartbeats and the copies when they are due, and frames are stamped with
+``time.time()``. A replay runs on the data clock: nothing happens between samples, the
+command moves the clock with :meth:`AlertPublisher.advance_to` as the recording is read,
+and every frame is sent and stamped (``--can-log``) at the recording's time at which it
+would have been sent: an alert at its decision's ``t_alert_s``, its copies after it, a
+heartbeat every ``heartbeat_period_s`` of data. ``python -m can.player`` then replays
+the log at the data's pace.
 """
 from __future__ import annotations
 
+import enum
+import heapq
+import itertools
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -159,15 +174,41 @@ class WearableStatus:
         with self._lock:
             return list(self._latencies_ms)
 
-    def heartbeat(self) -> dict[str, Any]:
+    def heartbeat(self, uptime_s: float | None = None) -> dict[str, Any]:
         """The WEARABLE_STATUS signals now (:meth:`AlertEncoder.encode_status`'s arguments);
-        what is reported becomes the baseline of the next heartbeat."""
+        what is reported becomes the baseline of the next heartbeat. ``uptime_s``: on the data
+        clock, the data time since the first sample (default: wall time since this object)."""
         with self._lock:
             now, before = self._counts(), self._reported
             self._reported = now
         state, health = heartbeat_state(now, before)
         return {"state": state, "sensor_health": health, "dropped_samples": now.dropped_samples,
-                "model_version": self.model_version, "uptime_s": time.monotonic() - self._t0}
+                "model_version": self.model_version,
+                "uptime_s": time.monotonic() - self._t0 if uptime_s is None else uptime_s}
+
+
+def _message_attribute(message, name: str) -> int:
+    attr = message.dbc.attributes.get(name) if message.dbc is not None else None
+    return int(attr.value) if attr is not None else 0
+
+
+@dataclass(frozen=True)
+class Repetition:
+    """How each alert is repeated, from the DBC's DISTRACTION_ALERT attributes."""
+
+    copies: int
+    """Frames after the first (``GenMsgNrOfRepetition``)."""
+    period_s: float
+    """Time between two frames of one alert (``GenMsgCycleTimeFast``, ms in the DBC)."""
+
+    @classmethod
+    def of(cls, message) -> "Repetition":
+        return cls(_message_attribute(message, "GenMsgNrOfRepetition"),
+                   _message_attribute(message, "GenMsgCycleTimeFast") / 1000.0)
+
+    def delays_s(self) -> list[float]:
+        """When the copies go out, after the first frame."""
+        return [k * self.period_s for k in range(1, self.copies + 1)]
 
 
 class AlertEncoder:
@@ -180,6 +221,7 @@ class AlertEncoder:
         self.db = db if db is not None else load_vehicle_dbc()
         self.alert_msg = self.db.get_message_by_name(ALERT)
         self.status_msg = self.db.get_message_by_name(STATUS)
+        self.repetition = Repetition.of(self.alert_msg)
         self._e2e = E2EProtector()
         self._alert_seq = 0
         self._lock = threading.Lock()
@@ -187,16 +229,24 @@ class AlertEncoder:
     def _protect(self, message, signals: dict) -> can.Message:
         return self._e2e.protect(message, signals)
 
-    def encode_alert(self, decision: Any) -> can.Message:
-        """A DISTRACTION_ALERT for a decision (t_trigger_s, t_alert_s, label, confidence, status, compute_us)."""
+    def next_alert_seq(self) -> int:
+        """A new AlertSeq (16 bits, wrapping): one per alert, shared by all its frames."""
+        with self._lock:
+            seq = self._alert_seq
+            self._alert_seq = (seq + 1) & 0xFFFF
+        return seq
+
+    def encode_alert(self, decision: Any, seq: int | None = None, delay_s: float = 0.0) -> can.Message:
+        """A DISTRACTION_ALERT for a decision (t_trigger_s, t_alert_s, label, confidence, status, compute_us):
+        the first frame of a new alert, or with ``seq`` the copy ``delay_s`` after the first frame."""
         label = decision.label
         choices = {str(v) for v in self.alert_msg.get_signal_by_name("Class").choices.values()}
         cls = label if label in choices else NO_CLASS
         status = "uncertain" if getattr(decision, "status", "alert") == "uncertain" else "alert"
-        since_ms = (decision.t_alert_s - decision.t_trigger_s) * 1000.0 + getattr(decision, "compute_us", 0.0) / 1000.0
-        with self._lock:
-            seq = self._alert_seq
-            self._alert_seq = (seq + 1) & 0xFFFF
+        since_ms = ((decision.t_alert_s - decision.t_trigger_s + delay_s) * 1000.0
+                    + getattr(decision, "compute_us", 0.0) / 1000.0)
+        if seq is None:
+            seq = self.next_alert_seq()
         return self._protect(self.alert_msg, {
             "Status": status,
             "Class": cls,
@@ -219,12 +269,33 @@ class AlertEncoder:
         return self.db.decode_message(msg.arbitration_id, bytes(msg.data), decode_choices=True)
 
 
+class Clock(enum.Enum):
+    """What drives the publisher's schedule and stamps its frames."""
+
+    WALL = "wall"
+    """A live source: a background thread, ``time.monotonic()`` for the schedule, ``time.time()`` stamps."""
+    DATA = "data"
+    """A replay: the recording's time, moved by :meth:`AlertPublisher.advance_to`; frames stamped with it."""
+
+
+@dataclass(order=True)
+class _Copy:
+    """A DISTRACTION_ALERT copy waiting for its time (on the publisher's clock)."""
+
+    due_s: float
+    order: int
+    alert: Any = field(compare=False)
+    seq: int = field(compare=False)
+    delay_s: float = field(compare=False)
+
+
 class AlertPublisher:
-    """Publishes alerts and the periodic WEARABLE_STATUS heartbeat of ``status`` on a python-can bus."""
+    """Publishes alerts (each with its copies) and the periodic WEARABLE_STATUS heartbeat of
+    ``status`` on a python-can bus, on the wall clock or on the data clock (:class:`Clock`)."""
 
     def __init__(self, bus: can.BusABC | None, encoder: AlertEncoder | None = None, heartbeat_period_s: float = 0.1,
                  log_path: str | Path | None = None, bus_factory: Callable[[], can.BusABC] | None = None,
-                 status: WearableStatus | None = None):
+                 status: WearableStatus | None = None, clock: Clock = Clock.WALL):
         if heartbeat_period_s <= 0:
             raise ValueError("heartbeat_period_s must be > 0")
         self.bus = bus
@@ -232,26 +303,36 @@ class AlertPublisher:
         self.period = heartbeat_period_s
         self.bus_factory = bus_factory
         self.status = status if status is not None else WearableStatus()
+        self.clock = clock
         self.frames_sent = 0
         self.alerts_sent = 0
+        self.alert_copies_sent = 0
         self.heartbeats_sent = 0
         self.send_errors = 0
         self.reconnects = 0
         self.last_error: str | None = None
         self._send_lock = threading.Lock()
+        self._copies: list[_Copy] = []  # a heap, by due time
+        self._copies_lock = threading.Lock()
+        self._order = itertools.count()
         self._stop = threading.Event()
+        self._wake = threading.Event()  # a copy was scheduled, or stop: the thread re-plans
         self._thread: threading.Thread | None = None
+        self._data_t0_s: float | None = None  # data clock: the first sample's time ...
+        self._data_now_s: float | None = None  # ... the clock now ...
+        self._next_beat_s: float | None = None  # ... and when the next heartbeat is due
         self._logger = can.Logger(str(log_path)) if log_path else None
 
     # -- sending ----------------------------------------------------------
-    def send(self, msg: can.Message) -> bool:
-        """Send one frame; True if the bus took it. Errors are counted, never raised."""
+    def send(self, msg: can.Message, stamp_s: float | None = None) -> bool:
+        """Send one frame; True if the bus took it. Errors are counted, never raised.
+        ``stamp_s``: the frame's time on the data clock (default: now, wall clock)."""
         with self._send_lock:
             if self.bus is None:
                 self.send_errors += 1
                 self.last_error = "no bus"
                 return False
-            msg.timestamp = time.time()
+            msg.timestamp = time.time() if stamp_s is None else stamp_s
             msg.is_rx = False
             try:
                 self.bus.send(msg)
@@ -284,12 +365,27 @@ class AlertPublisher:
             self.bus = bus
         self.reconnects += 1
 
-    def send_alert(self, alert: Any) -> bool:
+    def publish_alert(self, alert: Any) -> int | None:
         """A DISTRACTION_ALERT for an alert the policy made (the loop's would-alert verdict:
-        t_trigger_s, t_alert_s, label, confidence, status, compute_us); True if the bus took it."""
-        ok = self.send(self.encoder.encode_alert(alert))
-        self.alerts_sent += ok
-        return ok
+        t_trigger_s, t_alert_s, label, confidence, status, compute_us): its first frame now
+        (on the data clock: at ``t_alert_s``) and its copies scheduled after it.
+
+        Returns the AlertSeq its frames carry, or None if the first frame did not go out:
+        then no copy is sent either, so an alert is on the bus exactly when its decision says so."""
+        now_s = self._now_for(alert)
+        seq = self.encoder.next_alert_seq()
+        if not self.send(self.encoder.encode_alert(alert, seq), stamp_s=self._stamp(now_s)):
+            return None
+        self.alerts_sent += 1
+        with self._copies_lock:
+            for delay_s in self.encoder.repetition.delays_s():
+                heapq.heappush(self._copies, _Copy(now_s + delay_s, next(self._order), alert, seq, delay_s))
+        self._wake.set()
+        return seq
+
+    def send_alert(self, alert: Any) -> bool:
+        """:meth:`publish_alert`, answering only whether the alert went out."""
+        return self.publish_alert(alert) is not None
 
     def on_decision(self, decision: Any) -> bool:
         """For a decision made elsewhere (a recording's, a test's): its DISTRACTION_ALERT if it is alerted."""
@@ -297,35 +393,94 @@ class AlertPublisher:
 
     def send_heartbeat(self) -> bool:
         """WEARABLE_STATUS now: the heartbeat thread's, or at once on a change of the sensor's state."""
-        ok = self.send(self.encoder.encode_status(**self.status.heartbeat()))
+        return self._beat(self.status.heartbeat())
+
+    def _beat(self, signals: dict, stamp_s: float | None = None) -> bool:
+        ok = self.send(self.encoder.encode_status(**signals), stamp_s=stamp_s)
         self.heartbeats_sent += ok
         return ok
 
-    # -- heartbeat thread -------------------------------------------------
+    def _send_copies_due(self, now_s: float) -> None:
+        """Every copy due by ``now_s`` on the publisher's clock, in time order."""
+        while True:
+            with self._copies_lock:
+                if not self._copies or self._copies[0].due_s > now_s:
+                    return
+                c = heapq.heappop(self._copies)
+            self.alert_copies_sent += self.send(self.encoder.encode_alert(c.alert, c.seq, c.delay_s),
+                                                stamp_s=self._stamp(c.due_s))
+
+    def _next_copy_s(self) -> float:
+        with self._copies_lock:
+            return self._copies[0].due_s if self._copies else float("inf")
+
+    # -- clocks -----------------------------------------------------------
+    def _now_for(self, alert: Any) -> float:
+        """The alert's time on the publisher's clock; on the data clock everything due before it goes first."""
+        if self.clock is Clock.WALL:
+            return time.monotonic()
+        self.advance_to(alert.t_alert_s)
+        return alert.t_alert_s
+
+    def _stamp(self, t_s: float) -> float | None:
+        return t_s if self.clock is Clock.DATA else None
+
+    def advance_to(self, t_s: float) -> None:
+        """Data clock: the recording has reached ``t_s``; send what was due by then, in time order
+        (a heartbeat every ``heartbeat_period_s`` of data from the first sample, and the copies)."""
+        if self.clock is not Clock.DATA:
+            raise RuntimeError("advance_to is for the data clock (a replay)")
+        if self._data_t0_s is None:
+            self._data_t0_s = self._next_beat_s = t_s
+        self._data_now_s = max(t_s, self._data_now_s if self._data_now_s is not None else t_s)
+        while self._next_beat_s <= self._data_now_s:
+            beat_s = self._next_beat_s
+            self._send_copies_due(beat_s)
+            self._beat(self.status.heartbeat(uptime_s=beat_s - self._data_t0_s), stamp_s=beat_s)
+            self._next_beat_s = self._data_t0_s + round((beat_s - self._data_t0_s) / self.period + 1) * self.period
+        self._send_copies_due(self._data_now_s)
+
+    # -- heartbeat thread (wall clock) --------------------------------------
     def _run(self) -> None:
-        next_t = time.monotonic()
+        next_beat = time.monotonic()
         while not self._stop.is_set():
+            self._wake.clear()
             if self.bus is None and self.bus_factory is not None:
                 self._reconnect()
-            self.send_heartbeat()
-            next_t += self.period
             now = time.monotonic()
-            if next_t < now:  # fell behind (e.g. a slow reconnect): don't burst
-                next_t = now + self.period
-            self._stop.wait(next_t - now if next_t > now else self.period)
+            self._send_copies_due(now)
+            if now >= next_beat:
+                self.send_heartbeat()
+                next_beat += self.period
+                if next_beat < now:  # fell behind (e.g. a slow reconnect): don't burst
+                    next_beat = now + self.period
+            wait_s = min(next_beat, self._next_copy_s()) - time.monotonic()
+            self._wake.wait(max(wait_s, 0.0))
 
     def start(self) -> "AlertPublisher":
-        if self._thread is None:
+        """Wall clock: start the heartbeat thread. Data clock: nothing runs between samples."""
+        if self._thread is None and self.clock is Clock.WALL:
             self._stop.clear()
             self._thread = threading.Thread(target=self._run, name="can-heartbeat", daemon=True)
             self._thread.start()
         return self
 
     def stop(self) -> None:
-        self._stop.set()
+        """Stop after the copies still due: on the wall clock the thread sends them on time (they
+        are due within the repetition's span); on the data clock at their data time, after the
+        recording's end. Then the heartbeat stops and the log is closed."""
         if self._thread is not None:
+            span_s = self.encoder.repetition.copies * self.encoder.repetition.period_s
+            deadline = time.monotonic() + span_s + 1.0
+            while self._next_copy_s() < float("inf") and time.monotonic() < deadline and self._thread.is_alive():
+                self._stop.wait(self.encoder.repetition.period_s / 2)
+            self._stop.set()
+            self._wake.set()
             self._thread.join(timeout=max(2.0, 3 * self.period))
             self._thread = None
+        # copies still waiting (the data clock after the recording's end, a publisher never started,
+        # a thread that could not finish): sent now, at their data time on the data clock, not dropped
+        self._send_copies_due(float("inf"))
         if self._logger is not None:
             self._logger.stop()
             self._logger = None
@@ -344,5 +499,5 @@ class AlertPublisher:
 
     def summary(self) -> dict:
         return {"frames_sent": self.frames_sent, "alerts_sent": self.alerts_sent,
-                "heartbeats_sent": self.heartbeats_sent, "send_errors": self.send_errors,
-                "reconnects": self.reconnects}
+                "alert_copies_sent": self.alert_copies_sent, "heartbeats_sent": self.heartbeats_sent,
+                "send_errors": self.send_errors, "reconnects": self.reconnects}

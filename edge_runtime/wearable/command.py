@@ -84,7 +84,7 @@ def cmd(args: argparse.Namespace) -> int:
         for note in source.replay_stats.notices:
             print(f"notice: {note}", file=sys.stderr)
         outputs = _outputs(stack, args.alerts, args.quiet)
-        pub = _open_publisher(cfg, args.can_log, _status_of(engine))
+        pub = _open_publisher(cfg, args.can_log, _status_of(engine), data_clock=source.live is None)
         stack.callback(pub.close)
         loop = WearableLoop(engine, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
         t_wall = time.perf_counter()
@@ -179,10 +179,11 @@ def _status_of(engine: Engine) -> WearableStatus:
     return WearableStatus(model_version=int(engine.entry.get("sha256", "00")[:2], 16))
 
 
-def _open_publisher(cfg, can_log: str | None, status: WearableStatus) -> AlertPublisher:
-    """The CAN side: the configured python-can bus, alerts and the WEARABLE_STATUS heartbeat, started."""
+def _open_publisher(cfg, can_log: str | None, status: WearableStatus, data_clock: bool = False) -> AlertPublisher:
+    """The CAN side: the configured python-can bus, alerts and the WEARABLE_STATUS heartbeat, started.
+    ``data_clock`` (a replay): frames go out, and are logged, at the recording's time (``Clock.DATA``)."""
     from edge_runtime.canbus.bus import open_bus
-    from edge_runtime.wearable.alerts import AlertPublisher
+    from edge_runtime.wearable.alerts import AlertPublisher, Clock
 
     c = cfg.can
 
@@ -191,7 +192,7 @@ def _open_publisher(cfg, can_log: str | None, status: WearableStatus) -> AlertPu
 
     try:
         pub = AlertPublisher(bus_factory(), heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
-                             bus_factory=bus_factory, status=status)
+                             bus_factory=bus_factory, status=status, clock=Clock.DATA if data_clock else Clock.WALL)
     except ValueError as e:  # python-can's Logger: unknown file suffix
         raise CliError(f"--can-log {can_log}: {e}") from None
     return pub.start()
@@ -226,9 +227,26 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
                 break
             continue
         _sensor_state(loop.publisher, "ok")
-        for decision in loop.feed(event):
-            for output in outputs:
-                output(decision)
+        for block in _data_clock_steps(loop, event) if source.live is None else (event,):
+            for decision in loop.feed(block):
+                for output in outputs:
+                    output(decision)
+        if source.live is None:
+            loop.publisher.advance_to(event.t0_s + (len(event.acc_mps2) - 1) / loop.rate_hz)
+
+
+def _data_clock_steps(loop: WearableLoop, block: ImuBlock) -> Iterator[ImuBlock]:
+    """A recorded block in pieces of one heartbeat period, the publisher's data clock moved to
+    the start of each: every heartbeat goes out at its data time and reports the samples fed
+    by then (a recording is one block: fed whole, every heartbeat would count all of it)."""
+    from edge_runtime.wearable.sources import ImuBlock
+
+    pub = loop.publisher
+    step = max(1, round(pub.period * loop.rate_hz))
+    for i in range(0, len(block.acc_mps2), step):
+        t0_s = block.t0_s + i / loop.rate_hz
+        pub.advance_to(t0_s)
+        yield ImuBlock(t0_s, block.acc_mps2[i : i + step], block.continuous or i > 0, rx_monotonic_s=block.rx_monotonic_s)
 
 
 def _sensor_state(pub: AlertPublisher, state: str, detail: str = "") -> None:
@@ -256,8 +274,9 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
         f"gaps {r.gaps}, detector restarts {h.detector_restarts}"
     )
     c = loop.publisher.summary()
-    print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']}, "
-          f"heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, reconnects {c['reconnects']}"
+    print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']} "
+          f"+ copies {c['alert_copies_sent']}, heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, "
+          f"reconnects {c['reconnects']}"
           + (f"; logged to {can_log}" if can_log else ""))
     latencies_ms = loop.status.alert_latencies_ms()
     if latencies_ms:

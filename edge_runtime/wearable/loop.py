@@ -7,8 +7,8 @@ result is worth. Calls go one way: the loop calls the detector, the classifier a
 the publisher, and none of them calls back.
 
 Every decision is complete when it is made. A would-alert :class:`Verdict` is handed
-to the publisher (``alerts.AlertPublisher.send_alert``), which answers whether its
-DISTRACTION_ALERT went out; only then is the :class:`Decision` built, once, and
+to the publisher (``alerts.AlertPublisher.publish_alert``), which answers with the
+AlertSeq its DISTRACTION_ALERT frames carry, or that none went out; only then is the :class:`Decision` built, once, and
 :meth:`WearableLoop.feed` returns it. Output handlers (the alert log, the console,
 ``on_decision``) only read it.
 
@@ -91,18 +91,22 @@ class Decision(Verdict):
     """A DISTRACTION_ALERT went out for it (for a loop without a publisher: the policy says 'alert')."""
     latency_ms: float | None = None
     """Arrival of the capture's last sample -> its frame handed to the bus (sent alerts of live sources)."""
+    alert_seq: int | None = None
+    """The AlertSeq its DISTRACTION_ALERT frames carry (None: no frame went out for it)."""
 
     @classmethod
     def made(cls, verdict: Verdict, alerted: bool, status: str | None = None,
-             latency_ms: float | None = None) -> "Decision":
-        return cls(**{**asdict(verdict), "status": status or verdict.status}, alerted=alerted, latency_ms=latency_ms)
+             latency_ms: float | None = None, alert_seq: int | None = None) -> "Decision":
+        return cls(**{**asdict(verdict), "status": status or verdict.status}, alerted=alerted, latency_ms=latency_ms,
+                   alert_seq=alert_seq)
 
     def to_json(self) -> dict:
         """One line of ``--alerts`` (the host clock ``rx_monotonic_s`` means nothing outside this process)."""
         return {"t_trigger_s": self.t_trigger_s, "t_alert_s": self.t_alert_s, "label": self.label,
                 "confidence": round(self.confidence, 5), "alerted": self.alerted, "status": self.status,
                 "probs": {k: round(v, 5) for k, v in self.probs.items()}, "compute_us": round(self.compute_us, 1),
-                "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 3)}
+                "latency_ms": None if self.latency_ms is None else round(self.latency_ms, 3),
+                "alert_seq": self.alert_seq}
 
 
 @dataclass
@@ -211,10 +215,11 @@ class WearableLoop:
         """The decision, made once: a would-alert verdict is 'alert' only if its frame went out."""
         if verdict.status != "alert" or self.publisher is None:
             return Decision.made(verdict, alerted=verdict.status == "alert")
-        if not self.publisher.send_alert(verdict):
+        seq = self.publisher.publish_alert(verdict)
+        if seq is None:
             return Decision.made(verdict, alerted=False, status="alert_not_sent")
         if verdict.rx_monotonic_s is None:  # a recording: no arrival time to measure from
-            return Decision.made(verdict, alerted=True)
+            return Decision.made(verdict, alerted=True, alert_seq=seq)
         latency_ms = (time.monotonic() - verdict.rx_monotonic_s) * 1e3
         self.status.add_alert_latency(latency_ms)
-        return Decision.made(verdict, alerted=True, latency_ms=latency_ms)
+        return Decision.made(verdict, alerted=True, latency_ms=latency_ms, alert_seq=seq)

@@ -8,7 +8,7 @@ import time
 import pytest
 from support.can import LISTENER  # the stock-tools listener script
 
-from edge_runtime.wearable.alerts import DBC_PATH
+from edge_runtime.wearable.alerts import DBC_PATH, AlertEncoder
 
 pytestmark = pytest.mark.slow  # every test here starts a process
 
@@ -51,4 +51,7 @@ def test_alerts_of_a_simulated_drive_reach_an_integrator_process(hub, tmp_path):
     assert [a["Class"] for a in received] == expected == [d["label"] for d in decisions if d["alerted"]]
     assert "send errors 0" in summary
     log = (tmp_path / "sent.log").read_text()
-    assert log.count("3A0#") == len(expected) and "3A1#" in log  # every frame sent is logged, heartbeat included
+    frames_per_alert = 1 + AlertEncoder().repetition.copies
+    assert log.count("3A0#") == frames_per_alert * len(expected) and "3A1#" in log  # every frame sent is logged
+    seqs = [d["alert_seq"] for d in decisions if d["alerted"]]
+    assert [a["AlertSeq"] for a in received] == seqs == list(range(len(expected)))

@@ -11,7 +11,15 @@ import can
 import pytest
 
 from edge_runtime.canbus.e2e import E2EChecker
-from edge_runtime.wearable.alerts import DBC_PATH, AlertEncoder, AlertPublisher, WearableStatus, load_vehicle_dbc
+from edge_runtime.wearable.alerts import (
+    DBC_PATH,
+    AlertEncoder,
+    AlertPublisher,
+    Clock,
+    Repetition,
+    WearableStatus,
+    load_vehicle_dbc,
+)
 from edge_runtime.wearable.labels import CLASSES
 
 
@@ -22,7 +30,7 @@ def decision(label="Phone", conf=0.87, alerted=True, status="alert"):
 
 def test_dbc_loads_with_version_and_labels():
     db = load_vehicle_dbc()
-    assert db.version == "1.0.0"
+    assert db.version == "1.1.0"
     alert = db.get_message_by_name("DISTRACTION_ALERT")
     status = db.get_message_by_name("WEARABLE_STATUS")
     assert (alert.frame_id, status.frame_id) == (0x3A0, 0x3A1)
@@ -91,7 +99,8 @@ def test_heartbeat_rate_and_log(tmp_path):
     rx.shutdown()
     hb = [m for m in rx_msgs if m.arbitration_id == 0x3A1]
     assert 3 <= len(hb) <= 8, len(hb)
-    assert sum(m.arbitration_id == 0x3A0 for m in rx_msgs) == 1
+    alerts = [m for m in rx_msgs if m.arbitration_id == 0x3A0]
+    assert len(alerts) == 5 and {AlertEncoder().decode(m)["AlertSeq"] for m in alerts} == {0}  # 1 + 4 copies
     assert pub.frames_sent == len(rx_msgs) and pub.send_errors == 0
     chk = E2EChecker(load_vehicle_dbc())
     assert all(chk.check(m).valid for m in hb)
@@ -177,3 +186,75 @@ def test_alert_latencies_are_kept_in_order_and_handed_out_as_a_copy():
     got = st.alert_latencies_ms()
     got.append(99.0)
     assert st.alert_latencies_ms() == [1.5, 0.5]
+
+
+# ---------------------------------------------------------------------------- repetition and clocks
+
+
+def test_the_dbc_says_how_alerts_are_repeated():
+    rep = Repetition.of(load_vehicle_dbc().get_message_by_name("DISTRACTION_ALERT"))
+    assert rep == Repetition(copies=4, period_s=0.05)
+    assert rep.delays_s() == pytest.approx([0.05, 0.1, 0.15, 0.2])  # every loss recovered within 200 ms
+
+
+def _frames(log_path):
+    enc = AlertEncoder()
+    return [(m.timestamp, m.arbitration_id, enc.decode(m)) for m in can.LogReader(str(log_path))]
+
+
+def test_on_the_wall_clock_each_alert_goes_out_with_its_copies_and_the_same_alert_seq(tmp_path):
+    bus = can.Bus(interface="virtual", channel="rep", receive_own_messages=False)
+    rx = can.Bus(interface="virtual", channel="rep")
+    pub = AlertPublisher(bus, heartbeat_period_s=0.1, log_path=tmp_path / "f.log").start()
+    assert pub.publish_alert(decision("Drink")) == 0 and pub.publish_alert(decision("Phone")) == 1
+    pub.close()
+    got = []
+    while (m := rx.recv(0.05)) is not None:
+        if m.arbitration_id == 0x3A0:
+            got.append(AlertEncoder().decode(m))
+    rx.shutdown()
+    assert sorted((d["AlertSeq"], d["Class"]) for d in got) == [(0, "Drink")] * 5 + [(1, "Phone")] * 5
+    assert [d["TimeSinceTrigger"] for d in got if d["AlertSeq"] == 0] == [753, 803, 853, 903, 953]
+    logged = [m for m in can.LogReader(str(tmp_path / "f.log")) if m.arbitration_id == 0x3A0]
+    chk = E2EChecker(load_vehicle_dbc())
+    assert all(chk.check(m).valid for m in logged)  # every copy is a new E2E frame, never a 'repeated' one
+    assert [m.data[1] & 0x0F for m in logged] == list(range(10))
+    assert pub.summary()["alerts_sent"] == 2 and pub.summary()["alert_copies_sent"] == 8
+
+
+def test_an_alert_whose_first_frame_fails_has_no_alert_seq_and_no_copies():
+    pub = AlertPublisher(RaisingBus(), heartbeat_period_s=0.05, clock=Clock.DATA)
+    assert pub.publish_alert(decision()) is None
+    pub.bus.fail = False
+    pub.advance_to(20.0)
+    assert pub.alert_copies_sent == 0 and pub.alerts_sent == 0 and pub.heartbeats_sent > 0
+
+
+def test_on_the_data_clock_frames_are_stamped_with_the_recording_time(tmp_path):
+    bus = can.Bus(interface="virtual", channel="data-clock", receive_own_messages=False)
+    pub = AlertPublisher(bus, heartbeat_period_s=0.1, log_path=tmp_path / "f.asc", clock=Clock.DATA).start()
+    assert pub._thread is None  # nothing runs between samples
+    pub.status.count_samples(100)
+    pub.advance_to(100.0)
+    pub.publish_alert(SimpleNamespace(t_trigger_s=103.0, t_alert_s=110.0, label="Phone", confidence=0.9,
+                                      status="alert", compute_us=0.0))
+    pub.advance_to(110.12)
+    pub.publish_alert(SimpleNamespace(t_trigger_s=123.0, t_alert_s=130.0, label="Drink", confidence=0.9,
+                                      status="alert", compute_us=0.0))
+    pub.advance_to(130.0)
+    pub.close()  # the copies still due after the recording's end go out at their data time
+    frames = _frames(tmp_path / "f.asc")
+    stamps = [t for t, _, _ in frames]
+    assert stamps == sorted(stamps)
+    frames = [(t - stamps[0] + 100.0, i, d) for t, i, d in frames]  # .asc keeps times from the first frame
+    alerts = [(round(t, 3), d["AlertSeq"]) for t, i, d in frames if i == 0x3A0]
+    assert alerts == [(110.0, 0), (110.05, 0), (110.1, 0), (110.15, 0), (110.2, 0),
+                      (130.0, 1), (130.05, 1), (130.1, 1), (130.15, 1), (130.2, 1)]
+    beats = [(t, d["Uptime_s"]) for t, i, d in frames if i == 0x3A1]
+    assert [round(t, 3) for t, _ in beats] == [round(100.0 + 0.1 * k, 3) for k in range(301)]  # 100.0 .. 130.0
+    assert beats[-1][1] == 30  # uptime in data time
+
+
+def test_advance_to_is_for_the_data_clock_only():
+    with pytest.raises(RuntimeError):
+        AlertPublisher(None).advance_to(1.0)

@@ -20,7 +20,7 @@ from edge_runtime.wearable.mavlink_source import SourceStatus
 from edge_runtime.wearable.sources import ImuBlock, ReplayStats
 
 DECISION_KEYS = ["t_trigger_s", "t_alert_s", "label", "confidence", "alerted", "status", "probs", "compute_us",
-                 "latency_ms"]
+                 "latency_ms", "alert_seq"]
 
 
 def _steps_csv(path, n=3000, steps=(1000,)):
@@ -119,8 +119,8 @@ class Publisher:
         self.heartbeats += 1
         return True
 
-    def send_alert(self, alert):
-        return True
+    def publish_alert(self, alert):
+        return 0
 
 
 class Live:

@@ -93,9 +93,9 @@ class Publisher:
 
         self.status, self.goes_out, self.handed = WearableStatus(), goes_out, []
 
-    def send_alert(self, alert):
+    def publish_alert(self, alert):
         self.handed.append(copy.deepcopy(alert))
-        return self.goes_out
+        return len(self.handed) - 1 if self.goes_out else None  # the AlertSeq its frames carry
 
 
 def _one_capture(label="Texting", p=0.9, goes_out=True, rx=None):
@@ -107,13 +107,14 @@ def _one_capture(label="Texting", p=0.9, goes_out=True, rx=None):
 
 def test_a_would_alert_verdict_goes_to_the_publisher_and_the_decision_says_if_it_went_out():
     sent, pub, loop = _one_capture(rx=time.monotonic())
-    assert (sent.alerted, sent.status) == (True, "alert") and sent.latency_ms >= 0
+    assert (sent.alerted, sent.status, sent.alert_seq) == (True, "alert", 0) and sent.latency_ms >= 0
+    assert sent.to_json()["alert_seq"] == 0
     assert loop.status.alert_latencies_ms() == [sent.latency_ms]
     (verdict,) = pub.handed
     assert type(verdict) is Verdict and verdict.status == "alert" and verdict.label == "Texting"
 
     lost, pub, loop = _one_capture(goes_out=False, rx=time.monotonic())
-    assert (lost.alerted, lost.status, lost.latency_ms) == (False, "alert_not_sent", None)
+    assert (lost.alerted, lost.status, lost.latency_ms, lost.alert_seq) == (False, "alert_not_sent", None, None)
     assert loop.stats.statuses["alert"] == 1  # the summary counts what the policy said
     assert loop.status.alert_latencies_ms() == []
 
