@@ -2,6 +2,7 @@
 unix datagram socket. READY=1 arrives, a healthy loop's WATCHDOG=1 keep-alives arrive every
 half interval of WATCHDOG_USEC, and a hung loop's stop. Time is a counter the test turns, so
 nothing here depends on how loaded the machine is."""
+import json
 import os
 import socket
 import threading
@@ -153,3 +154,37 @@ def test_the_wearable_drive_loop_keeps_alive_while_it_turns_and_goes_silent_when
         service.reset(previous)
     drive.join(timeout=60)
     assert not drive.is_alive()
+
+
+class SteppingClock(Clock):
+    """Each reading is ``step_s`` later than the one before: one loop iteration per reading."""
+
+    def __init__(self, step_s: float):
+        super().__init__()
+        self.step_s = step_s
+
+    def __call__(self) -> float:
+        self.now_s += self.step_s
+        return self.now_s
+
+
+def test_the_robot_drive_loop_sends_ready_then_keepalives_per_turn(supervisor, tmp_path, monkeypatch):
+    from support.robot import FakeLink
+
+    from edge_runtime.__main__ import main
+    from edge_runtime.robot import command as robot_cli
+    from firmware_sim.people import human
+
+    sock, env = supervisor
+    body = human.Body.from_height(1.8)
+    frames = 12  # 0.4 s of a worker standing 3 m from the arm, at 30 Hz
+    rows = [{"t": i / 30, "joints_robot_m": human.joints(body, human.Posture(), pelvis_xz_m=(0.0, 3.0)).tolist()}
+            for i in range(frames)]
+    (tmp_path / "joints.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    monkeypatch.setattr(robot_cli, "_open_link", lambda cfg: FakeLink())
+    previous = service.reset(service.Notifier(env, SteppingClock(WATCHDOG_USEC / 1e6 / 4)))  # 2 turns per keep-alive
+    try:
+        assert main(["robot", "--joints", str(tmp_path / "joints.jsonl"), "--quiet"]) == 0
+    finally:
+        service.reset(previous)
+    assert received(sock) == [b"READY=1"] + [b"WATCHDOG=1"] * ((frames - 1) // 2)
