@@ -72,9 +72,8 @@ echo "installed @PRODUCT@ into $PREFIX (configuration: $ETC/box.toml)"
 UNIT = """[Unit]
 Description=Edge safety runtime: @WHAT@
 After=network.target
-# Restarted at most 5 times a minute; then systemd gives up and the unit shows as failed.
-StartLimitIntervalSec=60
-StartLimitBurst=5
+# A safety function is never given up on: no start rate limit, a restart every RestartSec.
+StartLimitIntervalSec=0
 
 [Service]
 # READY=1 comes from the first turn of the drive loop (model loaded, bus open); after that
@@ -84,7 +83,10 @@ NotifyAccess=main
 WatchdogSec=@WATCHDOG_S@
 TimeoutStartSec=60
 Restart=on-failure
-RestartSec=1
+# The loop also ends, with status 0, when its sensor is gone for good (a disconnected IMU, a
+# camera stream that ended): on a box that is a fault to recover from, not a request to stop.
+RestartForceExitStatus=0
+RestartSec=2
 EnvironmentFile=@ETC@/@NAME@.env
 ExecStart=@PREFIX@/bin/@NAME@ --config @ETC@/box.toml $EDGE_ARGS
 SyslogIdentifier=@NAME@

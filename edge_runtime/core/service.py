@@ -64,11 +64,6 @@ class Notifier:
                 self.keepalives_sent += 1
             self._last_s = now_s
 
-    def stopping(self) -> None:
-        """STOPPING=1: the service is shutting down on purpose."""
-        if self.address is not None:
-            self._send(b"STOPPING=1")
-
     def _send(self, message: bytes) -> bool:
         try:
             if self._sock is None:

@@ -65,6 +65,7 @@ def test_ready_first_then_keepalives_every_half_interval(supervisor):
     assert [m for _, m in sent_at[1:]] == [b"WATCHDOG=1"] * 5
     assert np.allclose([t for t, _ in sent_at[1:]], [1.0, 2.0, 3.0, 4.0, 5.0])
     assert n.keepalives_sent == 5 and n.send_errors == 0
+    n.close()
 
 
 def test_abstract_socket_name(supervisor):
@@ -75,6 +76,7 @@ def test_abstract_socket_name(supervisor):
         n = service.Notifier({**env, "NOTIFY_SOCKET": "@" + name}, Clock())
         n.alive()
         assert sock.recv(64) == b"READY=1"
+        n.close()
 
 
 @pytest.mark.parametrize("env, interval_s", [
