@@ -170,7 +170,8 @@ class OneLineFormatter(logging.Formatter):
 
 
 def setup_logging(level: int = logging.INFO, stream=None) -> None:
-    """The one log handler of a runtime process: :class:`OneLineFormatter` lines on stderr.
+    """The one log handler of a runtime process: :class:`OneLineFormatter` lines on stderr,
+    ``level`` and up from the runtime's own loggers, warnings and up from the libraries'.
     Idempotent (a second call replaces the handler, e.g. for a test's stream)."""
     root = logging.getLogger()
     for h in [h for h in root.handlers if getattr(h, "edge_runtime", False)]:
@@ -180,7 +181,7 @@ def setup_logging(level: int = logging.INFO, stream=None) -> None:
     handler.edge_runtime = True
     handler.setFormatter(OneLineFormatter(journal=_is_journal(stream)))
     root.addHandler(handler)
-    root.setLevel(level)
+    logging.getLogger("edge_runtime").setLevel(level)
 
 
 def _number(s: str, cast, what: str, ok) -> float:
