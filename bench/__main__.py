@@ -109,7 +109,7 @@ def main(argv=None) -> int:
     from edge_runtime.core.manifest import ModelIntegrityError
 
     args = build_parser().parse_args(argv)
-    return run(lambda: cmd(args), bad_input=(ModelIntegrityError, ValueError))
+    return run(lambda: cmd(args), bad_input=(ModelIntegrityError, ValueError), what="bench", extra="bench")
 
 
 if __name__ == "__main__":

@@ -22,11 +22,14 @@ COMMANDS = (
     ("robot", "robot.command", "the robot-side safety loop against a real or simulated arm"),
 )
 """(name, module of this package, help), in the order ``--help`` lists them."""
+EXTRAS = {"wearable": "serial-imu", "lift": "robot", "robot": "robot"}
+"""The setup.cfg extra each command needs beyond the base install (the wearable only for a
+serial IMU: a replay or a simulated IMU runs on the base install)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser, sub = make_parser("python -m edge_runtime", __doc__.splitlines()[0])
-    add_module_commands(sub, __package__, COMMANDS)
+    add_module_commands(sub, __package__, COMMANDS, EXTRAS)
     return parser
 
 
@@ -45,6 +48,18 @@ def load_all_sections() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     return run_command(build_parser().parse_args(argv))
+
+
+# Console entry points (setup.cfg, the bundle's wheel). One per product, beside the
+# `edge-runtime` command table: a systemd unit's ExecStart and the journal's identifier
+# (`journalctl -t edge-wearable`) then name the product, and neither can run the other's loop
+# by a mistyped subcommand.
+def wearable_main() -> int:
+    return main(["wearable", *sys.argv[1:]])
+
+
+def robot_main() -> int:
+    return main(["robot", *sys.argv[1:]])
 
 
 if __name__ == "__main__":

@@ -220,8 +220,15 @@ def from_dict(data: dict, source: str = "<config>"):
     return box_config_type()(**values)
 
 
+SYSTEM_PATH = Path("/etc/edge-safety/box.toml")
+"""Where an installed box keeps its configuration (docs/install.md); ``--config`` overrides it."""
+
+
 def load(path: str | Path | None):
-    """The configuration in ``path`` (TOML), or the defaults when ``path`` is None."""
+    """The configuration in ``path`` (TOML); when ``path`` is None, the box's own
+    (:data:`SYSTEM_PATH`) if it has one, else the defaults."""
+    if path is None and SYSTEM_PATH.is_file():
+        path = SYSTEM_PATH
     if path is None:
         return box_config_type()()
     p = Path(path)

@@ -146,15 +146,15 @@ def cmd_compare(a) -> int:
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from edge_runtime.core.manifest import ModelIntegrityError
-    from export.onnx_export import ExportError
-    from export.quantize import QuantizeError
-    from models.dataset import DataError
 
     cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "compare-int8": cmd_compare}
     func = getattr(args, "func", None) or cmds[args.command]
+    # ExportError, QuantizeError and DataError are ValueErrors: naming them here would import
+    # torch and onnx, which `export bundle` on an install without the train extra does not have.
     return run(lambda: func(args),
-               bad_input=(ExportError, QuantizeError, DataError, ModelIntegrityError, OSError, ValueError, KeyError,
-                          *getattr(args, "bad_input", ())))
+               bad_input=(ModelIntegrityError, OSError, ValueError, KeyError,
+                          *getattr(args, "bad_input", ())),
+               what=f"export {args.command}", extra="train")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""``python -m export bundle --out DIR [--measure-install [--venv DIR]]``: what goes onto a box.
+"""``python -m export bundle --out DIR [--product wearable|robot|all] [--platform x86_64|aarch64]``:
+what goes onto a box, installable there without a package index.
 
 DIR receives:
 
@@ -6,37 +7,44 @@ DIR receives:
   ``edge_runtime`` package with its assets (models, manifest.json, the DBC) and
   its TOML -- built from a minimal source tree generated in a temporary
   directory (the repository's setup.cfg packages the training side too). Its
-  dependencies are setup.cfg's ``install_requires``, which must not name torch;
-  ``pip wheel --no-deps --no-build-isolation`` builds it with the setuptools
-  already installed;
+  dependencies are setup.cfg's ``install_requires`` (the wearable box) and its
+  product extras (``serial-imu``, ``robot``), none of which may name torch; its
+  console scripts are setup.cfg's (``edge-wearable``, ``edge-robot``, ``edge-runtime``);
+* ``wheels/``: every dependency of the product, as binary wheels for the target
+  platform and Python (``pip download --only-binary=:all: --platform manylinux_2_36_<arch> ...
+  --python-version 3.11``): ``install.sh`` installs from here alone;
 * ``assets/``: the assets directory (models, manifest.json, DBCs), copied, each
   model's sha256 checked against the manifest after the copy (and every model
   inside the wheel too);
 * ``box.toml``: the default configuration (``edge_runtime/box.example.toml``,
-  every key with its default), checked to load;
-* ``INSTALL.md``: how to install and run it;
-* ``SHA256SUMS``: ``sha256sum -c`` format over every other file.
+  every key with its default), checked to load; ``install.sh`` puts it at
+  ``/etc/edge-safety/box.toml``, where the runtime looks when no ``--config`` is given;
+* ``systemd/``: the product's units (``Type=notify``, ``WatchdogSec=``,
+  ``Restart=on-failure``) and their environment files (export/box_files.py);
+* ``install.sh``: the offline install (docs/install.md); ``INSTALL.md``: how to
+  install and run it; ``SHA256SUMS``: ``sha256sum -c`` format over every other file.
 
-``--measure-install`` then installs the wheel into a fresh virtual environment
-(``python -m venv``, dependencies from PyPI or pip's cache), proves torch is not
-importable there, and reports the installed size (bytes under site-packages)
-and the largest distributions; :func:`measure_install` does the same for tests.
+``--measure-install`` then runs ``install.sh`` into a fresh prefix with no index
+reachable, proves torch is not importable there, and reports the installed size
+and what each distribution costs; :func:`measure_install` does the same for tests.
 """
 from __future__ import annotations
 
 import configparser
+import json
 import os
+import platform
 import shutil
 import subprocess
 import sys
 import tempfile
-import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from edge_runtime.cli import CliError
 from edge_runtime.core.manifest import ModelIntegrityError, sha256_bytes, sha256_file, verify_all
+from export.box_files import INSTALL_SH, SKIP_COMPILE, UNIT, UNITS, fill
 
 ROOT = Path(__file__).resolve().parent.parent
 RUNTIME_PACKAGE = ROOT / "edge_runtime"
@@ -44,6 +52,17 @@ SETUP_CFG = ROOT / "setup.cfg"
 DIST_NAME = "edge-safety-runtime"
 REQUIRES_PYTHON = ">=3.11"
 """edge_runtime.config reads TOML with the standard library's tomllib (Python 3.11+)."""
+PYTHON_VERSION = "3.11"
+"""The box's Python (Debian 12's python3.11): the wheelhouse is built for it."""
+PLATFORMS = ("x86_64", "aarch64")
+GLIBC_MINOR = 36
+"""The box's glibc is 2.36 (Debian 12): a wheel may need any glibc up to it. pip download matches
+the platform tags it is given exactly, so :func:`platform_tags` lists every manylinux tag up to it
+(with only ``manylinux_2_28``, pymavlink fell back to an old pure-Python wheel of 165 MiB)."""
+PRODUCTS = {"wearable": ("wearable",), "robot": ("robot",), "all": ("wearable", "serial-imu", "robot")}
+"""Each product's extras of the runtime wheel (setup.cfg); ``wearable`` is the base install."""
+PRODUCT_EXTRAS = ("wearable", "serial-imu", "robot")
+"""setup.cfg extras the runtime wheel carries: what a box may add (``--with serial-imu``)."""
 FORBIDDEN_REQUIREMENTS = ("torch", "torchvision", "onnx", "onnxscript", "tensorflow")
 SUMS_NAME = "SHA256SUMS"
 CONFIG_NAME = "box.toml"
@@ -61,7 +80,10 @@ class Bundle:
     wheel: Path
     """The runtime wheel inside it."""
     requirements: tuple[str, ...]
-    """The wheel's dependencies (setup.cfg install_requires)."""
+    """What the product installs (setup.cfg install_requires and the product's extras)."""
+    product: str = "all"
+    platform: str = "x86_64"
+    extras: tuple[str, ...] = ()
     files: dict[str, str] = field(default_factory=dict)
     """Relative path -> sha256 of every file listed in SHA256SUMS."""
 
@@ -69,44 +91,86 @@ class Bundle:
 @dataclass(frozen=True)
 class InstallReport:
     venv: Path
+    venv_bytes: int
+    """Bytes of every file under the installed venv (apparent sizes), pip and setuptools included."""
     site_packages_bytes: int
-    """Bytes of every file under the venv's site-packages (du, apparent sizes)."""
-    largest: tuple[tuple[str, int], ...]
-    """The biggest top-level entries of site-packages: (name, bytes)."""
+    """Bytes of every file under the venv's site-packages."""
+    distributions: tuple[tuple[str, int], ...]
+    """Every installed distribution and the bytes of its files (its RECORD), largest first."""
     torch_importable: bool
-    install_s: float
-    """Wall time of ``pip install`` (s; network and cache dependent)."""
+    absent: tuple[str, ...]
+    """Of torch, cv2 and pymavlink, those the installed venv cannot import."""
 
 
 # ---------------------------------------------------------------------------------------------- inputs
 
-def runtime_metadata(setup_cfg: Path = SETUP_CFG) -> tuple[str, tuple[str, ...]]:
-    """(version, install_requires) from setup.cfg; refuses a torch-side requirement."""
+def _requirement_name(req: str) -> str:
+    return req.split(";")[0].split("[")[0].split("=")[0].split(">")[0].split("<")[0].split("~")[0].strip().lower()
+
+
+def _lines(raw: str) -> tuple[str, ...]:
+    return tuple(line.strip() for line in raw.splitlines() if line.strip() and not line.strip().startswith("#"))
+
+
+def _read_setup_cfg(setup_cfg: Path) -> configparser.ConfigParser:
     cfg = configparser.ConfigParser()
     if not cfg.read(setup_cfg):
         raise BundleError(f"{setup_cfg}: not readable")
+    return cfg
+
+
+def runtime_metadata(setup_cfg: Path = SETUP_CFG) -> tuple[str, tuple[str, ...]]:
+    """(version, install_requires) from setup.cfg; refuses a torch-side requirement."""
+    cfg = _read_setup_cfg(setup_cfg)
     try:
         version = cfg["metadata"]["version"].strip()
-        raw = cfg["options"]["install_requires"]
+        reqs = _lines(cfg["options"]["install_requires"])
     except KeyError as e:
         raise BundleError(f"{setup_cfg}: field {e.args[0]!r} missing") from None
-    reqs = tuple(line.strip() for line in raw.splitlines() if line.strip() and not line.strip().startswith("#"))
-    for r in reqs:
-        name = r.split(";")[0].split("[")[0].split("=")[0].split(">")[0].split("<")[0].split("~")[0].strip().lower()
-        if name in FORBIDDEN_REQUIREMENTS:
-            raise BundleError(f"{setup_cfg}: field 'options.install_requires': {r!r} does not belong on a box "
-                              "(training side)")
+    _refuse_training_side(setup_cfg, "options.install_requires", reqs)
     return version, reqs
 
 
-def _pyproject(version: str, reqs: tuple[str, ...]) -> str:
-    deps = "".join(f'    "{r}",\n' for r in reqs)
+def product_extras(setup_cfg: Path = SETUP_CFG) -> dict[str, tuple[str, ...]]:
+    """The runtime wheel's extras (:data:`PRODUCT_EXTRAS`) and their requirements, from setup.cfg."""
+    cfg = _read_setup_cfg(setup_cfg)
+    extras = {}
+    for name in PRODUCT_EXTRAS:
+        if not cfg.has_option("options.extras_require", name):
+            raise BundleError(f"{setup_cfg}: field 'options.extras_require.{name}' missing")
+        extras[name] = _lines(cfg["options.extras_require"][name])
+        _refuse_training_side(setup_cfg, f"options.extras_require.{name}", extras[name])
+    return extras
+
+
+def console_scripts(setup_cfg: Path = SETUP_CFG) -> dict[str, str]:
+    """setup.cfg's console scripts (name -> module:function), the runtime wheel's too."""
+    cfg = _read_setup_cfg(setup_cfg)
+    raw = cfg.get("options.entry_points", "console_scripts", fallback="")
+    return {k.strip(): v.strip() for k, v in (line.split("=", 1) for line in _lines(raw))}
+
+
+def _refuse_training_side(setup_cfg: Path, where: str, reqs: tuple[str, ...]) -> None:
+    for r in reqs:
+        if _requirement_name(r) in FORBIDDEN_REQUIREMENTS:
+            raise BundleError(f"{setup_cfg}: field {where!r}: {r!r} does not belong on a box (training side)")
+
+
+def _pyproject(version: str, reqs: tuple[str, ...], extras: dict[str, tuple[str, ...]] | None = None,
+               scripts: dict[str, str] | None = None) -> str:
+    def toml_list(items):
+        return "[" + ", ".join(f'"{r}"' for r in items) + "]"
+
+    optional = "".join(f'"{name}" = {toml_list(items)}\n' for name, items in (extras or {}).items())
+    entry = "".join(f'{name} = "{target}"\n' for name, target in (scripts or {}).items())
     return (
         '[build-system]\nrequires = ["setuptools>=64", "wheel"]\nbuild-backend = "setuptools.build_meta"\n\n'
         f'[project]\nname = "{DIST_NAME}"\nversion = "{version}"\n'
         'description = "Edge safety runtime: the torch-free edge_runtime package and its shipped models"\n'
-        f'requires-python = "{REQUIRES_PYTHON}"\nlicense = {{text = "Apache-2.0"}}\ndependencies = [\n{deps}]\n\n'
-        '[project.scripts]\nedge-runtime = "edge_runtime.__main__:main"\n\n'
+        f'requires-python = "{REQUIRES_PYTHON}"\nlicense = {{text = "Apache-2.0"}}\n'
+        f'dependencies = {toml_list(reqs)}\n\n'
+        f'[project.optional-dependencies]\n{optional}\n'
+        f'[project.scripts]\n{entry}\n'
         '[tool.setuptools]\ninclude-package-data = false\n\n'
         '[tool.setuptools.packages.find]\nnamespaces = true\ninclude = ["edge_runtime", "edge_runtime.*"]\n'
         'exclude = ["*.__pycache__"]\n\n'
@@ -115,23 +179,52 @@ def _pyproject(version: str, reqs: tuple[str, ...]) -> str:
 
 # ---------------------------------------------------------------------------------------------- build
 
-def build_wheel(out: Path, package: Path, version: str, reqs: tuple[str, ...]) -> Path:
+def build_wheel(out: Path, package: Path, version: str, reqs: tuple[str, ...],
+                extras: dict[str, tuple[str, ...]] | None = None, scripts: dict[str, str] | None = None) -> Path:
     """The runtime wheel, built from a generated source tree holding ``package`` only."""
     with tempfile.TemporaryDirectory(prefix="bundle-src-") as tmp:
         src = Path(tmp) / "src"
         shutil.copytree(package, src / "edge_runtime", ignore=shutil.ignore_patterns("__pycache__", "*.pyc",
                                                                                        "*.tmp.json"))
-        (src / "pyproject.toml").write_text(_pyproject(version, reqs))
-        r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation",
-                            "--disable-pip-version-check", "--wheel-dir", str(out), str(src)],
-                           capture_output=True, text=True)
-        if r.returncode != 0:
-            last = (r.stderr.strip().splitlines() or ["no output"])[-1]
-            raise BundleError(f"pip wheel {src}: exit {r.returncode}: {last}")
+        (src / "pyproject.toml").write_text(_pyproject(version, reqs, extras, scripts))
+        _pip(["wheel", "--quiet", "--no-deps", "--no-build-isolation", "--wheel-dir", str(out), str(src)],
+             f"pip wheel {src}")
     wheels = sorted(out.glob(f"{DIST_NAME.replace('-', '_')}-{version}-*.whl"))
     if len(wheels) != 1:
         raise BundleError(f"{out}: expected one {DIST_NAME} {version} wheel, found {[w.name for w in wheels]}")
     return wheels[0]
+
+
+def _pip(args: list[str], what: str, env: dict | None = None, timeout_s: float = 1800.0) -> None:
+    r = subprocess.run([sys.executable, "-m", "pip", "--disable-pip-version-check", *args], capture_output=True,
+                       text=True, env=env, timeout=timeout_s)
+    if r.returncode != 0:
+        errors = [line for line in r.stderr.splitlines() if line.startswith("ERROR")] or r.stderr.splitlines()
+        raise BundleError(f"{what}: exit {r.returncode}: {(errors or ['no output'])[-1]}")
+
+
+def platform_tags(platform_name: str) -> list[str]:
+    """Every manylinux tag a wheel for the box may carry, newest glibc first."""
+    legacy = ("manylinux2014", "manylinux2010", "manylinux1")
+    return [f"manylinux_2_{minor}_{platform_name}" for minor in range(GLIBC_MINOR, 4, -1)] + \
+        [f"{tag}_{platform_name}" for tag in legacy]
+
+
+def download_wheelhouse(wheels: Path, requirements: tuple[str, ...], platform_name: str,
+                        python_version: str = PYTHON_VERSION, find_links: tuple[str, ...] = ()) -> list[Path]:
+    """Binary wheels of ``requirements`` and everything they need, for ``platform_name`` and CPython
+    ``python_version``, into ``wheels`` (pip's index and configuration, plus ``find_links``:
+    wheels built elsewhere for a package the index has none of for that platform)."""
+    version = python_version.replace(".", "")
+    args = ["download", "--quiet", "--only-binary=:all:", *(a for tag in platform_tags(platform_name)
+                                                           for a in ("--platform", tag)),
+            "--python-version", python_version, "--implementation", "cp", "--abi", f"cp{version}", "--abi", "abi3",
+            "--abi", "none", "--dest", str(wheels)]
+    for link in find_links:
+        args += ["--find-links", link]
+    _pip([*args, *requirements], f"pip download for {platform_name} Python {python_version} (a package with no "
+         f"binary wheel for it can be built on such a machine and given with --find-links DIR)")
+    return sorted(wheels.glob("*.whl"))
 
 
 def check_wheel_assets(wheel: Path, manifest: dict) -> None:
@@ -166,66 +259,131 @@ def write_sums(out: Path) -> dict[str, str]:
     return files
 
 
-def _install_text(wheel: Path, reqs: tuple[str, ...], manifest: dict) -> str:
+def _units(product: str) -> list[str]:
+    return list(UNITS) if product == "all" else [product]
+
+
+def write_box_files(out: Path, wheel: Path, product: str, platform_name: str, python_version: str,
+                    extras: tuple[str, ...]) -> None:
+    """install.sh and systemd/ (units and their environment files) for ``product``."""
+    units = _units(product)
+    names = [UNITS[u]["NAME"] for u in units]
+    extra_spec = f"[{','.join(extras)}]" if extras else ""
+    sh = out / "install.sh"
+    sh.write_text(fill(INSTALL_SH, PRODUCT=product, PLATFORM=platform_name, PYTHON_VERSION=python_version,
+                       WHEEL=wheel.name, EXTRAS=extra_spec, UNITS=" ".join(names), SKIP_COMPILE=SKIP_COMPILE))
+    sh.chmod(0o755)
+    (out / "systemd").mkdir()
+    for u in units:
+        values = UNITS[u]
+        (out / "systemd" / f"{values['NAME']}.service").write_text(
+            fill(UNIT, **{k: v for k, v in values.items() if k != "ENV"}))
+        (out / "systemd" / f"{values['NAME']}.env").write_text(values["ENV"])
+
+
+def _install_text(b: Bundle, manifest: dict, wheels: list[Path]) -> str:
     models = "\n".join(f"  - `{e['file']}` ({e['name']}, {e['precision']}, sha256 `{e['sha256'][:16]}...`)"
                        for e in manifest["models"])
-    return f"""# Edge safety runtime bundle
+    units = [UNITS[u]["NAME"] for u in _units(b.product)]
+    wheel_list = "\n".join(f"  - `{w.name}`" for w in wheels)
+    return f"""# Edge safety runtime bundle: {b.product}, {b.platform}, Python {PYTHON_VERSION}
 
-What a box needs to run the product, and nothing more (no torch).
+What a box needs to run the product, and nothing more (no torch), installable without a
+package index.
 
 | file | what |
 |---|---|
-| `{wheel.name}` | the `edge_runtime` package with its models, manifest and DBC (Python {REQUIRES_PYTHON}) |
+| `{b.wheel.name}` | the `edge_runtime` package with its models, manifest and DBCs (Python {REQUIRES_PYTHON}) |
+| `wheels/` | every dependency, as wheels for {b.platform} and CPython {PYTHON_VERSION} |
 | `assets/` | the same models, `manifest.json` and DBCs, for integrators or `[model] assets` |
 | `{CONFIG_NAME}` | the default configuration: every key with its default |
+| `systemd/` | {", ".join(f"`{u}.service`" for u in units)} and their `.env` files (the command's arguments) |
+| `install.sh` | the offline install |
 | `{SUMS_NAME}` | sha256 of every file here |
+
+Installs the runtime wheel with extras `{",".join(b.extras) or "none (the base install)"}`:
+{", ".join(f"`{r}`" for r in b.requirements)}.
 
 Models:
 {models}
 
-Dependencies (installed by pip from PyPI or a local wheelhouse): {", ".join(f"`{r}`" for r in reqs)}.
+Wheels:
+{wheel_list}
 
-## Install
+## Install (as root; Debian 12: `apt install python3.11-venv`)
 
 ```sh
 sha256sum -c {SUMS_NAME}
-python3.11 -m venv /opt/edge-safety
-/opt/edge-safety/bin/pip install {wheel.name}
-# offline: pip download the dependencies into a wheelhouse elsewhere, then
-#   /opt/edge-safety/bin/pip install --no-index --find-links WHEELHOUSE {wheel.name}
+./install.sh    # /opt/edge-safety (venv), /etc/edge-safety (box.toml, *.env), /etc/systemd/system
+# or: ./install.sh --prefix DIR --etc DIR [--systemd DIR | --no-systemd] [--python PYTHON]
 ```
+
+`install.sh` checks this bundle against `{SUMS_NAME}`, the machine ({b.platform}) and the
+Python ({PYTHON_VERSION}), creates the venv, installs from `wheels/` only (no index, no pip
+configuration), checks every installed model against `manifest.json`, and copies `box.toml` and
+the `.env` files to `/etc/edge-safety` unless they are there already.
 
 ## Run
 
 ```sh
-/opt/edge-safety/bin/python -m edge_runtime wearable --config {CONFIG_NAME} --print-config
-/opt/edge-safety/bin/python -m edge_runtime wearable --config {CONFIG_NAME} --imu serial:/dev/ttyUSB0
-/opt/edge-safety/bin/python -m edge_runtime wearable --replay imu.csv --alerts alerts.jsonl   # a recording
+$EDITOR /etc/edge-safety/box.toml /etc/edge-safety/{units[0]}.env
+systemctl daemon-reload && systemctl enable --now {" ".join(units)}
+journalctl -t {units[0]} -f              # one line per record: level=... component=... event=...
+/opt/edge-safety/bin/edge-runtime wearable --print-config           # the effective configuration
+/opt/edge-safety/bin/edge-wearable --replay imu.csv --alerts alerts.jsonl   # a recording
 ```
 
-Every model file is checked against `manifest.json` (sha256) before it is loaded; a
-mismatch stops the runtime with one line naming the file.
+The units are `Type=notify` with `WatchdogSec=` and `Restart=on-failure`: the runtime says
+READY once its loop turns and keeps the watchdog fed from that loop, so a hung loop is
+restarted. Every model file is checked against `manifest.json` (sha256) before it is loaded;
+a mismatch stops the runtime with one line naming the file.
 """
 
 
+def product_requirements(product: str, with_extras: tuple[str, ...] = (),
+                         setup_cfg: Path = SETUP_CFG) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """(the runtime wheel's extras, every requirement they and the base install bring) of ``product``."""
+    if product not in PRODUCTS:
+        raise BundleError(f"--product: {product!r}, expected one of {', '.join(PRODUCTS)}")
+    extras_reqs = product_extras(setup_cfg)
+    unknown = [e for e in with_extras if e not in extras_reqs]
+    if unknown:
+        raise BundleError(f"--with: {unknown[0]!r}, expected one of {', '.join(extras_reqs)}")
+    extras = tuple(dict.fromkeys((*PRODUCTS[product], *with_extras)))
+    base = runtime_metadata(setup_cfg)[1]
+    return extras, tuple(dict.fromkeys((*base, *(r for e in extras for r in extras_reqs[e]))))
+
+
 def build_bundle(out: str | os.PathLike, package: str | os.PathLike = RUNTIME_PACKAGE,
-                 setup_cfg: str | os.PathLike = SETUP_CFG) -> Bundle:
-    """Build the bundle into ``out`` (see the module docstring) from the runtime ``package``."""
-    out, package = Path(out), Path(package)
-    version, reqs = runtime_metadata(Path(setup_cfg))
+                 setup_cfg: str | os.PathLike = SETUP_CFG, product: str = "all", platform_name: str | None = None,
+                 with_extras: tuple[str, ...] = (), find_links: tuple[str, ...] = (),
+                 wheelhouse: bool = True) -> Bundle:
+    """Build the bundle into ``out`` (see the module docstring) from the runtime ``package``.
+    ``wheelhouse=False`` leaves ``wheels/`` out (tests of the rest that need no index)."""
+    out, package, setup_cfg = Path(out), Path(package), Path(setup_cfg)
+    platform_name = platform_name or platform.machine()
+    if platform_name not in PLATFORMS:
+        raise BundleError(f"--platform: {platform_name!r}, expected one of {', '.join(PLATFORMS)}")
+    version, reqs = runtime_metadata(setup_cfg)
+    extras_reqs = product_extras(setup_cfg)
+    extras, requirements = product_requirements(product, with_extras, setup_cfg)
     manifest = verify_all(package / "assets")  # a tampered model never gets into a bundle
     from edge_runtime.config import load as load_config
 
     load_config(package / "box.example.toml")
     _prepare_out(out)
-    wheel = build_wheel(out, package, version, reqs)
+    wheel = build_wheel(out, package, version, reqs, extras_reqs, console_scripts(setup_cfg))
     check_wheel_assets(wheel, manifest)
+    wheels = download_wheelhouse(out / "wheels", requirements, platform_name, PYTHON_VERSION, find_links) \
+        if wheelhouse else []
     assets = out / "assets"
     shutil.copytree(package / "assets", assets, ignore=shutil.ignore_patterns("*.tmp.json", "__pycache__"))
     verify_all(assets)
     shutil.copy2(package / "box.example.toml", out / CONFIG_NAME)
-    (out / "INSTALL.md").write_text(_install_text(wheel, reqs, manifest))
-    return Bundle(out, wheel, reqs, write_sums(out))
+    write_box_files(out, wheel, product, platform_name, PYTHON_VERSION, extras)
+    b = Bundle(out, wheel, requirements, product, platform_name, extras)
+    (out / "INSTALL.md").write_text(_install_text(b, manifest, wheels))
+    return Bundle(out, wheel, requirements, product, platform_name, extras, write_sums(out))
 
 
 # ---------------------------------------------------------------------------------------------- install
@@ -251,34 +409,57 @@ def site_packages(venv: Path) -> Path:
     return Path(r.stdout.strip())
 
 
-def measure_install(wheel: str | os.PathLike, venv: str | os.PathLike, timeout_s: float = 900.0) -> InstallReport:
-    """A fresh venv (no system site-packages) with ``wheel`` and its dependencies installed;
-    its site-packages size, and whether torch is importable there (it must not be)."""
+OFFLINE_ENV = {"PIP_NO_INDEX": "1", "PIP_FIND_LINKS": "", "PIP_INDEX_URL": "http://127.0.0.1:9/none",
+               "PIP_EXTRA_INDEX_URL": "", "PIP_CONFIG_FILE": os.devnull}
+"""No package index reachable: what install.sh must do without (tests and --measure-install)."""
+
+_PROBE = """
+import importlib.metadata as md, importlib.util as u, json, os
+def size(d):  # its files (RECORD), and the bytecode install.sh compiled for them
+    paths = [str(d.locate_file(f)) for f in d.files or ()]
+    paths += [u.cache_from_source(p) for p in paths if p.endswith(".py")]
+    return sum(os.path.getsize(p) for p in set(paths) if os.path.isfile(p))
+print(json.dumps({"dists": {d.metadata["Name"]: size(d) for d in md.distributions()},
+                  "absent": [m for m in ("torch", "cv2", "pymavlink") if u.find_spec(m) is None]}))
+"""
+
+
+def install_offline(bundle_dir: str | os.PathLike, prefix: str | os.PathLike, etc: str | os.PathLike,
+                    python: str = sys.executable, timeout_s: float = 900.0) -> subprocess.CompletedProcess:
+    """Run the bundle's install.sh into ``prefix`` (``etc`` for the configuration, no systemd
+    units) with no package index reachable (:data:`OFFLINE_ENV`)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")} | OFFLINE_ENV
+    return subprocess.run(["sh", str(Path(bundle_dir) / "install.sh"), "--prefix", str(prefix), "--etc", str(etc),
+                           "--no-systemd", "--python", python], capture_output=True, text=True, env=env,
+                          timeout=timeout_s)
+
+
+def measure_install(bundle_dir: str | os.PathLike, venv: str | os.PathLike, timeout_s: float = 900.0) -> InstallReport:
+    """The bundle installed offline (install.sh) into a fresh venv: its size, what each
+    distribution costs, and which of torch, cv2 and pymavlink it cannot import."""
     venv = Path(venv)
     if venv.exists():
         raise BundleError(f"--venv {venv}: exists; give a new directory")
-    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, capture_output=True, timeout=timeout_s)
-    t0 = time.perf_counter()
-    r = subprocess.run([str(venv_python(venv)), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
-                        str(wheel)], capture_output=True, text=True, timeout=timeout_s)
-    install_s = time.perf_counter() - t0
+    r = install_offline(bundle_dir, venv, venv.parent / f"{venv.name}-etc", timeout_s=timeout_s)
     if r.returncode != 0:
         last = (r.stderr.strip().splitlines() or ["no output"])[-1]
-        raise BundleError(f"pip install {Path(wheel).name} into {venv}: exit {r.returncode}: {last}")
-    probe = subprocess.run([str(venv_python(venv)), "-c",
-                            "import importlib.util, sys; sys.exit(0 if importlib.util.find_spec('torch') else 1)"],
-                           capture_output=True, timeout=60)
-    sp = site_packages(venv)
-    sizes = sorted(((p.name, _tree_bytes(p) if p.is_dir() else p.stat().st_size) for p in sp.iterdir()),
-                   key=lambda kv: -kv[1])
-    return InstallReport(venv, _tree_bytes(sp), tuple(sizes[:8]), probe.returncode == 0, round(install_s, 1))
+        raise BundleError(f"{Path(bundle_dir) / 'install.sh'} into {venv}: exit {r.returncode}: {last}")
+    probe = subprocess.run([str(venv_python(venv)), "-c", _PROBE], capture_output=True, text=True, check=True,
+                           timeout=120)
+    found = json.loads(probe.stdout)
+    dists = tuple(sorted(found["dists"].items(), key=lambda kv: -kv[1]))
+    return InstallReport(venv, _tree_bytes(venv), _tree_bytes(site_packages(venv)), dists,
+                         "torch" not in found["absent"], tuple(found["absent"]))
 
 
 def format_install(rep: InstallReport) -> str:
-    top = ", ".join(f"{name} {size / 2**20:.1f}" for name, size in rep.largest)
-    return (f"installed runtime (fresh venv, no torch{' -- BUT torch is importable' if rep.torch_importable else ''}): "
-            f"site-packages {rep.site_packages_bytes / 2**20:.1f} MiB; largest (MiB): {top}; "
-            f"pip install took {rep.install_s:.0f} s")
+    mib = 2 ** 20
+    costs = ", ".join(f"{name} {size / mib:.1f}" for name, size in rep.distributions)
+    return (f"installed offline (install.sh, fresh venv, no index): venv {rep.venv_bytes / mib:.1f} MiB "
+            f"({rep.venv_bytes / 1e6:.1f} MB), site-packages {rep.site_packages_bytes / mib:.1f} MiB; "
+            f"not importable: {', '.join(rep.absent) or 'none of torch, cv2, pymavlink'}"
+            f"{' -- BUT torch is importable' if rep.torch_importable else ''}\n"
+            f"  each distribution (MiB): {costs}")
 
 
 # ---------------------------------------------------------------------------------------------- command
@@ -286,21 +467,36 @@ def format_install(rep: InstallReport) -> str:
 def add_arguments(parser) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="bundle directory (new, empty, or a "
                                                                     "previous bundle, which is replaced)")
+    parser.add_argument("--product", choices=tuple(PRODUCTS), default="all",
+                        help="wearable (the base install), robot, or all (both, and a serial IMU); default all")
+    parser.add_argument("--platform", choices=PLATFORMS, default=None,
+                        help="the box's CPU (default: this machine's); the wheels are for it and CPython "
+                             f"{PYTHON_VERSION}")
+    parser.add_argument("--with", dest="with_extras", action="append", default=[], metavar="EXTRA",
+                        help=f"add a runtime extra to the product ({', '.join(PRODUCT_EXTRAS)}), e.g. serial-imu")
+    parser.add_argument("--find-links", action="append", default=[], metavar="DIR",
+                        help="more wheels for the wheelhouse (built on the target for a package without one)")
     parser.add_argument("--measure-install", action="store_true",
-                        help="install the wheel into a fresh venv and report its size without torch")
+                        help="install the bundle offline into a fresh venv and report its size without torch")
     parser.add_argument("--venv", default=None, metavar="DIR",
                         help="--measure-install: keep the venv here (default: a temporary one)")
 
 
 def cmd(args) -> int:
-    b = build_bundle(args.out)
+    b = build_bundle(args.out, product=args.product, platform_name=args.platform,
+                     with_extras=tuple(args.with_extras), find_links=tuple(args.find_links))
     total = sum((b.out / name).stat().st_size for name in b.files)
-    print(f"{b.out}: {b.wheel.name} ({b.wheel.stat().st_size / 2**20:.2f} MiB), assets/, {CONFIG_NAME}, INSTALL.md, "
-          f"{SUMS_NAME} ({len(b.files)} files, {total / 2**20:.2f} MiB)")
-    print(f"  requires: {', '.join(b.requirements)}")
+    n_wheels = sum(1 for name in b.files if name.startswith("wheels/"))
+    print(f"{b.out}: {b.product} for {b.platform}: {b.wheel.name} ({b.wheel.stat().st_size / 2**20:.2f} MiB), "
+          f"wheels/ ({n_wheels} wheels), assets/, {CONFIG_NAME}, systemd/, install.sh, INSTALL.md, {SUMS_NAME} "
+          f"({len(b.files)} files, {total / 2**20:.2f} MiB)")
+    print(f"  installs: {', '.join(b.requirements)}")
     if args.measure_install:
+        if b.platform != platform.machine():
+            raise BundleError(f"--measure-install: a {b.platform} bundle cannot be installed on this "
+                              f"{platform.machine()} machine")
         with tempfile.TemporaryDirectory(prefix="bundle-venv-") as tmp:
-            rep = measure_install(b.wheel, Path(args.venv) if args.venv else Path(tmp) / "venv")
+            rep = measure_install(b.out, Path(args.venv) if args.venv else Path(tmp) / "venv")
             print("  " + format_install(rep))
         if rep.torch_importable:
             return 1

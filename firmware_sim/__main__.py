@@ -101,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_cohort)
 
-    add_module_commands(sub, __package__, _MODULE_COMMANDS)
+    add_module_commands(sub, __package__, _MODULE_COMMANDS, {name: "sim" for name, _, _ in _MODULE_COMMANDS})
     return ap
 
 
@@ -118,7 +118,8 @@ _MODULE_COMMANDS = (
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return run(lambda: args.func(args), bad_input=(ValueError, *getattr(args, "bad_input", ())))
+    return run(lambda: args.func(args), bad_input=(ValueError, *getattr(args, "bad_input", ())),
+               what=f"firmware_sim {args.command}", extra="sim")
 
 
 if __name__ == "__main__":

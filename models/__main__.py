@@ -198,7 +198,8 @@ def main(argv=None) -> int:
 
     cmds = {"train": cmd_train, "evaluate": cmd_evaluate, "import": cmd_import, "report": cmd_report}
     # DataError names the file and field; OSError/ValueError: unreadable file, unwritable --out, ...
-    return run(lambda: cmds[args.command](args), bad_input=(DataError, OSError, ValueError))
+    return run(lambda: cmds[args.command](args), bad_input=(DataError, OSError, ValueError),
+               what=f"models {args.command}", extra="train")
 
 
 if __name__ == "__main__":

@@ -370,6 +370,7 @@ def _frames(args, cfg, calibration):
 
 
 def run_loop(args, cfg) -> int:
+    from edge_runtime.core.service import keepalive
     from edge_runtime.robot.loop import RobotLoop
 
     calibration = Calibration.load(args.calibration) if args.calibration else None
@@ -386,6 +387,7 @@ def run_loop(args, cfg) -> int:
         timed = _live_frames if live else _replayed_frames
         with closing(timed(loop, frames, start, args.duration)) as due_frames:
             for t_rel_s, feed in due_frames:
+                keepalive()  # READY, then the watchdog's keep-alives, only while this loop turns
                 progress.show(t_rel_s, feed(loop))
     except KeyboardInterrupt:
         pass

@@ -215,10 +215,12 @@ def _outputs(stack: ExitStack, alerts_path: str | None, quiet: bool) -> list[Cal
 def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision], None]]) -> None:
     """Every event of the source: a block goes to the loop and its decisions to the outputs;
     a live sensor's state goes to the status. A disconnected sensor ends the run."""
+    from edge_runtime.core.service import keepalive
     from edge_runtime.wearable.sources import ImuBlock
 
     status = loop.status
     for event in source.events:
+        keepalive()  # READY, then the watchdog's keep-alives, only while this loop turns
         if source.live is not None:
             status.set_source_counts(source.live.stats.saturated, source.live.stats.dropped)
         if not isinstance(event, ImuBlock):  # a live source's SourceStatus
