@@ -117,6 +117,17 @@ class LoopParams:
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
     records: int = config.setting(100_000, config.AT_LEAST_1)
     """Frame records kept in memory (the oldest are dropped)."""
+    ack_timeout_s: float = config.setting(0.1, ("a number in (0, 0.2) (the arm's watchdog is 200 ms)",
+                                                 lambda v: 0 < v < 0.2))
+    """A safety command (stop, retract) the arm has not acknowledged within this long (s),
+    or a stop it refused, raises the command alarm, is sent again and is counted
+    (``unacked``, ``retries``)."""
+    ack_retries: int = config.setting(3, config.AT_LEAST_1)
+    """Sends of a safety command after the first; when they fail too, the loop reports a
+    ``fault`` (``python -m edge_runtime robot`` then ends, the arm left to its watchdog)."""
+    link_up_timeout_s: float = config.setting(2.0, config.POSITIVE)
+    """No state from the arm this long (s) after the loop started: the link never came up,
+    a ``fault`` (wrong channel, nothing answering, a signing key the arm does not share)."""
 
     def __post_init__(self):
         if not 0 <= self.retract_min_radius_m < self.retract_max_radius_m:
@@ -183,6 +194,23 @@ class LoopCounters:
     link_errors: int = 0
     heartbeats: int = 0
     commands: int = 0
+    acked: int = 0
+    """Safety commands the arm acknowledged."""
+    unacked: int = 0
+    """Safety commands with no acknowledgement within ``ack_timeout_s``."""
+    retries: int = 0
+    """Safety commands sent again (unacknowledged, or a stop refused)."""
+
+
+@dataclass
+class PendingCommand:
+    """A safety command on its way: sent, not yet acknowledged."""
+
+    kind: str
+    """"stop" or "retract"."""
+    seq: int
+    sent_s: float
+    tries: int
 
 
 def _vec3(v) -> tuple[float, float, float]:
@@ -231,6 +259,15 @@ class RobotLoop:
         self._last_watchdog_fix_s = -math.inf
         self._last_effector: np.ndarray | None = None
         self._last_yaw: float | None = None
+        self._pending: PendingCommand | None = None
+        self._resending = False  # the motion now sent is a retry of an unacknowledged one
+        self._t_start_s: float | None = None
+        self.command_alarm = ""
+        """Why the last safety command is not confirmed ("" when it is): the arm may not be doing
+        what the runtime asked. Cleared by the next acknowledged safety command."""
+        self.fault = ""
+        """Why the loop cannot keep the arm safe through this link ("" while it can): the link
+        never came up, or a safety command stayed unacknowledged or refused after every retry."""
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -301,12 +338,16 @@ class RobotLoop:
         reason = "retract_unreachable" if self._unreachable and m.state == State.LEVEL2 else m.reason
         self.counters.stale = m.stale_events
         return {"state": m.state.name, "reason": reason, "link": self.link_state,
-                "link_error": self.link_error, "waypoint": self._waypoint, **vars(self.counters)}
+                "link_error": self.link_error, "command_alarm": self.command_alarm, "fault": self.fault,
+                "waypoint": self._waypoint, **vars(self.counters)}
 
     # -- internals ------------------------------------------------------------------------
 
     def _poll_link(self) -> None:
         """Read the controller's state (end effector, watchdog, answers) and the link's health."""
+        if self._t_start_s is None:
+            self._t_start_s = self.clock()
+        self._check_link_up()
         if self._raised:
             if self.clock() < self._next_retry_s or self._call(self.link.heartbeat) is None:
                 return
@@ -333,6 +374,60 @@ class RobotLoop:
             self._retract_refused()
         if self._move_seq is not None and self._refused(self._move_seq):
             self._skip_waypoint()
+        self._check_ack(now)
+
+    # -- acknowledgements ---------------------------------------------------------------------
+
+    def _expect_ack(self, kind: str | None, seq, retry: bool) -> None:
+        """A safety command ``kind`` went out as ``seq``: wait for the arm's answer
+        (``_check_ack``). A move (``kind`` None) supersedes it: nothing is pending then."""
+        p = self._pending
+        if kind is None or isinstance(seq, int) and seq > 0:
+            tries = p.tries + 1 if retry and p is not None and p.kind == kind else 1
+            self._pending = None if kind is None else PendingCommand(kind, seq, self.clock(), tries)
+
+    def _check_ack(self, now: float) -> None:
+        """The pending safety command: acknowledged (the alarm clears), or unanswered after
+        ``ack_timeout_s`` / a stop refused (within it): alarm, count, and send it again on this cycle
+        (``_act`` re-sends the current motion); after ``ack_retries`` retries: ``fault``.
+        A refused retraction is not retried as it is: ``_retract_refused`` falls back."""
+        p = self._pending
+        if p is None:
+            return
+        if self.link_state != "ok":  # nothing can answer: the arm's watchdog holds it; re-sent on reconnection
+            p.sent_s = now
+            return
+        result = self.link.result(p.seq)
+        if result == "ok":
+            self.counters.acked += 1
+            self._pending, self.command_alarm = None, ""
+            return
+        if p.kind == "retract" and result is not None:
+            self._pending = None  # refused: _retract_refused already chose the fallback
+            return
+        if now - p.sent_s < self.params.ack_timeout_s:  # a refusal too is retried at this period
+            return
+        if result is None:
+            self.counters.unacked += 1
+            why = f"not acknowledged within {self.params.ack_timeout_s * 1000:.0f} ms"
+        else:
+            self.counters.refused += 1
+            why = f"answered {result!r}"
+        self.command_alarm = f"{p.kind} (seq {p.seq}) {why}"
+        if p.tries > self.params.ack_retries:
+            self._pending = None
+            self.fault = f"the arm did not confirm {p.kind}: {why}, {p.tries} tries"
+            return
+        self.counters.retries += 1
+        self._sent_motion = None  # _act sends the motion again, as a retry
+        self._resending = True
+
+    def _check_link_up(self) -> None:
+        """No state from the arm ``link_up_timeout_s`` after the start: the link never came up."""
+        if self.link_state == "connecting" and not self.fault \
+                and self.clock() - self._t_start_s > self.params.link_up_timeout_s:
+            self.fault = (f"no state from the arm in {self.params.link_up_timeout_s:g} s"
+                          + (f" ({self.link_error})" if self.link_error else ""))
 
     def _skip_waypoint(self) -> None:
         """A task waypoint the arm cannot reach (counted in ``refused``): go on to the next."""
@@ -458,10 +553,15 @@ class RobotLoop:
 
     def _send_motion(self, motion: Motion) -> bool:
         c = self.counters
+        pending = self._pending
+        retry = self._resending and pending is not None and pending.kind == motion.kind.value
+        self._resending = False
         if motion.kind is MotionKind.STOP:
-            ok = self._call(self.link.stop) is not None
-            c.stops += ok
+            seq = self._call(self.link.stop)
+            ok = seq is not None
+            c.stops += ok and not retry
             self._move_seq = None
+            self._expect_ack("stop", seq, retry)
         else:
             moving = self._sent_motion is not None and self._sent_motion.kind is MotionKind.MOVE
             if motion.kind is MotionKind.MOVE and not moving and self._call(self.link.resume) is None:
@@ -469,8 +569,9 @@ class RobotLoop:
             send = self.link.move_to if motion.kind is MotionKind.MOVE else self.link.retract
             seq = self._call(send, motion.position_m, pitch_rad=motion.pitch_rad, yaw_rad=motion.yaw_rad)
             ok = seq is not None
+            self._expect_ack("retract" if motion.kind is MotionKind.RETRACT else None, seq, retry)
             if motion.kind is MotionKind.RETRACT:
-                c.retracts += ok
+                c.retracts += ok and not retry
                 self._retract_seq, self._move_seq = seq, None
                 if seq is INVALID:  # refused before it left: the fallback now
                     self._retract_refused()
