@@ -119,12 +119,14 @@ class LoopParams:
     """Frame records kept in memory (the oldest are dropped)."""
     ack_timeout_s: float = config.setting(0.1, ("a number in (0, 0.2) (the arm's watchdog is 200 ms)",
                                                  lambda v: 0 < v < 0.2))
-    """A safety command (stop, retract) the arm has not acknowledged within this long (s),
-    or a stop it refused, raises the command alarm, is sent again and is counted
-    (``unacked``, ``retries``)."""
+    """A motion command (stop, retract, move) the arm has not acknowledged within this long
+    (s), or a stop it refused, raises the command alarm, is sent again and is counted
+    (``unacked``, ``retries``); a refused move or retraction raises it too (the next waypoint
+    or the fallback retraction follows)."""
     ack_retries: int = config.setting(3, config.AT_LEAST_1)
-    """Sends of a safety command after the first; when they fail too, the loop reports a
-    ``fault`` (``python -m edge_runtime robot`` then ends, the arm left to its watchdog)."""
+    """More motion commands than this in a row not acknowledged (unanswered or refused): the
+    loop reports a ``fault`` (``python -m edge_runtime robot`` then ends, the arm left to its
+    watchdog)."""
     link_up_timeout_s: float = config.setting(2.0, config.POSITIVE)
     """No state from the arm this long (s) after the loop started: the link never came up,
     a ``fault`` (wrong channel, nothing answering, a signing key the arm does not share)."""
@@ -195,22 +197,21 @@ class LoopCounters:
     heartbeats: int = 0
     commands: int = 0
     acked: int = 0
-    """Safety commands the arm acknowledged."""
+    """Motion commands (stop, retract, move) the arm acknowledged."""
     unacked: int = 0
-    """Safety commands with no acknowledgement within ``ack_timeout_s``."""
+    """Motion commands with no acknowledgement within ``ack_timeout_s``."""
     retries: int = 0
-    """Safety commands sent again (unacknowledged, or a stop refused)."""
+    """Motion commands sent again (unacknowledged, or a stop refused)."""
 
 
 @dataclass
 class PendingCommand:
-    """A safety command on its way: sent, not yet acknowledged."""
+    """A motion command on its way: sent, not yet acknowledged."""
 
     kind: str
-    """"stop" or "retract"."""
+    """"stop", "retract" or "move"."""
     seq: int
     sent_s: float
-    tries: int
 
 
 def _vec3(v) -> tuple[float, float, float]:
@@ -260,14 +261,15 @@ class RobotLoop:
         self._last_effector: np.ndarray | None = None
         self._last_yaw: float | None = None
         self._pending: PendingCommand | None = None
+        self._unconfirmed = 0  # motion commands in a row the arm did not acknowledge
         self._resending = False  # the motion now sent is a retry of an unacknowledged one
         self._t_start_s: float | None = None
         self.command_alarm = ""
-        """Why the last safety command is not confirmed ("" when it is): the arm may not be doing
-        what the runtime asked. Cleared by the next acknowledged safety command."""
+        """Why the last motion command is not confirmed ("" when it is): the arm may not be doing
+        what the runtime asked. Cleared by the next acknowledged one."""
         self.fault = ""
         """Why the loop cannot keep the arm safe through this link ("" while it can): the link
-        never came up, or a safety command stayed unacknowledged or refused after every retry."""
+        never came up, or ``ack_retries`` + 1 motion commands in a row were not acknowledged."""
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -370,27 +372,26 @@ class RobotLoop:
                 and now - self._last_watchdog_fix_s >= self.params.link_retry_s:
             self._last_watchdog_fix_s = now  # the controller latched a stop: send everything again
             self._sent_motion = self._sent_alarm = None
+        self._check_ack(now)
         if self._retract_seq is not None and self._refused(self._retract_seq):
             self._retract_refused()
         if self._move_seq is not None and self._refused(self._move_seq):
             self._skip_waypoint()
-        self._check_ack(now)
 
     # -- acknowledgements ---------------------------------------------------------------------
 
-    def _expect_ack(self, kind: str | None, seq, retry: bool) -> None:
-        """A safety command ``kind`` went out as ``seq``: wait for the arm's answer
-        (``_check_ack``). A move (``kind`` None) supersedes it: nothing is pending then."""
-        p = self._pending
-        if kind is None or isinstance(seq, int) and seq > 0:
-            tries = p.tries + 1 if retry and p is not None and p.kind == kind else 1
-            self._pending = None if kind is None else PendingCommand(kind, seq, self.clock(), tries)
+    def _expect_ack(self, kind: str, seq) -> None:
+        """Motion command ``kind`` ("stop", "retract", "move") went out as ``seq``: wait for the
+        arm's answer (``_check_ack``)."""
+        if isinstance(seq, int) and seq > 0:
+            self._pending = PendingCommand(kind, seq, self.clock())
 
     def _check_ack(self, now: float) -> None:
-        """The pending safety command: acknowledged (the alarm clears), or unanswered after
-        ``ack_timeout_s`` / a stop refused (within it): alarm, count, and send it again on this cycle
-        (``_act`` re-sends the current motion); after ``ack_retries`` retries: ``fault``.
-        A refused retraction is not retried as it is: ``_retract_refused`` falls back."""
+        """The last motion command: acknowledged (the command alarm clears), or not confirmed:
+        no answer within ``ack_timeout_s`` (it is sent again), a stop refused (sent again after
+        ``ack_timeout_s``) or a move or retraction refused (their own handling picks the next
+        waypoint or the fallback retraction). Each is counted and raises the command alarm;
+        more than ``ack_retries`` in a row without an acknowledgement is a ``fault``."""
         p = self._pending
         if p is None:
             return
@@ -400,27 +401,27 @@ class RobotLoop:
         result = self.link.result(p.seq)
         if result == "ok":
             self.counters.acked += 1
-            self._pending, self.command_alarm = None, ""
+            self._pending, self._unconfirmed, self.command_alarm = None, 0, ""
             return
-        if p.kind == "retract" and result is not None:
-            self._pending = None  # refused: _retract_refused already chose the fallback
+        handled = result is not None and p.kind != "stop"
+        if not handled and now - p.sent_s < self.params.ack_timeout_s:
             return
-        if now - p.sent_s < self.params.ack_timeout_s:  # a refusal too is retried at this period
-            return
+        self._pending = None
         if result is None:
             self.counters.unacked += 1
             why = f"not acknowledged within {self.params.ack_timeout_s * 1000:.0f} ms"
         else:
-            self.counters.refused += 1
+            self.counters.refused += p.kind == "stop"  # a refused move or retraction is counted by _refused
             why = f"answered {result!r}"
+        self._unconfirmed += 1
         self.command_alarm = f"{p.kind} (seq {p.seq}) {why}"
-        if p.tries > self.params.ack_retries:
-            self._pending = None
-            self.fault = f"the arm did not confirm {p.kind}: {why}, {p.tries} tries"
+        if self._unconfirmed > self.params.ack_retries:
+            self.fault = f"the arm did not confirm {p.kind}: {why}, {self._unconfirmed} commands in a row"
             return
-        self.counters.retries += 1
-        self._sent_motion = None  # _act sends the motion again, as a retry
-        self._resending = True
+        if not handled:
+            self.counters.retries += 1
+            self._sent_motion = None  # _act sends the motion again, as a retry
+            self._resending = True
 
     def _check_link_up(self) -> None:
         """No state from the arm ``link_up_timeout_s`` after the start: the link never came up."""
@@ -553,15 +554,13 @@ class RobotLoop:
 
     def _send_motion(self, motion: Motion) -> bool:
         c = self.counters
-        pending = self._pending
-        retry = self._resending and pending is not None and pending.kind == motion.kind.value
-        self._resending = False
+        retry, self._resending = self._resending, False
         if motion.kind is MotionKind.STOP:
             seq = self._call(self.link.stop)
             ok = seq is not None
             c.stops += ok and not retry
             self._move_seq = None
-            self._expect_ack("stop", seq, retry)
+            self._expect_ack("stop", seq)
         else:
             moving = self._sent_motion is not None and self._sent_motion.kind is MotionKind.MOVE
             if motion.kind is MotionKind.MOVE and not moving and self._call(self.link.resume) is None:
@@ -569,7 +568,7 @@ class RobotLoop:
             send = self.link.move_to if motion.kind is MotionKind.MOVE else self.link.retract
             seq = self._call(send, motion.position_m, pitch_rad=motion.pitch_rad, yaw_rad=motion.yaw_rad)
             ok = seq is not None
-            self._expect_ack("retract" if motion.kind is MotionKind.RETRACT else None, seq, retry)
+            self._expect_ack(motion.kind.value, seq)
             if motion.kind is MotionKind.RETRACT:
                 c.retracts += ok and not retry
                 self._retract_seq, self._move_seq = seq, None

@@ -370,7 +370,7 @@ def test_an_unconfirmed_stop_alarms_is_sent_again_and_ends_in_a_fault(answer, co
     drive(loop, link, clock, Path(lambda t: None, clock.t + (p.ack_retries + 1) * p.ack_timeout_s + 0.1))
     s = loop.status()
     assert _stops(link) == p.ack_retries + 1 and s["retries"] == p.ack_retries
-    assert s["fault"].startswith("the arm did not confirm stop") and f"{p.ack_retries + 1} tries" in s["fault"]
+    assert s["fault"].startswith("the arm did not confirm stop") and f"{p.ack_retries + 1} commands in a row" in s["fault"]
 
 
 def test_a_late_acknowledgement_clears_the_alarm():
@@ -399,3 +399,13 @@ def test_a_link_that_never_comes_up_is_a_fault():
     assert loop.fault == "" and loop.status()["unacked"] == 0  # nothing answers while down: no ack alarm
     drive(loop, link, clock, Path(lambda t: None, up_s + 0.1))
     assert loop.fault.startswith(f"no state from the arm in {up_s:g} s") and "200 ms" in loop.fault
+
+
+def test_an_arm_refusing_every_move_is_a_fault_too():
+    loop, link, clock = make()
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 1.5))  # the start-up stop acknowledged: at work
+    assert loop.status()["state"] == "NORMAL" and loop.fault == ""
+    link.answer = "refused"  # e.g. an arm switched to its local mode
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), clock.t + 1.0))
+    s = loop.status()
+    assert s["fault"].startswith("the arm did not confirm move: answered 'refused'") and s["refused"] >= 4
