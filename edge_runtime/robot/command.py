@@ -35,12 +35,13 @@ flags; the link sends its own heartbeat and reconnects by itself). At the end (i
 exhausted, ``--duration`` reached or Ctrl-C) the arm is stopped, and a summary is
 printed: frames, states, stops, retracts, link errors, the link's own counters and the
 reaction time from a frame's arrival to its command on the link; the link is called ``ok``
-only when the arm sent its state and acknowledged the safety commands. The run ends early,
+only when the arm sent its state and acknowledged the motion commands. The run ends early,
 with one ``error:`` line and exit status 3 (:data:`EXIT_LINK_FAULT`), when the loop cannot keep
 the arm safe through the link (``RobotLoop.fault``): no state from the arm within
 ``[robot_loop] link_up_timeout_s`` (a link that never comes up, a wrong channel, a signing key
-the arm does not share), or a stop or retraction unacknowledged or refused after every retry;
-the arm is then left to its watchdog, which stops it. ``--log`` writes one
+the arm does not share), or more than ``[robot_loop] ack_retries`` motion commands in a row
+unacknowledged (100 ms, ``ack_timeout_s``) or refused; the arm is then left to its watchdog,
+which stops it. ``--log`` writes one
 JSON object per frame (``t_in_s``, ``t_command_s``, ``state``, ``reason``,
 ``distance_m``, ``command``) and a final ``{"summary": ...}`` line. ``--sizing
 iso15066`` sizes the stop zone by ISO/TS 15066's protective separation distance
@@ -531,14 +532,14 @@ def _summary(loop: RobotLoop, link: RobotLink, states: dict, wall_s: float) -> d
 
 def _link_verdict(loop: RobotLoop) -> str:
     """What the link did, in words: "ok" only when the arm reported its state and acknowledged
-    the safety commands it was sent."""
+    the motion commands it was sent."""
     c = loop.counters
     if loop.link_state == "connecting":
         return "never up: no state from the arm"
     if c.acked == 0:
-        return f"up, but the arm acknowledged none of the safety commands ({c.unacked} unacknowledged)"
+        return f"up, but the arm acknowledged none of the motion commands ({c.unacked} unacknowledged)"
     if c.unacked or c.retries:
-        return f"degraded: {c.unacked} safety commands unacknowledged in time, {c.retries} sent again"
+        return f"degraded: {c.unacked} motion commands unacknowledged in time, {c.retries} sent again"
     return "ok"
 
 
@@ -569,7 +570,7 @@ def _summary_text(s: dict, log_path: str | None) -> str:
             f"{s['invalid']}, stale {s['stale']}; link errors {s['link_errors']}\n"
             f"  reaction (frame in -> command on the link): median {rt['median']} ms, p99 {rt['p99']} ms "
             f"over {rt['n']} commands\n"
-            f"  safety commands acknowledged {s['acked']}, unacknowledged {s['unacked']}, sent again {s['retries']}; "
+            f"  motion commands acknowledged {s['acked']}, unacknowledged {s['unacked']}, sent again {s['retries']}; "
             f"link {s['link_verdict']}\n"
             "  robot link: " + ", ".join(f"{k} {v}" for k, v in s["robot_link"].items() if k != "link_ok")
             + (f"\n  log: {log_path}" if log_path else ""))

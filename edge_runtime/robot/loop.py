@@ -212,6 +212,9 @@ class PendingCommand:
     """"stop", "retract" or "move"."""
     seq: int
     sent_s: float
+    earlier: tuple[int, ...] = ()
+    """The sequence numbers of its earlier sends (it is a retry): a late answer to one of
+    them confirms it too, since the arm then did carry it out."""
 
 
 def _vec3(v) -> tuple[float, float, float]:
@@ -262,6 +265,7 @@ class RobotLoop:
         self._last_yaw: float | None = None
         self._pending: PendingCommand | None = None
         self._unconfirmed = 0  # motion commands in a row the arm did not acknowledge
+        self._retry_of: PendingCommand | None = None  # the unacknowledged command being sent again
         self._resending = False  # the motion now sent is a retry of an unacknowledged one
         self._t_start_s: float | None = None
         self.command_alarm = ""
@@ -383,8 +387,10 @@ class RobotLoop:
     def _expect_ack(self, kind: str, seq) -> None:
         """Motion command ``kind`` ("stop", "retract", "move") went out as ``seq``: wait for the
         arm's answer (``_check_ack``)."""
+        retry_of, self._retry_of = self._retry_of, None
         if isinstance(seq, int) and seq > 0:
-            self._pending = PendingCommand(kind, seq, self.clock())
+            earlier = (retry_of.seq, *retry_of.earlier) if retry_of is not None and retry_of.kind == kind else ()
+            self._pending = PendingCommand(kind, seq, self.clock(), earlier)
 
     def _check_ack(self, now: float) -> None:
         """The last motion command: acknowledged (the command alarm clears), or not confirmed:
@@ -399,7 +405,7 @@ class RobotLoop:
             p.sent_s = now
             return
         result = self.link.result(p.seq)
-        if result == "ok":
+        if result == "ok" or any(self.link.result(seq) == "ok" for seq in p.earlier):
             self.counters.acked += 1
             self._pending, self._unconfirmed, self.command_alarm = None, 0, ""
             return
@@ -421,7 +427,7 @@ class RobotLoop:
         if not handled:
             self.counters.retries += 1
             self._sent_motion = None  # _act sends the motion again, as a retry
-            self._resending = True
+            self._resending, self._retry_of = True, p
 
     def _check_link_up(self) -> None:
         """No state from the arm ``link_up_timeout_s`` after the start: the link never came up."""

@@ -373,15 +373,21 @@ def test_an_unconfirmed_stop_alarms_is_sent_again_and_ends_in_a_fault(answer, co
     assert s["fault"].startswith("the arm did not confirm stop") and f"{p.ack_retries + 1} commands in a row" in s["fault"]
 
 
-def test_a_late_acknowledgement_clears_the_alarm():
+@pytest.mark.parametrize("late", [False, True])
+def test_a_late_acknowledgement_clears_the_alarm(late):
     loop, link, clock = make()
     link.answer = None
     drive(loop, link, clock, Path(lambda t: None, 0.15))
-    assert loop.status()["command_alarm"]
-    link.answer = "ok"  # the retry is acknowledged
-    drive(loop, link, clock, Path(lambda t: None, clock.t + 0.2))
+    assert loop.status()["command_alarm"] and _stops(link) == 2
+    if late:  # the first stop's answer arrives after its retry went out: the arm did stop
+        first = next(i for i, c in enumerate(link.calls, 1) if c[0] == "stop")
+        link._answers[first] = "ok"
+    else:
+        link.answer = "ok"  # the retry is acknowledged
+    drive(loop, link, clock, Path(lambda t: None, clock.t + 0.4))
     s = loop.status()
     assert s["command_alarm"] == "" and s["fault"] == "" and s["acked"] == 1
+    assert _stops(link) == (2 if late else 3)  # once confirmed, no more retries
 
 
 def test_a_link_that_never_comes_up_is_a_fault():
