@@ -26,6 +26,7 @@ from firmware_sim.scenarios.hrc_world import (
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "edge_runtime" / "box.example.toml"
+VALIDATED = ROOT / "reports" / "hrc" / "validated.json"
 CONTRACT_KEYS = ("scenarios", "collisions", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms")
 
 
@@ -213,6 +214,23 @@ def test_a_validation_record_is_kept_per_safety_configuration(tmp_path):
     assert len(rec["runs"]) == 2
     other = hrc.record_validation({**out, "safety_sha256": "0" * 64}, rec_path, "cmd c")
     assert list(other["runs"]) == ["front can 2mps lifter 30hz"]   # the old figures do not carry over
+
+
+def test_the_shipped_safety_defaults_are_the_validated_ones():
+    """Fails when a default the cell's safety depends on changed since reports/hrc/validated.json was
+    measured: re-run the commands it lists (each with --validated reports/hrc/validated.json)."""
+    rec = json.loads(VALIDATED.read_text())
+    box = hrc.load_box()
+    now = hrc.config_dict(box, hrc.SAFETY_SECTIONS)
+    changed = [f"[{sec}] {k}: validated {v!r}, shipped {now[sec].get(k)!r}"
+               for sec, table in rec["safety_config"].items() for k, v in table.items() if now[sec].get(k) != v]
+    assert rec["safety_sha256"] == hrc.config_sha256(box, hrc.SAFETY_SECTIONS), changed
+    runs = rec["runs"].values()
+    for need in ("random:200 can", "random:200 mavlink", "dissertation can", "dissertation mavlink"):
+        assert any(f"{r['scenario']} {r['link']}" == need for r in runs), need
+    for r in runs:
+        assert r["collisions"] == 0 and not r["not_run"] and r["perception"] == "lifter", r["command"]
+        assert r["max_speed_mps"] == 2.0 or r["scenario"] == "dissertation", r["command"]
 
 
 @pytest.mark.skipif(not __import__("firmware_sim.scenarios.hrc_world", fromlist=["x"]).lifter_available(),
