@@ -97,7 +97,8 @@ class _KnownTransform:
 
 class _TimedLink(LinkInterface):
     """A robot link that accepts every command and records when the last call returned.
-    No controller answers: no state, no refusals, and the loop sends the heartbeats."""
+    No controller state; every command is acknowledged at once (so the loop never re-sends
+    one as unacknowledged), and the loop sends the heartbeats."""
 
     state = None
     link_ok = True
@@ -117,8 +118,8 @@ class _TimedLink(LinkInterface):
     def poll(self) -> None:
         return None
 
-    def result(self, seq: int) -> None:
-        return None
+    def result(self, seq: int) -> str | None:
+        return "ok" if 0 < seq <= self.calls else None
 
     def set_runtime_state(self, state: str) -> None:
         """Nobody receives the heartbeat's runtime state here."""

@@ -156,4 +156,5 @@ def test_robot_sections_round_trip_through_print_config():
     again = config.from_dict(tomllib.loads(cfg.to_toml()))
     assert again == cfg and again.robot_loop.task_waypoints_m == ((0.3, 0.1, 0.6), (0.0, 0.1, 0.9))
     assert again.calibration.markers_xz_m[1] == (2.0, 1.0)
-    assert config.override(cfg, "zones", sizing="iso15066").zones.r1_m == pytest.approx(cfg.zones.protective_distance_m)
+    iso = config.override(cfg, "zones", sizing="iso15066").zones
+    assert iso.r1_m == pytest.approx(max(cfg.zones.protective_distance_m, iso.r2_m))  # S_p, never inside R2

@@ -34,7 +34,14 @@ lifter. The arm gets its commands over the configured link ([robot_link], or the
 flags; the link sends its own heartbeat and reconnects by itself). At the end (input
 exhausted, ``--duration`` reached or Ctrl-C) the arm is stopped, and a summary is
 printed: frames, states, stops, retracts, link errors, the link's own counters and the
-reaction time from a frame's arrival to its command on the link. ``--log`` writes one
+reaction time from a frame's arrival to its command on the link; the link is called ``ok``
+only when the arm sent its state and acknowledged the motion commands. The run ends early,
+with one ``error:`` line and exit status 3 (:data:`EXIT_LINK_FAULT`), when the loop cannot keep
+the arm safe through the link (``RobotLoop.fault``): no state from the arm within
+``[robot_loop] link_up_timeout_s`` (a link that never comes up, a wrong channel, a signing key
+the arm does not share), or more than ``[robot_loop] ack_retries`` motion commands in a row
+unacknowledged (100 ms, ``ack_timeout_s``) or refused; the arm is then left to its watchdog,
+which stops it. ``--log`` writes one
 JSON object per frame (``t_in_s``, ``t_command_s``, ``state``, ``reason``,
 ``distance_m``, ``command``) and a final ``{"summary": ...}`` line. ``--sizing
 iso15066`` sizes the stop zone by ISO/TS 15066's protective separation distance
@@ -72,6 +79,8 @@ if TYPE_CHECKING:  # imported when the loop runs, not for every command's option
 
 TICK_S = 0.01
 """Control cycle of the real-time driver (s)."""
+EXIT_LINK_FAULT = 3
+"""Exit status when the arm could not be reached or did not confirm a safety command."""
 
 
 class JointsInputError(InputError):
@@ -389,6 +398,8 @@ def run_loop(args, cfg) -> int:
             for t_rel_s, feed in due_frames:
                 keepalive()  # READY, then the watchdog's keep-alives, only while this loop turns
                 progress.show(t_rel_s, feed(loop))
+                if loop.fault:
+                    break
     except KeyboardInterrupt:
         pass
     finally:
@@ -399,6 +410,9 @@ def run_loop(args, cfg) -> int:
             log.close()
         link.close()
     print(_summary_text(summary, args.log))
+    if loop.fault:
+        print(f"error: {_fault_line(loop, link, cfg)}", file=sys.stderr)
+        return EXIT_LINK_FAULT
     return 0
 
 
@@ -515,17 +529,52 @@ def _summary(loop: RobotLoop, link: RobotLink, states: dict, wall_s: float) -> d
     rt = {"median": round(float(np.median(react)), 3) if react else None,
           "p99": round(float(np.percentile(react, 99)), 3) if react else None, "n": len(react)}
     return {**loop.status(), "states": states, "wall_s": round(wall_s, 3), "reaction_ms": rt,
-            "robot_link": link.summary()}
+            "link_verdict": _link_verdict(loop), "robot_link": link.summary()}
+
+
+def _link_verdict(loop: RobotLoop) -> str:
+    """What the link did, in words: "ok" only when the arm reported its state and acknowledged
+    the motion commands it was sent."""
+    c = loop.counters
+    if loop.link_state == "connecting":
+        return "never up: no state from the arm"
+    if c.acked == 0:
+        return f"up, but the arm acknowledged none of the motion commands ({c.unacked} unacknowledged)"
+    if c.unacked or c.retries:
+        return f"degraded: {c.unacked} motion commands unacknowledged in time, {c.retries} sent again"
+    return "ok"
+
+
+def _fault_line(loop: RobotLoop, link: RobotLink, cfg) -> str:
+    """The one line for a run ended by ``loop.fault``: which link, what failed, the likely cause."""
+    r = cfg.robot_link
+    where = (f"{r.interface}:{r.host}:{r.port}:{r.channel}" if r.interface == "socketcand" else
+             f"{r.interface}:{r.channel}") if r.kind == "can" else r.serial.split("?", 1)[0]
+    stats = link.summary()
+    hints = []
+    failures = getattr(link, "signature_failures", {})
+    if failures:
+        hints.append(f"{sum(failures.values())} packets from the arm failed the signature check "
+                     f"({', '.join(sorted(failures))}): a different signing key?")
+    elif not stats.get("states"):
+        hints.append("nothing answered: is the arm on this " + ("channel" if r.kind == "can" else "line") + "?")
+    arm_rejected = (link.state.counters or {}).get("integrity_errors", 0) if link.state is not None else 0
+    if arm_rejected and stats.get("states"):
+        hints.append(f"the arm discarded {arm_rejected} of the runtime's frames (signing or E2E mismatch?)")
+    return (f"robot link {r.kind} {where}: {loop.fault}" + "".join(f"; {h}" for h in hints)
+            + "; the arm is left to its watchdog")
 
 
 def _summary_text(s: dict, log_path: str | None) -> str:
     rt = s["reaction_ms"]
     return (f"summary: {s['frames']} frames in {s['wall_s']:.1f} s; states {s['states']}\n"
             f"  stops {s['stops']}, retracts {s['retracts']}, unreachable {s['unreachable']}, invalid frames "
-            f"{s['invalid']}, stale {s['stale']}; link {s['link']} (errors {s['link_errors']})\n"
+            f"{s['invalid']}, stale {s['stale']}; link errors {s['link_errors']}\n"
             f"  reaction (frame in -> command on the link): median {rt['median']} ms, p99 {rt['p99']} ms "
             f"over {rt['n']} commands\n"
-            "  robot link: " + ", ".join(f"{k} {v}" for k, v in s["robot_link"].items())
+            f"  motion commands acknowledged {s['acked']}, unacknowledged {s['unacked']}, sent again {s['retries']}; "
+            f"link {s['link_verdict']}\n"
+            "  robot link: " + ", ".join(f"{k} {v}" for k, v in s["robot_link"].items() if k != "link_ok")
             + (f"\n  log: {log_path}" if log_path else ""))
 
 

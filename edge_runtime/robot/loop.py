@@ -117,6 +117,19 @@ class LoopParams:
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
     records: int = config.setting(100_000, config.AT_LEAST_1)
     """Frame records kept in memory (the oldest are dropped)."""
+    ack_timeout_s: float = config.setting(0.1, ("a number in (0, 0.2) (the arm's watchdog is 200 ms)",
+                                                 lambda v: 0 < v < 0.2))
+    """A motion command (stop, retract, move) the arm has not acknowledged within this long
+    (s), or a stop it refused, raises the command alarm, is sent again and is counted
+    (``unacked``, ``retries``); a refused move or retraction raises it too (the next waypoint
+    or the fallback retraction follows)."""
+    ack_retries: int = config.setting(3, config.AT_LEAST_1)
+    """More motion commands than this in a row not acknowledged (unanswered or refused): the
+    loop reports a ``fault`` (``python -m edge_runtime robot`` then ends, the arm left to its
+    watchdog)."""
+    link_up_timeout_s: float = config.setting(2.0, config.POSITIVE)
+    """No state from the arm this long (s) after the loop started: the link never came up,
+    a ``fault`` (wrong channel, nothing answering, a signing key the arm does not share)."""
 
     def __post_init__(self):
         if not 0 <= self.retract_min_radius_m < self.retract_max_radius_m:
@@ -183,6 +196,25 @@ class LoopCounters:
     link_errors: int = 0
     heartbeats: int = 0
     commands: int = 0
+    acked: int = 0
+    """Motion commands (stop, retract, move) the arm acknowledged."""
+    unacked: int = 0
+    """Motion commands with no acknowledgement within ``ack_timeout_s``."""
+    retries: int = 0
+    """Motion commands sent again (unacknowledged, or a stop refused)."""
+
+
+@dataclass
+class PendingCommand:
+    """A motion command on its way: sent, not yet acknowledged."""
+
+    kind: str
+    """"stop", "retract" or "move"."""
+    seq: int
+    sent_s: float
+    earlier: tuple[int, ...] = ()
+    """The sequence numbers of its earlier sends (it is a retry): a late answer to one of
+    them confirms it too, since the arm then did carry it out."""
 
 
 def _vec3(v) -> tuple[float, float, float]:
@@ -231,6 +263,17 @@ class RobotLoop:
         self._last_watchdog_fix_s = -math.inf
         self._last_effector: np.ndarray | None = None
         self._last_yaw: float | None = None
+        self._pending: PendingCommand | None = None
+        self._unconfirmed = 0  # motion commands in a row the arm did not acknowledge
+        self._retry_of: PendingCommand | None = None  # the unacknowledged command being sent again
+        self._resending = False  # the motion now sent is a retry of an unacknowledged one
+        self._t_start_s: float | None = None
+        self.command_alarm = ""
+        """Why the last motion command is not confirmed ("" when it is): the arm may not be doing
+        what the runtime asked. Cleared by the next acknowledged one."""
+        self.fault = ""
+        """Why the loop cannot keep the arm safe through this link ("" while it can): the link
+        never came up, or ``ack_retries`` + 1 motion commands in a row were not acknowledged."""
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -301,12 +344,16 @@ class RobotLoop:
         reason = "retract_unreachable" if self._unreachable and m.state == State.LEVEL2 else m.reason
         self.counters.stale = m.stale_events
         return {"state": m.state.name, "reason": reason, "link": self.link_state,
-                "link_error": self.link_error, "waypoint": self._waypoint, **vars(self.counters)}
+                "link_error": self.link_error, "command_alarm": self.command_alarm, "fault": self.fault,
+                "waypoint": self._waypoint, **vars(self.counters)}
 
     # -- internals ------------------------------------------------------------------------
 
     def _poll_link(self) -> None:
         """Read the controller's state (end effector, watchdog, answers) and the link's health."""
+        if self._t_start_s is None:
+            self._t_start_s = self.clock()
+        self._check_link_up()
         if self._raised:
             if self.clock() < self._next_retry_s or self._call(self.link.heartbeat) is None:
                 return
@@ -329,10 +376,65 @@ class RobotLoop:
                 and now - self._last_watchdog_fix_s >= self.params.link_retry_s:
             self._last_watchdog_fix_s = now  # the controller latched a stop: send everything again
             self._sent_motion = self._sent_alarm = None
+        self._check_ack(now)
         if self._retract_seq is not None and self._refused(self._retract_seq):
             self._retract_refused()
         if self._move_seq is not None and self._refused(self._move_seq):
             self._skip_waypoint()
+
+    # -- acknowledgements ---------------------------------------------------------------------
+
+    def _expect_ack(self, kind: str, seq) -> None:
+        """Motion command ``kind`` ("stop", "retract", "move") went out as ``seq``: wait for the
+        arm's answer (``_check_ack``)."""
+        retry_of, self._retry_of = self._retry_of, None
+        if isinstance(seq, int) and seq > 0:
+            earlier = (retry_of.seq, *retry_of.earlier) if retry_of is not None and retry_of.kind == kind else ()
+            self._pending = PendingCommand(kind, seq, self.clock(), earlier)
+
+    def _check_ack(self, now: float) -> None:
+        """The last motion command: acknowledged (the command alarm clears), or not confirmed:
+        no answer within ``ack_timeout_s`` (it is sent again), a stop refused (sent again after
+        ``ack_timeout_s``) or a move or retraction refused (their own handling picks the next
+        waypoint or the fallback retraction). Each is counted and raises the command alarm;
+        more than ``ack_retries`` in a row without an acknowledgement is a ``fault``."""
+        p = self._pending
+        if p is None:
+            return
+        if self.link_state != "ok":  # nothing can answer: the arm's watchdog holds it; re-sent on reconnection
+            p.sent_s = now
+            return
+        result = self.link.result(p.seq)
+        if result == "ok" or any(self.link.result(seq) == "ok" for seq in p.earlier):
+            self.counters.acked += 1
+            self._pending, self._unconfirmed, self.command_alarm = None, 0, ""
+            return
+        handled = result is not None and p.kind != "stop"
+        if not handled and now - p.sent_s < self.params.ack_timeout_s:
+            return
+        self._pending = None
+        if result is None:
+            self.counters.unacked += 1
+            why = f"not acknowledged within {self.params.ack_timeout_s * 1000:.0f} ms"
+        else:
+            self.counters.refused += p.kind == "stop"  # a refused move or retraction is counted by _refused
+            why = f"answered {result!r}"
+        self._unconfirmed += 1
+        self.command_alarm = f"{p.kind} (seq {p.seq}) {why}"
+        if self._unconfirmed > self.params.ack_retries:
+            self.fault = f"the arm did not confirm {p.kind}: {why}, {self._unconfirmed} commands in a row"
+            return
+        if not handled:
+            self.counters.retries += 1
+            self._sent_motion = None  # _act sends the motion again, as a retry
+            self._resending, self._retry_of = True, p
+
+    def _check_link_up(self) -> None:
+        """No state from the arm ``link_up_timeout_s`` after the start: the link never came up."""
+        if self.link_state == "connecting" and not self.fault \
+                and self.clock() - self._t_start_s > self.params.link_up_timeout_s:
+            self.fault = (f"no state from the arm in {self.params.link_up_timeout_s:g} s"
+                          + (f" ({self.link_error})" if self.link_error else ""))
 
     def _skip_waypoint(self) -> None:
         """A task waypoint the arm cannot reach (counted in ``refused``): go on to the next."""
@@ -458,10 +560,13 @@ class RobotLoop:
 
     def _send_motion(self, motion: Motion) -> bool:
         c = self.counters
+        retry, self._resending = self._resending, False
         if motion.kind is MotionKind.STOP:
-            ok = self._call(self.link.stop) is not None
-            c.stops += ok
+            seq = self._call(self.link.stop)
+            ok = seq is not None
+            c.stops += ok and not retry
             self._move_seq = None
+            self._expect_ack("stop", seq)
         else:
             moving = self._sent_motion is not None and self._sent_motion.kind is MotionKind.MOVE
             if motion.kind is MotionKind.MOVE and not moving and self._call(self.link.resume) is None:
@@ -469,8 +574,9 @@ class RobotLoop:
             send = self.link.move_to if motion.kind is MotionKind.MOVE else self.link.retract
             seq = self._call(send, motion.position_m, pitch_rad=motion.pitch_rad, yaw_rad=motion.yaw_rad)
             ok = seq is not None
+            self._expect_ack(motion.kind.value, seq)
             if motion.kind is MotionKind.RETRACT:
-                c.retracts += ok
+                c.retracts += ok and not retry
                 self._retract_seq, self._move_seq = seq, None
                 if seq is INVALID:  # refused before it left: the fallback now
                     self._retract_refused()

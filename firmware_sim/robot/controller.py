@@ -106,6 +106,9 @@ class ControllerConfig:
     reconnect_min_s: float = 0.1
     """CAN: first retry after the bus broke; doubles up to reconnect_max_s."""
     reconnect_max_s: float = 1.0
+    refuse_commands: bool = False
+    """Answer every command (not the heartbeat) ``refused`` and carry none out: an arm held in
+    its local or teach mode, which the runtime must notice rather than report success."""
     arm: ArmConfig = field(default_factory=ArmConfig)
 
 
@@ -425,6 +428,8 @@ class SawyerController:
     def _execute(self, cmd: Command) -> str:
         if cmd.invalid:
             return "invalid"
+        if self.config.refuse_commands:
+            return "refused"
         try:
             if cmd.kind == "alarm":
                 self.light, self.tone_hz, self.tone_db = check_alarm(cmd.light, cmd.tone_hz, cmd.tone_db)
@@ -699,6 +704,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--watchdog-ms", type=positive_float, default=200.0, help="runtime silence that stops the arm")
     p.add_argument("--duration", type=positive_float, default=None, metavar="S", help="stop after S seconds")
     p.add_argument("--json", default=None, metavar="OUT", help="write the counters here at exit")
+    p.add_argument("--refuse-commands", action="store_true",
+                   help="answer every command refused and carry none out (an arm in its local/teach mode)")
 
 
 def _open_port(args, config: ControllerConfig):
@@ -733,7 +740,8 @@ def _open_port(args, config: ControllerConfig):
 def cmd(args) -> int:
     from edge_runtime.canbus.bus import CanLinkError
 
-    config = ControllerConfig(watchdog_s=args.watchdog_ms / 1000.0, state_rate_hz=args.rate_hz)
+    config = ControllerConfig(watchdog_s=args.watchdog_ms / 1000.0, state_rate_hz=args.rate_hz,
+                              refuse_commands=args.refuse_commands)
     try:
         port, where, cleanup = _open_port(args, config)
     except CanLinkError as e:
@@ -744,7 +752,9 @@ def cmd(args) -> int:
         signal.signal(sig, lambda *_: stop.set())
     print(where, flush=True)
     print(f"sawyer: {args.link} link on {where}, state at {args.rate_hz:g} Hz, watchdog {args.watchdog_ms:g} ms"
-          f"{', signed' if args.signing_key else ''}; booted stopped (send resume)", file=sys.stderr, flush=True)
+          f"{', signed' if args.signing_key else ''}"
+          f"{', refusing every command' if args.refuse_commands else '; booted stopped (send resume)'}",
+          file=sys.stderr, flush=True)
     try:
         timing = run_realtime(controller, args.duration, stop)
     finally:

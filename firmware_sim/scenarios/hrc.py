@@ -3,7 +3,8 @@
     python -m firmware_sim hrc --scenario NAME|dissertation|random:N --link can|mavlink --seed S
                                --json OUT.json [--plot OUT.png] [--max-speed M] [--camera-hz HZ]
                                [--perception auto|truth|lifter] [--no-runtime] [--with-baseline]
-                               [--retract-time S] [--zone KEY=VALUE ...] [--loop KEY=VALUE ...] [--jobs N]
+                               [--config BOX.toml] [--retract-time S] [--zone KEY=VALUE ...]
+                               [--loop KEY=VALUE ...] [--validated FILE] [--jobs N]
 
 Runs the robot-side runtime (``edge_runtime.robot.loop.RobotLoop``) against the simulated
 Sawyer on a real link (CAN or signed MAVLink), a simulated worker and a simulated camera,
@@ -27,16 +28,24 @@ The JSON: ``scenarios`` (count), ``collisions`` (scenarios with at least one),
 runtime -> command written on the link), ``command_delay_s`` (simulated time from the true
 head entering a zone to the runtime's command), ``head_error_m`` (``{"median", "p95"}``: the head
 the runtime was given against the true head, robot frame), ``runtime_cpu_share``, the settings
-(with every ZoneParams and LoopParams value used), and ``details``: one object per scenario.
+(with every ZoneParams and LoopParams value used), ``config`` (the whole effective box
+configuration the runtime ran), ``config_sha256`` (its hash) and ``safety_sha256`` (the hash of
+the sections the cell's safety depends on, :data:`SAFETY_SECTIONS`), and ``details``: one object
+per scenario.
 
-The runtime's configuration is the product's defaults except ``HRC_ZONES`` (T_retract = 2 s,
-see below); ``--zone``/``--loop`` override single fields to measure other settings.
+One source of truth: the runtime runs the box configuration, the shipped defaults
+(``edge_runtime/box.example.toml``) unless ``--config BOX.toml`` names a box file; ``--zone``,
+``--loop`` and ``--retract-time`` override single fields on top of it to measure other settings.
+The scenario's task replaces ``[robot_loop] task_waypoints_m``. ``--validated FILE`` adds the
+run's figures to a validation record (``reports/hrc/validated.json``) kept per ``safety_sha256``:
+``tests/sim/test_hrc.py`` fails when the shipped safety defaults are not the validated ones.
 Python callers: :func:`run`, :func:`run_dissertation` (what ``make demo`` shows) and
 :func:`format_table`.
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 from dataclasses import asdict, fields, replace
@@ -44,13 +53,13 @@ from pathlib import Path
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.cli import CliError, positive_float, positive_int
-from edge_runtime.robot.hazard import ZoneParams
-from edge_runtime.robot.loop import LoopParams
 from firmware_sim.scenarios.hrc_world import (
     DISSERTATION,
     RunResult,
     WorldParams,
+    box_config,
     dissertation_scenarios,
     lifter_available,
     percentiles,
@@ -62,12 +71,28 @@ LINKS = ("can", "mavlink")
 PERCEPTIONS = ("auto", "truth", "lifter")
 SPEED_LIMITS_MPS = (0.5, 2.0)
 
-HRC_ZONES = ZoneParams(retract_time_s=2.0)
-"""The runtime's zones in these runs. The dissertation's T_retract = 1 s gives R2 = 1.0 m, but the
-simulated Sawyer needs about 2 s for a retraction that also turns the tool toward the base (the
-wrist turns half a revolution; measured from the extended posture: half way after 1.5 s, done
-after 1.9-2.7 s), so Eq. 4 with the measured T_retract = 2 s: R2 = 1.4 x (2 - 0.5) + 0.3 = 2.4 m,
-R1 = 4.4 m. Everything else is the dissertation's."""
+SAFETY_SECTIONS = ("zones", "tracker", "robot_loop", "calibration", "lifter")
+"""The box sections the closed loop's collision figures depend on; their hash (``safety_sha256``)
+is what a validation holds for. The other sections (the wearable's, posture, link addresses) do
+not change what the cell does, so editing them does not void a validation."""
+
+
+def config_dict(box, sections=None) -> dict:
+    """The configuration as plain JSON values (tuples as lists), all sections or ``sections``."""
+    whole = config._as_lists(asdict(box))
+    return whole if sections is None else {k: whole[k] for k in sections}
+
+
+def config_sha256(box, sections=None) -> str:
+    """sha256 of the configuration's canonical JSON (sorted keys): equal values, equal hash."""
+    text = json.dumps(config_dict(box, sections), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def load_box(path: str | None = None):
+    """The box configuration from ``path`` (TOML), or the shipped defaults."""
+    return box_config() if path is None else replace(box_config(), **{
+        name: getattr(config.load(path), name) for name in config.registered()})
 
 
 def parse_scenario(text: str) -> tuple[str, int | None]:
@@ -102,8 +127,8 @@ def resolve_perception(perception: str) -> str:
 
 
 def _run_one(job) -> RunResult:
-    sc, link, runtime, perception, world, zones, loop_params = job
-    return run_scenario(sc, link, runtime, perception, world, zones, loop_params)
+    sc, link, runtime, perception, world, box = job
+    return run_scenario(sc, link, runtime, perception, world, box)
 
 
 def overrides(base, items: list[str], flag: str):
@@ -185,10 +210,12 @@ def summarize(results: list[RunResult], settings: dict) -> dict:
 
 def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtime: bool = True,
         perception: str = "auto", camera_hz: float = 30.0, max_speed_mps: float = 2.0,
-        latency_ms: float | None = None, zones: ZoneParams = HRC_ZONES, loop_params: LoopParams | None = None,
-        jobs: int = 1, progress: bool = False, keep_results: bool = False):
-    """Run scenarios and return the contract JSON (and the per-scenario results with
-    ``keep_results``, for plots)."""
+        latency_ms: float | None = None, box=None, jobs: int = 1, progress: bool = False,
+        keep_results: bool = False):
+    """Run scenarios with the box configuration ``box`` (default: the shipped one) and return the
+    contract JSON (and the per-scenario results with ``keep_results``, for plots)."""
+    box = box or box_config()
+    zones = box.zones
     if link not in LINKS:
         raise CliError(f"--link {link!r}: expected can or mavlink")
     if not SPEED_LIMITS_MPS[0] <= max_speed_mps <= SPEED_LIMITS_MPS[1]:
@@ -197,7 +224,7 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
     percept = resolve_perception(perception) if runtime else "none"
     world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0)
     scs = scenarios_for(scenario, seed, max_speed_mps)
-    results = _map([(sc, link, runtime, percept, world, zones, loop_params) for sc in scs], jobs, progress)
+    results = _map([(sc, link, runtime, percept, world, box) for sc in scs], jobs, progress)
     settings = {
         "scenario": scenario, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
         "camera_hz": camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1), "max_speed_mps": max_speed_mps,
@@ -205,11 +232,35 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
         "zones": {"r1_m": round(zones.r1_m, 3), "r2_m": round(zones.r2_m, 3), "sizing": zones.sizing,
                   "retract_time_s": zones.retract_time_s, "predict_s": zones.predict_s,
                   "worker_speed_mps": zones.worker_speed_mps},
-        "zone_params": asdict(zones), "loop_params": {k: v for k, v in asdict(loop_params or LoopParams()).items()
+        "zone_params": asdict(zones), "loop_params": {k: v for k, v in asdict(box.robot_loop).items()
                                                        if k != "task_waypoints_m"},
+        "config": config_dict(box), "config_sha256": config_sha256(box),
+        "safety_sha256": config_sha256(box, SAFETY_SECTIONS),
     }
     out = summarize(results, settings)
     return (out, results) if keep_results else out
+
+
+VALIDATED_KEYS = ("scenario", "link", "seed", "perception", "camera_hz", "max_speed_mps", "scenarios",
+                  "collisions", "not_run", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms")
+
+
+def record_validation(out: dict, path: str | Path, command: str) -> dict:
+    """Add this run's figures to the validation record at ``path``: one entry per (scenario, link,
+    max speed, perception, camera rate), under the run's ``safety_sha256``. A record made for other
+    safety settings is replaced, not mixed: its figures do not validate these."""
+    p = Path(path)
+    try:
+        rec = json.loads(p.read_text())
+    except (OSError, ValueError):
+        rec = {}
+    if rec.get("safety_sha256") != out["safety_sha256"]:
+        rec = {"safety_sha256": out["safety_sha256"], "safety_config": {k: out["config"][k] for k in SAFETY_SECTIONS},
+               "runs": {}}
+    key = f"{out['scenario']} {out['link']} {out['max_speed_mps']:g}mps {out['perception']} {out['camera_hz']:g}hz"
+    rec["runs"][key] = {**{k: out[k] for k in VALIDATED_KEYS}, "command": command}
+    p.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
+    return rec
 
 
 def run_dissertation(link: str, seed: int) -> dict:
@@ -274,13 +325,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "auto: lifter when the manifest has one (default)")
     p.add_argument("--no-runtime", action="store_true", help="baseline: the arm never sees the worker")
     p.add_argument("--with-baseline", action="store_true", help="also run the baseline and add it to the JSON")
-    p.add_argument("--retract-time", type=positive_float, default=HRC_ZONES.retract_time_s, metavar="S",
-                   help=f"T_retract of Eq. 4 (s; default {HRC_ZONES.retract_time_s:g}, the simulated Sawyer's; "
-                        "the dissertation's 1.0 gives R2 = 1 m, R1 = 3 m)")
+    p.add_argument("--config", default=None, metavar="BOX.toml",
+                   help="the box configuration the runtime runs (default: the shipped one, edge_runtime/box.example.toml)")
+    p.add_argument("--retract-time", type=positive_float, default=None, metavar="S",
+                   help="override [zones] retract_time_s, T_retract of Eq. 4 (s; the dissertation's 1.0 gives "
+                        "R2 = 1 m, R1 = 3 m)")
     p.add_argument("--zone", action="append", metavar="KEY=VALUE",
                    help="override a ZoneParams number field of the runtime (repeatable), e.g. --zone predict_s=0.7")
     p.add_argument("--loop", action="append", metavar="KEY=VALUE",
                    help="override a LoopParams number field of the runtime (repeatable), e.g. --loop re_retract_m=100")
+    p.add_argument("--validated", default=None, metavar="FILE",
+                   help="add the run's figures to this validation record (reports/hrc/validated.json)")
     p.add_argument("--jobs", type=positive_int, default=1, help="worker processes (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -297,11 +352,13 @@ def cmd(args) -> int:
     parse_scenario(args.scenario)
     _check_writable(args.json, "--json")
     _check_writable(args.plot, "--plot")
-    zones = overrides(replace(HRC_ZONES, retract_time_s=args.retract_time), args.zone, "--zone")
-    loop_params = overrides(LoopParams(), args.loop, "--loop")
+    _check_writable(args.validated, "--validated")
+    box = load_box(args.config)
+    zones = box.zones if args.retract_time is None else replace(box.zones, retract_time_s=args.retract_time)
+    box = replace(box, zones=overrides(zones, args.zone, "--zone"),
+                  robot_loop=overrides(box.robot_loop, args.loop, "--loop"))
     common = dict(link=args.link, seed=args.seed, camera_hz=args.camera_hz, max_speed_mps=args.max_speed,
-                  latency_ms=args.latency_ms, zones=zones, loop_params=loop_params, jobs=args.jobs,
-                  progress=not args.quiet)
+                  latency_ms=args.latency_ms, box=box, jobs=args.jobs, progress=not args.quiet)
     out, results = run(args.scenario, runtime=not args.no_runtime, perception=args.perception, keep_results=True,
                        **common)
     if args.with_baseline and not args.no_runtime:
@@ -309,6 +366,8 @@ def cmd(args) -> int:
         out["baseline"] = {k: base[k] for k in ("collisions", "collided", "min_separation_m", "details")}
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+    if args.validated:
+        record_validation(out, args.validated, "python -m firmware_sim " + " ".join(sys.argv[1:]))
     if args.plot:
         from firmware_sim.scenarios.hrc_plots import plot_runs
 
@@ -327,4 +386,4 @@ def _one_line(out: dict) -> str:
             f"p99 {r['p99']} ms")
 
 
-BAD_INPUT = (CliError,)
+BAD_INPUT = (CliError, config.ConfigError)

@@ -71,9 +71,9 @@ from pathlib import Path
 import numpy as np
 
 from edge_runtime.core.skeleton import HEAD
-from edge_runtime.robot.hazard import State, ZoneParams, ground
+from edge_runtime.robot.hazard import State, ground
 from edge_runtime.robot.lifter import MISSING_JOINTS, NO_PERSON, LiftedPose
-from edge_runtime.robot.loop import LoopParams, RobotLoop
+from edge_runtime.robot.loop import RobotLoop
 from firmware_sim.devices.camera import CANONICAL, Camera, DetectorNoise, detect, resample
 from firmware_sim.people import motions
 from firmware_sim.people.human import Body, heading_towards
@@ -255,26 +255,36 @@ def lifter_available(assets_dir=None) -> bool:
     return any(m.get("arch") == "lifter" for m in manifest.get("models", []))
 
 
-def make_lifter():
-    """The shipped lifter (int8, 1 thread, trained for 30 Hz; slower cameras are spaced out by it)."""
+def box_config():
+    """The shipped box configuration (every robot section registered): what the cell runs by default."""
+    import edge_runtime.robot.calibration  # noqa: F401  (registers [calibration])
+    from edge_runtime import config
+
+    return config.load(None)
+
+
+def make_lifter(box=None):
+    """The shipped lifter with the box's [lifter] settings (trained for 30 Hz; slower cameras are
+    spaced out by it)."""
     from edge_runtime.robot.lifter import StreamingLifter
 
-    return StreamingLifter.from_manifest()
+    return StreamingLifter.from_manifest(params=(box or box_config()).lifter)
 
 
 def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, height_m: float = 1.75,
-              stand_s: float | None = None):
+              stand_s: float | None = None, box=None):
     """The dissertation's calibration for one camera placement: a simulated worker stands ``stand_s``
     (default: 4 s, or 80 camera frames when that is longer: at 5.8 Hz the lifter's warm-up takes
     about 2 s and every detector miss burst resets it) on each floor marker (Eq. 1-2's (0, 1), (1, 1), (0, 2)), walking between them; his keypoints go through
     the lifter (frames still warming up are not used) and :func:`edge_runtime.robot.calibration.from_recording`
     fits camera -> robot. Raises ``edge_runtime.robot.calibration.CalibrationError`` when the fit refuses."""
-    from edge_runtime.robot.calibration import CalibrationParams, from_recording
+    from edge_runtime.robot.calibration import from_recording
 
+    box = box or box_config()
     rate = camera.rate_hz
     stand_s = stand_s or max(4.0, 80.0 / rate)
     body = Body.from_height(height_m)
-    markers = CalibrationParams().markers_xz_m
+    markers = box.calibration.markers_xz_m
     parts, labels = [], []
     for i, m in enumerate(markers):
         if i:
@@ -286,14 +296,14 @@ def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, he
         labels.append(np.full(len(s), i + 1))
     mot = motions.concat(parts, blend_s=0.2)
     kp = detect(camera, mot.joints_m, rng, noise)
-    lifter = make_lifter()
+    lifter = make_lifter(box)
     t = np.arange(len(kp)) / rate
     joints = np.full((len(kp), 17, 3), np.nan)
     for k in range(len(kp)):
         out = lifter.push(t[k], kp[k] if np.isfinite(kp[k, :, :2]).any() else None)
         if out.valid and not out.warming_up:
             joints[k] = out.joints_cam_m
-    cal = from_recording(t, joints, marker=np.concatenate(labels))
+    cal = from_recording(t, joints, box.calibration, marker=np.concatenate(labels))
     return cal, mot, lifter
 
 
@@ -335,13 +345,16 @@ class RunResult:
 
 
 def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, perception: str = "truth",
-                 world: WorldParams = WorldParams(), zones: ZoneParams = ZoneParams(),
-                 loop_params: LoopParams | None = None) -> RunResult:
-    """Run one scenario closed-loop; see the module docstring for what is measured."""
+                 world: WorldParams = WorldParams(), box=None) -> RunResult:
+    """Run one scenario closed-loop with the box configuration ``box`` (default: the shipped one;
+    the scenario's task replaces ``[robot_loop] task_waypoints_m``); see the module docstring for
+    what is measured."""
+    box = box or box_config()
+    zones = box.zones
     dt = world.dt_s
     rate = round(1.0 / dt)
     rng = np.random.default_rng([sc.seed, 7])
-    lp = replace(loop_params or LoopParams(), task_waypoints_m=sc.task_m)
+    lp = replace(box.robot_loop, task_waypoints_m=sc.task_m)
     mot = worker_motion(sc, rate)
     J = mot.joints_m
     n_pre = int(round(world.pre_roll_s / dt))
@@ -358,10 +371,10 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
         from edge_runtime.robot.calibration import CalibrationError
 
         try:
-            calibration, _, _ = calibrate(camera, rng, noise)
+            calibration, _, _ = calibrate(camera, rng, noise, box=box)
         except CalibrationError as e:  # the box would refuse to run: the arm never moves
             return _not_run(sc, link, world, f"calibration failed: {e}")
-        percept = LifterPerception(make_lifter(), kp)
+        percept = LifterPerception(make_lifter(box), kp)
     else:
         percept = TruthPerception(camera, Jc, kp, world, sc.noise_scale, rng)
     # the truth: head, its ground velocity and Eq. 3's prediction, at the physics rate
@@ -374,7 +387,7 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     clock = SimClock()
     sim = SimulatedRobot(link, clock=clock, q0_rad=task_start_posture(lp.task_waypoints_m[0], lp.task_pitch_rad,
                                                                       lp.task_yaw_rad))
-    loop = RobotLoop(sim.link, calibration=calibration, zones=zones, params=lp, clock=clock)
+    loop = RobotLoop(sim.link, calibration=calibration, zones=zones, tracker=box.tracker, params=lp, clock=clock)
     radii = {State.LEVEL1: zones.r1_m, State.LEVEL2: zones.r2_m}
     frame_i, deliver = 0, t_cap + world.frame_latency_s
     empty_next = 0.0

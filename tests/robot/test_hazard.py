@@ -12,8 +12,12 @@ from edge_runtime.robot.hazard import (
     ZoneParams,
 )
 
+DISSERTATION = ZoneParams(retract_time_s=1.0)
+"""The dissertation's zones (T_retract = 1 s: R2 = 1 m, R1 = 3 m), which these tests' geometry uses;
+the shipped default is the simulated Sawyer's 2 s (tests/sim/test_hrc.py validates it)."""
 
-def ready(zones=ZoneParams()):
+
+def ready(zones=DISSERTATION):
     """A monitor past its start-up fault: poses of a far worker have flowed for dwell_s."""
     mon = HazardMonitor(zones)
     n = int((zones.dwell_s + 0.2) * FPS)
@@ -31,17 +35,17 @@ def run(mon, heads, t0=0.0, fps=FPS):
 
 
 def test_zone_radii_follow_eq4_and_eq5_from_their_parameters():
-    z = ZoneParams()
+    z = DISSERTATION
     assert z.r2_m == pytest.approx(1.4 * (1.0 - 0.5) + 0.3) and z.r2_m == pytest.approx(1.0)
     assert z.r1_m == pytest.approx(3.0)
     faster = ZoneParams(worker_speed_mps=2.0, retract_time_s=1.5, margin2_m=0.5, margin1_m=1.0)
     assert faster.r2_m == pytest.approx(2.0 * 1.0 + 0.5) and faster.r1_m == pytest.approx(3.5)
-    iso = ZoneParams(sizing="iso15066")
+    iso = ZoneParams(sizing="iso15066", retract_time_s=1.0)
     sp = 1.6 * (0.15 + 0.3) + 0.6 * 0.15 + 0.09 + 0.85 + 0.1 + 0.01
     assert iso.protective_distance_m == pytest.approx(sp) and iso.r1_m == pytest.approx(sp)
     assert iso.r2_m == pytest.approx(1.0)
     # S_p can never shrink the stop zone below the retraction zone
-    assert ZoneParams(sizing="iso15066", iso_intrusion_m=0.0, iso_human_speed_mps=0.1).r1_m == pytest.approx(1.0)
+    assert ZoneParams(sizing="iso15066", iso_intrusion_m=0.0, iso_human_speed_mps=0.1).r1_m == pytest.approx(2.4)
     with pytest.raises(ValueError, match="sizing"):
         ZoneParams(sizing="big")
 
@@ -96,7 +100,7 @@ def test_least_squares_velocity_rejects_keypoint_noise():
 
 
 def test_leaving_needs_the_exit_radius_and_the_dwell_time():
-    z = ZoneParams()
+    z = DISSERTATION
     mon = ready(z)
     run(mon, [head_at(2.0)] * 30)
     assert mon.state == State.LEVEL1
@@ -120,7 +124,7 @@ def test_level2_steps_down_through_level1():
 
 
 def test_stale_pose_stops_within_one_cycle_after_200_ms():
-    mon = HazardMonitor()
+    mon = HazardMonitor(DISSERTATION)
     assert mon.check(0.0).state == State.FAULT and mon.reason == "no_pose_yet"
     run(mon, [head_at(5.0)] * 60)  # 2 s of a far worker: the start-up fault has cleared
     t_last = 59 / FPS
@@ -151,7 +155,7 @@ def test_a_fault_during_a_retraction_lets_the_retraction_finish():
 
 
 def test_a_worker_lost_inside_the_zone_holds_the_arm():
-    z = ZoneParams()
+    z = DISSERTATION
     mon = ready(z)
     run(mon, [head_at(2.0)] * 30)
     t = 1.0

@@ -237,9 +237,9 @@ def test_a_lost_link_is_reported_and_retried():
 
 def test_several_workers_the_nearest_decides_and_each_keeps_a_tracker():
     loop, link, clock = make()
-    both = Path(lambda t: np.stack([worker(4.0, 5.0), worker(1.5, 2.0)]), 3.0)
+    both = Path(lambda t: np.stack([worker(4.0, 5.0), worker(2.5, 3.0)]), 3.0)
     frames = drive(loop, link, clock, both)
-    assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(np.hypot(1.5, 1.2), abs=0.1)
+    assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(np.hypot(2.5, 2.2), abs=0.1)
 
 
 def test_camera_frame_joints_go_through_the_calibration():
@@ -249,8 +249,8 @@ def test_camera_frame_joints_go_through_the_calibration():
 
     clock, link = Clock(), FakeLink()
     loop = RobotLoop(link, calibration=Shift(), clock=clock)
-    frames = drive(loop, link, clock, Path(lambda t: worker(0.0, 12.8), 2.0))  # 2 m in the robot frame
-    assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(2.0, abs=0.05)
+    frames = drive(loop, link, clock, Path(lambda t: worker(0.0, 13.8), 2.0))  # 3 m in the robot frame
+    assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(3.0, abs=0.05)
 
 
 @pytest.mark.parametrize("anchor", [True, False])
@@ -342,3 +342,76 @@ def test_closed_loop_unreachable_retract_and_stale_camera_stop_the_arm(kind):
     assert t_fault - t_last <= 0.2 + 0.01 + 1e-6
     assert loop.status()["reason"] == "pose_stale"
     assert states[-1][2].mode == "stopped" and states[-1][2].ee_speed_mps < 0.01
+
+
+def _stops(link):
+    return sum(1 for c in link.calls if c[0] == "stop")
+
+
+def test_an_acknowledged_arm_raises_no_command_alarm():
+    loop, link, clock = make()
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 2.0))
+    s = loop.status()
+    assert s["acked"] >= 1 and s["unacked"] == 0 and s["retries"] == 0
+    assert s["command_alarm"] == "" and s["fault"] == ""
+
+
+@pytest.mark.parametrize("answer, counter", [(None, "unacked"), ("refused", "refused")])
+def test_an_unconfirmed_stop_alarms_is_sent_again_and_ends_in_a_fault(answer, counter):
+    loop, link, clock = make()
+    link.answer = answer
+    p = LoopParams()
+    # the start-up FAULT sends a stop; the arm never confirms it
+    drive(loop, link, clock, Path(lambda t: None, p.ack_timeout_s + 0.05))
+    s = loop.status()
+    assert s[counter] == 1 and s["retries"] == 1 and _stops(link) == 2
+    assert s["command_alarm"].startswith("stop") and s["fault"] == ""
+    assert s["stops"] == 1  # a retry is not a new stop
+    drive(loop, link, clock, Path(lambda t: None, clock.t + (p.ack_retries + 1) * p.ack_timeout_s + 0.1))
+    s = loop.status()
+    assert _stops(link) == p.ack_retries + 1 and s["retries"] == p.ack_retries
+    assert s["fault"].startswith("the arm did not confirm stop") and f"{p.ack_retries + 1} commands in a row" in s["fault"]
+
+
+@pytest.mark.parametrize("late", [False, True])
+def test_a_late_acknowledgement_clears_the_alarm(late):
+    loop, link, clock = make()
+    link.answer = None
+    drive(loop, link, clock, Path(lambda t: None, 0.15))
+    assert loop.status()["command_alarm"] and _stops(link) == 2
+    if late:  # the first stop's answer arrives after its retry went out: the arm did stop
+        first = next(i for i, c in enumerate(link.calls, 1) if c[0] == "stop")
+        link._answers[first] = "ok"
+    else:
+        link.answer = "ok"  # the retry is acknowledged
+    drive(loop, link, clock, Path(lambda t: None, clock.t + 0.4))
+    s = loop.status()
+    assert s["command_alarm"] == "" and s["fault"] == "" and s["acked"] == 1
+    assert _stops(link) == (2 if late else 3)  # once confirmed, no more retries
+
+
+def test_a_link_that_never_comes_up_is_a_fault():
+    class Silent(FakeLink):
+        last_error = "no robot state for 200 ms"
+
+        @property
+        def link_ok(self):
+            return False
+
+    clock, link = Clock(), Silent()
+    loop = RobotLoop(link, clock=clock)
+    up_s = LoopParams().link_up_timeout_s
+    drive(loop, link, clock, Path(lambda t: None, up_s - 0.1))
+    assert loop.fault == "" and loop.status()["unacked"] == 0  # nothing answers while down: no ack alarm
+    drive(loop, link, clock, Path(lambda t: None, up_s + 0.1))
+    assert loop.fault.startswith(f"no state from the arm in {up_s:g} s") and "200 ms" in loop.fault
+
+
+def test_an_arm_refusing_every_move_is_a_fault_too():
+    loop, link, clock = make()
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 1.5))  # the start-up stop acknowledged: at work
+    assert loop.status()["state"] == "NORMAL" and loop.fault == ""
+    link.answer = "refused"  # e.g. an arm switched to its local mode
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), clock.t + 1.0))
+    s = loop.status()
+    assert s["fault"].startswith("the arm did not confirm move: answered 'refused'") and s["refused"] >= 4

@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 import json
-import math
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from edge_runtime.robot.hazard import ZoneParams
+from edge_runtime.robot.loop import LoopParams
 from firmware_sim.scenarios import hrc
 from firmware_sim.scenarios.hrc_world import (
     CAMERA_6M,
@@ -21,6 +24,9 @@ from firmware_sim.scenarios.hrc_world import (
     run_scenario,
 )
 
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "edge_runtime" / "box.example.toml"
+VALIDATED = ROOT / "reports" / "hrc" / "validated.json"
 CONTRACT_KEYS = ("scenarios", "collisions", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms")
 
 
@@ -31,7 +37,7 @@ def front():
 
 @pytest.fixture(scope="module")
 def baseline_front(front):
-    return run_scenario(front, "can", runtime=False, zones=hrc.HRC_ZONES).summary
+    return run_scenario(front, "can", runtime=False).summary
 
 
 def test_without_the_runtime_the_worker_walks_into_the_tool(baseline_front):
@@ -44,7 +50,7 @@ def test_without_the_runtime_the_worker_walks_into_the_tool(baseline_front):
 
 @pytest.mark.parametrize("link", ["can", "mavlink"])
 def test_the_runtime_stops_and_retracts_in_time_on_both_links(front, baseline_front, link):
-    s = run_scenario(front, link, runtime=True, perception="truth", zones=hrc.HRC_ZONES).summary
+    s = run_scenario(front, link, runtime=True, perception="truth").summary
     assert not s["collision"], s
     assert s["min_separation_m"] > 0.10
     assert s["min_separation_m"] > baseline_front["min_separation_m"] + 0.2
@@ -153,6 +159,7 @@ def test_format_table_lists_every_scenario_and_the_baseline():
     (["--json", "/nonexistent-dir/x.json"], "--json"),
     (["--loop", "no_such_field=1"], "--loop"),
     (["--zone", "predict_s=soon"], "--zone"),
+    (["--config", "/nonexistent-dir/box.toml"], "box.toml"),
 ])
 def test_bad_arguments_are_one_line_and_exit_2(argv, needle, capsys):
     from firmware_sim.__main__ import main
@@ -167,17 +174,69 @@ def test_bad_arguments_are_one_line_and_exit_2(argv, needle, capsys):
     assert "Traceback" not in err
 
 
-def test_zone_radii_follow_eq4_with_the_measured_retraction_time():
-    z = hrc.HRC_ZONES
+def test_the_cell_runs_the_shipped_box_configuration():
+    # one source of truth: what hrc runs by default is what the box ships
+    box = hrc.load_box()
+    z = box.zones
+    assert z == ZoneParams() and box.robot_loop == LoopParams()
     assert z.r2_m == pytest.approx(z.worker_speed_mps * (z.retract_time_s - z.predict_s) + z.margin2_m)
-    assert z.r1_m == pytest.approx(z.r2_m + z.margin1_m)
-    assert math.isclose(z.retract_time_s, 2.0)
+    shipped = tomllib.loads(EXAMPLE.read_text())
+    assert shipped["zones"]["retract_time_s"] == z.retract_time_s
+    assert hrc.config_dict(box, ["zones"])["zones"] == shipped["zones"]
+
+
+def test_the_json_records_the_configuration_it_ran(tmp_path):
+    from firmware_sim.__main__ import main
+
+    box_toml = tmp_path / "box.toml"
+    box_toml.write_text("[zones]\nretract_time_s = 1.5\n[tracker]\nwindow_s = 0.4\n")
+    out = tmp_path / "hrc.json"
+    assert main(["hrc", "--scenario", "front", "--perception", "truth", "--config", str(box_toml),
+                 "--json", str(out), "--quiet"]) == 0
+    d = json.loads(out.read_text())
+    assert d["config"]["zones"]["retract_time_s"] == 1.5 and d["config"]["tracker"]["window_s"] == 0.4
+    assert d["zones"]["r2_m"] == pytest.approx(1.4 * (1.5 - 0.5) + 0.3)
+    assert d["safety_sha256"] != hrc.config_sha256(hrc.load_box(), hrc.SAFETY_SECTIONS)
+    ran = hrc.load_box(str(box_toml))
+    assert d["config_sha256"] == hrc.config_sha256(ran)
+    assert d["safety_sha256"] == hrc.config_sha256(ran, hrc.SAFETY_SECTIONS)
+
+
+def test_a_validation_record_is_kept_per_safety_configuration(tmp_path):
+    rec_path = tmp_path / "validated.json"
+    shipped = hrc.load_box()
+    out = {k: 0 for k in hrc.VALIDATED_KEYS} | {"scenario": "front", "link": "can", "max_speed_mps": 2.0,
+                                                "perception": "lifter", "camera_hz": 30.0,
+                                                "config": hrc.config_dict(shipped),
+                                                "safety_sha256": hrc.config_sha256(shipped, hrc.SAFETY_SECTIONS)}
+    hrc.record_validation(out, rec_path, "cmd a")
+    rec = hrc.record_validation({**out, "link": "mavlink"}, rec_path, "cmd b")
+    assert len(rec["runs"]) == 2
+    other = hrc.record_validation({**out, "safety_sha256": "0" * 64}, rec_path, "cmd c")
+    assert list(other["runs"]) == ["front can 2mps lifter 30hz"]   # the old figures do not carry over
+
+
+def test_the_shipped_safety_defaults_are_the_validated_ones():
+    """Fails when a default the cell's safety depends on changed since reports/hrc/validated.json was
+    measured: re-run the commands it lists (each with --validated reports/hrc/validated.json)."""
+    rec = json.loads(VALIDATED.read_text())
+    box = hrc.load_box()
+    now = hrc.config_dict(box, hrc.SAFETY_SECTIONS)
+    changed = [f"[{sec}] {k}: validated {v!r}, shipped {now[sec].get(k)!r}"
+               for sec, table in rec["safety_config"].items() for k, v in table.items() if now[sec].get(k) != v]
+    assert rec["safety_sha256"] == hrc.config_sha256(box, hrc.SAFETY_SECTIONS), changed
+    runs = rec["runs"].values()
+    for need in ("random:200 can", "random:200 mavlink", "dissertation can", "dissertation mavlink"):
+        assert any(f"{r['scenario']} {r['link']}" == need for r in runs), need
+    for r in runs:
+        assert r["collisions"] == 0 and not r["not_run"] and r["perception"] == "lifter", r["command"]
+        assert r["max_speed_mps"] == 2.0 or r["scenario"] == "dissertation", r["command"]
 
 
 @pytest.mark.skipif(not __import__("firmware_sim.scenarios.hrc_world", fromlist=["x"]).lifter_available(),
                     reason="no lifter in edge_runtime/assets/manifest.json")
 def test_lifter_path_calibrates_per_camera_and_keeps_the_worker_clear(front):
-    s = run_scenario(front, "can", runtime=True, perception="lifter", zones=hrc.HRC_ZONES).summary
+    s = run_scenario(front, "can", runtime=True, perception="lifter").summary
     assert s["perception"] == "lifter"
     assert 0.8 < s["calibration_scale"] < 1.25          # the 3-marker fit found a plausible scale
     assert s["head_error_m"]["n"] > 50 and s["head_error_m"]["median"] < 1.0
@@ -192,7 +251,7 @@ def test_a_refused_calibration_is_reported_not_hidden(front, monkeypatch):
         raise CalibrationError("marker 1: 3 usable frames, need 10")
 
     monkeypatch.setattr(hrc_world, "calibrate", refuse)
-    res = run_scenario(front, "can", runtime=True, perception="lifter", zones=hrc.HRC_ZONES)
+    res = run_scenario(front, "can", runtime=True, perception="lifter")
     assert res.summary["not_run"].startswith("calibration failed: marker 1")
     out = hrc.summarize([res], {"link": "can", "camera_hz": 30.0, "perception": "lifter",
                                 "zones": {"r1_m": 4.4, "r2_m": 2.4}})

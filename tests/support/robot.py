@@ -50,7 +50,8 @@ def anchored_worker(xz, heading=0.3):
 
 class FakeLink(LinkInterface):
     """Records every command; ``fail`` makes commands raise; ``unreachable_retract`` has the
-    "controller" answer every retraction unreachable. Its arm moves toward the last target
+    "controller" answer every retraction unreachable; ``answer`` is its answer to every other
+    command ("ok"; "refused"; None: it never answers). Its arm moves toward the last target
     at ``speed_mps`` when ``advance`` is called, and its tool turns to a target's yaw at once."""
 
     def __init__(self, start=(0.0, 0.14, 0.8), speed_mps=0.6):
@@ -62,13 +63,17 @@ class FakeLink(LinkInterface):
         self.fail = False
         self.unreachable_retract = False
         self.runtime_state = "starting"
+        self.answer: str | None = "ok"
         self._answers: dict[int, str] = {}
 
     def _log(self, name, *args) -> int:
         if self.fail:
             raise ConnectionError("link down")
         self.calls.append((name, *args))
-        return len(self.calls)  # the command's sequence number
+        seq = len(self.calls)  # the command's sequence number
+        if self.answer is not None and name != "heartbeat":
+            self._answers[seq] = self.answer
+        return seq
 
     def move_to(self, position_m, pitch_rad, yaw_rad):
         seq = self._log("move_to", tuple(position_m), pitch_rad, yaw_rad)
