@@ -109,11 +109,19 @@ class NoClassifier:
 class NoBus:
     """Stands in for the AlertPublisher: its status, and frames that are taken and dropped."""
 
+    period = 0.1  # the heartbeat period (s) a replay's data clock steps by
+
     def __init__(self):
         self.status = WearableStatus()
 
+    def advance_to(self, t_s):
+        pass
+
     def send_heartbeat(self):
         return True
+
+    def publish_alert(self, alert):
+        return 0
 
     def send_alert(self, alert):
         return True
