@@ -79,22 +79,16 @@ class SourceStats:
 Event = Union[ImuBlock, SourceStatus]
 
 
-class MavlinkImuSource:
-    def __init__(self, path: str, baud: int = 921600, signing_key: bytes | None = None,
-                 silence_timeout_s: float = 0.2, saturation_mps2: float = 2 * G_MPS2,
-                 on_status: Callable[[SourceStatus], None] | None = None,
-                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S):
-        self.path = path
-        self.silence_timeout_s = float(silence_timeout_s)
+class ImuPacketDecoder:
+    """Bytes of the serial line -> ImuBlocks (and "ok" SourceStatus events): the MAVLink
+    parser, the signature check and the timestamp bookkeeping, with no line and no clock
+    of its own (``feed`` is given the arrival time), so it can be driven with any bytes."""
+
+    def __init__(self, signing_key: bytes | None = None, saturation_mps2: float = 2 * G_MPS2,
+                 block_samples: int = BLOCK_SAMPLES, stats: SourceStats | None = None):
         self.saturation_mps2 = float(saturation_mps2)
-        self.on_status = on_status
         self.block_samples = int(block_samples)
-        self.read_timeout_s = min(float(read_timeout_s), READ_TIMEOUT_S)
-        self.stats = SourceStats()
-        try:
-            self.ser = serial.Serial(path, baudrate=baud, timeout=self.read_timeout_s)
-        except (serial.SerialException, OSError) as e:
-            raise ValueError(f"cannot open IMU serial line {path!r}: {e}") from None
+        self.stats = stats if stats is not None else SourceStats()
         self.mav = mavlink2.MAVLink(None)
         self.mav.robust_parsing = True
         if signing_key is not None:
@@ -104,72 +98,27 @@ class MavlinkImuSource:
             self.mav.signing.timestamp = int((time.time() - 1420070400) * 100_000)
             # allow_unsigned_callback stays None: unsigned packets are refused
         self._period = 1.0 / SAMPLE_RATE_HZ
-        self._closed = False
         self._last_t: float | None = None
         self._pending: list[tuple[float, float, float]] = []
         self._pending_t0: float | None = None
         self._pending_continuous = False  # the first block of a stream is not continuous
         self._next_continuous = False
-        self._last_rx = time.monotonic()
         self._rx: float | None = None
-        self._silent = False
+        self.last_sample_monotonic_s: float | None = None
+        """Arrival time of the last sample accepted (None before the first)."""
+        self.silent = False
+        """Set by the owner when the sensor went silent; the next sample reports "ok"."""
 
-    # -- public --------------------------------------------------------------------------
-    def close(self) -> None:
-        self._closed = True
-        try:
-            self.ser.close()
-        except Exception:
-            pass
+    @property
+    def last_t_s(self) -> float | None:
+        return self._last_t
 
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def blocks(self, duration_s: float | None = None) -> Iterator[Event]:
-        """ImuBlocks and SourceStatus events until close() (or ``duration_s`` of wall time)."""
-        end = None if duration_s is None else time.monotonic() + duration_s
-        out: list[Event] = []
-        while not self._closed:
-            if end is not None and time.monotonic() >= end:
-                break
-            got = self._read()
-            if got:
-                self._rx = time.monotonic()
-                for m in self.mav.parse_buffer(got) or ():
-                    self._handle(m, out)
-            # hand over at once what this read brought: a capture's last sample waits for nothing
-            self._flush(out)
-            now = time.monotonic()
-            if now - self._last_rx >= self.silence_timeout_s and not out:
-                # repeated every read timeout while silent, so that the caller keeps control
-                # (heartbeats); silent_events counts the transitions only
-                self._flush(out)
-                if not self._silent:
-                    self._silent = True
-                    self.stats.silent_events += 1
-                self._status(out, SourceStatus("silent", now - self._last_rx, self._last_t))
-            while out:
-                yield out.pop(0)
-        self._flush(out)
-        yield from out
-
-    # -- internals -----------------------------------------------------------------------
-    def _read(self) -> bytes:
-        try:
-            return self.ser.read(max(1, self.ser.in_waiting))
-        except (serial.SerialException, OSError):
-            # e.g. the writer closed the pty: wait a read timeout, never spin
-            self.stats.read_errors += 1
-            time.sleep(self.read_timeout_s)
-            return b""
-
-    def _status(self, out: list, st: SourceStatus) -> None:
-        if self.on_status is not None:
-            self.on_status(st)
-        out.append(st)
+    def feed(self, data: bytes, rx_monotonic_s: float, out: list) -> None:
+        """The events in ``data`` (arrived at ``rx_monotonic_s``) appended to ``out``; a block
+        that is not full yet is held back until :meth:`flush`."""
+        self._rx = rx_monotonic_s
+        for m in self.mav.parse_buffer(data) or ():
+            self._handle(m, out)
 
     def _handle(self, m, out: list) -> None:
         mtype = m.get_type()
@@ -200,12 +149,11 @@ class MavlinkImuSource:
         self._sample(t, acc, sat, out)
 
     def _sample(self, t: float, acc, sat: bool, out: list) -> None:
-        now = time.monotonic()
         if self._last_t is not None:
             dt = t - self._last_t
             if dt < -REBOOT_BACKJUMP_S:  # sensor rebooted: a new stream
                 self.stats.reboots += 1
-                self._flush(out)
+                self.flush(out)
                 self._next_continuous = False
             elif dt <= 0.5 * self._period:
                 self.stats.out_of_order += 1
@@ -213,12 +161,12 @@ class MavlinkImuSource:
             elif dt > MAX_GAP_PERIODS * self._period:
                 self.stats.gaps += 1
                 self.stats.dropped += max(0, int(round(dt / self._period)) - 1)
-                self._flush(out)
+                self.flush(out)
                 self._next_continuous = False
-        self._last_rx = now
-        if self._silent:
-            self._silent = False
-            self._status(out, SourceStatus("ok", 0.0, self._last_t))
+        self.last_sample_monotonic_s = self._rx
+        if self.silent:
+            self.silent = False
+            out.append(SourceStatus("ok", 0.0, self._last_t))
         self._last_t = t
         self.stats.samples += 1
         if sat:
@@ -231,9 +179,10 @@ class MavlinkImuSource:
             self._next_continuous = True
         self._pending.append(acc)
         if len(self._pending) >= self.block_samples:
-            self._flush(out)
+            self.flush(out)
 
-    def _flush(self, out: list) -> None:
+    def flush(self, out: list) -> None:
+        """The samples held back, as a block appended to ``out``."""
         if not self._pending:
             return
         out.append(ImuBlock(self._pending_t0, np.asarray(self._pending, dtype=np.float32),
@@ -241,3 +190,78 @@ class MavlinkImuSource:
         self.stats.blocks += 1
         self._pending = []
         self._pending_t0 = None
+
+
+class MavlinkImuSource:
+    """A :class:`ImuPacketDecoder` on a serial line, with the silence watch."""
+
+    def __init__(self, path: str, baud: int = 921600, signing_key: bytes | None = None,
+                 silence_timeout_s: float = 0.2, saturation_mps2: float = 2 * G_MPS2,
+                 on_status: Callable[[SourceStatus], None] | None = None,
+                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S):
+        self.path = path
+        self.silence_timeout_s = float(silence_timeout_s)
+        self.on_status = on_status
+        self.read_timeout_s = min(float(read_timeout_s), READ_TIMEOUT_S)
+        self.decoder = ImuPacketDecoder(signing_key, saturation_mps2, block_samples)
+        self.stats = self.decoder.stats
+        try:
+            self.ser = serial.Serial(path, baudrate=baud, timeout=self.read_timeout_s)
+        except (serial.SerialException, OSError) as e:
+            raise ValueError(f"cannot open IMU serial line {path!r}: {e}") from None
+        self._closed = False
+        self._opened_s = time.monotonic()
+
+    # -- public --------------------------------------------------------------------------
+    def close(self) -> None:
+        self._closed = True
+        try:
+            self.ser.close()
+        except Exception:
+            pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def blocks(self, duration_s: float | None = None) -> Iterator[Event]:
+        """ImuBlocks and SourceStatus events until close() (or ``duration_s`` of wall time)."""
+        end = None if duration_s is None else time.monotonic() + duration_s
+        out: list[Event] = []
+        while not self._closed:
+            if end is not None and time.monotonic() >= end:
+                break
+            got = self._read()
+            if got:
+                self.decoder.feed(got, time.monotonic(), out)
+            # hand over at once what this read brought: a capture's last sample waits for nothing
+            self.decoder.flush(out)
+            now = time.monotonic()
+            last_rx = self.decoder.last_sample_monotonic_s or self._opened_s
+            if now - last_rx >= self.silence_timeout_s and not out:
+                # repeated every read timeout while silent, so that the caller keeps control
+                # (heartbeats); silent_events counts the transitions only
+                if not self.decoder.silent:
+                    self.decoder.silent = True
+                    self.stats.silent_events += 1
+                out.append(SourceStatus("silent", now - last_rx, self.decoder.last_t_s))
+            while out:
+                event = out.pop(0)
+                if self.on_status is not None and isinstance(event, SourceStatus):
+                    self.on_status(event)
+                yield event
+        self.decoder.flush(out)
+        yield from out
+
+    # -- internals -----------------------------------------------------------------------
+    def _read(self) -> bytes:
+        try:
+            return self.ser.read(max(1, self.ser.in_waiting))
+        except (serial.SerialException, OSError):
+            # e.g. the writer closed the pty: wait a read timeout, never spin
+            self.stats.read_errors += 1
+            time.sleep(self.read_timeout_s)
+            return b""
+
