@@ -61,8 +61,9 @@ class CanParams:
     """socketcand only: the hub's address."""
     port: int = config.setting(29536, config.TCP_PORT)
     """socketcand only: the hub's TCP port."""
-    heartbeat_period_s: float = config.setting(0.1, config.within(0.01, 10))
-    """WEARABLE_STATUS period (s): 10 Hz."""
+    heartbeat_period_s: float = config.setting(0.1, config.within(0.01, 0.1, "s"))
+    """WEARABLE_STATUS period (s): 10 Hz. At most 0.1 s: vehicle_alerts.dbc promises a heartbeat
+    every 100 ms and a listener treats 300 ms without one as the wearable gone."""
 
 
 @dataclass(frozen=True)

@@ -36,11 +36,13 @@ class ImuParams:
     sample_rate_hz: int = config.setting(SAMPLE_RATE_HZ, ("100 (the rate the shipped classifier was trained at)",
                                                           lambda v: v == SAMPLE_RATE_HZ))
     """Rate the detector and model expect; recordings at other rates are resampled to it."""
-    range_mps2: float = config.setting(156.9, config.POSITIVE)
-    """Accelerometer full scale (m/s^2, 16 g); readings at or beyond it count as saturated."""
-    silence_timeout_s: float = config.setting(0.15, config.POSITIVE)
+    range_mps2: float = config.setting(156.9, config.within(19.6, 1000, "m/s^2"))
+    """Accelerometer full scale (m/s^2, 16 g); readings at or beyond it count as saturated and
+    are clipped to it before the model sees them."""
+    silence_timeout_s: float = config.setting(0.15, config.within(0.02, 0.15, "s"))
     """No sample for this long: the sensor is silent. WEARABLE_STATUS says so at once (an
-    extra heartbeat on every change of state), so within 200 ms of the last sample."""
+    extra heartbeat on every change of state), so within 200 ms of the last sample: the
+    source looks every 50 ms, hence at most 0.15 s (and at least two sample periods)."""
 
 
 @dataclass
