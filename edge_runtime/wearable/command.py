@@ -110,13 +110,19 @@ class _Source:
         if self.live is not None:
             self.live.close()
 
+    def health(self) -> tuple[int, int]:
+        """(saturated, dropped) samples so far, the source's own counts for the status."""
+        if self.live is not None:
+            return self.live.stats.saturated, self.live.stats.dropped
+        return self.replay_stats.saturated, 0
+
 
 def _open_source(args: argparse.Namespace, cfg) -> _Source:
     from edge_runtime.wearable.sources import ReplayStats, read_imu_csv
 
     stats = ReplayStats()
     if args.replay:
-        blocks = read_imu_csv(args.replay, stats)
+        blocks = read_imu_csv(args.replay, stats, range_mps2=cfg.imu.range_mps2)
         if args.realtime:
             blocks = (b for block in blocks for b in _paced(block, cfg.imu.sample_rate_hz))
         return _Source(blocks, stats)
@@ -131,7 +137,7 @@ def _open_live_source(spec: str, cfg) -> MavlinkImuSource:
         from edge_runtime.wearable.sim_source import SimImuSource, SimSourceError
 
         try:
-            return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s)
+            return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s, range_mps2=cfg.imu.range_mps2)
         except SimSourceError as e:
             raise CliError(str(e)) from None
     from edge_runtime.core.serial_line import parse_serial_spec
@@ -143,7 +149,8 @@ def _open_live_source(spec: str, cfg) -> MavlinkImuSource:
     from edge_runtime.wearable.mavlink_source import MavlinkImuSource
 
     try:
-        return MavlinkImuSource(path, signing_key=key, silence_timeout_s=cfg.imu.silence_timeout_s)
+        return MavlinkImuSource(path, signing_key=key, silence_timeout_s=cfg.imu.silence_timeout_s,
+                                range_mps2=cfg.imu.range_mps2)
     except ValueError as e:
         raise CliError(str(e)) from None
 
@@ -218,8 +225,7 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
 
     status = loop.status
     for event in source.events:
-        if source.live is not None:
-            status.set_source_counts(source.live.stats.saturated, source.live.stats.dropped)
+        status.set_source_counts(*source.health())
         if not isinstance(event, ImuBlock):  # a live source's SourceStatus
             _sensor_state(loop.publisher, event.state, f" ({event.since_s:.2f} s since the last sample)")
             if event.state == "disconnected":
@@ -252,8 +258,9 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
         f"  captures {s.captures}: alerts {s.statuses['alert']}, uncertain {s.statuses['uncertain']}, "
         f"not alerted {s.statuses['not_alerted']}\n"
         f"  by class: " + (", ".join(f"{k} {v}" for k, v in sorted(s.labels.items())) or "none") + "\n"
-        f"  bad samples: non-finite {h.non_finite}, dropped (time not advancing) {r.dropped_non_monotonic}, "
-        f"gaps {r.gaps}, detector restarts {h.detector_restarts}"
+        f"  bad samples: non-finite or out of range {h.non_finite} (out of range "
+        f"{r.out_of_range if source.live is None else source.live.stats.out_of_range}), saturated {h.saturated}, "
+        f"dropped (time not advancing) {r.dropped_non_monotonic}, gaps {r.gaps}, detector restarts {h.detector_restarts}"
     )
     c = loop.publisher.summary()
     print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']}, "

@@ -28,6 +28,7 @@ from urllib.parse import parse_qsl
 from edge_runtime.core.serial_line import parse_signing_key
 from edge_runtime.errors import InputError
 from edge_runtime.wearable.mavlink_source import MavlinkImuSource, SourceStatus
+from edge_runtime.wearable.sources import ImuParams
 
 FIRMWARE_OPTIONS = ("minutes", "seed", "csv", "speed", "message", "key", "drop", "drop_burst", "corrupt",
                     "nan_burst", "saturate", "stop_after")
@@ -61,7 +62,7 @@ def firmware_command(opts: dict[str, str]) -> list[str]:
 class SimImuSource(MavlinkImuSource):
     """A :class:`MavlinkImuSource` on the pseudo-terminal of a simulated IMU child process."""
 
-    def __init__(self, spec: str, silence_timeout_s: float = 0.15):
+    def __init__(self, spec: str, silence_timeout_s: float = 0.15, range_mps2: float = ImuParams.range_mps2):
         opts = parse_sim_spec(spec)
         if importlib.util.find_spec("firmware_sim") is None:
             raise SimSourceError("--imu sim: the simulated IMU firmware (package firmware_sim) is not installed "
@@ -76,7 +77,7 @@ class SimImuSource(MavlinkImuSource):
                                      text=True, bufsize=1)
         path = self._first_line()
         try:
-            super().__init__(path, signing_key=key, silence_timeout_s=silence_timeout_s)
+            super().__init__(path, signing_key=key, silence_timeout_s=silence_timeout_s, range_mps2=range_mps2)
         except ValueError:
             self._stop_child()
             raise
