@@ -74,8 +74,9 @@ class ReplayStats:
     notices: list[str] = field(default_factory=list)
 
 
-CHUNK_ROWS = 1 << 16
-"""Rows parsed at a time: a replay holds one chunk, whatever the recording's length."""
+CHUNK_ROWS = 1 << 14
+"""Rows parsed at a time: a replay holds one chunk, whatever the recording's length (larger
+chunks parse no faster and leave the allocator a larger high-water mark)."""
 SATURATION_TOLERANCE = 1e-6
 """A reading within this fraction of full scale is at full scale (saturated), beyond it: impossible."""
 
@@ -114,6 +115,9 @@ def _open_csv(path: Path):
 
 def _parse_rows(path: Path, lines: list[bytes], first_no: int) -> np.ndarray:
     """Rows of ``t,ax,ay,az`` -> (n, 4) float64; a malformed line is an InputError naming it."""
+    fast = _parse_plain_rows(lines)
+    if fast is not None:
+        return fast
     try:
         text = b"".join(lines).decode("utf-8")
         data = np.loadtxt(io.StringIO(text), delimiter=",", ndmin=2, dtype=np.float64)
@@ -137,6 +141,18 @@ def _parse_rows(path: Path, lines: list[bytes], first_no: int) -> np.ndarray:
             except ValueError:
                 raise InputError(f"{path}:{no}: field {name!r} is not a number: {cell.strip()[:40]!r}") from None
     raise InputError(f"{path}:{first_no}: unreadable CSV")
+
+
+def _parse_plain_rows(lines: list[bytes]) -> np.ndarray | None:
+    """The common case, about twice as fast as np.loadtxt: every line has exactly four
+    comma-separated numbers. None for anything else (blank lines, text, non-UTF-8 ...)."""
+    if any(line.count(b",") != 3 for line in lines):
+        return None
+    try:
+        values = np.fromstring(b"".join(lines).replace(b"\n", b","), dtype=np.float64, sep=",")
+    except ValueError:
+        return None
+    return values.reshape(-1, 4) if values.size == 4 * len(lines) else None
 
 
 def _chunks(path: Path, f, chunk_rows: int) -> Iterator[tuple[int, np.ndarray]]:
