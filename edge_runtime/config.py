@@ -126,7 +126,14 @@ def _toml_value(v: Any) -> str:
         return repr(v)
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return '"' + _redact(str(v)).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _redact(text: str) -> str:
+    """A signing key written inline (``serial:PATH?key=HEX``) is never printed (``--print-config``)."""
+    from edge_runtime.core.serial_line import redact
+
+    return redact(text)
 
 
 # ---------------------------------------------------------------------------------------------- validation

@@ -175,3 +175,13 @@ def test_robot_sections_round_trip_through_print_config():
     assert again == cfg and again.robot_loop.task_waypoints_m == ((0.3, 0.1, 0.6), (0.0, 0.1, 0.9))
     assert again.calibration.markers_xz_m[1] == (2.0, 1.0)
     assert config.override(cfg, "zones", sizing="iso15066").zones.r1_m == pytest.approx(cfg.zones.protective_distance_m)
+
+
+def test_print_config_redacts_an_inline_signing_key(tmp_path):
+    key = "ab" * 32
+    p = tmp_path / "box.toml"
+    p.write_text(f'[robot_link]\nkind = "mavlink"\nserial = "serial:/dev/ttyS1?key={key}"\n')
+    text = config.load(p).to_toml()
+    assert key not in text and 'serial = "serial:/dev/ttyS1?key=<redacted>"' in text
+    p.write_text('[robot_link]\nkind = "mavlink"\nserial = "serial:/dev/ttyS1?key=@/etc/box/arm.key"\n')
+    assert 'key=@/etc/box/arm.key"' in config.load(p).to_toml()  # a file name is not a secret

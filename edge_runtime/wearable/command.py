@@ -1,6 +1,7 @@
 """``python -m edge_runtime wearable``: IMU -> detector -> ConvLSTM -> alert decisions on CAN (docs/design.md section 7).
 
-    python -m edge_runtime wearable (--replay FILE.csv | --imu serial:PATH[?key=HEX] | --imu sim[?options])
+    python -m edge_runtime wearable (--replay FILE.csv | --imu serial:PATH?key=@FILE|key=env:NAME|unsigned=yes
+                                     | --imu sim[?options])
         [--config BOX.toml] [--alerts OUT.jsonl] [--can-log OUT.log] [--duration S] [--realtime] [--quiet]
     python -m edge_runtime wearable [--config BOX.toml] --print-config
 
@@ -39,9 +40,11 @@ BAD_INPUT: tuple[type[BaseException], ...] = ()
 def add_arguments(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--replay", metavar="FILE.csv", help="a recording t,ax,ay,az (s, m/s^2), processed as fast as possible")
-    src.add_argument("--imu", metavar="serial:PATH[?key=HEX] | sim[?minutes=M&seed=S&...]",
-                     help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line (key: MAVLink 2 signing "
-                          "key), or 'sim': the simulated IMU firmware on a pseudo-terminal (development checkouts)")
+    src.add_argument("--imu", metavar="serial:PATH?key=@FILE|key=env:NAME|unsigned=yes | sim[?minutes=M&seed=S&...]",
+                     help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line, signed with the MAVLink 2 "
+                          "key in FILE or in the environment variable NAME (unsigned only when the spec says "
+                          "unsigned=yes, with a warning), or 'sim': the simulated IMU firmware on a "
+                          "pseudo-terminal (development checkouts)")
     p.add_argument("--duration", type=float, metavar="S", help="stop a live source after S seconds")
     p.add_argument("--can-log", metavar="OUT.log|.asc|.blf|.csv", help="write every CAN frame sent (python-can formats)")
     p.add_argument("--alerts", metavar="OUT.jsonl", help="write one JSON object per classifier decision")
@@ -140,16 +143,24 @@ def _open_live_source(spec: str, cfg) -> MavlinkImuSource:
             return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s, range_mps2=cfg.imu.range_mps2)
         except SimSourceError as e:
             raise CliError(str(e)) from None
-    from edge_runtime.core.serial_line import parse_serial_spec
+    from edge_runtime.core.serial_line import KEY_FORMS, parse_link_spec
 
     try:
-        path, key = parse_serial_spec(spec)
+        line = parse_link_spec(spec)
     except ValueError as e:
         raise CliError(f"--imu: {e}") from None
+    if line.key_inline:  # argv is readable by every user of the box (ps, /proc, shell history)
+        raise CliError(f"--imu: a signing key on the command line is visible to every user; give {KEY_FORMS}")
+    if line.key is None and not line.unsigned:
+        raise CliError(f"--imu serial:{line.path}: no signing key; give {KEY_FORMS}, "
+                       "or add ?unsigned=yes if an unsigned IMU line is intended")
+    if line.unsigned:
+        print(f"warning: --imu serial:{line.path} is unsigned (unsigned=yes): any device on the line "
+              "can inject or replay IMU samples", file=sys.stderr)
     from edge_runtime.wearable.mavlink_source import MavlinkImuSource
 
     try:
-        return MavlinkImuSource(path, signing_key=key, silence_timeout_s=cfg.imu.silence_timeout_s,
+        return MavlinkImuSource(line.path, signing_key=line.key, silence_timeout_s=cfg.imu.silence_timeout_s,
                                 range_mps2=cfg.imu.range_mps2)
     except ValueError as e:
         raise CliError(str(e)) from None
