@@ -277,6 +277,9 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
     print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']}, "
           f"heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, reconnects {c['reconnects']}"
           + (f"; logged to {can_log}" if can_log else ""))
+    if c["alerts_held"] or c["alerts_lost"]:
+        print(f"  alerts the bus did not take at first {c['alerts_held']}: sent late {c['alerts_sent_late']}, "
+              f"lost {c['alerts_lost']} (WEARABLE_STATUS said degraded)")
     latencies_ms = loop.status.alert_latencies_ms()
     if latencies_ms:
         import numpy as np
