@@ -117,7 +117,8 @@ class _Timer:
     def __enter__(self):
         if self.armed:
             self._old = signal.signal(signal.SIGALRM, self._fire)
-            signal.setitimer(signal.ITIMER_REAL, self.timeout_s)
+            # repeating: a Hang raised inside a gc callback is swallowed by Python, so fire again
+            signal.setitimer(signal.ITIMER_REAL, self.timeout_s, 0.5)
         return self
 
     @staticmethod

@@ -28,6 +28,12 @@ SAMPLE_RATE_HZ = 100
 CSV_HEADER = ("t", "ax", "ay", "az")
 MAX_GAP_PERIODS = 1.5
 """A step between timestamps longer than this many sample periods is a gap."""
+MAX_TIME_S = 1e10
+"""A recording's times are seconds (of a session, or since 1970: 1.7e9 now); beyond this
+(about 300 years) a time is not one, and every sample after it would be dropped as going
+back in time, so the line is refused."""
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 10_000.0
+"""Recording rates the replay resamples from; outside, the timestamps are not a sample clock."""
 
 
 @config.section("imu")
@@ -160,9 +166,11 @@ def _chunks(path: Path, f, chunk_rows: int) -> Iterator[tuple[int, np.ndarray]]:
     no = 2
     while lines := list(islice(f, chunk_rows)):
         data = _parse_rows(path, lines, no)
-        bad_t = np.flatnonzero(~np.isfinite(data[:, 0]))
+        with np.errstate(invalid="ignore"):
+            bad_t = np.flatnonzero(~(np.abs(data[:, 0]) <= MAX_TIME_S))  # NaN fails the comparison too
         if bad_t.size:
-            raise InputError(f"{path}:{no + bad_t[0]}: field 't' is not a finite time")
+            raise InputError(f"{path}:{no + bad_t[0]}: field 't' is not a time in seconds "
+                             f"(finite, at most {MAX_TIME_S:g}): {data[bad_t[0], 0]!r}")
         yield no, data
         no += len(lines)
 
@@ -206,6 +214,9 @@ def _replay_rate(path: Path, data: np.ndarray, stats: ReplayStats) -> tuple[floa
         return 1.0 / SAMPLE_RATE_HZ, Fraction(1)
     period = float(np.median(np.diff(t)))
     rate = 1.0 / period
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        raise InputError(f"{path}: the timestamps give a sample rate of {rate:.3g} Hz (median step {period:.3g} s); "
+                         f"expected {MIN_RATE_HZ:g} to {MAX_RATE_HZ:g} Hz")
     ratio = Fraction(1)
     if abs(rate - SAMPLE_RATE_HZ) > 0.01 * SAMPLE_RATE_HZ:
         ratio = _rate_ratio(rate)

@@ -47,6 +47,8 @@ def test_gaps_split_blocks_and_backwards_time_is_dropped(tmp_path):
         ("t,ax,ay,az\n0,1,2,3\n0.01,1,2\n", r":3: expected 4 fields"),
         ("t,ax,ay,az\n0,1,2,3\n0.01,1,abc,3\n", r":3: field 'ay' is not a number"),
         ("t,ax,ay,az\n0,1,2,3\nnan,1,2,3\n", r":3: field 't'"),
+        ("t,ax,ay,az\n0,1,2,3\n0.01,1,2,3\n1.7e308,1,2,3\n", r":4: field 't' is not a time in seconds"),
+        ("t,ax,ay,az\n0,1,2,3\n1000,1,2,3\n2000,1,2,3\n", r"sample rate of 0.001 Hz"),
         ("", r"empty file"),
     ],
 )
