@@ -36,7 +36,7 @@ from typing import Callable, Iterator, Union
 import numpy as np
 import serial
 
-from edge_runtime.core.serial_line import make_mavlink, signature_failure
+from edge_runtime.core.mavlink import make_mavlink, signature_failure
 from edge_runtime.wearable.sources import MAX_GAP_PERIODS, SAMPLE_RATE_HZ, ImuBlock, ImuParams, screen_samples
 
 MG_TO_MPS2 = 9.80665e-3

@@ -75,7 +75,7 @@ from edge_runtime.canbus.bus import CanLinkError, open_bus
 from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EChecker, E2EProtector
 from edge_runtime.core.manifest import ASSETS_DIR
-from edge_runtime.core.serial_line import (  # noqa: F401 - the MAVLink endpoint, shared with the wearable
+from edge_runtime.core.mavlink import (  # noqa: F401 - the MAVLink endpoint, shared with the wearable
     MAVLINK_EPOCH_UNIX_S,
     SignedMAVLink,
     make_mavlink,
