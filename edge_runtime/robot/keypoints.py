@@ -87,6 +87,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from edge_runtime.core import strict_json
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
 
@@ -117,6 +118,16 @@ UNDISTORT_CRITERIA = (3, 50, 1e-6)  # cv2.TERM_CRITERIA_COUNT | EPS: 50 iteratio
 _EAR_HALF_WIDTH_M = 0.075
 _EYE_FORWARD_M = 0.08
 _EYE_HALF_WIDTH_M = 0.032
+
+
+MAX_COORDINATE_PX = 1e6
+"""A keypoint coordinate beyond this many pixels from the image origin is refused: no camera
+has such an image, and the lifter's float32 input would turn it into inf."""
+MAX_TIMESTAMP_S = 1e10
+"""A frame time beyond +-this is refused (Unix time is 1.7e9 s): time arithmetic on larger
+ones (gaps, replay pacing) overflows or loses the frame period to rounding."""
+MAX_FRAME = 2**53
+"""Frame numbers above this are refused (t = frame / fps must stay exact)."""
 
 
 class KeypointInputError(InputError):
@@ -257,6 +268,7 @@ def _fail(where: str, msg: str):
 def _parse_person(p, i: int, where: str) -> Person:
     if not isinstance(p, dict) or "keypoints" not in p:
         _fail(where, f"people[{i}]: expected an object with 'keypoints'")
+    field = f"{where}: people[{i}].keypoints"
     raw = p["keypoints"]
     if not isinstance(raw, list):
         _fail(where, f"people[{i}].keypoints: expected a list")
@@ -275,44 +287,49 @@ def _parse_person(p, i: int, where: str) -> Person:
         rows = [raw[k:k + width] for k in range(0, len(raw), width)]
     if len(rows) > N_JOINTS:
         _fail(where, f"people[{i}].keypoints: {len(rows)} keypoints, expected 17")
-    try:
-        a = np.array([[np.nan if v is None else float(v) for v in r] for r in rows], dtype=np.float64)
-    except (TypeError, ValueError):
-        _fail(where, f"people[{i}].keypoints: non-numeric value")
-    a = a.reshape(len(rows), width)
+    xy = strict_json.number_array([r[:2] for r in rows], (len(rows), 2), field, KeypointInputError,
+                                  -MAX_COORDINATE_PX, MAX_COORDINATE_PX, nulls=True)
+    scores = (strict_json.number_array([r[2] for r in rows], (len(rows),), f"{field} score", KeypointInputError,
+                                       0.0, 1.0, nulls=True) if width == 3 else np.ones(len(rows)))
     pid = p.get("id")
-    if pid is not None and (isinstance(pid, bool) or not isinstance(pid, int)):
-        _fail(where, f"people[{i}].id: expected an integer, got {pid!r}")
-    return Person(as_keypoints(a, n_joints=None), pid)
+    if pid is not None:
+        pid = strict_json.integer(pid, f"{where}: people[{i}].id", KeypointInputError, -2**63, 2**63 - 1)
+    return Person(np.column_stack([xy, scores]).reshape(len(rows), 3), pid)
 
 
-def parse_keypoint_line(line: str, where: str, fmt: str, fps: float = 30.0) -> KeypointFrame | None:
-    """One JSON line -> a frame (None for a blank line); ``where`` is "FILE:LINE"."""
+def parse_keypoint_line(line: str | bytes, where: str, fmt: str, fps: float = 30.0) -> KeypointFrame | None:
+    """One JSON line -> a frame (None for a blank line); ``where`` is "FILE:LINE".
+
+    Every field is checked here, the input's one validation step: ``t`` finite within
+    +-``MAX_TIMESTAMP_S``, ``frame`` a non-negative integer, coordinates finite within
+    +-``MAX_COORDINATE_PX`` (or null: not seen), scores in [0, 1] (or null), ``id`` a
+    64-bit integer; NaN/Infinity literals, non-UTF-8 bytes and deep nesting are refused."""
     if not line.strip():
         return None
-    try:
-        obj = json.loads(line)
-    except json.JSONDecodeError as e:
-        _fail(where, f"not valid JSON ({e.msg} at character {e.pos + 1})")
+    obj = strict_json.loads(line, where, KeypointInputError)
     if not isinstance(obj, dict):
         _fail(where, "expected a JSON object per line")
     line_fmt = obj.get("format", fmt)
     if line_fmt != fmt:
         _fail(where, f"format {line_fmt!r}, but the input was declared {fmt!r}")
     frame = obj.get("frame")
-    if frame is not None and (isinstance(frame, bool) or not isinstance(frame, int)):
-        _fail(where, f"frame: expected an integer, got {frame!r}")
+    if frame is not None:
+        frame = strict_json.integer(frame, f"{where}: frame", KeypointInputError, 0, MAX_FRAME)
     t = obj.get("t")
     if t is None:
         if frame is None:
             _fail(where, "neither 't' (s) nor 'frame' given")
         t = frame / fps
-    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
-        _fail(where, f"t: expected a finite number of seconds, got {t!r}")
+    t = timestamp_s(t, f"{where}: t", KeypointInputError)
     people = obj.get("people", [])
     if not isinstance(people, list):
         _fail(where, "people: expected a list")
-    return KeypointFrame(float(t), frame, [_parse_person(p, i, where) for i, p in enumerate(people)], fmt)
+    return KeypointFrame(t, frame, [_parse_person(p, i, where) for i, p in enumerate(people)], fmt)
+
+
+def timestamp_s(value, where: str, error: type[Exception]) -> float:
+    """A frame timestamp (s) of an input file: finite and within +-MAX_TIMESTAMP_S."""
+    return strict_json.number(value, where, error, -MAX_TIMESTAMP_S, MAX_TIMESTAMP_S)
 
 
 def read_keypoints_jsonl(path: str | os.PathLike, fmt: str = "coco", fps: float = 30.0
@@ -326,11 +343,7 @@ def read_keypoints_jsonl(path: str | os.PathLike, fmt: str = "coco", fps: float 
         raise KeypointInputError(f"{path}: cannot open ({e.strerror or e})") from None
     with f:
         for n, raw in enumerate(f, 1):
-            try:
-                line = raw.decode("utf-8")
-            except UnicodeDecodeError:
-                raise KeypointInputError(f"{path}:{n}: not UTF-8 text") from None
-            frame = parse_keypoint_line(line, f"{path}:{n}", fmt, fps)
+            frame = parse_keypoint_line(raw, f"{path}:{n}", fmt, fps)
             if frame is not None:
                 yield frame
 
