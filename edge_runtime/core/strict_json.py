@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
 MAX_DEPTH = 64
 """Deeper nesting than this is refused (no input of ours nests more than 4 levels)."""
@@ -82,6 +83,8 @@ def number_array(value: Any, shape: tuple[int, ...], where: str, error: type[Exc
                  lo: float = -math.inf, hi: float = math.inf, nulls: bool = False) -> np.ndarray:
     """A nested list of numbers of exactly ``shape`` as float64, every entry checked by
     :func:`number` (``null`` allowed and read as NaN when ``nulls``)."""
+    import numpy as np  # here: the manifest's reader (standard library only) shares this module
+
     def walk(v: Any, dims: tuple[int, ...], path: str):
         if not dims:
             return math.nan if (nulls and v is None) else number(v, f"{where}{path}", error, lo, hi)

@@ -91,6 +91,9 @@ MISSING_JOINTS = "missing_joints"
 TIME_NOT_INCREASING = "time_not_increasing"
 BAD_TIME = "bad_time"
 
+MAX_RECEPTIVE_FIELD = 1024
+"""The largest receptive field a manifest may declare (VideoPose3D's largest is 243 frames):
+the ring buffer is allocated from it."""
 MAX_NORMALISED = 10.0
 """A keypoint whose normalised coordinate (the image spans [-1, 1] in x) is beyond +-this
 (4.5 image widths outside the image) counts as missing: the model's input stays finite and
@@ -423,9 +426,9 @@ def padded_windows(frames: np.ndarray, receptive_field: int) -> np.ndarray:
 def _check_entry(entry: dict, source: str) -> tuple[int, CameraModel]:
     """(receptive field, canonical camera) from a lifter manifest entry."""
     rf = entry.get("receptive_field", 27)
-    if isinstance(rf, bool) or not isinstance(rf, int) or rf < 1:
-        raise ModelIntegrityError(f"{source}: manifest field 'receptive_field': expected a positive integer, "
-                                  f"got {rf!r}")
+    if isinstance(rf, bool) or not isinstance(rf, int) or not 1 <= rf <= MAX_RECEPTIVE_FIELD:
+        raise ModelIntegrityError(f"{source}: manifest field 'receptive_field': expected an integer in "
+                                  f"[1, {MAX_RECEPTIVE_FIELD}], got {rf!r}"[:300])
     if entry.get("joints", JOINT_SET) != JOINT_SET:
         raise ModelIntegrityError(f"{source}: manifest field 'joints': {entry.get('joints')!r}, this runtime "
                                   f"feeds {JOINT_SET}")
