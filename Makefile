@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint venv clean assets report bench bundle
+.PHONY: demo test test-fast lint venv clean assets report bench bundle fuzz
 
 $(STAMP): setup.cfg pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -44,6 +44,10 @@ bench: $(STAMP)
 ## what goes onto a box: runtime wheel (no torch), assets, default config, checksums
 bundle: $(STAMP)
 	$(PY) -m export bundle --out dist/box --measure-install
+
+## make fuzz: every parser and frame decoder with 100,000 mutated inputs each (fuzz/README.md)
+fuzz: $(STAMP)
+	$(PY) -m fuzz --inputs 100000 --seed 0 --json reports/fuzz/fuzz.json --md reports/fuzz/fuzz.md
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache

@@ -126,13 +126,30 @@ def _toml_value(v: Any) -> str:
         return repr(v)
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return '"' + _redact(str(v)).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _redact(text: str) -> str:
+    """A signing key written inline (``serial:PATH?key=HEX``) is never printed (``--print-config``)."""
+    from edge_runtime.core.serial_line import redact
+
+    return redact(text)
 
 
 # ---------------------------------------------------------------------------------------------- validation
 
+INT_LIMIT = 2**63
+"""An integer setting beyond 64 bits is refused by its type check (TOML allows any length)."""
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and -INT_LIMIT <= x < INT_LIMIT
+
+
 def _is_number(x: Any) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+    if isinstance(x, int):
+        return _is_int(x)
+    return isinstance(x, float) and math.isfinite(x)
 
 
 def _coerce(where: str, default: Any, value: Any) -> Any:
@@ -140,7 +157,7 @@ def _coerce(where: str, default: Any, value: Any) -> Any:
     if isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
+        ok = _is_int(value)
     elif isinstance(default, float):
         ok = _is_number(value)
         value = float(value) if ok else value
@@ -151,8 +168,17 @@ def _coerce(where: str, default: Any, value: Any) -> Any:
     if not ok:
         kind = {bool: "true/false", int: "an integer", float: "a number", str: "a string"}
         expected = _list_kind(default) if isinstance(default, tuple) else kind[type(default)]
-        raise ConfigError(f"{where}: expected {expected}, got {value!r}")
+        raise ConfigError(f"{where}: expected {expected}, got {_short(value)}")
     return value
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """A value for a one-line message: a 400-digit integer or a deep list is cut short."""
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):  # an int past Python's str() digit limit, a deep list
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def _list_kind(default: tuple) -> str:
@@ -174,7 +200,7 @@ def _coerce_list(default: tuple, value: Any) -> tuple[bool, Any]:
         ok = all(isinstance(r, list) and len(r) == len(first) and all(map(_is_number, r)) for r in value)
         return ok, tuple(tuple(float(x) for x in r) for r in value) if ok else value
     if isinstance(first, int) and not isinstance(first, bool):
-        ok = all(isinstance(x, int) and not isinstance(x, bool) for x in value)
+        ok = all(map(_is_int, value))
         return ok, tuple(value) if ok else value
     if _is_number(first):
         ok = all(map(_is_number, value))
@@ -196,7 +222,7 @@ def _section_from_table(name: str, cls: type, table: Any, source: str) -> Any:
         value = _coerce(where, getattr(default, key), value)
         check = known[key].metadata.get("check")
         if check and not check[1](value):
-            raise ConfigError(f"{where}: must be {check[0]}, got {value!r}")
+            raise ConfigError(f"{where}: must be {check[0]}, got {_short(value)}")
         values[key] = value
     try:
         return cls(**values)
@@ -231,8 +257,12 @@ def load(path: str | Path | None):
         raise ConfigError(f"{p}: cannot read ({e.strerror or e})") from None
     try:
         data = tomllib.loads(raw.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{p}: not UTF-8 (byte {e.start}); a TOML file is UTF-8 text") from None
+    except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{p}: not valid TOML ({e})") from None
+    except (RecursionError, ValueError) as e:  # nesting too deep; an integer past Python's digit limit
+        raise ConfigError(f"{p}: not a usable TOML file ({type(e).__name__}: {str(e)[:80]})") from None
     return from_dict(data, str(p))
 
 

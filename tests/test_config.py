@@ -35,12 +35,30 @@ def test_example_file_is_the_defaults_and_print_config_round_trips(tmp_path):
         ("[imu]\nsample_rate_hz = 50\n", r"\[imu\] sample_rate_hz: must be 100"),
         ("[detector]\npre_frames = 300\n", r"\[detector\] pre_frames: must be below window_frames"),
         ("[can\n", r"box.toml: not valid TOML"),
+        # the limits that README, the DBC and docs/integrator.md promise (issue 16)
+        ("[imu]\nsilence_timeout_s = 3600\n", r"\[imu\] silence_timeout_s: must be a number in \[0.02, 0.15\] s"),
+        ("[imu]\nsilence_timeout_s = 0.2\n", r"\[imu\] silence_timeout_s: must be a number in \[0.02, 0.15\]"),
+        ("[can]\nheartbeat_period_s = 10.0\n", r"\[can\] heartbeat_period_s: must be a number in \[0.01, 0.1\] s"),
+        ("[imu]\nrange_mps2 = 1e300\n", r"\[imu\] range_mps2: must be a number in \[19.6, 1000\]"),
+        ('[alerts]\nnever_alert = ["Phone", "Texting", "TouchScreen", "Drink", "Marker", "Other"]\n',
+         r"\[alerts\] never_alert: .* holds every class"),
+        # what a parser meets from a fuzzer: one line, never a traceback
+        ("[detector]\nwindow_frames = " + "9" * 400 + "\n", r"\[detector\] window_frames: expected an integer, got 9+\.\.\.$"),
+        ("[imu]\nrange_mps2 = " + "9" * 400 + "\n", r"\[imu\] range_mps2: expected a number"),
+        ("a = " + "[" * 5000 + "\n", r"box.toml: not a usable TOML file \(RecursionError"),
     ],
 )
 def test_bad_config_names_file_and_key(tmp_path, toml, match):
     p = tmp_path / "box.toml"
     p.write_text(toml)
     with pytest.raises(ConfigError, match=match):
+        config.load(p)
+
+
+def test_non_utf8_config_is_one_line_naming_the_byte(tmp_path):
+    p = tmp_path / "box.toml"
+    p.write_bytes(b"[imu]\n\xff = 1\n")
+    with pytest.raises(ConfigError, match=r"box.toml: not UTF-8 \(byte 6\)"):
         config.load(p)
 
 
@@ -157,3 +175,13 @@ def test_robot_sections_round_trip_through_print_config():
     assert again == cfg and again.robot_loop.task_waypoints_m == ((0.3, 0.1, 0.6), (0.0, 0.1, 0.9))
     assert again.calibration.markers_xz_m[1] == (2.0, 1.0)
     assert config.override(cfg, "zones", sizing="iso15066").zones.r1_m == pytest.approx(cfg.zones.protective_distance_m)
+
+
+def test_print_config_redacts_an_inline_signing_key(tmp_path):
+    key = "ab" * 32
+    p = tmp_path / "box.toml"
+    p.write_text(f'[robot_link]\nkind = "mavlink"\nserial = "serial:/dev/ttyS1?key={key}"\n')
+    text = config.load(p).to_toml()
+    assert key not in text and 'serial = "serial:/dev/ttyS1?key=<redacted>"' in text
+    p.write_text('[robot_link]\nkind = "mavlink"\nserial = "serial:/dev/ttyS1?key=@/etc/box/arm.key"\n')
+    assert 'key=@/etc/box/arm.key"' in config.load(p).to_toml()  # a file name is not a secret

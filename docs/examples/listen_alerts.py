@@ -30,6 +30,76 @@ def data_id(message):
     return int(attr.value) if attr is not None else message.frame_id
 
 
+class AlertListener:
+    """What the listener does with one frame (``frame``) and with the passing of time (``tick``),
+    without a bus: the main loop below feeds it, and so can a test or a fuzzer.
+    ``emit`` receives each line the listener prints."""
+
+    def __init__(self, db, json_lines=False, emit=lambda line: print(line, flush=True)):
+        self.db, self.json_lines, self.emit = db, json_lines, emit
+        self.alert = db.get_message_by_name("DISTRACTION_ALERT")
+        self.status = db.get_message_by_name("WEARABLE_STATUS")
+        self.messages = {m.frame_id: m for m in (self.alert, self.status)}
+        self.ids = {m.frame_id: data_id(m) for m in (self.alert, self.status)}
+        self.counts = {"alerts": 0, "heartbeats": 0, "e2e_wrong_crc": 0, "e2e_repeated": 0, "e2e_lost": 0,
+                       "bad_frames": 0, "heartbeat_timeouts": 0}
+        self.last_counter, self.last_beat, self.max_gap, self.state = {}, None, 0.0, None
+
+    def tick(self, now):
+        """The heartbeat watchdog, at monotonic time ``now``."""
+        if self.last_beat is not None and now - self.last_beat > HEARTBEAT_TIMEOUT_S and self.state != "missing":
+            self.counts["heartbeat_timeouts"] += 1
+            self.state = "missing"
+            self.emit(f"WEARABLE_STATUS missing for {now - self.last_beat:.2f} s: treat the wearable as unavailable")
+
+    def frame(self, msg, now):
+        """One received frame at monotonic time ``now``: checked as a frame (kind, identifier, length
+        against the DBC), then E2E (CRC, alive counter), and only then decoded."""
+        message = self.messages.get(msg.arbitration_id)
+        if message is None:
+            return
+        if (msg.is_error_frame or msg.is_remote_frame or bool(msg.is_extended_id) != message.is_extended_frame
+                or len(msg.data) != message.length):
+            self.counts["bad_frames"] += 1  # cantools cannot decode it; the E2E check would not catch all of it
+            return
+        data = bytearray(msg.data)
+        if not p01.e2e_p01_check(data, self.ids[msg.arbitration_id], length=len(data)):
+            self.counts["e2e_wrong_crc"] += 1
+            return
+        counter, prev = data[1] & 0x0F, self.last_counter.get(msg.arbitration_id)
+        self.last_counter[msg.arbitration_id] = counter
+        if prev is not None:
+            delta = (counter - prev) % (COUNTER_MAX + 1)
+            if delta == 0:
+                self.counts["e2e_repeated"] += 1
+                return
+            self.counts["e2e_lost"] += delta - 1
+        sig = self.db.decode_message(msg.arbitration_id, msg.data)
+        if msg.arbitration_id == self.status.frame_id:
+            self.counts["heartbeats"] += 1
+            if self.last_beat is not None:
+                self.max_gap = max(self.max_gap, now - self.last_beat)
+            self.last_beat = now
+            if str(sig["State"]) != self.state:
+                self.state = str(sig["State"])
+                self.emit(f"WEARABLE_STATUS {self.state}, sensor {sig['SensorHealth']}, dropped {sig['DroppedSamples']}")
+        else:
+            self.counts["alerts"] += 1
+            rec = {k: (v if isinstance(v, (int, float)) else str(v)) for k, v in sig.items()}
+            if self.json_lines:
+                self.emit(json.dumps(rec))
+            else:
+                self.emit(f"ALERT {rec['Class']:<12} confidence {rec['Confidence']:.2f}, "
+                          f"{rec['TimeSinceTrigger']} ms after the trigger")
+
+    def summary(self):
+        counts = dict(self.counts)
+        counts["e2e_errors"] = (counts["e2e_wrong_crc"] + counts["e2e_repeated"] + counts["e2e_lost"]
+                                + counts["bad_frames"])
+        counts["max_heartbeat_gap_ms"] = round(self.max_gap * 1000, 1)
+        return counts
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dbc", required=True)
@@ -41,10 +111,7 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true", help="print alerts as JSON lines")
     a = ap.parse_args(argv)
 
-    db = cantools.database.load_file(a.dbc)
-    alert = db.get_message_by_name("DISTRACTION_ALERT")
-    status = db.get_message_by_name("WEARABLE_STATUS")
-    ids = {m.frame_id: data_id(m) for m in (alert, status)}
+    listener = AlertListener(cantools.database.load_file(a.dbc), json_lines=a.json)
     extra = {"host": a.host, "port": a.port} if a.interface == "socketcand" else {}
     bus = can.Bus(interface=a.interface, channel=a.channel, **extra)
     stop = {"now": False}
@@ -52,51 +119,15 @@ def main(argv=None):
         signal.signal(sig, lambda *_: stop.update(now=True))
     print("listening", flush=True)
 
-    counts = {"alerts": 0, "heartbeats": 0, "e2e_wrong_crc": 0, "e2e_repeated": 0, "e2e_lost": 0, "heartbeat_timeouts": 0}
-    last_counter, last_beat, max_gap, state = {}, None, 0.0, None
     t_end = None if a.duration is None else time.monotonic() + a.duration
     while not stop["now"] and (t_end is None or time.monotonic() < t_end):
         msg = bus.recv(0.05)
         now = time.monotonic()
-        if last_beat is not None and now - last_beat > HEARTBEAT_TIMEOUT_S and state != "missing":
-            counts["heartbeat_timeouts"] += 1
-            state = "missing"
-            print(f"WEARABLE_STATUS missing for {now - last_beat:.2f} s: treat the wearable as unavailable", flush=True)
-        if msg is None or msg.arbitration_id not in ids:
-            continue
-        data = bytearray(msg.data)
-        if not p01.e2e_p01_check(data, ids[msg.arbitration_id], length=len(data)):
-            counts["e2e_wrong_crc"] += 1
-            continue
-        counter, prev = data[1] & 0x0F, last_counter.get(msg.arbitration_id)
-        last_counter[msg.arbitration_id] = counter
-        if prev is not None:
-            delta = (counter - prev) % (COUNTER_MAX + 1)
-            if delta == 0:
-                counts["e2e_repeated"] += 1
-                continue
-            counts["e2e_lost"] += delta - 1
-        sig = db.decode_message(msg.arbitration_id, msg.data)
-        if msg.arbitration_id == status.frame_id:
-            counts["heartbeats"] += 1
-            if last_beat is not None:
-                max_gap = max(max_gap, now - last_beat)
-            last_beat = now
-            if str(sig["State"]) != state:
-                state = str(sig["State"])
-                print(f"WEARABLE_STATUS {state}, sensor {sig['SensorHealth']}, dropped {sig['DroppedSamples']}", flush=True)
-        else:
-            counts["alerts"] += 1
-            rec = {k: (v if isinstance(v, (int, float)) else str(v)) for k, v in sig.items()}
-            if a.json:
-                print(json.dumps(rec), flush=True)
-            else:
-                print(f"ALERT {rec['Class']:<12} confidence {rec['Confidence']:.2f}, "
-                      f"{rec['TimeSinceTrigger']} ms after the trigger", flush=True)
+        listener.tick(now)
+        if msg is not None:
+            listener.frame(msg, now)
     bus.shutdown()
-    counts["e2e_errors"] = counts["e2e_wrong_crc"] + counts["e2e_repeated"] + counts["e2e_lost"]
-    counts["max_heartbeat_gap_ms"] = round(max_gap * 1000, 1)
-    print("summary " + json.dumps(counts), flush=True)
+    print("summary " + json.dumps(listener.summary()), flush=True)
     return 0
 
 

@@ -3,6 +3,11 @@
 CRC-8 in byte 0, alive counter 0..14 in the low nibble of byte 1, data ID from the
 DBC's ``E2E_DataID`` message attribute (mode BOTH). The sender (:class:`E2EProtector`)
 and the receiver (:class:`E2EChecker`) are shared by the vehicle alerts and the robot link.
+
+The receiver checks the frame itself before anything reads its bytes (:func:`frame_fault`):
+an error or remote frame, an identifier of the wrong kind (extended where the DBC says
+standard) or a length other than the DBC's is refused as ``bad_frame``, so a decoder
+behind a valid check never meets a frame it cannot decode.
 """
 from __future__ import annotations
 
@@ -41,11 +46,26 @@ class E2EProtector:
         return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
 
 
+def frame_fault(msg: can.Message, message) -> str | None:
+    """Why ``msg`` cannot be the DBC ``message`` (None if it can): the frame-level check, once per frame."""
+    if msg.is_error_frame:
+        return "error frame"
+    if msg.is_remote_frame:
+        return "remote frame"
+    if bool(msg.is_extended_id) != bool(message.is_extended_frame):
+        return "extended identifier" if msg.is_extended_id else "standard identifier"
+    if len(msg.data) != message.length:
+        return f"{len(msg.data)} data bytes, the DBC says {message.length}"
+    return None
+
+
 @dataclass
 class E2EResult:
     status: str
-    """'ok', 'initial' (first frame seen), 'wrong_crc', 'repeated', 'lost' (lost > 0 frames in between), 'unknown_id'."""
+    """'ok', 'initial' (first frame seen), 'wrong_crc', 'repeated', 'lost' (lost > 0 frames in between),
+    'unknown_id', 'bad_frame' (error/remote frame, wrong identifier kind or length: see ``reason``)."""
     lost: int = 0
+    reason: str = ""
 
     @property
     def valid(self) -> bool:
@@ -62,6 +82,7 @@ class E2EChecker:
     def __post_init__(self):
         if self.db is None:
             raise ValueError("E2EChecker needs the DBC whose messages it checks (db=...)")
+        self._messages = {m.frame_id: m for m in self.db.messages}
         self._ids = {m.frame_id: e2e_data_id(m) for m in self.db.messages}
         self._last: dict[int, int] = {}
 
@@ -73,11 +94,14 @@ class E2EChecker:
         return res
 
     def _check(self, msg: can.Message) -> E2EResult:
-        data_id = self._ids.get(msg.arbitration_id)
-        if data_id is None:
+        message = self._messages.get(msg.arbitration_id)
+        if message is None:
             return E2EResult("unknown_id")
+        fault = frame_fault(msg, message)
+        if fault is not None:
+            return E2EResult("bad_frame", reason=fault)
         data = bytearray(msg.data)
-        if len(data) < 2 or not p01.e2e_p01_check(data, data_id, length=len(data)):
+        if not p01.e2e_p01_check(data, self._ids[msg.arbitration_id], length=len(data)):
             return E2EResult("wrong_crc")
         counter = data[1] & 0x0F
         if counter > COUNTER_MAX:
@@ -95,6 +119,7 @@ class E2EChecker:
 
     @property
     def errors(self) -> int:
-        return self.counts.get("wrong_crc", 0) + self.counts.get("repeated", 0) + self.counts.get("lost_frames", 0)
+        return (self.counts.get("wrong_crc", 0) + self.counts.get("repeated", 0) + self.counts.get("lost_frames", 0)
+                + self.counts.get("bad_frame", 0))
 
 

@@ -32,6 +32,7 @@ from edge_runtime.canbus.bus import BUS_INTERFACES
 from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EProtector
 from edge_runtime.core.manifest import ASSETS_DIR
+from edge_runtime.wearable.backlog import AlertBacklog
 
 log = logging.getLogger(__name__)
 
@@ -61,8 +62,9 @@ class CanParams:
     """socketcand only: the hub's address."""
     port: int = config.setting(29536, config.TCP_PORT)
     """socketcand only: the hub's TCP port."""
-    heartbeat_period_s: float = config.setting(0.1, config.within(0.01, 10))
-    """WEARABLE_STATUS period (s): 10 Hz."""
+    heartbeat_period_s: float = config.setting(0.1, config.within(0.01, 0.1, "s"))
+    """WEARABLE_STATUS period (s): 10 Hz. At most 0.1 s: vehicle_alerts.dbc promises a heartbeat
+    every 100 ms and a listener treats 300 ms without one as the wearable gone."""
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,8 @@ class HealthCounts:
     """Samples of the live source with an axis at the sensor's range limit."""
     source_dropped: int = 0
     """Samples missing from the live source's stream (timestamp gaps)."""
+    alerts_undelivered: int = 0
+    """Alerts the bus did not take when they were made: sent late or lost (:mod:`~edge_runtime.wearable.backlog`)."""
 
     @property
     def dropped_samples(self) -> int:
@@ -101,6 +105,8 @@ def heartbeat_state(now: HealthCounts, before: HealthCounts) -> tuple[str, str]:
         return "degraded", "saturated"
     if now.detector_restarts > before.detector_restarts:
         return "degraded", "gaps"
+    if now.alerts_undelivered > before.alerts_undelivered:
+        return "degraded", "ok"  # the sensor is fine; alerts were late or lost while the bus was down
     return "running", "ok"
 
 
@@ -117,6 +123,7 @@ class WearableStatus:
         self._lock = threading.Lock()
         self._sensor = "ok"
         self._samples = self._non_finite = self._restarts = self._saturated = self._source_dropped = 0
+        self._alerts_undelivered = 0
         self._latencies_ms: list[float] = []
         self._reported = HealthCounts()  # as of the previous heartbeat
 
@@ -141,6 +148,11 @@ class WearableStatus:
         with self._lock:
             self._saturated, self._source_dropped = saturated, dropped
 
+    def set_alerts_undelivered(self, n: int) -> None:
+        """The publisher's running total of alerts sent late or lost while the bus was down."""
+        with self._lock:
+            self._alerts_undelivered = n
+
     def add_alert_latency(self, latency_ms: float) -> None:
         """Arrival of a capture's last sample -> its DISTRACTION_ALERT handed to the bus."""
         with self._lock:
@@ -153,7 +165,7 @@ class WearableStatus:
 
     def _counts(self) -> HealthCounts:
         return HealthCounts(self._sensor, self._samples, self._non_finite, self._restarts, self._saturated,
-                            self._source_dropped)
+                            self._source_dropped, self._alerts_undelivered)
 
     def alert_latencies_ms(self) -> list[float]:
         with self._lock:
@@ -242,6 +254,7 @@ class AlertPublisher:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._logger = can.Logger(str(log_path)) if log_path else None
+        self.backlog = AlertBacklog()
 
     # -- sending ----------------------------------------------------------
     def send(self, msg: can.Message) -> bool:
@@ -287,9 +300,28 @@ class AlertPublisher:
     def send_alert(self, alert: Any) -> bool:
         """A DISTRACTION_ALERT for an alert the policy made (the loop's would-alert verdict:
         t_trigger_s, t_alert_s, label, confidence, status, compute_us); True if the bus took it."""
+        self._send_backlog()
         ok = self.send(self.encoder.encode_alert(alert))
         self.alerts_sent += ok
+        if not ok:
+            self.backlog.hold(alert)
         return ok
+
+    def _send_backlog(self) -> None:
+        """Alerts held while the bus was down, sent late now that it may be back (or counted
+        lost when too old); the total goes to the status, so the next heartbeat says degraded."""
+        if self.bus is None or not len(self.backlog):
+            return
+        late, _ = self.backlog.take()
+        for k, (alert, _) in enumerate(late):
+            if not self.send(self.encoder.encode_alert(alert)):
+                for again, since in late[k:]:
+                    self.backlog.hold(again.alert, since_s=since)
+                break
+            self.backlog.sent()
+            self.alerts_sent += 1
+        c = self.backlog.counts()
+        self.status.set_alerts_undelivered(c.sent_late + c.lost)
 
     def on_decision(self, decision: Any) -> bool:
         """For a decision made elsewhere (a recording's, a test's): its DISTRACTION_ALERT if it is alerted."""
@@ -307,6 +339,7 @@ class AlertPublisher:
         while not self._stop.is_set():
             if self.bus is None and self.bus_factory is not None:
                 self._reconnect()
+            self._send_backlog()
             self.send_heartbeat()
             next_t += self.period
             now = time.monotonic()
@@ -331,8 +364,9 @@ class AlertPublisher:
             self._logger = None
 
     def close(self) -> None:
-        """Stop and shut the bus down."""
+        """Stop and shut the bus down; alerts still held are lost (counted in the summary)."""
         self.stop()
+        self.backlog.abandon()
         if self.bus is not None:
             self._drop_bus()
 
@@ -343,6 +377,8 @@ class AlertPublisher:
         self.close()
 
     def summary(self) -> dict:
-        return {"frames_sent": self.frames_sent, "alerts_sent": self.alerts_sent,
+        b = self.backlog.counts()
+        return {"frames_sent": self.frames_sent, "alerts_sent": self.alerts_sent, "alerts_held": b.held,
+                "alerts_sent_late": b.sent_late, "alerts_lost": b.lost + b.pending,
                 "heartbeats_sent": self.heartbeats_sent, "send_errors": self.send_errors,
                 "reconnects": self.reconnects}

@@ -1,6 +1,7 @@
 """``python -m edge_runtime wearable``: IMU -> detector -> ConvLSTM -> alert decisions on CAN (docs/design.md section 7).
 
-    python -m edge_runtime wearable (--replay FILE.csv | --imu serial:PATH[?key=HEX] | --imu sim[?options])
+    python -m edge_runtime wearable (--replay FILE.csv | --imu serial:PATH?key=@FILE|key=env:NAME|unsigned=yes
+                                     | --imu sim[?options])
         [--config BOX.toml] [--alerts OUT.jsonl] [--can-log OUT.log] [--duration S] [--realtime] [--quiet]
     python -m edge_runtime wearable [--config BOX.toml] --print-config
 
@@ -39,9 +40,11 @@ BAD_INPUT: tuple[type[BaseException], ...] = ()
 def add_arguments(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--replay", metavar="FILE.csv", help="a recording t,ax,ay,az (s, m/s^2), processed as fast as possible")
-    src.add_argument("--imu", metavar="serial:PATH[?key=HEX] | sim[?minutes=M&seed=S&...]",
-                     help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line (key: MAVLink 2 signing "
-                          "key), or 'sim': the simulated IMU firmware on a pseudo-terminal (development checkouts)")
+    src.add_argument("--imu", metavar="serial:PATH?key=@FILE|key=env:NAME|unsigned=yes | sim[?minutes=M&seed=S&...]",
+                     help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line, signed with the MAVLink 2 "
+                          "key in FILE or in the environment variable NAME (unsigned only when the spec says "
+                          "unsigned=yes, with a warning), or 'sim': the simulated IMU firmware on a "
+                          "pseudo-terminal (development checkouts)")
     p.add_argument("--duration", type=float, metavar="S", help="stop a live source after S seconds")
     p.add_argument("--can-log", metavar="OUT.log|.asc|.blf|.csv", help="write every CAN frame sent (python-can formats)")
     p.add_argument("--alerts", metavar="OUT.jsonl", help="write one JSON object per classifier decision")
@@ -110,13 +113,19 @@ class _Source:
         if self.live is not None:
             self.live.close()
 
+    def health(self) -> tuple[int, int]:
+        """(saturated, dropped) samples so far, the source's own counts for the status."""
+        if self.live is not None:
+            return self.live.stats.saturated, self.live.stats.dropped
+        return self.replay_stats.saturated, 0
+
 
 def _open_source(args: argparse.Namespace, cfg) -> _Source:
     from edge_runtime.wearable.sources import ReplayStats, read_imu_csv
 
     stats = ReplayStats()
     if args.replay:
-        blocks = read_imu_csv(args.replay, stats)
+        blocks = read_imu_csv(args.replay, stats, range_mps2=cfg.imu.range_mps2)
         if args.realtime:
             blocks = (b for block in blocks for b in _paced(block, cfg.imu.sample_rate_hz))
         return _Source(blocks, stats)
@@ -131,19 +140,28 @@ def _open_live_source(spec: str, cfg) -> MavlinkImuSource:
         from edge_runtime.wearable.sim_source import SimImuSource, SimSourceError
 
         try:
-            return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s)
+            return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s, range_mps2=cfg.imu.range_mps2)
         except SimSourceError as e:
             raise CliError(str(e)) from None
-    from edge_runtime.core.serial_line import parse_serial_spec
+    from edge_runtime.core.serial_line import KEY_FORMS, parse_link_spec
 
     try:
-        path, key = parse_serial_spec(spec)
+        line = parse_link_spec(spec)
     except ValueError as e:
         raise CliError(f"--imu: {e}") from None
+    if line.key_inline:  # argv is readable by every user of the box (ps, /proc, shell history)
+        raise CliError(f"--imu: a signing key on the command line is visible to every user; give {KEY_FORMS}")
+    if line.key is None and not line.unsigned:
+        raise CliError(f"--imu serial:{line.path}: no signing key; give {KEY_FORMS}, "
+                       "or add ?unsigned=yes if an unsigned IMU line is intended")
+    if line.unsigned:
+        print(f"warning: --imu serial:{line.path} is unsigned (unsigned=yes): any device on the line "
+              "can inject or replay IMU samples", file=sys.stderr)
     from edge_runtime.wearable.mavlink_source import MavlinkImuSource
 
     try:
-        return MavlinkImuSource(path, signing_key=key, silence_timeout_s=cfg.imu.silence_timeout_s)
+        return MavlinkImuSource(line.path, signing_key=line.key, silence_timeout_s=cfg.imu.silence_timeout_s,
+                                range_mps2=cfg.imu.range_mps2)
     except ValueError as e:
         raise CliError(str(e)) from None
 
@@ -218,8 +236,7 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
 
     status = loop.status
     for event in source.events:
-        if source.live is not None:
-            status.set_source_counts(source.live.stats.saturated, source.live.stats.dropped)
+        status.set_source_counts(*source.health())
         if not isinstance(event, ImuBlock):  # a live source's SourceStatus
             _sensor_state(loop.publisher, event.state, f" ({event.since_s:.2f} s since the last sample)")
             if event.state == "disconnected":
@@ -252,13 +269,17 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
         f"  captures {s.captures}: alerts {s.statuses['alert']}, uncertain {s.statuses['uncertain']}, "
         f"not alerted {s.statuses['not_alerted']}\n"
         f"  by class: " + (", ".join(f"{k} {v}" for k, v in sorted(s.labels.items())) or "none") + "\n"
-        f"  bad samples: non-finite {h.non_finite}, dropped (time not advancing) {r.dropped_non_monotonic}, "
-        f"gaps {r.gaps}, detector restarts {h.detector_restarts}"
+        f"  bad samples: non-finite or out of range {h.non_finite} (out of range "
+        f"{r.out_of_range if source.live is None else source.live.stats.out_of_range}), saturated {h.saturated}, "
+        f"dropped (time not advancing) {r.dropped_non_monotonic}, gaps {r.gaps}, detector restarts {h.detector_restarts}"
     )
     c = loop.publisher.summary()
     print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']}, "
           f"heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, reconnects {c['reconnects']}"
           + (f"; logged to {can_log}" if can_log else ""))
+    if c["alerts_held"] or c["alerts_lost"]:
+        print(f"  alerts the bus did not take at first {c['alerts_held']}: sent late {c['alerts_sent_late']}, "
+              f"lost {c['alerts_lost']} (WEARABLE_STATUS said degraded)")
     latencies_ms = loop.status.alert_latencies_ms()
     if latencies_ms:
         import numpy as np

@@ -30,7 +30,7 @@ import numpy as np
 from edge_runtime import config
 from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
 from edge_runtime.wearable.detector import Capture, DetectorConfig, StreamingDetector
-from edge_runtime.wearable.labels import OTHER
+from edge_runtime.wearable.labels import CLASSES, OTHER
 from edge_runtime.wearable.sources import SAMPLE_RATE_HZ, ImuBlock
 
 
@@ -54,6 +54,8 @@ class AlertPolicy:
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_confidence <= 1.0:
             raise ValueError("min_confidence must lie in [0, 1]")
+        if set(CLASSES) <= set(self.never_alert):
+            raise ValueError(f"never_alert: {list(self.never_alert)} holds every class; nothing would ever be alerted")
 
     def status(self, label: str, confidence: float) -> str:
         if label in self.never_alert:

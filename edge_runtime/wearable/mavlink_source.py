@@ -18,9 +18,14 @@ Bad input is counted in :attr:`MavlinkImuSource.stats` and handled:
   ``continuous=False``);
 * NaN samples are passed on (the loop counts them and resets its detector);
   SCALED_IMU's -32768 is the "invalid" marker and becomes NaN;
-* saturation: a sample with an axis at the int16 limit or beyond
-  ``saturation_mps2`` is counted (and passed on);
-* with a signing key, unsigned or wrongly signed packets are rejected and counted.
+* values: :func:`~edge_runtime.wearable.sources.screen_samples`, the one check every source
+  uses: an axis at the configured full scale ``range_mps2`` (or SCALED_IMU's int16 limit)
+  is counted as saturated and passed on; beyond it (or inf, or a float32 overflow) the
+  sample is counted and passed on as NaN, so the model never sees it;
+* with a signing key, unsigned or wrongly signed packets are rejected and counted; the
+  signature is checked before the stream's timestamp moves (``core.serial_line.SignedMAVLink``),
+  so a forged packet stamped far in the future cannot make later genuine packets look replayed;
+* a stray start byte (0xFD) costs only itself: the parser rescans the bytes behind it.
 """
 from __future__ import annotations
 
@@ -30,9 +35,9 @@ from typing import Callable, Iterator, Union
 
 import numpy as np
 import serial
-from pymavlink.dialects.v20 import common as mavlink2
 
-from edge_runtime.wearable.sources import MAX_GAP_PERIODS, SAMPLE_RATE_HZ, ImuBlock
+from edge_runtime.core.serial_line import make_mavlink, signature_failure
+from edge_runtime.wearable.sources import MAX_GAP_PERIODS, SAMPLE_RATE_HZ, ImuBlock, ImuParams, screen_samples
 
 MG_TO_MPS2 = 9.80665e-3
 G_MPS2 = 9.80665
@@ -70,6 +75,9 @@ class SourceStats:
     """Duplicate or backwards timestamps (dropped)."""
     reboots: int = 0
     saturated: int = 0
+    """Samples with an axis at full scale (the configured range, or SCALED_IMU's int16 limit)."""
+    out_of_range: int = 0
+    """Samples with an axis beyond the configured range: passed on as NaN (never to the model)."""
     nan_samples: int = 0
     signature_failures: int = 0
     silent_events: int = 0
@@ -79,40 +87,135 @@ class SourceStats:
 Event = Union[ImuBlock, SourceStatus]
 
 
-class MavlinkImuSource:
-    def __init__(self, path: str, baud: int = 921600, signing_key: bytes | None = None,
-                 silence_timeout_s: float = 0.2, saturation_mps2: float = 2 * G_MPS2,
-                 on_status: Callable[[SourceStatus], None] | None = None,
-                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S):
-        self.path = path
-        self.silence_timeout_s = float(silence_timeout_s)
-        self.saturation_mps2 = float(saturation_mps2)
-        self.on_status = on_status
+class ImuPacketDecoder:
+    """Bytes of the serial line -> ImuBlocks (and "ok" SourceStatus events): the MAVLink
+    parser, the signature check and the timestamp bookkeeping, with no line and no clock
+    of its own (``feed`` is given the arrival time), so it can be driven with any bytes."""
+
+    def __init__(self, signing_key: bytes | None = None, range_mps2: float = ImuParams.range_mps2,
+                 block_samples: int = BLOCK_SAMPLES, stats: SourceStats | None = None):
+        self.range_mps2 = float(range_mps2)
         self.block_samples = int(block_samples)
-        self.read_timeout_s = min(float(read_timeout_s), READ_TIMEOUT_S)
-        self.stats = SourceStats()
-        try:
-            self.ser = serial.Serial(path, baudrate=baud, timeout=self.read_timeout_s)
-        except (serial.SerialException, OSError) as e:
-            raise ValueError(f"cannot open IMU serial line {path!r}: {e}") from None
-        self.mav = mavlink2.MAVLink(None)
-        self.mav.robust_parsing = True
-        if signing_key is not None:
-            if len(signing_key) != 32:
-                raise ValueError(f"MAVLink signing key must be 32 bytes, got {len(signing_key)}")
-            self.mav.signing.secret_key = bytes(signing_key)
-            self.mav.signing.timestamp = int((time.time() - 1420070400) * 100_000)
-            # allow_unsigned_callback stays None: unsigned packets are refused
+        self.stats = stats if stats is not None else SourceStats()
+        # The robot link's endpoint: it checks a signature before any timestamp state changes
+        # (a forged far-future packet cannot starve the line) and resynchronises after a stray
+        # start byte. With a key, unsigned packets are refused.
+        self.mav = make_mavlink(None, 0, 0, signing_key, link_id=0)
         self._period = 1.0 / SAMPLE_RATE_HZ
-        self._closed = False
         self._last_t: float | None = None
         self._pending: list[tuple[float, float, float]] = []
         self._pending_t0: float | None = None
         self._pending_continuous = False  # the first block of a stream is not continuous
         self._next_continuous = False
-        self._last_rx = time.monotonic()
         self._rx: float | None = None
-        self._silent = False
+        self.last_sample_monotonic_s: float | None = None
+        """Arrival time of the last sample accepted (None before the first)."""
+        self.silent = False
+        """Set by the owner when the sensor went silent; the next sample reports "ok"."""
+
+    @property
+    def last_t_s(self) -> float | None:
+        return self._last_t
+
+    def feed(self, data: bytes, rx_monotonic_s: float, out: list) -> None:
+        """The events in ``data`` (arrived at ``rx_monotonic_s``) appended to ``out``; a block
+        that is not full yet is held back until :meth:`flush`."""
+        self._rx = rx_monotonic_s
+        for m in self.mav.parse_buffer(data) or ():
+            self._handle(m, out)
+
+    def _handle(self, m, out: list) -> None:
+        mtype = m.get_type()
+        if mtype == "BAD_DATA":
+            if signature_failure(self.mav, m) is not None:
+                self.stats.signature_failures += 1
+            else:
+                self.stats.crc_errors += 1
+                self.stats.bad_bytes += len(getattr(m, "data", b""))
+            return
+        self.stats.packets += 1
+        if mtype == "HEARTBEAT":
+            self.stats.heartbeats += 1
+            return
+        if mtype == "HIGHRES_IMU":
+            t = m.time_usec * 1e-6
+            acc = (float(m.xacc), float(m.yacc), float(m.zacc))
+            int16_sat = False
+        elif mtype == "SCALED_IMU":
+            t = m.time_boot_ms * 1e-3
+            raw = (m.xacc, m.yacc, m.zacc)
+            acc = tuple(float("nan") if r == INT16_INVALID else r * MG_TO_MPS2 for r in raw)
+            int16_sat = any(abs(r) >= INT16_SAT for r in raw if r != INT16_INVALID)
+        else:
+            return
+        nan = any(v != v for v in acc)
+        screened, out_of_range, at_scale = screen_samples(np.asarray(acc), self.range_mps2)
+        self.stats.out_of_range += out_of_range
+        self._sample(t, tuple(screened[0]), int16_sat or at_scale > 0, nan, out)
+
+    def _sample(self, t: float, acc, sat: bool, nan: bool, out: list) -> None:
+        if self._last_t is not None:
+            dt = t - self._last_t
+            if dt < -REBOOT_BACKJUMP_S:  # sensor rebooted: a new stream
+                self.stats.reboots += 1
+                self.flush(out)
+                self._next_continuous = False
+            elif dt <= 0.5 * self._period:
+                self.stats.out_of_order += 1
+                return
+            elif dt > MAX_GAP_PERIODS * self._period:
+                self.stats.gaps += 1
+                self.stats.dropped += max(0, int(round(dt / self._period)) - 1)
+                self.flush(out)
+                self._next_continuous = False
+        self.last_sample_monotonic_s = self._rx
+        if self.silent:
+            self.silent = False
+            out.append(SourceStatus("ok", 0.0, self._last_t))
+        self._last_t = t
+        self.stats.samples += 1
+        if sat:
+            self.stats.saturated += 1
+        if nan:
+            self.stats.nan_samples += 1
+        if not self._pending:
+            self._pending_t0 = t
+            self._pending_continuous = self._next_continuous
+            self._next_continuous = True
+        self._pending.append(acc)
+        if len(self._pending) >= self.block_samples:
+            self.flush(out)
+
+    def flush(self, out: list) -> None:
+        """The samples held back, as a block appended to ``out``."""
+        if not self._pending:
+            return
+        out.append(ImuBlock(self._pending_t0, np.asarray(self._pending, dtype=np.float32),
+                            self._pending_continuous, rx_monotonic_s=self._rx))
+        self.stats.blocks += 1
+        self._pending = []
+        self._pending_t0 = None
+
+
+class MavlinkImuSource:
+    """A :class:`ImuPacketDecoder` on a serial line, with the silence watch."""
+
+    def __init__(self, path: str, baud: int = 921600, signing_key: bytes | None = None,
+                 silence_timeout_s: float = 0.2, range_mps2: float = ImuParams.range_mps2,
+                 on_status: Callable[[SourceStatus], None] | None = None,
+                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S):
+        self.path = path
+        self.silence_timeout_s = float(silence_timeout_s)
+        self.on_status = on_status
+        self.read_timeout_s = min(float(read_timeout_s), READ_TIMEOUT_S)
+        self.decoder = ImuPacketDecoder(signing_key, range_mps2, block_samples)
+        self.stats = self.decoder.stats
+        try:
+            self.ser = serial.Serial(path, baudrate=baud, timeout=self.read_timeout_s)
+        except (serial.SerialException, OSError) as e:
+            raise ValueError(f"cannot open IMU serial line {path!r}: {e}") from None
+        self._closed = False
+        self._opened_s = time.monotonic()
 
     # -- public --------------------------------------------------------------------------
     def close(self) -> None:
@@ -137,23 +240,24 @@ class MavlinkImuSource:
                 break
             got = self._read()
             if got:
-                self._rx = time.monotonic()
-                for m in self.mav.parse_buffer(got) or ():
-                    self._handle(m, out)
+                self.decoder.feed(got, time.monotonic(), out)
             # hand over at once what this read brought: a capture's last sample waits for nothing
-            self._flush(out)
+            self.decoder.flush(out)
             now = time.monotonic()
-            if now - self._last_rx >= self.silence_timeout_s and not out:
+            last_rx = self.decoder.last_sample_monotonic_s or self._opened_s
+            if now - last_rx >= self.silence_timeout_s and not out:
                 # repeated every read timeout while silent, so that the caller keeps control
                 # (heartbeats); silent_events counts the transitions only
-                self._flush(out)
-                if not self._silent:
-                    self._silent = True
+                if not self.decoder.silent:
+                    self.decoder.silent = True
                     self.stats.silent_events += 1
-                self._status(out, SourceStatus("silent", now - self._last_rx, self._last_t))
+                out.append(SourceStatus("silent", now - last_rx, self.decoder.last_t_s))
             while out:
-                yield out.pop(0)
-        self._flush(out)
+                event = out.pop(0)
+                if self.on_status is not None and isinstance(event, SourceStatus):
+                    self.on_status(event)
+                yield event
+        self.decoder.flush(out)
         yield from out
 
     # -- internals -----------------------------------------------------------------------
@@ -166,78 +270,3 @@ class MavlinkImuSource:
             time.sleep(self.read_timeout_s)
             return b""
 
-    def _status(self, out: list, st: SourceStatus) -> None:
-        if self.on_status is not None:
-            self.on_status(st)
-        out.append(st)
-
-    def _handle(self, m, out: list) -> None:
-        mtype = m.get_type()
-        if mtype == "BAD_DATA":
-            reason = str(getattr(m, "reason", ""))
-            if "signature" in reason.lower():
-                self.stats.signature_failures += 1
-            else:
-                self.stats.crc_errors += 1
-                self.stats.bad_bytes += len(getattr(m, "data", b""))
-            return
-        self.stats.packets += 1
-        if mtype == "HEARTBEAT":
-            self.stats.heartbeats += 1
-            return
-        if mtype == "HIGHRES_IMU":
-            t = m.time_usec * 1e-6
-            acc = (float(m.xacc), float(m.yacc), float(m.zacc))
-            sat = any(abs(v) >= self.saturation_mps2 * (1 - 1e-6) for v in acc)
-        elif mtype == "SCALED_IMU":
-            t = m.time_boot_ms * 1e-3
-            raw = (m.xacc, m.yacc, m.zacc)
-            acc = tuple(float("nan") if r == INT16_INVALID else r * MG_TO_MPS2 for r in raw)
-            sat = any(abs(r) >= INT16_SAT for r in raw if r != INT16_INVALID) or \
-                any(abs(v) >= self.saturation_mps2 * (1 - 1e-6) for v in acc)
-        else:
-            return
-        self._sample(t, acc, sat, out)
-
-    def _sample(self, t: float, acc, sat: bool, out: list) -> None:
-        now = time.monotonic()
-        if self._last_t is not None:
-            dt = t - self._last_t
-            if dt < -REBOOT_BACKJUMP_S:  # sensor rebooted: a new stream
-                self.stats.reboots += 1
-                self._flush(out)
-                self._next_continuous = False
-            elif dt <= 0.5 * self._period:
-                self.stats.out_of_order += 1
-                return
-            elif dt > MAX_GAP_PERIODS * self._period:
-                self.stats.gaps += 1
-                self.stats.dropped += max(0, int(round(dt / self._period)) - 1)
-                self._flush(out)
-                self._next_continuous = False
-        self._last_rx = now
-        if self._silent:
-            self._silent = False
-            self._status(out, SourceStatus("ok", 0.0, self._last_t))
-        self._last_t = t
-        self.stats.samples += 1
-        if sat:
-            self.stats.saturated += 1
-        if any(v != v for v in acc):
-            self.stats.nan_samples += 1
-        if not self._pending:
-            self._pending_t0 = t
-            self._pending_continuous = self._next_continuous
-            self._next_continuous = True
-        self._pending.append(acc)
-        if len(self._pending) >= self.block_samples:
-            self._flush(out)
-
-    def _flush(self, out: list) -> None:
-        if not self._pending:
-            return
-        out.append(ImuBlock(self._pending_t0, np.asarray(self._pending, dtype=np.float32),
-                            self._pending_continuous, rx_monotonic_s=self._rx))
-        self.stats.blocks += 1
-        self._pending = []
-        self._pending_t0 = None

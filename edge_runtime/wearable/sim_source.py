@@ -11,7 +11,7 @@ Options ride in the spec as a query string::
     sim                                  3 minutes of driving, seed 0
     sim?minutes=10&seed=4                another drive
     sim?csv=drive/imu.csv&speed=10      stream a recording, ten times faster than real time
-    sim?key=<64 hex>                     signed MAVLink 2 (firmware and runtime share the key)
+    sim?key=@FILE | key=env:NAME         signed MAVLink 2 (firmware and runtime share the key)
     sim?drop=0.01&corrupt=0.002&nan_burst=0.001&saturate=2&stop_after=30&message=scaled
                                          the firmware's fault modes (see ``python -m firmware_sim imu -h``)
 
@@ -25,9 +25,10 @@ import sys
 import threading
 from urllib.parse import parse_qsl
 
-from edge_runtime.core.serial_line import parse_signing_key
+from edge_runtime.core.serial_line import read_signing_key
 from edge_runtime.errors import InputError
 from edge_runtime.wearable.mavlink_source import MavlinkImuSource, SourceStatus
+from edge_runtime.wearable.sources import ImuParams
 
 FIRMWARE_OPTIONS = ("minutes", "seed", "csv", "speed", "message", "key", "drop", "drop_burst", "corrupt",
                     "nan_burst", "saturate", "stop_after")
@@ -61,7 +62,7 @@ def firmware_command(opts: dict[str, str]) -> list[str]:
 class SimImuSource(MavlinkImuSource):
     """A :class:`MavlinkImuSource` on the pseudo-terminal of a simulated IMU child process."""
 
-    def __init__(self, spec: str, silence_timeout_s: float = 0.15):
+    def __init__(self, spec: str, silence_timeout_s: float = 0.15, range_mps2: float = ImuParams.range_mps2):
         opts = parse_sim_spec(spec)
         if importlib.util.find_spec("firmware_sim") is None:
             raise SimSourceError("--imu sim: the simulated IMU firmware (package firmware_sim) is not installed "
@@ -69,14 +70,15 @@ class SimImuSource(MavlinkImuSource):
         key = None
         if "key" in opts:
             try:
-                key = parse_signing_key(opts["key"], f"--imu {spec}: key")
+                key = read_signing_key(opts["key"], "--imu sim: key")
+                opts = {**opts, "key": key.hex()}  # the simulated firmware (a development tool) takes hex
             except ValueError as e:
                 raise SimSourceError(str(e)) from None
         self.proc = subprocess.Popen(firmware_command(opts), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, bufsize=1)
         path = self._first_line()
         try:
-            super().__init__(path, signing_key=key, silence_timeout_s=silence_timeout_s)
+            super().__init__(path, signing_key=key, silence_timeout_s=silence_timeout_s, range_mps2=range_mps2)
         except ValueError:
             self._stop_child()
             raise

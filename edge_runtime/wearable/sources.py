@@ -14,7 +14,9 @@ import io
 import math
 from dataclasses import dataclass, field
 from fractions import Fraction
+from itertools import chain, islice
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -26,6 +28,12 @@ SAMPLE_RATE_HZ = 100
 CSV_HEADER = ("t", "ax", "ay", "az")
 MAX_GAP_PERIODS = 1.5
 """A step between timestamps longer than this many sample periods is a gap."""
+MAX_TIME_S = 1e10
+"""A recording's times are seconds (of a session, or since 1970: 1.7e9 now); beyond this
+(about 300 years) a time is not one, and every sample after it would be dropped as going
+back in time, so the line is refused."""
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 10_000.0
+"""Recording rates the replay resamples from; outside, the timestamps are not a sample clock."""
 
 
 @config.section("imu")
@@ -36,11 +44,13 @@ class ImuParams:
     sample_rate_hz: int = config.setting(SAMPLE_RATE_HZ, ("100 (the rate the shipped classifier was trained at)",
                                                           lambda v: v == SAMPLE_RATE_HZ))
     """Rate the detector and model expect; recordings at other rates are resampled to it."""
-    range_mps2: float = config.setting(156.9, config.POSITIVE)
-    """Accelerometer full scale (m/s^2, 16 g); readings at or beyond it count as saturated."""
-    silence_timeout_s: float = config.setting(0.15, config.POSITIVE)
+    range_mps2: float = config.setting(156.9, config.within(19.6, 1000, "m/s^2"))
+    """Accelerometer full scale (m/s^2, 16 g); readings at or beyond it count as saturated and
+    are clipped to it before the model sees them."""
+    silence_timeout_s: float = config.setting(0.15, config.within(0.02, 0.15, "s"))
     """No sample for this long: the sensor is silent. WEARABLE_STATUS says so at once (an
-    extra heartbeat on every change of state), so within 200 ms of the last sample."""
+    extra heartbeat on every change of state), so within 200 ms of the last sample: the
+    source looks every 50 ms, hence at most 0.15 s (and at least two sample periods)."""
 
 
 @dataclass
@@ -61,94 +71,200 @@ class ReplayStats:
     rows: int = 0
     dropped_non_monotonic: int = 0
     gaps: int = 0
+    out_of_range: int = 0
+    """Samples with an axis beyond the sensor's range: impossible readings, passed on as NaN
+    (the loop counts them with the non-finite ones and restarts the detector around them)."""
+    saturated: int = 0
+    """Samples with an axis at the sensor's full scale (passed on: a real sensor clips there)."""
     source_rate_hz: float = SAMPLE_RATE_HZ
     notices: list[str] = field(default_factory=list)
 
 
-def _load_csv(path: Path) -> np.ndarray:
+CHUNK_ROWS = 1 << 14
+"""Rows parsed at a time: a replay holds one chunk, whatever the recording's length (larger
+chunks parse no faster and leave the allocator a larger high-water mark)."""
+SATURATION_TOLERANCE = 1e-6
+"""A reading within this fraction of full scale is at full scale (saturated), beyond it: impossible."""
+
+
+def screen_samples(acc: np.ndarray, range_mps2: float) -> tuple[np.ndarray, int, int]:
+    """The one check of sample values, for every source: ``acc`` (n, 3) as float32 with each
+    sample that has a non-finite axis or one beyond ``range_mps2`` set to NaN (so the loop
+    counts it and the model never sees it), the number set to NaN for being out of range,
+    and the number at full scale (saturated, passed on)."""
+    a = np.asarray(acc, dtype=np.float64).reshape(-1, 3)
+    with np.errstate(invalid="ignore", over="ignore"):
+        mag = np.abs(a)
+        beyond = (mag > range_mps2 * (1 + SATURATION_TOLERANCE)).any(axis=1)
+        at_scale = (mag >= range_mps2 * (1 - SATURATION_TOLERANCE)).any(axis=1) & ~beyond
+        out = a.astype(np.float32)  # finite float64 beyond float32 becomes inf here; it is beyond range too
+    out[beyond] = np.nan
+    return out, int(beyond.sum()), int(at_scale.sum())
+
+
+def _open_csv(path: Path):
     try:
-        text = path.read_text()
+        f = path.open("rb")
     except OSError as e:
         raise InputError(f"{path}: cannot read ({e.strerror or e})") from None
-    lines = text.splitlines()
-    if not lines:
+    first = f.readline()
+    if not first:
+        f.close()
         raise InputError(f"{path}: empty file; expected the header 't,ax,ay,az'")
-    header = tuple(c.strip() for c in lines[0].split(","))
+    header = tuple(c.strip() for c in first.decode("utf-8", "replace").split(","))
     if header != CSV_HEADER:
-        raise InputError(f"{path}:1: header is {','.join(header)!s}; expected 't,ax,ay,az'")
+        f.close()
+        shown = ",".join(header)[:60]
+        raise InputError(f"{path}:1: header is {shown!s}; expected 't,ax,ay,az'")
+    return f
+
+
+def _parse_rows(path: Path, lines: list[bytes], first_no: int) -> np.ndarray:
+    """Rows of ``t,ax,ay,az`` -> (n, 4) float64; a malformed line is an InputError naming it."""
+    fast = _parse_plain_rows(lines)
+    if fast is not None:
+        return fast
     try:
-        data = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2, dtype=np.float64)
+        text = b"".join(lines).decode("utf-8")
+        data = np.loadtxt(io.StringIO(text), delimiter=",", ndmin=2, dtype=np.float64)
+        if data.shape[1:] == (4,) or data.size == 0:
+            return data.reshape(-1, 4)
+    except (UnicodeDecodeError, ValueError):
+        pass
+    for no, raw in enumerate(lines, start=first_no):  # find the offending line
+        try:
+            line = raw.decode("utf-8")
+        except UnicodeDecodeError as e:
+            raise InputError(f"{path}:{no}: not UTF-8 text (byte {e.start + 1} of the line)") from None
+        cells = line.split(",")
+        if not line.strip():
+            raise InputError(f"{path}:{no}: empty line")
+        if len(cells) != 4:
+            raise InputError(f"{path}:{no}: expected 4 fields t,ax,ay,az, got {len(cells)}")
+        for name, cell in zip(CSV_HEADER, cells):
+            try:
+                float(cell)
+            except ValueError:
+                raise InputError(f"{path}:{no}: field {name!r} is not a number: {cell.strip()[:40]!r}") from None
+    raise InputError(f"{path}:{first_no}: unreadable CSV")
+
+
+def _parse_plain_rows(lines: list[bytes]) -> np.ndarray | None:
+    """The common case, about twice as fast as np.loadtxt: every line has exactly four
+    comma-separated numbers. None for anything else (blank lines, text, non-UTF-8 ...)."""
+    if any(line.count(b",") != 3 for line in lines):
+        return None
+    try:
+        values = np.fromstring(b"".join(lines).replace(b"\n", b","), dtype=np.float64, sep=",")
     except ValueError:
-        data = None
-    if data is None or data.shape[1:] != (4,):
-        for no, line in enumerate(lines[1:], start=2):  # find the offending line
-            cells = line.split(",")
-            if not line.strip():
-                raise InputError(f"{path}:{no}: empty line")
-            if len(cells) != 4:
-                raise InputError(f"{path}:{no}: expected 4 fields t,ax,ay,az, got {len(cells)}")
-            for name, cell in zip(CSV_HEADER, cells):
-                try:
-                    float(cell)
-                except ValueError:
-                    raise InputError(f"{path}:{no}: field {name!r} is not a number: {cell.strip()!r}") from None
-        raise InputError(f"{path}: unreadable CSV")
-    if len(data) == 0:
-        raise InputError(f"{path}: no samples after the header")
-    bad_t = np.flatnonzero(~np.isfinite(data[:, 0]))
-    if bad_t.size:
-        raise InputError(f"{path}:{bad_t[0] + 2}: field 't' is not a finite time")
-    return data
+        return None
+    return values.reshape(-1, 4) if values.size == 4 * len(lines) else None
+
+
+def _chunks(path: Path, f, chunk_rows: int) -> Iterator[tuple[int, np.ndarray]]:
+    """(line number of the first row, rows) of at most ``chunk_rows``; checks 't' is finite."""
+    no = 2
+    while lines := list(islice(f, chunk_rows)):
+        data = _parse_rows(path, lines, no)
+        with np.errstate(invalid="ignore"):
+            bad_t = np.flatnonzero(~(np.abs(data[:, 0]) <= MAX_TIME_S))  # NaN fails the comparison too
+        if bad_t.size:
+            raise InputError(f"{path}:{no + bad_t[0]}: field 't' is not a time in seconds "
+                             f"(finite, at most {MAX_TIME_S:g}): {data[bad_t[0], 0]!r}")
+        yield no, data
+        no += len(lines)
 
 
 def _rate_ratio(rate_hz: float) -> Fraction:
     return Fraction(SAMPLE_RATE_HZ / rate_hz).limit_denominator(50)
 
 
-def read_imu_csv(path: str | Path, stats: ReplayStats | None = None) -> list[ImuBlock]:
-    """A recording ``t,ax,ay,az`` (s, m/s^2) as continuous 100 Hz blocks.
+def read_imu_csv(path: str | Path, stats: ReplayStats | None = None, range_mps2: float = ImuParams.range_mps2,
+                 chunk_rows: int = CHUNK_ROWS) -> Iterator[ImuBlock]:
+    """A recording ``t,ax,ay,az`` (s, m/s^2) as continuous 100 Hz blocks, streamed: the file is
+    read ``chunk_rows`` at a time, so memory does not grow with the recording's length.
 
-    Out-of-order or duplicate timestamps are dropped and counted; a step of more
-    than 1.5 periods starts a new block; a recording at another constant rate is
-    resampled to 100 Hz with a notice. NaN/inf samples are passed on: the loop
-    counts them and resets the detector around them.
+    The header, the first chunk and the sample rate are checked at once (bad input is
+    reported before anything runs); a malformed line further on ends the replay there
+    with an InputError naming it. Out-of-order or duplicate timestamps are dropped and
+    counted; a step of more than 1.5 periods (the period: the median step of the first
+    chunk) starts a new block; a recording at another constant rate is resampled to 100 Hz
+    with a notice (chunk by chunk). Sample values go through :func:`screen_samples`:
+    non-finite and out-of-range samples reach the loop as NaN and are counted, never fatal.
     """
     path = Path(path)
     stats = stats if stats is not None else ReplayStats()
-    data = _load_csv(path)
-    stats.rows = len(data)
+    f = _open_csv(path)
+    try:
+        chunks = _chunks(path, f, chunk_rows)
+        first = next(chunks, None)
+        if first is None or not len(first[1]):
+            raise InputError(f"{path}: no samples after the header")
+        period, ratio = _replay_rate(path, first[1], stats)
+    except BaseException:
+        f.close()
+        raise
+    return _replay_blocks(f, first, chunks, period, ratio, range_mps2, stats, path)
+
+
+def _replay_rate(path: Path, data: np.ndarray, stats: ReplayStats) -> tuple[float, Fraction]:
     t = data[:, 0]
-    keep = np.ones(len(t), bool)
-    if len(t) > 1:  # drop samples that do not advance time
-        running_max = np.maximum.accumulate(t)
-        keep[1:] = t[1:] > running_max[:-1]
-    stats.dropped_non_monotonic = int((~keep).sum())
-    if stats.dropped_non_monotonic:
-        stats.notices.append(f"{path}: dropped {stats.dropped_non_monotonic} samples whose time did not advance")
-    t, acc = t[keep], data[keep, 1:]
+    t = t[np.r_[True, t[1:] > np.maximum.accumulate(t)[:-1]]]
     if len(t) < 2:
-        return [ImuBlock(float(t[0]), acc.astype(np.float32), True)]
-    dt = np.diff(t)
-    period = float(np.median(dt))
+        return 1.0 / SAMPLE_RATE_HZ, Fraction(1)
+    period = float(np.median(np.diff(t)))
     rate = 1.0 / period
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        raise InputError(f"{path}: the timestamps give a sample rate of {rate:.3g} Hz (median step {period:.3g} s); "
+                         f"expected {MIN_RATE_HZ:g} to {MAX_RATE_HZ:g} Hz")
     ratio = Fraction(1)
     if abs(rate - SAMPLE_RATE_HZ) > 0.01 * SAMPLE_RATE_HZ:
         ratio = _rate_ratio(rate)
         if ratio.numerator > 50 or math.isclose(float(ratio), 0.0):
             raise InputError(f"{path}: sample rate {rate:.3g} Hz cannot be resampled to {SAMPLE_RATE_HZ} Hz")
-        stats.notices.append(f"{path}: recorded at {rate:.4g} Hz; resampled to {SAMPLE_RATE_HZ} Hz (polyphase {ratio.numerator}/{ratio.denominator})")
+        stats.notices.append(f"{path}: recorded at {rate:.4g} Hz; resampled to {SAMPLE_RATE_HZ} Hz "
+                             f"(polyphase {ratio.numerator}/{ratio.denominator})")
     stats.source_rate_hz = rate
-    breaks = np.flatnonzero(dt > MAX_GAP_PERIODS * period) + 1
-    stats.gaps = int(breaks.size)
-    if breaks.size:
-        stats.notices.append(f"{path}: {breaks.size} gap(s) in time; the detector restarts after each")
-    blocks = []
-    for k, (a, b) in enumerate(zip([0, *breaks], [*breaks, len(t)])):
-        seg = acc[a:b]
-        if ratio != 1:
-            seg = _resample_segment(seg, ratio)
-        blocks.append(ImuBlock(float(t[a]), seg.astype(np.float32), continuous=(k == 0)))
-    return blocks
+    return period, ratio
+
+
+def _replay_blocks(f, first, chunks, period: float, ratio: Fraction, range_mps2: float,
+                   stats: ReplayStats, path: Path) -> Iterator[ImuBlock]:
+    last_t: float | None = None
+    with f:
+        for _, data in chain([first], chunks):
+            stats.rows += len(data)
+            t = data[:, 0]
+            prev = -math.inf if last_t is None else last_t
+            keep = t > np.maximum.accumulate(np.r_[prev, t])[:-1]  # drop samples that do not advance time
+            dropped = int((~keep).sum())
+            if dropped and not stats.dropped_non_monotonic:
+                stats.notices.append(f"{path}: samples whose time did not advance are dropped (counted)")
+            stats.dropped_non_monotonic += dropped
+            t, acc = t[keep], data[keep, 1:]
+            if not len(t):
+                continue
+            steps = np.diff(np.r_[prev, t])
+            breaks = np.flatnonzero(steps > MAX_GAP_PERIODS * period)
+            if last_t is None:
+                breaks = breaks[1:]  # the very first sample starts the first block
+            n_gaps = int(breaks.size)
+            if n_gaps and not stats.gaps:
+                stats.notices.append(f"{path}: gap(s) in time; the detector restarts after each (counted)")
+            stats.gaps += n_gaps
+            acc, out_of_range, saturated = screen_samples(acc, range_mps2)
+            stats.out_of_range += out_of_range
+            stats.saturated += saturated
+            starts = set(breaks.tolist())
+            bounds = [0, *sorted(starts), len(t)]
+            for a, b in zip(bounds[:-1], bounds[1:]):
+                if b <= a:
+                    continue
+                seg = acc[a:b]
+                if ratio != 1:
+                    seg = np.clip(_resample_segment(seg, ratio), -range_mps2, range_mps2).astype(np.float32)
+                yield ImuBlock(float(t[a]), seg, continuous=a not in starts)
+            last_t = float(t[-1])
 
 
 def _resample_segment(seg: np.ndarray, ratio: Fraction) -> np.ndarray:

@@ -8,7 +8,7 @@ Live (the default), as separate processes, the way a vehicle would run it:
 3. the wrist IMU firmware streaming MAVLink HIGHRES_IMU at a real 100 Hz on a
    pseudo-terminal (``python -m firmware_sim imu``);
 4. the edge runtime: serial line -> detector -> int8 ConvLSTM -> CAN alerts and heartbeat
-   (``python -m edge_runtime wearable --imu serial:PATH``).
+   (``python -m edge_runtime wearable --imu serial:PATH?unsigned=yes``).
 
 Then the alerts are scored against the simulator's truth (event level), and a PNG
 shows the IMU trace with the truth, the triggers and the alerts. ``--replay`` runs
@@ -174,7 +174,7 @@ def run_live(out: Path, minutes: float, seed: int) -> None:
         print(f"== 3. wrist IMU firmware: {minutes:g} min of driving as MAVLink at 100 Hz on {path}", flush=True)
         box.write_text(f'[can]\ninterface = "socketcand"\nchannel = "vcan0"\nhost = "127.0.0.1"\nport = {port}\n')
         print("== 4. edge runtime: serial -> detector -> int8 ConvLSTM -> CAN (alerts + 10 Hz heartbeat)", flush=True)
-        rt = subprocess.run([py, "-m", "edge_runtime", "wearable", "--imu", f"serial:{path}", "--config", str(box),
+        rt = subprocess.run([py, "-m", "edge_runtime", "wearable", "--imu", f"serial:{path}?unsigned=yes", "--config", str(box),
                              "--alerts", str(alerts), "--can-log", str(can_log), "--quiet",
                              "--duration", str(minutes * 60 + 3)])
         if rt.returncode != 0:

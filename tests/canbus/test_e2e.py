@@ -1,5 +1,6 @@
 """canbus/e2e.py: AUTOSAR E2E Profile 1 on a DBC message, sender and receiver."""
 import can
+import e2e.p01 as p01
 
 from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EChecker, E2EProtector
@@ -27,3 +28,29 @@ def test_e2e_counter_crc_repeat_loss():
     fake = can.Message(arbitration_id=0x3A1, data=msgs[19].data, is_extended_id=False)
     assert chk.check(fake).status == "wrong_crc"
     assert chk.errors == 1 + 2 + 2
+
+
+def test_frames_the_dbc_does_not_describe_are_refused_before_the_crc():
+    db = load_dbc(ASSETS_DIR / "vehicle_alerts.dbc")
+    alert = db.get_message_by_name("DISTRACTION_ALERT")
+    chk = E2EChecker(db)
+    good = E2EProtector().protect(alert, SIGNALS)
+
+    def variant(**kw):
+        fields = dict(arbitration_id=good.arbitration_id, data=bytes(good.data), is_extended_id=False)
+        return can.Message(**{**fields, **kw}, check=False)
+
+    # a 2-byte frame whose CRC is valid for its 2 bytes: the check alone would pass it
+    short = bytearray(2)
+    short[1] = 1
+    p01.e2e_p01_protect(short, 0x3A0, length=2, increment_counter=False)
+    cases = {
+        "2 data bytes, the DBC says 8": variant(data=bytes(short)),
+        "extended identifier": variant(is_extended_id=True),
+        "remote frame": variant(is_remote_frame=True),
+        "error frame": variant(is_error_frame=True),
+    }
+    for reason, msg in cases.items():
+        res = chk.check(msg)
+        assert (res.status, res.reason, res.valid) == ("bad_frame", reason, False)
+    assert chk.check(good).status == "initial" and chk.errors == 4

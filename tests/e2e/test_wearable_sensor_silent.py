@@ -20,7 +20,7 @@ def test_silent_sensor_reaches_the_heartbeat(tmp_path):
     master, path = open_pty_pair()
     box = tmp_path / "box.toml"
     box.write_text(f'[can]\ninterface = "socketcand"\nport = {hub.port}\n')
-    rt = subprocess.Popen([sys.executable, "-m", "edge_runtime", "wearable", "--imu", f"serial:{path}", "--config",
+    rt = subprocess.Popen([sys.executable, "-m", "edge_runtime", "wearable", "--imu", f"serial:{path}?unsigned=yes", "--config",
                            str(box), "--duration", "12", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                           text=True)
     bus = can.Bus(interface="socketcand", host="127.0.0.1", port=hub.port, channel="vcan0")

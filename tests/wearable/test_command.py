@@ -3,6 +3,7 @@ registered in (edge_runtime/__main__.py, cli.run_command)."""
 import argparse
 import importlib
 import json
+import re
 import subprocess
 import sys
 
@@ -144,3 +145,32 @@ def test_drive_reports_each_change_of_the_sensor_once_and_stops_when_it_is_gone(
     assert pub.heartbeats == 3  # one at each change, at once
     counts = pub.status.counts()
     assert (counts.sensor, counts.samples, counts.saturated, counts.source_dropped) == ("disconnected", 20, 2, 7)
+
+
+KEY_HEX = "0f" * 32
+
+
+@pytest.mark.parametrize("spec, env, expect", [
+    ("serial:/nonexistent/tty", {}, r"no signing key; give key=@FILE .* or add \?unsigned=yes"),
+    (f"serial:/nonexistent/tty?key={KEY_HEX}", {}, r"a signing key on the command line is visible to every user"),
+    ("serial:/nonexistent/tty?key=env:FUZZW_NO_SUCH_KEY", {}, r"environment variable FUZZW_NO_SUCH_KEY is not set"),
+    ("serial:/nonexistent/tty?key=env:FUZZW_KEY", {"FUZZW_KEY": "zz" * 32}, r"\(variable FUZZW_KEY\) is not 64 hex"),
+    ("serial:/nonexistent/tty?key=env:FUZZW_KEY", {"FUZZW_KEY": KEY_HEX}, r"cannot open IMU serial line"),
+    ("serial:/nonexistent/tty?unsigned=yes", {}, r"cannot open IMU serial line"),
+])
+def test_the_imu_line_is_signed_unless_the_spec_says_unsigned(spec, env, expect, monkeypatch, capsys):
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    assert table.main(["wearable", "--imu", spec]) == 2
+    err = capsys.readouterr().err
+    assert len([line for line in err.splitlines() if line.startswith("error")]) == 1
+    assert re.search(expect, err) and KEY_HEX not in err and "Traceback" not in err
+    assert ("is unsigned (unsigned=yes)" in err) == ("unsigned=yes" in spec)
+
+
+def test_a_key_file_is_read_and_never_shown(tmp_path, capsys):
+    key = tmp_path / "imu.key"
+    key.write_text(KEY_HEX + "\n")
+    assert table.main(["wearable", "--imu", f"serial:/nonexistent/tty?key=@{key}"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot open IMU serial line '/nonexistent/tty'" in err and KEY_HEX not in err

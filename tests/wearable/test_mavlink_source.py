@@ -136,16 +136,30 @@ def test_saturation_clipped_and_counted(pty):
     acc = ramp()
     acc[20:25, 0] = 3.5 * G
     acc[40, 2] = -2.5 * G
-    fw, src, events, _ = stream(acc, pty, faults=FaultConfig(saturate_g=2.0))
+    fw, src, events, _ = stream(acc, pty, faults=FaultConfig(saturate_g=2.0), range_mps2=2 * G)
     _, _, a = samples(events)
     assert np.max(np.abs(a)) == pytest.approx(2 * G, rel=1e-6)
-    assert src.stats.saturated == 6
+    assert src.stats.saturated == 6 and src.stats.out_of_range == 0
+
+
+def test_the_configured_range_decides_saturated_and_out_of_range(pty):
+    acc = ramp()
+    acc[20, 0] = 2.5 * G  # inside the default 16 g: an ordinary sample
+    acc[30, 1] = 156.9  # at full scale (16 g as configured): saturated, passed on
+    acc[40:42, 2] = 3.4e38  # finite in float64, inf in float32, far beyond the range: NaN, counted
+    acc[50, 0] = 200.0  # beyond 16 g (156.9 m/s^2): impossible for this sensor
+    fw, src, events, _ = stream(acc, pty)
+    _, t, a = samples(events)
+    k = index_of(fw, t)
+    assert src.stats.saturated == 1 and src.stats.out_of_range == 3
+    assert list(k[np.isnan(a).any(1)]) == [40, 41, 50]
+    assert np.nanmax(np.abs(a)) == pytest.approx(156.9, rel=1e-6)
 
 
 def test_scaled_int16_limit_counted(pty):
     acc = ramp()
     acc[10:13, 1] = 40 * G  # beyond int16 mG: the firmware clips to +-32767 mG
-    _, src, events, _ = stream(acc, pty, message="scaled", saturation_mps2=50 * G)
+    _, src, events, _ = stream(acc, pty, message="scaled", range_mps2=50 * G)
     _, _, a = samples(events)
     assert src.stats.saturated == 3
     assert np.allclose(a[10:13, 1], 32767 * MG_TO_MPS2)
@@ -218,3 +232,36 @@ def test_duplicate_and_out_of_order_timestamps_dropped(pty):
     assert np.allclose(t, [1.0, 1.01, 1.02, 1.03, 1.04, 0.01, 0.02])
     assert np.allclose(a[:, 0] / MG_TO_MPS2, [1000, 1010, 1020, 1030, 1040, 10, 20], atol=1e-3)
     assert [b.continuous for b in blocks] == [False, False]
+
+
+def _decoder_and_firmware_bytes(key):
+    from edge_runtime.wearable.mavlink_source import ImuPacketDecoder
+    from fuzz.seeds import firmware_bytes
+
+    t_sign = 36_000_000_000_000
+    dec = ImuPacketDecoder(signing_key=key)
+    dec.mav.signing.timestamp = t_sign
+    return dec, lambda acc, t0_s, signing_t=t_sign: firmware_bytes(acc, "highres", key, t0_s, signing_t)
+
+
+def test_a_forged_far_future_packet_does_not_starve_a_signed_line():
+    key = bytes(range(32))
+    dec, packets = _decoder_and_firmware_bytes(key)
+    acc = ramp(100)
+    forged = packets(acc[:1], 1.0, signing_t=2**47)  # a heartbeat and a sample stamped far in the future ...
+    forged = forged[forged.index(b"\xfd", 1):-6] + bytes(6)  # ... the sample alone, its signature forged
+    events: list = []
+    dec.feed(forged + packets(acc, 2.0), 0.0, events)
+    dec.flush(events)
+    assert dec.stats.samples == 100 and dec.stats.signature_failures == 1
+
+
+def test_a_stray_start_byte_loses_no_good_packet():
+    dec, packets = _decoder_and_firmware_bytes(bytes(range(32)))
+    stream = packets(ramp(100), 2.0)
+    cut = len(stream) // 2
+    cut = stream.index(b"\xfd", cut)  # a packet boundary
+    events: list = []
+    dec.feed(stream[:cut] + b"\xfd" + stream[cut:], 0.0, events)
+    dec.flush(events)
+    assert dec.stats.samples == 100

@@ -34,7 +34,7 @@ def test_gaps_split_blocks_and_backwards_time_is_dropped(tmp_path):
     t = np.r_[np.arange(300), np.arange(299, 400), np.arange(600, 900)] / 100.0  # duplicate at 2.99, gap 4.0 -> 6.0
     acc = np.tile([0.0, 0.0, 9.81], (len(t), 1))
     stats = ReplayStats()
-    blocks = read_imu_csv(_write(tmp_path / "g.csv", t, acc), stats)
+    blocks = list(read_imu_csv(_write(tmp_path / "g.csv", t, acc), stats))
     assert [len(b.acc_mps2) for b in blocks] == [400, 300]
     assert [b.continuous for b in blocks] == [True, False] and blocks[1].t0_s == 6.0
     assert stats.dropped_non_monotonic == 1 and stats.gaps == 1
@@ -47,6 +47,8 @@ def test_gaps_split_blocks_and_backwards_time_is_dropped(tmp_path):
         ("t,ax,ay,az\n0,1,2,3\n0.01,1,2\n", r":3: expected 4 fields"),
         ("t,ax,ay,az\n0,1,2,3\n0.01,1,abc,3\n", r":3: field 'ay' is not a number"),
         ("t,ax,ay,az\n0,1,2,3\nnan,1,2,3\n", r":3: field 't'"),
+        ("t,ax,ay,az\n0,1,2,3\n0.01,1,2,3\n1.7e308,1,2,3\n", r":4: field 't' is not a time in seconds"),
+        ("t,ax,ay,az\n0,1,2,3\n1000,1,2,3\n2000,1,2,3\n", r"sample rate of 0.001 Hz"),
         ("", r"empty file"),
     ],
 )
@@ -55,3 +57,53 @@ def test_malformed_csv_names_the_line(tmp_path, body, match):
     p.write_text(body)
     with pytest.raises(InputError, match=match):
         read_imu_csv(p)
+
+
+def test_non_utf8_line_is_named(tmp_path):
+    p = tmp_path / "bin.csv"
+    p.write_bytes(b"t,ax,ay,az\n0,1,2,3\n0.01,1,\xff2,3\n")
+    with pytest.raises(InputError, match=r"bin.csv:3: not UTF-8 text \(byte 8 of the line\)"):
+        read_imu_csv(p)
+
+
+def test_impossible_values_are_counted_and_reach_the_loop_as_nan(tmp_path):
+    t = np.arange(10) / 100
+    acc = np.tile([0.0, 0.0, 9.81], (10, 1))
+    acc[2, 0] = 3.4e38  # finite in float64, inf in float32
+    acc[4, 1] = 200.0  # beyond the 16 g range
+    acc[6, 2] = 156.9  # at full scale: saturated, kept
+    p = _write(tmp_path / "v.csv", t, acc)
+    text = p.read_text().splitlines()
+    text[9] = "0.0800," + "9" * 400 + ",0,9.81"  # a 400-digit number: inf
+    p.write_text("\n".join(text) + "\n")
+    stats = ReplayStats()
+    (blk,) = read_imu_csv(p, stats)
+    bad = np.flatnonzero(np.isnan(blk.acc_mps2).any(1))
+    assert list(bad) == [2, 4, 8] and stats.out_of_range == 3 and stats.saturated == 1  # inf is beyond too
+    assert np.nanmax(np.abs(blk.acc_mps2)) == pytest.approx(156.9)
+
+
+def test_the_configured_range_is_used(tmp_path):
+    t = np.arange(10) / 100
+    acc = np.tile([0.0, 0.0, 9.81], (10, 1))
+    acc[3, 0] = 2.5 * 9.81  # inside 16 g, beyond 2 g
+    stats = ReplayStats()
+    (blk,) = read_imu_csv(_write(tmp_path / "r.csv", t, acc), stats, range_mps2=156.9)
+    assert stats.saturated == 0 and stats.out_of_range == 0 and np.isfinite(blk.acc_mps2).all()
+    stats = ReplayStats()
+    (blk,) = read_imu_csv(_write(tmp_path / "r.csv", t, acc), stats, range_mps2=19.6)
+    assert stats.out_of_range == 1 and np.isnan(blk.acc_mps2[3]).all()
+
+
+def test_a_long_recording_is_streamed_in_chunks_with_the_same_blocks(tmp_path):
+    t = np.r_[np.arange(250), np.arange(400, 700)] / 100  # one gap
+    acc = np.c_[np.sin(t), np.cos(t), np.full_like(t, 9.81)]
+    p = _write(tmp_path / "long.csv", t, acc)
+    whole = list(read_imu_csv(p))
+    chunked = list(read_imu_csv(p, chunk_rows=64))
+    assert [len(b.acc_mps2) for b in whole] == [250, 300] and [b.continuous for b in whole] == [True, False]
+    assert [b.continuous for b in chunked].count(False) == 1
+    np.testing.assert_array_equal(np.concatenate([b.acc_mps2 for b in chunked]),
+                                  np.concatenate([b.acc_mps2 for b in whole]))
+    gap_block = next(b for b in chunked if not b.continuous)
+    assert gap_block.t0_s == 4.0

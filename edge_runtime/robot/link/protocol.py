@@ -64,7 +64,6 @@ import functools
 import math
 import os
 import socket
-import time
 from dataclasses import dataclass, field, replace
 
 import can
@@ -77,6 +76,12 @@ from edge_runtime.canbus.bus import CanLinkError, open_bus
 from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EChecker, E2EProtector
 from edge_runtime.core.manifest import ASSETS_DIR
+from edge_runtime.core.serial_line import (  # noqa: F401 - the MAVLink endpoint, shared with the wearable
+    MAVLINK_EPOCH_UNIX_S,
+    SignedMAVLink,
+    make_mavlink,
+    signature_failure,
+)
 
 DBC_PATH = ASSETS_DIR / "robot_link.dbc"
 
@@ -442,8 +447,6 @@ ATTITUDE_ONLY_MASK = (mavlink2.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
                       | mavlink2.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
                       | mavlink2.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
                       | mavlink2.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE)
-MAVLINK_EPOCH_UNIX_S = 1420070400
-"""MAVLink signing timestamps count 10 us since 2015-01-01 00:00 UTC."""
 
 
 def robot_to_mav(p) -> tuple[float, float, float]:
@@ -480,88 +483,3 @@ def unpack_status(custom_mode: int) -> dict:
     return {"mode": MODES[min(c & 3, len(MODES) - 1)], "watchdog": bool(c >> 2 & 1), "moving": bool(c >> 3 & 1),
             "at_target": bool(c >> 4 & 1), "last_result": RESULTS[min(c >> 5 & 7, len(RESULTS) - 1)],
             "last_command": COMMANDS[min(c >> 8 & 7, len(COMMANDS) - 1)], "last_seq": c >> 16 & 0xFFFF}
-
-
-class SignedMAVLink(mavlink2.MAVLink):
-    """pymavlink's MAVLink with a stricter signature check.
-
-    pymavlink records a stream's timestamp before it compares the signature, so one forged
-    packet with a future timestamp would make every genuine packet look replayed. Here the
-    signature is checked first; the timestamp only advances on a genuine packet. The reason
-    of the last failure ("forged", "replayed", "stale") is kept for the counters.
-    """
-
-    last_signature_failure = ""
-
-    def parse_char(self, c):
-        """pymavlink's parser, resynchronising after a stray start byte.
-
-        pymavlink takes any 0xFD as the start of a packet and waits for the length its
-        header claims (up to 280 bytes, several heartbeats' worth on a quiet line), then
-        drops all of it when the CRC fails. Here a start byte whose header has unknown
-        incompat flags is skipped at once, and the bytes behind the start byte of a
-        rejected frame are scanned again.
-        """
-        self.buf.extend(c)
-        self.total_bytes_received += len(c)
-        while (self.buf_len() >= 3 and self.buf[self.buf_index] == mavlink2.PROTOCOL_MARKER_V2
-               and self.buf[self.buf_index + 2] & ~mavlink2.MAVLINK_IFLAG_SIGNED):
-            self.buf_index += 1
-        m = super().parse_char(b"")
-        if m is not None and m.get_type() == "BAD_DATA":
-            data = bytes(getattr(m, "data", b""))
-            reason = str(getattr(m, "reason", "")).lower()
-            if (len(data) > 1 and data[0] in (mavlink2.PROTOCOL_MARKER_V1, mavlink2.PROTOCOL_MARKER_V2)
-                    and "signature" not in reason):
-                self.buf = bytearray(data[1:]) + self.buf[self.buf_index:]
-                self.buf_index = 0
-        return m
-
-    def check_signature(self, msgbuf, srcSystem, srcComponent) -> bool:  # noqa: N803 - pymavlink's names
-        import hashlib
-
-        h = hashlib.new("sha256")
-        h.update(self.signing.secret_key)
-        h.update(msgbuf[:-6])
-        if h.digest()[:6] != bytes(msgbuf[-6:]):
-            self.last_signature_failure = "forged"
-            return False
-        tlow, thigh = self.mav_sign_unpacker.unpack(msgbuf[-12:-6])
-        timestamp = tlow + (thigh << 32)
-        stream = (msgbuf[-13], srcSystem, srcComponent)
-        last = self.signing.stream_timestamps.get(stream)
-        if last is not None and timestamp <= last:
-            self.last_signature_failure = "replayed"
-            return False
-        if last is None and timestamp + 6000 * 1000 < self.signing.timestamp:
-            self.last_signature_failure = "stale"
-            return False
-        self.signing.stream_timestamps[stream] = timestamp
-        self.signing.timestamp = max(self.signing.timestamp, timestamp)
-        return True
-
-
-def make_mavlink(writer, src_system: int, src_component: int, signing_key: bytes | None, link_id: int) -> SignedMAVLink:
-    """A MAVLink 2 endpoint that signs what it sends and refuses unsigned packets when given a key."""
-    mav = SignedMAVLink(writer, srcSystem=src_system, srcComponent=src_component)
-    mav.robust_parsing = True
-    if signing_key is not None:
-        if len(signing_key) != 32:
-            raise ValueError(f"MAVLink signing key must be 32 bytes, got {len(signing_key)}")
-        mav.signing.secret_key = bytes(signing_key)
-        mav.signing.link_id = link_id
-        mav.signing.timestamp = int((time.time() - MAVLINK_EPOCH_UNIX_S) * 100_000)
-        mav.signing.sign_outgoing = True  # allow_unsigned_callback stays None: unsigned packets are refused
-    return mav
-
-
-def signature_failure(mav: SignedMAVLink, bad) -> str | None:
-    """For a BAD_DATA packet: "unsigned", "forged", "replayed" or "stale"; None if not a signature problem."""
-    if "signature" not in str(getattr(bad, "reason", "")).lower():
-        return None
-    data = bytes(getattr(bad, "data", b""))
-    signed = len(data) > 2 and data[0] == mavlink2.PROTOCOL_MARKER_V2 and data[2] & mavlink2.MAVLINK_IFLAG_SIGNED
-    if not signed:
-        return "unsigned"
-    why, mav.last_signature_failure = mav.last_signature_failure or "forged", ""
-    return why

@@ -1,0 +1,75 @@
+"""Alerts decided while the CAN bus is down are held, sent late or counted lost, never dropped silently."""
+from types import SimpleNamespace
+
+import can
+
+from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher, WearableStatus
+from edge_runtime.wearable.backlog import AlertBacklog
+
+
+class SwitchableBus(can.BusABC):
+    """A bus that raises while ``down`` and records what it took."""
+
+    def __init__(self):
+        super().__init__(channel="x")
+        self.down, self.sent = True, []
+
+    def send(self, msg, timeout=None):
+        if self.down:
+            raise can.CanOperationError("bus off")
+        self.sent.append(msg)
+
+    def _recv_internal(self, timeout):
+        return None, False
+
+
+class FakeClock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+def alert(label="Phone"):
+    return SimpleNamespace(t_trigger_s=10.0, t_alert_s=10.75, label=label, confidence=0.9, alerted=True,
+                           status="alert", probs={}, compute_us=2500.0)
+
+
+def test_alerts_held_while_the_bus_is_down_go_out_late_with_their_age_and_the_status_says_so():
+    bus, clock = SwitchableBus(), FakeClock()
+    pub = AlertPublisher(bus, status=WearableStatus())
+    pub.backlog = AlertBacklog(clock=clock)
+    pub.status.count_samples(100)
+    assert pub.status.heartbeat()["state"] == "running"
+    assert not pub.send_alert(alert("Phone")) and not pub.send_alert(alert("Drink"))
+    clock.t += 2.0  # the bus is back two seconds later
+    bus.down = False
+    assert pub.send_alert(alert("Texting"))
+    decoded = [AlertEncoder().decode(m) for m in bus.sent]
+    assert [str(d["Class"]) for d in decoded] == ["Phone", "Drink", "Texting"]
+    assert decoded[0]["TimeSinceTrigger"] == 750 + 3 + 2000  # the decision's 753 ms plus the 2 s it waited
+    assert decoded[2]["TimeSinceTrigger"] == 753
+    assert pub.status.heartbeat()["state"] == "degraded"  # not "running" as if nothing happened
+    s = pub.summary()
+    assert (s["alerts_held"], s["alerts_sent_late"], s["alerts_lost"], s["alerts_sent"]) == (2, 2, 0, 3)
+
+
+def test_too_old_overflowing_or_never_sent_alerts_are_counted_lost():
+    clock = FakeClock()
+    backlog = AlertBacklog(max_alerts=2, max_age_s=5.0, clock=clock)
+    for label in ("Phone", "Drink", "Marker"):  # the third pushes the oldest out
+        backlog.hold(alert(label))
+    clock.t += 6.0
+    late, too_old = backlog.take()
+    assert late == [] and too_old == 2 and backlog.counts().lost == 3
+    backlog.hold(alert())
+    assert backlog.abandon() == 1 and backlog.counts().lost == 4 and backlog.counts().held == 4
+
+
+def test_the_summary_reports_alerts_still_held_at_the_end_as_lost():
+    bus = SwitchableBus()
+    pub = AlertPublisher(bus, status=WearableStatus())
+    assert not pub.send_alert(alert())
+    pub.close()
+    assert pub.summary()["alerts_lost"] == 1
