@@ -1,40 +1,41 @@
 """The robot command's ``--joints`` JSON lines -> the frames the robot loop is fed.
 
 An input is a few lines of a joints file (camera- or robot-frame joints, ``people`` lists,
-``valid``/``reason``/``marker``) built from plausible values mixed, about one value in a
-hundred, with hostile ones (see :mod:`fuzz.targets.keypoints_jsonl`), some lines damaged
-at the byte level. Each line is parsed on its own; a refused line is the documented
+``valid``/``marker``), about half of them with a few fields made hostile and the bytes
+maybe damaged (:func:`fuzz.targets.keypoints_jsonl.stream`). Each line is parsed on its own; a refused line is the documented
 JointsInputError (the first is re-raised at the end). An accepted frame must carry a
 timestamp within +-1e10 s and joints that are finite within +-100 m or NaN (not seen):
 what the loop's distance checks and replay pacing are stated for.
 """
 from __future__ import annotations
 
-import json
-
 import numpy as np
-from hypothesis import strategies as st
 
 from edge_runtime.robot.command import JointsInputError, parse_joints_line
 from fuzz.harness import SilentAcceptance
-from fuzz.targets.keypoints_jsonl import damaged, rarely_hostile
+from fuzz.targets.keypoints_jsonl import stream
 
 NAME = "joints_jsonl"
 DOCUMENTED = (JointsInputError,)
 
-COORD = rarely_hostile(st.one_of(st.floats(-5, 10), st.floats(-100, 100), st.none()))
-JOINTS = rarely_hostile(st.lists(rarely_hostile(st.tuples(COORD, COORD, COORD).map(list)), min_size=17, max_size=17))
-KIND = st.sampled_from(["joints_cam_m", "joints_robot_m"])
-PERSON = st.builds(lambda k, j, pid: {k: j, "id": pid}, KIND, JOINTS, rarely_hostile(st.integers(0, 9)))
-FRAME = st.one_of(
-    st.builds(lambda k, j, t, v: {"t": t, k: j, "valid": v}, KIND, JOINTS, rarely_hostile(st.floats(0, 100)),
-              rarely_hostile(st.just(True))),
-    st.builds(lambda people, t, m: {"t": t, "people": people, "marker": m}, rarely_hostile(st.lists(PERSON, max_size=3)),
-              rarely_hostile(st.floats(0, 100)), rarely_hostile(st.sampled_from([0, 1, 2, 3]))))
+def plausible_frame(i: int, seed: int) -> dict:
+    """Frame ``i`` (t = i / 30 s) of a joints file: camera- or robot-frame joints of one
+    person, or a ``people`` list, some joints not seen (null)."""
+    rng = np.random.default_rng(seed)
+    kind = "joints_cam_m" if rng.random() < 0.5 else "joints_robot_m"
+
+    def joints():
+        j = rng.normal([0.0, 0.0, 3.0], 1.0, (17, 3))
+        return [[None if rng.random() < 0.03 else float(v) for v in row] for row in j]
+
+    if rng.random() < 0.3:
+        return {"t": i / 30, "people": [{"id": k, kind: joints()} for k in range(int(rng.integers(0, 3)))],
+                "marker": int(rng.integers(0, 4))}
+    return {"t": i / 30, kind: joints(), "valid": True}
 
 
 def strategy():
-    return st.lists(damaged(FRAME.map(lambda f: json.dumps(f).encode())), min_size=1, max_size=6)
+    return stream(plausible_frame)
 
 
 def run(lines) -> None:
