@@ -307,22 +307,15 @@ class RobotCanCodec:
     def decode(self, msg: can.Message) -> tuple[str, str, dict | None]:
         """(status, message name, signals). Signals is None unless the frame is valid.
 
-        The frame's shape is checked before anything reads its bytes (a short frame would make
-        cantools raise, and it must not move the E2E counter state either): a standard data
-        frame of a DBC id (else ``unknown_id``, or ``wrong_flags`` for an extended-id, remote or
-        error frame) with exactly the DBC's length (``wrong_length``). Then the E2E status, and
-        the decoded values against the DBC: every enumerated signal one of its named values and
-        every signal within its [min|max] (``out_of_range``)."""
-        if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
-            return "wrong_flags", "", None
-        message = self._by_id.get(msg.arbitration_id)
-        if message is None:
-            return "unknown_id", "", None
-        if len(msg.data) != message.length or msg.dlc != message.length:
-            return "wrong_length", "", None
+        The E2E check comes first and checks the frame's shape before its bytes are read
+        (``bad_frame``: an error or remote frame, the wrong identifier kind or length; a
+        short frame would make cantools raise). The decoded values are then held to the
+        DBC: every enumerated signal one of its named values and every signal within its
+        [min|max] (``out_of_range``)."""
         res = self.checker.check(msg)
         if not res.valid:
             return res.status, "", None
+        message = self._by_id[msg.arbitration_id]
         sig = message.decode(bytes(msg.data), decode_choices=True)
         if not all(_signal_in_range(s, sig[s.name]) for s in message.signals):
             return "out_of_range", message.name, None

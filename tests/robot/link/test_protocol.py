@@ -83,10 +83,10 @@ def test_a_short_frame_with_a_valid_crc_is_refused_before_decoding():
     data = bytearray(5)
     p01.e2e_p01_protect(data, e2e_data_id(msg), length=len(data), increment_counter=False)
     short = can.Message(arbitration_id=msg.frame_id, data=bytes(data), is_extended_id=False)
-    assert codec.decode(short) == ("wrong_length", "", None)
+    assert codec.decode(short) == ("bad_frame", "", None)
     good = codec.status_frame(blank_state())
     assert codec.decode(can.Message(arbitration_id=good.arbitration_id, data=good.data,
-                                    is_extended_id=True))[0] == "wrong_flags"
+                                    is_extended_id=True))[0] == "bad_frame"
     assert codec.decode(good)[2] is not None
 
 
