@@ -78,7 +78,6 @@ as VideoPose3D does (:func:`normalize_screen`): ``u/w*2 - 1``, ``v/w*2 - h/w``.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -456,7 +455,7 @@ class CameraModel:
             dist = tuple(float(v) for v in d.get("dist", ()) or ())
         except KeyError as e:
             raise ValueError(f"{where}: field {e.args[0]!r}: missing") from None
-        except (TypeError, ValueError) as e:
+        except (TypeError, ValueError, OverflowError) as e:  # OverflowError: float() of a 400-digit integer
             raise ValueError(f"{where}: {e}") from None
         if isinstance(w, bool) or isinstance(h, bool) or not isinstance(w, int) or not isinstance(h, int):
             raise ValueError(f"{where}: width_px and height_px must be integers")
@@ -469,9 +468,10 @@ class CameraModel:
     def from_json(cls, path: str | os.PathLike) -> "CameraModel":
         """A camera file (JSON, :meth:`from_dict`'s fields); errors name the file."""
         try:
-            d = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise InputError(f"{path}: not a readable JSON camera file ({' '.join(str(e).split())})") from None
+            raw = Path(path).read_bytes()
+        except OSError as e:
+            raise InputError(f"{path}: not a readable JSON camera file ({e.strerror or e})") from None
+        d = strict_json.loads(raw, str(path), InputError)
         try:
             return cls.from_dict(d, str(path))
         except ValueError as e:

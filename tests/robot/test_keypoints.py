@@ -280,5 +280,10 @@ def test_camera_files(tmp_path):
             CameraModel.from_json(p)
         assert str(p) in str(e.value)
     p.write_text("{nope")
-    with pytest.raises(InputError, match="cam.json: not a readable JSON"):
+    with pytest.raises(InputError, match="cam.json: not valid JSON"):
         CameraModel.from_json(p)
+    for text, msg in (('{"fx_px": ' + "9" * 400 + "}", "cam.json: "), ("[" * 5000 + "]" * 5000, "nested more than"),
+                      ('{"fx_px": NaN}', "NaN is not JSON")):
+        p.write_text(text)
+        with pytest.raises(InputError, match=msg):
+            CameraModel.from_json(p)
