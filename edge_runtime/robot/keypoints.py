@@ -122,6 +122,9 @@ _EYE_HALF_WIDTH_M = 0.032
 MAX_COORDINATE_PX = 1e6
 """A keypoint coordinate beyond this many pixels from the image origin is refused: no camera
 has such an image, and the lifter's float32 input would turn it into inf."""
+MAX_IMAGE_PX = 100_000
+"""A camera image wider or taller than this many pixels is refused (and a focal length
+beyond 100 times it)."""
 MAX_TIMESTAMP_S = 1e10
 """A frame time beyond +-this is refused (Unix time is 1.7e9 s): time arithmetic on larger
 ones (gaps, replay pacing) overflows or loses the frame period to rounding."""
@@ -413,11 +416,16 @@ class CameraModel:
     """Distortion coefficients in OpenCV's order (k1, k2, p1, p2[, k3[, ...]]); () = none."""
 
     def __post_init__(self):
-        for name in ("fx_px", "fy_px", "width_px", "height_px"):
+        # comparisons, not math.isfinite: a 400-digit integer from a file must not raise OverflowError
+        for name in ("width_px", "height_px"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"camera {name}: expected a positive number, got {v!r}")
-        if not all(math.isfinite(v) for v in (self.cx_px, self.cy_px, *self.dist)):
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_IMAGE_PX:
+                raise ValueError(f"camera {name}: expected an integer in [1, {MAX_IMAGE_PX}], got {v!r}"[:200])
+        for name in ("fx_px", "fy_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= MAX_IMAGE_PX * 100:
+                raise ValueError(f"camera {name}: expected a positive number, got {v!r}"[:200])
+        if not all(isinstance(v, (int, float)) and -1e9 <= v <= 1e9 for v in (self.cx_px, self.cy_px, *self.dist)):
             raise ValueError("camera: principal point and distortion must be finite")
         if len(self.dist) not in (0, 4, 5, 8, 12, 14):
             raise ValueError(f"camera dist: {len(self.dist)} coefficients; OpenCV takes 4, 5, 8, 12 or 14")
