@@ -1,6 +1,6 @@
 """``assets/manifest.json``: what the box runs, and the proof that it is what was built.
 
-numpy-free, torch-free: the standard library only.
+numpy-free, torch-free: the standard library only (and :mod:`edge_runtime.core.strict_json`).
 
 Schema (``SCHEMA_VERSION`` 1; ``python -m export assets`` writes it)::
 
@@ -41,6 +41,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from edge_runtime.core import strict_json
 from edge_runtime.errors import ManifestError, ModelIntegrityError
 
 SCHEMA_VERSION = 1
@@ -53,6 +54,10 @@ CLASSIFIER_ARCHS = ("convlstm", "cnn", "lstm", "lda")
 lifter) list ``[]``."""
 _REQUIRED_MODEL_KEYS = ("name", "file", "sha256", "precision", "arch", "parameters", "inputs",
                         "outputs", "classes")
+_OBJECT_KEYS = ("parameters", "metrics", "quantization", "provenance", "camera")
+"""Entry fields that, when present, must be JSON objects."""
+_STRING_KEYS = ("model_version", "joints")
+"""Entry fields that, when present, must be strings."""
 
 
 
@@ -74,48 +79,78 @@ def manifest_path(assets_dir: str | os.PathLike) -> Path:
 
 
 def _check_model(entry: Any, i: int, where: str) -> None:
+    """Every field of one model entry, by type (and the file name, hash and precision by value)."""
+    def fail(field: str, msg: str):
+        raise ManifestError(f"{where}: field 'models[{i}].{field}': {msg}")
+
     if not isinstance(entry, dict):
         raise ManifestError(f"{where}: field 'models[{i}]': expected an object")
     for key in _REQUIRED_MODEL_KEYS:
         if key not in entry:
-            raise ManifestError(f"{where}: field 'models[{i}].{key}': missing")
+            fail(key, "missing")
+    for key in ("name", "arch"):
+        if not (isinstance(entry[key], str) and entry[key]):
+            fail(key, f"expected a non-empty string, got {_short(entry[key])}")
     f = entry["file"]
     if not isinstance(f, str) or not f or Path(f).name != f or f in (".", ".."):
-        raise ManifestError(f"{where}: field 'models[{i}].file': {f!r} must be a plain file name "
-                            "inside the assets directory")
+        fail("file", f"{_short(f)} must be a plain file name inside the assets directory")
     sha = entry["sha256"]
     if not (isinstance(sha, str) and len(sha) == 64 and all(c in "0123456789abcdef" for c in sha)):
-        raise ManifestError(f"{where}: field 'models[{i}].sha256': expected 64 lowercase hex digits")
-    if entry["precision"] not in PRECISIONS:
-        raise ManifestError(f"{where}: field 'models[{i}].precision': {entry['precision']!r} "
-                            f"not one of {PRECISIONS}")
+        fail("sha256", "expected 64 lowercase hex digits")
+    if not isinstance(entry["precision"], str) or entry["precision"] not in PRECISIONS:
+        fail("precision", f"{_short(entry['precision'])} not one of {PRECISIONS}")
     classes = entry["classes"]
     if not (isinstance(classes, list) and all(isinstance(c, str) and c for c in classes)
             and len(set(classes)) == len(classes)):
-        raise ManifestError(f"{where}: field 'models[{i}].classes': expected unique non-empty strings")
+        fail("classes", "expected unique non-empty strings")
     if not classes and entry["arch"] in CLASSIFIER_ARCHS:
-        raise ManifestError(f"{where}: field 'models[{i}].classes': a {entry['arch']} classifier needs its "
-                            "class list")
+        fail("classes", f"a {entry['arch']} classifier needs its class list")
     for key in ("inputs", "outputs"):
         io = entry[key]
-        if not (isinstance(io, list) and io and all(isinstance(t, dict) and "name" in t for t in io)):
-            raise ManifestError(f"{where}: field 'models[{i}].{key}': expected a list of {{name, shape, dtype}}")
+        if not (isinstance(io, list) and io and all(_is_tensor(t) for t in io)):
+            fail(key, "expected a list of {name: string, shape: [integer or string, ...], dtype: string}")
+    for key in _OBJECT_KEYS:
+        if key in entry and not isinstance(entry[key], dict):
+            fail(key, f"expected an object, got {_short(entry[key])}")
+    for key in _STRING_KEYS:
+        if key in entry and not isinstance(entry[key], str):
+            fail(key, f"expected a string, got {_short(entry[key])}")
+
+
+def _is_tensor(t: Any) -> bool:
+    """An inputs/outputs entry: a name, and when given a shape of dimensions and a dtype."""
+    if not (isinstance(t, dict) and isinstance(t.get("name"), str) and t["name"]):
+        return False
+    shape = t.get("shape", [])
+    dims_ok = isinstance(shape, list) and all(
+        isinstance(d, str) or (isinstance(d, int) and not isinstance(d, bool) and 0 <= d <= 2**31) for d in shape)
+    return dims_ok and isinstance(t.get("dtype", ""), str)
+
+
+def _short(value: Any) -> str:
+    r = repr(value)
+    return r if len(r) <= 40 else r[:37] + "..."
 
 
 def load_manifest(assets_dir: str | os.PathLike) -> dict:
-    """Read and validate ``assets_dir/manifest.json`` (or a manifest path itself)."""
+    """Read and validate ``assets_dir/manifest.json`` (or a manifest path itself): every
+    field the runtime reads is checked for its type, in one line naming the field."""
     path = manifest_path(assets_dir)
     if not path.is_file():
         raise ManifestError(f"{path}: manifest not found (rebuild with `python -m export assets --seed 0`)")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise ManifestError(f"{path}: not readable JSON ({type(e).__name__}: {e})".replace("\n", " ")) from None
+        raw = path.read_bytes()
+    except OSError as e:
+        raise ManifestError(f"{path}: cannot read ({e.strerror or e})") from None
+    data = strict_json.loads(raw, str(path), ManifestError)
     if not isinstance(data, dict):
         raise ManifestError(f"{path}: expected a JSON object at the top level")
-    if data.get("version") != SCHEMA_VERSION:
-        raise ManifestError(f"{path}: field 'version': {data.get('version')!r}, this runtime reads "
+    version = data.get("version")
+    if version != SCHEMA_VERSION or isinstance(version, bool):
+        raise ManifestError(f"{path}: field 'version': {_short(version)}, this runtime reads "
                             f"version {SCHEMA_VERSION}")
+    if not isinstance(data.get("created_by", ""), str):
+        raise ManifestError(f"{path}: field 'created_by': expected a string")
     models = data.get("models")
     if not isinstance(models, list) or not models:
         raise ManifestError(f"{path}: field 'models': expected a non-empty list")

@@ -53,8 +53,9 @@ from pathlib import Path
 import numpy as np
 
 from edge_runtime import config
+from edge_runtime.core import strict_json
 from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, L_ANKLE, R_ANKLE
-from edge_runtime.errors import InputError
+from edge_runtime.errors import ConfigError, InputError
 
 FORMAT_VERSION = 1
 METHODS = ("rigid", "eq2", "pnp")
@@ -252,34 +253,54 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":
+        """A calibration file; any problem is one CalibrationError naming the file and the field."""
         p = Path(path)
         try:
-            data = json.loads(p.read_text())
+            raw = p.read_bytes()
         except OSError as e:
             raise CalibrationError(f"{p}: cannot read ({e.strerror or e})") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise CalibrationError(f"{p}: not JSON ({e})") from None
-        try:
-            return cls.from_json(data)
-        except (KeyError, TypeError, ValueError) as e:
-            raise CalibrationError(f"{p}: not a calibration file ({type(e).__name__}: {e})") from None
+        return cls.from_json(strict_json.loads(raw, str(p), CalibrationError), str(p))
 
     @classmethod
-    def from_json(cls, data: dict) -> "Calibration":
-        if data.get("version") != FORMAT_VERSION:
-            raise ValueError(f"version {data.get('version')!r}, expected {FORMAT_VERSION}")
-        A, b = np.array(data["A"], float), np.array(data["b"], float)
-        if A.shape != (3, 3) or b.shape != (3,) or not (np.isfinite(A).all() and np.isfinite(b).all()):
-            raise ValueError("A must be 3x3 and b 3 finite numbers")
-        if abs(np.linalg.det(A)) < 1e-9:
-            raise ValueError("A is singular")
-        raw = dict(data.get("params", {}))
-        if "markers_xz_m" in raw:
-            raw["markers_xz_m"] = tuple(tuple(float(x) for x in m) for m in raw["markers_xz_m"])
+    def from_json(cls, data, where: str = "calibration") -> "Calibration":
+        """Every field checked for its type and range (errors name ``where`` and the field):
+        the file's one validation step, so that nothing malformed reaches the robot loop."""
+        def fail(msg: str):
+            raise CalibrationError(f"{where}: {msg}")
+
+        if not isinstance(data, dict):
+            fail("expected a JSON object")
+        if data.get("version") != FORMAT_VERSION or isinstance(data.get("version"), bool):
+            fail(f"field 'version': {data.get('version')!r}, expected {FORMAT_VERSION}"[:200])
+        for key in ("A", "b", "method", "worker_height_m", "inputs"):
+            if key not in data:
+                fail(f"field {key!r}: missing")
+        A = strict_json.number_array(data["A"], (3, 3), f"{where}: field 'A'", CalibrationError)
+        b = strict_json.number_array(data["b"], (3,), f"{where}: field 'b'", CalibrationError, -100.0, 100.0)
+        if not 1e-3 <= abs(np.linalg.det(A)) <= 1e3:
+            fail("field 'A': singular or of an impossible scale (|det A| must lie in [1e-3, 1e3])")
+        if data["method"] not in METHODS:
+            fail(f"field 'method': expected one of {', '.join(METHODS)}, got {data['method']!r}"[:200])
+        height = strict_json.number(data["worker_height_m"], f"{where}: field 'worker_height_m'", CalibrationError,
+                                    0.5, 3.0)
         inputs = data["inputs"]
-        return cls(A, b, data["method"], float(data["worker_height_m"]),
-                   np.array(inputs["head_cam_m"], float), np.array(inputs["ankle_cam_m"], float),
-                   CalibrationParams(**raw), tuple(inputs.get("frames_per_marker", ())))
+        if not isinstance(inputs, dict):
+            fail("field 'inputs': expected an object")
+        head, ankle = (strict_json.number_array(inputs.get(k), (3, 3), f"{where}: field 'inputs.{k}'",
+                                                CalibrationError, -100.0, 100.0) for k in ("head_cam_m", "ankle_cam_m"))
+        frames = inputs.get("frames_per_marker", [])
+        if not isinstance(frames, list) or len(frames) > 3:
+            fail("field 'inputs.frames_per_marker': expected a list of up to 3 integers")
+        frames = tuple(strict_json.integer(n, f"{where}: field 'inputs.frames_per_marker'", CalibrationError,
+                                           0, 10**9) for n in frames)
+        params = data.get("params", {})
+        if not isinstance(params, dict):
+            fail("field 'params': expected an object")
+        try:  # the box configuration's own schema and limits ([calibration]), so both agree
+            params = config.from_dict({"calibration": params}, f"{where}: field 'params'").calibration
+        except ConfigError as e:
+            raise CalibrationError(str(e)) from None
+        return cls(A, b, data["method"], height, head, ankle, params, frames)
 
 
 def marker_points(params: CalibrationParams) -> np.ndarray:

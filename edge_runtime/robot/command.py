@@ -56,7 +56,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import math
 import queue
 import sys
 import threading
@@ -68,9 +67,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from edge_runtime.cli import CliError, positive_float
+from edge_runtime.core import strict_json
 from edge_runtime.core.manifest import ManifestError
 from edge_runtime.errors import InputError
 from edge_runtime.robot.calibration import Calibration, CalibrationError
+from edge_runtime.robot.keypoints import timestamp_s
 from edge_runtime.robot.link.options import add_bus_arguments
 
 if TYPE_CHECKING:  # imported when the loop runs, not for every command's options
@@ -141,14 +142,14 @@ class JointsFrame:
     marker: int = 0
 
 
+MAX_JOINT_M = 100.0
+"""A joint coordinate beyond +-this (m) is refused: no camera of a robot cell sees that far,
+and zone distances are computed from these numbers."""
+
+
 def _array17(value, where: str) -> np.ndarray:
-    try:
-        a = np.array([[np.nan if v is None else float(v) for v in row] for row in value], dtype=float)
-    except (TypeError, ValueError):
-        raise JointsInputError(f"{where}: expected 17 [x, y, z] rows of numbers") from None
-    if a.shape != (17, 3):
-        raise JointsInputError(f"{where}: expected 17 [x, y, z] rows, got shape {a.shape}")
-    return a
+    """17 [x, y, z] rows of finite numbers within +-MAX_JOINT_M (null: not seen)."""
+    return strict_json.number_array(value, (17, 3), where, JointsInputError, -MAX_JOINT_M, MAX_JOINT_M, nulls=True)
 
 
 def _pick_joints(obj: dict, where: str) -> tuple[np.ndarray | None, str | None]:
@@ -162,14 +163,11 @@ def _pick_joints(obj: dict, where: str) -> tuple[np.ndarray | None, str | None]:
     return (None if value is None else _array17(value, f"{where}: {keys[0]}")), frame
 
 
-def parse_joints_line(line: str, where: str) -> JointsFrame | None:
-    """One line of a joints file (None: blank or a summary line)."""
+def parse_joints_line(line: str | bytes, where: str) -> JointsFrame | None:
+    """One line of a joints file (None: blank or a summary line); every field checked here."""
     if not line.strip():
         return None
-    try:
-        obj = json.loads(line)
-    except json.JSONDecodeError as e:
-        raise JointsInputError(f"{where}: not valid JSON ({e.msg} at column {e.colno})") from None
+    obj = strict_json.loads(line, where, JointsInputError)
     if not isinstance(obj, dict):
         raise JointsInputError(f"{where}: expected a JSON object per line")
     if "summary" in obj:
@@ -188,16 +186,15 @@ def parse_joints_line(line: str, where: str) -> JointsFrame | None:
 
 def _frame_fields(obj: dict, where: str) -> tuple[float, bool, str, int]:
     """A joints line's t (s), valid, reason and marker, checked."""
-    t = obj.get("t", obj.get("t_s"))
-    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
-        raise JointsInputError(f"{where}: t: expected a finite number of seconds, got {t!r}")
+    t = timestamp_s(obj.get("t", obj.get("t_s")), f"{where}: t", JointsInputError)
     valid = obj.get("valid", True)
     if not isinstance(valid, bool):
         raise JointsInputError(f"{where}: valid: expected true/false, got {valid!r}")
-    marker = obj.get("marker", 0)
-    if marker not in (0, 1, 2, 3):
-        raise JointsInputError(f"{where}: marker: expected 1, 2 or 3, got {marker!r}")
-    return float(t), valid, obj.get("reason") or "", marker
+    marker = strict_json.integer(obj.get("marker", 0), f"{where}: marker", JointsInputError, 0, 3)
+    reason = obj.get("reason") or ""
+    if not isinstance(reason, str):
+        raise JointsInputError(f"{where}: reason: expected a string, got {reason!r}"[:200])
+    return t, valid, reason, marker
 
 
 def _people(people, where: str) -> tuple[np.ndarray | None, str, list]:
@@ -211,32 +208,33 @@ def _people(people, where: str) -> tuple[np.ndarray | None, str, list]:
     if len(frames) > 1:
         raise JointsInputError(f"{where}: people mix camera- and robot-frame joints")
     joints = np.stack([j for j, _ in picked]) if picked else None
-    return joints, frames.pop() if frames else "robot", [p.get("id", i) for i, p in enumerate(people)]
+    ids = [p.get("id", i) for i, p in enumerate(people)]
+    for i, pid in enumerate(ids):
+        if not isinstance(pid, str):
+            strict_json.integer(pid, f"{where}: people[{i}].id", JointsInputError, -2**63, 2**63 - 1)
+    return joints, frames.pop() if frames else "robot", ids
 
 
 def read_joints_jsonl(path: str) -> list[JointsFrame]:
     """Every frame of a joints file, checked in full (times must increase)."""
     try:
-        f = open(path, encoding="utf-8")
+        f = open(path, "rb")  # decoded line by line, so that bad bytes are named by their line
     except OSError as e:
         raise JointsInputError(f"{path}: cannot open ({e.strerror or e})") from None
     frames: list[JointsFrame] = []
     kind = None  # the frame of the first joints seen: a file holds one kind only
     with f:
-        try:
-            for n, line in enumerate(f, 1):
-                fr = parse_joints_line(line, f"{path}:{n}")
-                if fr is None:
-                    continue
-                if frames and fr.t_s <= frames[-1].t_s:
-                    raise JointsInputError(f"{path}:{n}: t {fr.t_s} does not increase (previous {frames[-1].t_s})")
-                if fr.joints_m is not None:
-                    if kind is not None and fr.frame != kind:
-                        raise JointsInputError(f"{path}:{n}: mixes camera- and robot-frame joints")
-                    kind = fr.frame
-                frames.append(fr)
-        except UnicodeDecodeError:
-            raise JointsInputError(f"{path}: not UTF-8 text") from None
+        for n, line in enumerate(f, 1):
+            fr = parse_joints_line(line, f"{path}:{n}")
+            if fr is None:
+                continue
+            if frames and fr.t_s <= frames[-1].t_s:
+                raise JointsInputError(f"{path}:{n}: t {fr.t_s} does not increase (previous {frames[-1].t_s})")
+            if fr.joints_m is not None:
+                if kind is not None and fr.frame != kind:
+                    raise JointsInputError(f"{path}:{n}: mixes camera- and robot-frame joints")
+                kind = fr.frame
+            frames.append(fr)
     if not frames:
         raise JointsInputError(f"{path}: no frames")
     return frames

@@ -78,7 +78,6 @@ as VideoPose3D does (:func:`normalize_screen`): ``u/w*2 - 1``, ``v/w*2 - h/w``.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -87,6 +86,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from edge_runtime.core import strict_json
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
 
@@ -117,6 +117,19 @@ UNDISTORT_CRITERIA = (3, 50, 1e-6)  # cv2.TERM_CRITERIA_COUNT | EPS: 50 iteratio
 _EAR_HALF_WIDTH_M = 0.075
 _EYE_FORWARD_M = 0.08
 _EYE_HALF_WIDTH_M = 0.032
+
+
+MAX_COORDINATE_PX = 1e6
+"""A keypoint coordinate beyond this many pixels from the image origin is refused: no camera
+has such an image, and the lifter's float32 input would turn it into inf."""
+MAX_IMAGE_PX = 100_000
+"""A camera image wider or taller than this many pixels is refused (and a focal length
+beyond 100 times it)."""
+MAX_TIMESTAMP_S = 1e10
+"""A frame time beyond +-this is refused (Unix time is 1.7e9 s): time arithmetic on larger
+ones (gaps, replay pacing) overflows or loses the frame period to rounding."""
+MAX_FRAME = 2**53
+"""Frame numbers above this are refused (t = frame / fps must stay exact)."""
 
 
 class KeypointInputError(InputError):
@@ -257,6 +270,7 @@ def _fail(where: str, msg: str):
 def _parse_person(p, i: int, where: str) -> Person:
     if not isinstance(p, dict) or "keypoints" not in p:
         _fail(where, f"people[{i}]: expected an object with 'keypoints'")
+    field = f"{where}: people[{i}].keypoints"
     raw = p["keypoints"]
     if not isinstance(raw, list):
         _fail(where, f"people[{i}].keypoints: expected a list")
@@ -275,44 +289,49 @@ def _parse_person(p, i: int, where: str) -> Person:
         rows = [raw[k:k + width] for k in range(0, len(raw), width)]
     if len(rows) > N_JOINTS:
         _fail(where, f"people[{i}].keypoints: {len(rows)} keypoints, expected 17")
-    try:
-        a = np.array([[np.nan if v is None else float(v) for v in r] for r in rows], dtype=np.float64)
-    except (TypeError, ValueError):
-        _fail(where, f"people[{i}].keypoints: non-numeric value")
-    a = a.reshape(len(rows), width)
+    xy = strict_json.number_array([r[:2] for r in rows], (len(rows), 2), field, KeypointInputError,
+                                  -MAX_COORDINATE_PX, MAX_COORDINATE_PX, nulls=True)
+    scores = (strict_json.number_array([r[2] for r in rows], (len(rows),), f"{field} score", KeypointInputError,
+                                       0.0, 1.0, nulls=True) if width == 3 else np.ones(len(rows)))
     pid = p.get("id")
-    if pid is not None and (isinstance(pid, bool) or not isinstance(pid, int)):
-        _fail(where, f"people[{i}].id: expected an integer, got {pid!r}")
-    return Person(as_keypoints(a, n_joints=None), pid)
+    if pid is not None:
+        pid = strict_json.integer(pid, f"{where}: people[{i}].id", KeypointInputError, -2**63, 2**63 - 1)
+    return Person(np.column_stack([xy, scores]).reshape(len(rows), 3), pid)
 
 
-def parse_keypoint_line(line: str, where: str, fmt: str, fps: float = 30.0) -> KeypointFrame | None:
-    """One JSON line -> a frame (None for a blank line); ``where`` is "FILE:LINE"."""
+def parse_keypoint_line(line: str | bytes, where: str, fmt: str, fps: float = 30.0) -> KeypointFrame | None:
+    """One JSON line -> a frame (None for a blank line); ``where`` is "FILE:LINE".
+
+    Every field is checked here, the input's one validation step: ``t`` finite within
+    +-``MAX_TIMESTAMP_S``, ``frame`` a non-negative integer, coordinates finite within
+    +-``MAX_COORDINATE_PX`` (or null: not seen), scores in [0, 1] (or null), ``id`` a
+    64-bit integer; NaN/Infinity literals, non-UTF-8 bytes and deep nesting are refused."""
     if not line.strip():
         return None
-    try:
-        obj = json.loads(line)
-    except json.JSONDecodeError as e:
-        _fail(where, f"not valid JSON ({e.msg} at character {e.pos + 1})")
+    obj = strict_json.loads(line, where, KeypointInputError)
     if not isinstance(obj, dict):
         _fail(where, "expected a JSON object per line")
     line_fmt = obj.get("format", fmt)
     if line_fmt != fmt:
         _fail(where, f"format {line_fmt!r}, but the input was declared {fmt!r}")
     frame = obj.get("frame")
-    if frame is not None and (isinstance(frame, bool) or not isinstance(frame, int)):
-        _fail(where, f"frame: expected an integer, got {frame!r}")
+    if frame is not None:
+        frame = strict_json.integer(frame, f"{where}: frame", KeypointInputError, 0, MAX_FRAME)
     t = obj.get("t")
     if t is None:
         if frame is None:
             _fail(where, "neither 't' (s) nor 'frame' given")
         t = frame / fps
-    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
-        _fail(where, f"t: expected a finite number of seconds, got {t!r}")
+    t = timestamp_s(t, f"{where}: t", KeypointInputError)
     people = obj.get("people", [])
     if not isinstance(people, list):
         _fail(where, "people: expected a list")
-    return KeypointFrame(float(t), frame, [_parse_person(p, i, where) for i, p in enumerate(people)], fmt)
+    return KeypointFrame(t, frame, [_parse_person(p, i, where) for i, p in enumerate(people)], fmt)
+
+
+def timestamp_s(value, where: str, error: type[Exception]) -> float:
+    """A frame timestamp (s) of an input file: finite and within +-MAX_TIMESTAMP_S."""
+    return strict_json.number(value, where, error, -MAX_TIMESTAMP_S, MAX_TIMESTAMP_S)
 
 
 def read_keypoints_jsonl(path: str | os.PathLike, fmt: str = "coco", fps: float = 30.0
@@ -326,11 +345,7 @@ def read_keypoints_jsonl(path: str | os.PathLike, fmt: str = "coco", fps: float 
         raise KeypointInputError(f"{path}: cannot open ({e.strerror or e})") from None
     with f:
         for n, raw in enumerate(f, 1):
-            try:
-                line = raw.decode("utf-8")
-            except UnicodeDecodeError:
-                raise KeypointInputError(f"{path}:{n}: not UTF-8 text") from None
-            frame = parse_keypoint_line(line, f"{path}:{n}", fmt, fps)
+            frame = parse_keypoint_line(raw, f"{path}:{n}", fmt, fps)
             if frame is not None:
                 yield frame
 
@@ -401,11 +416,16 @@ class CameraModel:
     """Distortion coefficients in OpenCV's order (k1, k2, p1, p2[, k3[, ...]]); () = none."""
 
     def __post_init__(self):
-        for name in ("fx_px", "fy_px", "width_px", "height_px"):
+        # comparisons, not math.isfinite: a 400-digit integer from a file must not raise OverflowError
+        for name in ("width_px", "height_px"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"camera {name}: expected a positive number, got {v!r}")
-        if not all(math.isfinite(v) for v in (self.cx_px, self.cy_px, *self.dist)):
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= MAX_IMAGE_PX:
+                raise ValueError(f"camera {name}: expected an integer in [1, {MAX_IMAGE_PX}], got {v!r}"[:200])
+        for name in ("fx_px", "fy_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v <= MAX_IMAGE_PX * 100:
+                raise ValueError(f"camera {name}: expected a positive number, got {v!r}"[:200])
+        if not all(isinstance(v, (int, float)) and -1e9 <= v <= 1e9 for v in (self.cx_px, self.cy_px, *self.dist)):
             raise ValueError("camera: principal point and distortion must be finite")
         if len(self.dist) not in (0, 4, 5, 8, 12, 14):
             raise ValueError(f"camera dist: {len(self.dist)} coefficients; OpenCV takes 4, 5, 8, 12 or 14")
@@ -443,7 +463,7 @@ class CameraModel:
             dist = tuple(float(v) for v in d.get("dist", ()) or ())
         except KeyError as e:
             raise ValueError(f"{where}: field {e.args[0]!r}: missing") from None
-        except (TypeError, ValueError) as e:
+        except (TypeError, ValueError, OverflowError) as e:  # OverflowError: float() of a 400-digit integer
             raise ValueError(f"{where}: {e}") from None
         if isinstance(w, bool) or isinstance(h, bool) or not isinstance(w, int) or not isinstance(h, int):
             raise ValueError(f"{where}: width_px and height_px must be integers")
@@ -456,9 +476,10 @@ class CameraModel:
     def from_json(cls, path: str | os.PathLike) -> "CameraModel":
         """A camera file (JSON, :meth:`from_dict`'s fields); errors name the file."""
         try:
-            d = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise InputError(f"{path}: not a readable JSON camera file ({' '.join(str(e).split())})") from None
+            raw = Path(path).read_bytes()
+        except OSError as e:
+            raise InputError(f"{path}: not a readable JSON camera file ({e.strerror or e})") from None
+        d = strict_json.loads(raw, str(path), InputError)
         try:
             return cls.from_dict(d, str(path))
         except ValueError as e:

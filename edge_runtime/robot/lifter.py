@@ -32,8 +32,9 @@ have been buffered (outputs during warm-up are valid but rest on padding).
 
 Missing data is never fed through as garbage:
 
-* A joint is missing when its score is below ``min_score`` or a coordinate is
-  NaN/infinite. It is HELD at its last valid observation for up to
+* A joint is missing when its score is below ``min_score``, a coordinate is
+  NaN/infinite, or it lies more than 4.5 image widths outside the image
+  (``MAX_NORMALISED``). It is HELD at its last valid observation for up to
   ``hold_frames`` frames (``observed`` is False for it); missing longer (or never
   seen since the last reset) the frame is INVALID (reason ``missing_joints: ...``)
   and the model is not run.
@@ -52,7 +53,8 @@ Missing data is never fed through as garbage:
 * A camera slower than ``frame_rate_hz`` looks like one that drops frames, so its
   frames are spaced out to the model's rate by the same interpolation (each pose
   is still computed, and reported, at the camera's own frames).
-* A timestamp that does not increase is refused (reason ``time_not_increasing``)
+* A timestamp that is not finite or beyond +-1e10 s (``keypoints.MAX_TIMESTAMP_S``) is
+  refused (reason ``bad_time``). A timestamp that does not increase is refused (reason ``time_not_increasing``)
   and changes nothing; one that goes back by more than ``lost_timeout_s`` starts
   a new stream (:meth:`StreamingLifter.restart`: buffer, joint memory and clock
   forgotten; ``stats.restarts``).
@@ -74,7 +76,7 @@ from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
 from edge_runtime.core.onnx import session_from_manifest
 from edge_runtime.core.skeleton import JOINTS, N_JOINTS
-from edge_runtime.robot.keypoints import FORMATS, CameraModel, image_to_canonical, to_h36m
+from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, image_to_canonical, to_h36m
 
 LIFTER_ARCH = "lifter"
 INPUT_NAME = "keypoints_2d"
@@ -88,6 +90,14 @@ JOINT_COUNT = "joint_count"
 MISSING_JOINTS = "missing_joints"
 TIME_NOT_INCREASING = "time_not_increasing"
 BAD_TIME = "bad_time"
+
+MAX_RECEPTIVE_FIELD = 1024
+"""The largest receptive field a manifest may declare (VideoPose3D's largest is 243 frames):
+the ring buffer is allocated from it."""
+MAX_NORMALISED = 10.0
+"""A keypoint whose normalised coordinate (the image spans [-1, 1] in x) is beyond +-this
+(4.5 image widths outside the image) counts as missing: the model's input stays finite and
+within what a camera can show."""
 
 
 @config.section("lifter")
@@ -286,7 +296,7 @@ class StreamingLifter:
         st = self.stats
         st.frames += 1
         t_s = float(t_s)
-        if not math.isfinite(t_s):
+        if not (math.isfinite(t_s) and abs(t_s) <= MAX_TIMESTAMP_S):  # gap arithmetic would overflow
             return self._invalid(t_s, f"{BAD_TIME}: timestamp {t_s}", None)
         if self._last_t is not None and t_s < self._last_t - self.params.lost_timeout_s:
             self.restart()  # the clock went back by more than a lost person's timeout: a new stream
@@ -335,7 +345,9 @@ class StreamingLifter:
         ok = np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= self.params.min_score)  # NaN score: False
         if ok.any():
             norm = image_to_canonical(kp[ok], self.camera, self.canonical_camera)
-            ok_norm = np.isfinite(norm).all(axis=1)  # undistortion may fail far outside the image
+            # undistortion may fail far outside the image; a point beyond MAX_NORMALISED is no joint
+            # this camera saw, and float32 would make a huge one inf in the model's input
+            ok_norm = np.isfinite(norm).all(axis=1) & (np.abs(norm) <= MAX_NORMALISED).all(axis=1)
             idx = np.flatnonzero(ok)
             ok[idx[~ok_norm]] = False
             self._last_seen[idx[ok_norm]] = norm[ok_norm]
@@ -414,9 +426,9 @@ def padded_windows(frames: np.ndarray, receptive_field: int) -> np.ndarray:
 def _check_entry(entry: dict, source: str) -> tuple[int, CameraModel]:
     """(receptive field, canonical camera) from a lifter manifest entry."""
     rf = entry.get("receptive_field", 27)
-    if isinstance(rf, bool) or not isinstance(rf, int) or rf < 1:
-        raise ModelIntegrityError(f"{source}: manifest field 'receptive_field': expected a positive integer, "
-                                  f"got {rf!r}")
+    if isinstance(rf, bool) or not isinstance(rf, int) or not 1 <= rf <= MAX_RECEPTIVE_FIELD:
+        raise ModelIntegrityError(f"{source}: manifest field 'receptive_field': expected an integer in "
+                                  f"[1, {MAX_RECEPTIVE_FIELD}], got {rf!r}"[:300])
     if entry.get("joints", JOINT_SET) != JOINT_SET:
         raise ModelIntegrityError(f"{source}: manifest field 'joints': {entry.get('joints')!r}, this runtime "
                                   f"feeds {JOINT_SET}")

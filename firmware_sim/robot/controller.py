@@ -67,6 +67,7 @@ from edge_runtime.robot.link.protocol import (
     RESULT_TO_MAV,
     ROBOT_COMPID,
     ROBOT_SYSID,
+    SEQ_MAX,
     FdStream,
     RobotCanCodec,
     RobotState,
@@ -74,6 +75,7 @@ from edge_runtime.robot.link.protocol import (
     SocketStream,
     check_alarm,
     check_target,
+    light_name,
     make_mavlink,
     mav_to_robot,
     open_can_bus,
@@ -89,6 +91,9 @@ if TYPE_CHECKING:  # the runtime's link is only run here, through open_link
     from edge_runtime.robot.link.base import LinkConfig, RobotLink
 
 DEFAULT_CHANNEL = "vcan0"
+QUATERNION_NORM_TOLERANCE = 1e-3
+"""MAVLink: an attitude quaternion whose norm is further than this from 1 is refused (a zero
+or scaled quaternion describes no attitude; float32 on the wire keeps a unit one within 1e-6)."""
 HALF_TARGET_TIMEOUT_S = 0.1
 """CAN: a target's position half must follow its direction half within this time."""
 
@@ -249,8 +254,12 @@ class CanControllerPort:
 class MavlinkControllerPort:
     """MAVLink 2 on a byte stream (pty master, serial line, socket), signed when given a key."""
 
-    def __init__(self, stream, signing_key: bytes | None = None, link_id: int = 0):
+    def __init__(self, stream, signing_key: bytes | None = None, link_id: int = 0,
+                 runtime_sysid: int | None = None):
         self.stream = stream
+        self.runtime_sysid = runtime_sysid
+        """When set, only packets from this MAVLink system id are taken as the runtime's
+        (an unsigned link cannot otherwise tell the runtime from another system on the line)."""
         self.counters: dict[str, int] = {"rx_valid": 0, "integrity_errors": 0}
         self.mav = make_mavlink(self, ROBOT_SYSID, ROBOT_COMPID, signing_key, link_id)
         self._attitude: tuple[int, object] | None = None
@@ -291,8 +300,11 @@ class MavlinkControllerPort:
                 _count(self.counters, "crc_errors")
                 _count(self.counters, "integrity_errors")
             return None
-        _count(self.counters, "rx_valid")
         src = (m.get_srcSystem(), m.get_srcComponent())
+        if self.runtime_sysid is not None and src[0] != self.runtime_sysid:
+            _count(self.counters, "foreign_system")
+            return None
+        _count(self.counters, "rx_valid")
         if mtype == "HEARTBEAT":
             return Command("heartbeat")
         if mtype == "SET_ATTITUDE_TARGET":
@@ -313,21 +325,29 @@ class MavlinkControllerPort:
             return Command("move", seq=seq, invalid="position target without its attitude half", reply_to=reply)
         if m.coordinate_frame != mavlink2.MAV_FRAME_LOCAL_NED or m.type_mask & 0b111:
             return Command("move", seq=seq, invalid="position target must be LOCAL_NED with x, y, z", reply_to=reply)
-        pitch, yaw = tool_pitch_yaw(att[1])
+        q = np.asarray(att[1], dtype=float)
+        if not (np.isfinite(q).all() and abs(np.linalg.norm(q) - 1.0) <= QUATERNION_NORM_TOLERANCE):
+            return Command("move", seq=seq, invalid=f"attitude quaternion {q.tolist()} is not a unit quaternion",
+                           reply_to=reply)
+        pitch, yaw = tool_pitch_yaw(q)
         return Command("move", seq=seq, position_m=mav_to_robot(m.x, m.y, m.z), pitch_rad=pitch, yaw_rad=yaw,
                        reply_to=reply)
 
     def _command_long(self, m, src) -> Command:
-        seq = int(m.param7) & 0xFFFF
         reply = (m.command, *src)
-        if m.command == MAV_CMD_STOP_RESUME:
-            return Command("stop" if m.param1 == 0 else "resume", seq=seq, reply_to=reply)
+        if not (math.isfinite(m.param7) and m.param7 == int(m.param7) and 0 <= m.param7 <= SEQ_MAX):
+            return Command("none", invalid=f"sequence number {m.param7!r} is not an integer in 0..{SEQ_MAX}",
+                           reply_to=reply)
+        seq = int(m.param7)
+        if m.command == MAV_CMD_STOP_RESUME:  # param1 exactly 0 (stop) or 1 (resume): nothing else is either
+            kind = {0.0: "stop", 1.0: "resume"}.get(m.param1)
+            return Command(kind or "none", seq=seq, reply_to=reply,
+                           invalid="" if kind else f"pause/continue param1 {m.param1!r} is neither 0 nor 1")
         if m.command == MAV_CMD_RETRACT:
             return Command("retract", seq=seq, position_m=mav_to_robot(m.param1, m.param2, m.param3),
                            pitch_rad=float(m.param4), yaw_rad=-float(m.param5), reply_to=reply)
         if m.command == MAV_CMD_ALARM:
-            code = int(m.param1) if math.isfinite(m.param1) else -1
-            light = LIGHTS[code] if 0 <= code < len(LIGHTS) and code == m.param1 else f"code {m.param1}"
+            light = light_name(m.param1)
             return Command("alarm", seq=seq, light=light, tone_hz=float(m.param2), tone_db=float(m.param3),
                            invalid="" if light in LIGHTS else f"unknown light {light}", reply_to=reply)
         return Command("none", seq=seq, invalid=f"unsupported command {m.command}", reply_to=reply)
@@ -420,6 +440,8 @@ class SawyerController:
         _count(self.counters, "commands")
         if result != "ok":
             _count(self.counters, "refused")
+        if cmd.invalid:
+            _count(self.counters, "malformed")  # refused before anything was executed
         if result == "unreachable":
             _count(self.counters, "unreachable")
         self.port.acknowledge(cmd, result, self.snapshot(self._last_valid_rx))
@@ -700,6 +722,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--serial", default=None, metavar="PATH", help="MAVLink: use this existing serial line")
     p.add_argument("--baud", type=positive_int, default=921600, help="MAVLink --serial: baud rate")
     p.add_argument("--signing-key", type=_hex_key, default=None, help="MAVLink 2 signing key, 64 hex digits")
+    p.add_argument("--runtime-sysid", type=int, choices=range(1, 256), default=None, metavar="ID",
+                   help="MAVLink: take commands only from this system id (default: any)")
     p.add_argument("--rate-hz", type=positive_float, default=100.0, help="state reports per second (default 100)")
     p.add_argument("--watchdog-ms", type=positive_float, default=200.0, help="runtime silence that stops the arm")
     p.add_argument("--duration", type=positive_float, default=None, metavar="S", help="stop after S seconds")
@@ -727,13 +751,13 @@ def _open_port(args, config: ControllerConfig):
         raise ValueError("--link mavlink needs exactly one of --pty or --serial PATH")
     if args.pty:
         master, path = open_pty_pair()
-        port = MavlinkControllerPort(FdStream(master), args.signing_key)
+        port = MavlinkControllerPort(FdStream(master), args.signing_key, runtime_sysid=args.runtime_sysid)
         return port, path, lambda: close_pty_pair(master)
     try:
         stream = SerialStream(args.serial, args.baud)
     except (OSError, ValueError) as e:
         raise ValueError(f"cannot open serial line {args.serial!r}: {e}") from None
-    port = MavlinkControllerPort(stream, args.signing_key)
+    port = MavlinkControllerPort(stream, args.signing_key, runtime_sysid=args.runtime_sysid)
     return port, args.serial, port.close
 
 

@@ -118,11 +118,26 @@ def test_save_and_load_keep_everything(tmp_path):
     assert np.allclose(again.apply(p), cal.apply(p)) and again.params == cal.params
 
 
+def _saved(**changes) -> str:
+    """A valid calibration file's text with some fields replaced (None deletes one)."""
+    t, cam_j, label = recording(camera(), np.random.default_rng(5), frames_per_marker=20)
+    data = from_recording(t, cam_j, marker=label).to_json()
+    for key, value in changes.items():
+        section, _, name = key.partition("__")
+        target = data[section] if name else data
+        if value is None:
+            target.pop(name or section)
+        else:
+            target[name or section] = value
+    return json.dumps(data)
+
+
 @pytest.mark.parametrize("text, match", [
-    ("{", "not JSON"),
-    ('{"version": 9}', "version 9"),
-    ('{"version": 1, "A": [[1, 0], [0, 1]], "b": [0, 0, 0]}', "3x3"),
-    ('{"version": 1, "A": [[0, 0, 0], [0, 0, 0], [0, 0, 0]], "b": [0, 0, 0]}', "singular"),
+    ("{", "not valid JSON"),
+    ('{"version": 9}', "field 'version': 9"),
+    ('{"version": 1, "A": [[1, 0], [0, 1]], "b": [0, 0, 0]}', "field 'method': missing"),
+    ('{"version": 1, "A": [[0, 0, 0], [0, 0, 0], [0, 0, 0]], "b": [0, 0, 0], "method": "rigid", '
+     '"worker_height_m": 1.7, "inputs": {}}', "singular"),
 ])
 def test_bad_calibration_files_say_why(tmp_path, text, match):
     p = tmp_path / "cal.json"
@@ -132,6 +147,29 @@ def test_bad_calibration_files_say_why(tmp_path, text, match):
     assert str(p) in str(e.value)
     with pytest.raises(CalibrationError, match="cannot read"):
         Calibration.load(tmp_path / "missing.json")
+
+
+@pytest.mark.parametrize("changes, match", [
+    ({"params__ground_anchor": "false"}, r"\[calibration\] ground_anchor: expected true/false, got 'false'"),
+    ({"worker_height_m": "1.7"}, r"field 'worker_height_m': expected a finite number"),
+    ({"b": [0, "1", 0]}, r"field 'b'\[1\]: expected a finite number"),
+    ({"A": [[1, 0, 0], [0, 1, 0], [0, 0, 10**400]]}, r"field 'A'\[2\]\[2\]: expected a finite number"),
+    ({"A": [[1, 0], [0, 1]]}, r"field 'A': expected a list of 3"),
+    ({"method": ["rigid"]}, r"field 'method': expected one of"),
+    ({"inputs__head_cam_m": None}, r"field 'inputs.head_cam_m': expected a list of 3"),
+    ({"inputs__frames_per_marker": [60, 60.5, 60]}, r"frames_per_marker': expected an integer"),
+    ({"params__markers_xz_m": [[0, 1], [1, 1]]}, r"markers_xz_m: must be three"),
+    ({"params__min_frames": 0}, r"\[calibration\] min_frames: must be an integer of at least 1"),
+    ({"params": []}, r"field 'params': expected an object"),
+])
+def test_every_calibration_field_is_checked_and_named(tmp_path, changes, match):
+    p = tmp_path / "cal.json"
+    p.write_text(_saved(**changes))
+    with pytest.raises(CalibrationError, match=match) as e:
+        Calibration.load(p)
+    assert str(e.value).startswith(f"{p}: ") and "\n" not in str(e.value)
+    p.write_text(_saved())
+    assert Calibration.load(p).params.ground_anchor is True
 
 
 def test_degenerate_inputs_are_refused():

@@ -126,7 +126,7 @@ def test_robot_frame_joints_need_no_calibration(tmp_path, fake_link):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("line, match", [
-    ('{"t": 0.0, "joints_robot_m": [[0, 0, 0]]}', r"walk.jsonl:2: joints_robot_m: expected 17 \[x, y, z\] rows"),
+    ('{"t": 0.0, "joints_robot_m": [[0, 0, 0]]}', r"walk.jsonl:2: joints_robot_m: expected a list of 17"),
     ('{"t": 0.0}', r"walk.jsonl:2: no joints_cam_m, joints_robot_m or people"),
     ('{"t": "soon", "joints_robot_m": null, "valid": false}', r"walk.jsonl:2: t: expected a finite number"),
     ('[1, 2]', r"walk.jsonl:2: expected a JSON object"),
@@ -143,6 +143,34 @@ def test_bad_joints_files_are_one_line_naming_the_line(tmp_path, line, match):
     import re
 
     assert re.search(match, r.stderr), r.stderr
+
+
+@pytest.mark.parametrize("line, match", [
+    ('{"t": 1.7e308, "joints_robot_m": null, "valid": false}', r"walk.jsonl:2: t: expected a finite number in"),
+    ('{"t": 1.0, "joints_robot_m": [[1e400, 0, 0]' + ', [0, 0, 0]' * 16 + ']}',
+     r"walk.jsonl:2: joints_robot_m\[0\]\[0\]: expected a finite number in \[-100, 100\]"),
+    ('{"t": 1.0, "joints_robot_m": [[NaN, 0, 0]' + ', [0, 0, 0]' * 16 + ']}', r"walk.jsonl:2: NaN is not JSON"),
+    ('{"t": 1.0, "marker": true, "joints_robot_m": null, "valid": false}', r"walk.jsonl:2: marker: expected an integer"),
+    (json.dumps({"t": 1.0, "people": [{"id": [1], "joints_robot_m": [[0, 0, 0]] * 17}]}), r"walk.jsonl:2: people\[0\].id"),
+    ('{"t": ' + "9" * 400 + ', "joints_robot_m": null, "valid": false}', r"walk.jsonl:2: t: expected a finite number"),
+    ('{"t": 1.0, "x": ' + "[" * 3000 + "]" * 3000 + '}', r"walk.jsonl:2: nested more than 64 levels"),
+])
+def test_joints_lines_are_checked_field_by_field(tmp_path, line, match):
+    from edge_runtime.robot.command import JointsInputError, read_joints_jsonl
+
+    p = tmp_path / "walk.jsonl"
+    p.write_text(json.dumps({"t": 0.0, "joints_robot_m": np.zeros((17, 3)).tolist()}) + "\n" + line + "\n")
+    with pytest.raises(JointsInputError, match=match):
+        read_joints_jsonl(str(p))
+
+
+def test_non_utf8_joints_line_is_named(tmp_path):
+    from edge_runtime.robot.command import JointsInputError, read_joints_jsonl
+
+    p = tmp_path / "walk.jsonl"
+    p.write_bytes(json.dumps({"t": 0.0, "joints_robot_m": None, "valid": False}).encode() + b"\n\xff\n")
+    with pytest.raises(JointsInputError, match=r"walk.jsonl:2: not UTF-8 text"):
+        read_joints_jsonl(str(p))
 
 
 @pytest.mark.slow

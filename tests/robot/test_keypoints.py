@@ -149,6 +149,13 @@ def test_reads_nested_flat_null_and_frame_only(tmp_path):
     assert frames[4].people[0].keypoints.shape == (15, 3)  # passed on; the lifter reports it
 
 
+def test_non_utf8_bytes_name_file_and_line(tmp_path):
+    p = tmp_path / "kp.jsonl"
+    p.write_bytes(b'{"t": 0.0, "people": []}\n{"t": 0.1, "people": [], "x": "\xff"}\n')
+    with pytest.raises(KeypointInputError, match=r"kp.jsonl:2: not UTF-8 text"):
+        list(read_keypoints_jsonl(p, "coco"))
+
+
 @pytest.mark.parametrize("line, message", [
     ('{"t": 0.1, "people": [', "not valid JSON"),
     ('[1, 2, 3]', "expected a JSON object"),
@@ -158,7 +165,16 @@ def test_reads_nested_flat_null_and_frame_only(tmp_path):
     ('{"t": 0.1, "people": [{"kp": []}]}', "people[0]: expected an object with 'keypoints'"),
     ('{"t": 0.1, "people": [{"keypoints": [[1, 2, 3, 4]]}]}', "each keypoint must be"),
     ('{"t": 0.1, "people": [{"keypoints": [1, 2, 3, 4, 5]}]}', "neither x,y,score"),
-    ('{"t": 0.1, "people": [{"keypoints": [["a", 2, 0.5]]}]}', "non-numeric"),
+    ('{"t": 0.1, "people": [{"keypoints": [["a", 2, 0.5]]}]}', "keypoints[0][0]: expected a finite number"),
+    ('{"t": 0.1, "people": [{"keypoints": [[1e300, 2, 0.5]]}]}', "keypoints[0][0]: expected a finite number"),
+    ('{"t": 0.1, "people": [{"keypoints": [[1, Infinity, 0.5]]}]}', "Infinity is not JSON"),
+    ('{"t": 0.1, "people": [{"keypoints": [[1, 1e999, 0.5]]}]}', "keypoints[0][1]: expected a finite number"),
+    ('{"t": 0.1, "people": [{"keypoints": [[1, 2, 1.5]]}]}', "keypoints score[0]: expected a finite number in [0, 1]"),
+    ('{"t": 0.1, "people": [{"keypoints": [[1, 2, ' + "9" * 400 + ']]}]}', "expected a finite number in [0, 1]"),
+    ('{"t": 1.7e308, "people": []}', "t: expected a finite number in [-1e+10, 1e+10]"),
+    ('{"frame": ' + "9" * 400 + ', "people": []}', "frame: expected an integer"),
+    ('{"t": 0.1, "people": ' + "[" * 5000 + "]" * 5000 + '}', "nested more than"),
+    ('{"t": 0.1, "people": [{"keypoints": [], "id": ' + "1" * 400 + '}]}', "id: expected an integer"),
     ('{"t": 0.1, "people": [{"keypoints": ' + json.dumps([[1, 2, 1]] * 18) + '}]}', "18 keypoints"),
     ('{"t": 0.1, "format": "h36m", "people": []}', "declared 'coco'"),
     ('{"t": 0.1, "people": [{"keypoints": [], "id": "x"}]}', "id: expected an integer"),
@@ -264,5 +280,10 @@ def test_camera_files(tmp_path):
             CameraModel.from_json(p)
         assert str(p) in str(e.value)
     p.write_text("{nope")
-    with pytest.raises(InputError, match="cam.json: not a readable JSON"):
+    with pytest.raises(InputError, match="cam.json: not valid JSON"):
         CameraModel.from_json(p)
+    for text, msg in (('{"fx_px": ' + "9" * 400 + "}", "cam.json: "), ("[" * 5000 + "]" * 5000, "nested more than"),
+                      ('{"fx_px": NaN}', "NaN is not JSON")):
+        p.write_text(text)
+        with pytest.raises(InputError, match=msg):
+            CameraModel.from_json(p)

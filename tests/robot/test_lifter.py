@@ -156,6 +156,26 @@ def test_fewer_joints_and_bad_timestamps(assets):
     assert s.frames == 5 and s.valid == 2 and s.frames_interpolated == 1
 
 
+def test_a_timestamp_of_1_7e308_is_a_bad_time_not_an_overflow(assets):
+    kp = random_walk_keypoints(np.random.default_rng(6), 3)
+    lifter = _lifter(assets)
+    assert lifter.push(0.0, kp[0]).valid
+    far = lifter.push(1.7e308, kp[1])
+    assert not far.valid and far.code == BAD_TIME
+    assert lifter.push(PERIOD, kp[2]).valid
+
+
+def test_a_joint_far_outside_the_image_is_missing_and_never_reaches_the_model(assets):
+    kp = random_walk_keypoints(np.random.default_rng(8), 2)
+    lifter = _lifter(assets, hold_frames=0)
+    assert lifter.push(0.0, kp[0]).valid
+    far = kp[1].copy()
+    far[3, 0] = 1e300  # finite, but inf once the model's float32 input holds it
+    pose = lifter.push(PERIOD, far)
+    assert not pose.valid and pose.code == MISSING_JOINTS
+    assert np.isfinite(lifter.window()).all() and np.abs(lifter.window()).max() <= 10
+
+
 def test_person_who_disappears_is_held_then_invalid_then_resets(assets):
     kp = random_walk_keypoints(np.random.default_rng(7), 80)
     lifter = _lifter(assets, hold_frames=2, lost_timeout_s=0.3)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import subprocess
 import sys
 
@@ -93,3 +94,68 @@ def test_a_damaged_command_is_never_executed(kind):
         assert sim.faults.stats["corrupted"] > 50 and sim.faults.stats["dropped"] > 20
         assert sim.controller.all_counters()["integrity_errors"] > 10
         assert sim.link.stats.integrity_errors > 10
+
+
+def _signed_from(sim, sysid: int) -> tuple:
+    """(pymavlink sender as system ``sysid`` with the link's key, its byte buffer)."""
+    buf = io.BytesIO()
+    return make_mavlink(buf, sysid, 191, sim.controller.port.mav.signing.secret_key, link_id=3), buf
+
+
+def test_a_pause_continue_whose_param1_is_not_0_or_1_is_refused_not_executed_as_resume():
+    with SimulatedRobot("mavlink") as sim:
+        sim.step(0.05)
+        mav, buf = _signed_from(sim, 1)
+        mav.command_long_send(1, 1, 193, 0, math.nan, 0, 0, 0, 0, 0, 700.0)  # a stop? a resume? neither
+        mav.command_long_send(1, 1, 193, 0, 1, 0, 0, 0, 0, 0, math.inf)      # a resume with no sequence number
+        sim.link.stream.write(buf.getvalue())
+        sim.step(0.05)
+        assert sim.controller.mode == "stopped"
+        assert sim.controller.counters["malformed"] == 2
+
+
+def test_a_zero_quaternion_is_an_invalid_move_not_an_assertion():
+    with SimulatedRobot("mavlink") as sim:
+        sim.link.resume()
+        sim.step(0.05)
+        mav, buf = _signed_from(sim, 1)
+        mav.set_attitude_target_send(9, 1, 1, 0, [0.0, 0.0, 0.0, 0.0], 0, 0, 0, 0)
+        mav.set_position_target_local_ned_send(9, 1, 1, 1, 0b111111111000, 0.6, -0.3, -0.2, 0, 0, 0, 0, 0, 0, 0, 0)
+        sim.link.stream.write(buf.getvalue())
+        sim.step(0.05)
+        assert (sim.controller.last_seq, sim.controller.last_result) == (9, "invalid")
+        assert sim.controller.counters["malformed"] == 1
+
+
+def test_commands_from_a_foreign_system_id_are_refused_when_one_is_configured():
+    with SimulatedRobot("mavlink") as sim:
+        sim.controller.port.runtime_sysid = 1
+        sim.step(0.05)
+        mav, buf = _signed_from(sim, 7)
+        mav.command_long_send(1, 1, 193, 0, 1, 0, 0, 0, 0, 0, 800.0)  # resume, from system 7
+        sim.link.stream.write(buf.getvalue())
+        sim.step(0.05)
+        assert sim.controller.mode == "stopped" and sim.controller.port.counters["foreign_system"] == 1
+        sim.link.resume()
+        sim.step(0.05)
+        assert sim.controller.mode == "run"
+
+
+def test_a_short_can_frame_is_counted_and_the_controller_keeps_running():
+    import can
+    import e2e.p01 as p01
+
+    from edge_runtime.canbus.e2e import e2e_data_id
+
+    with SimulatedRobot("can") as sim:
+        sim.step(0.05)
+        msg = sim.link.codec.db.get_message_by_name("ROBOT_MODE_CMD")
+        data = bytearray(3)
+        p01.e2e_p01_protect(data, e2e_data_id(msg), length=len(data), increment_counter=False)
+        sim.link.bus.send(can.Message(arbitration_id=msg.frame_id, data=bytes(data), is_extended_id=False))
+        sim.step(0.05)
+        assert sim.controller.port.codec.checker.counts.get("wrong_crc", 0) == 0  # refused before the E2E check
+        assert sim.controller.all_counters()["integrity_errors"] == 1
+        ok = sim.link.resume()
+        sim.step(0.05)
+        assert sim.link.result(ok) == "ok"

@@ -38,6 +38,7 @@ from edge_runtime.robot.link.protocol import (
     RUNTIME_STATES,
     RobotState,
     check_alarm,
+    check_state,
     check_target,
     next_seq,
 )
@@ -56,7 +57,10 @@ class LinkStats:
     frames_received: int = 0
     """Frames or packets received that passed the integrity check."""
     states: int = 0
-    """Complete state reports received."""
+    """Complete state reports received and used."""
+    states_refused: int = 0
+    """Complete state reports refused by ``protocol.check_state`` (a non-finite or impossible
+    value); the link treats them as not received, so the state timeout still runs."""
     integrity_errors: int = 0
     """Received frames discarded: E2E (CRC, repeated counter) or MAVLink signature/CRC failures."""
     refused: int = 0
@@ -181,6 +185,8 @@ class RobotLink(LinkInterface):
         self.clock: Clock = clock or time.monotonic
         self.stats = LinkStats()
         self.last_error: str | None = None
+        self.last_refused_state: str | None = None
+        """Why the last refused state report was refused (``stats.states_refused``)."""
         self.reopenable = reopenable
         self._lock = threading.RLock()
         self._seq = 0
@@ -239,6 +245,11 @@ class RobotLink(LinkInterface):
             if self._open:
                 try:
                     for st in self._receive(now):
+                        refused = check_state(st)
+                        if refused is not None:  # a measurement the runtime cannot decide on
+                            self.stats.states_refused += 1
+                            self.last_refused_state = f"{refused}: outside its range or not finite"
+                            continue
                         newest = self._on_state(st)
                 except LINK_ERRORS as exc:
                     self._fault(now, f"receive: {type(exc).__name__}: {exc}")

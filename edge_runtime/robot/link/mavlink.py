@@ -27,6 +27,7 @@ from edge_runtime.robot.link.protocol import (
     RobotState,
     SerialStream,
     blank_state,
+    light_name,
     make_mavlink,
     mav_to_robot,
     robot_to_mav,
@@ -137,7 +138,7 @@ class MavlinkRobotLink(RobotLink):
         elif mtype == "ACTUATOR_OUTPUT_STATUS":
             a = m.actuator
             self._partial = replace(s, joint_positions_rad=np.array(a[:N_JOINTS], dtype=float),
-                                    light=LIGHTS[int(round(a[14])) % len(LIGHTS)], tone_hz=float(a[15]),
+                                    light=light_name(a[14]), tone_hz=float(a[15]),
                                     tone_db=float(a[16]))
         elif mtype == "SYS_STATUS":
             self._partial = replace(s, counters={"integrity_errors": m.errors_comm, "refused": m.errors_count1,

@@ -60,6 +60,7 @@ SYS_STATUS                  robot→runtime  counters every 100 ms: errors_comm 
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 import socket
@@ -144,7 +145,9 @@ def next_seq(seq: int) -> int:
 
 
 def wrap_angle(a: float) -> float:
-    """Angle in (-pi, pi]."""
+    """Angle in (-pi, pi]; NaN for a non-finite angle (which has no direction)."""
+    if not math.isfinite(a):
+        return math.nan
     a = math.remainder(float(a), 2 * math.pi)
     return math.pi if a == -math.pi else a
 
@@ -154,13 +157,52 @@ def check_target(position_m, pitch_rad: float, yaw_rad: float) -> tuple[np.ndarr
     p = np.asarray(position_m, dtype=float).reshape(-1)
     if p.shape != (3,) or not np.all(np.isfinite(p)):
         raise ValueError(f"position_m must be 3 finite numbers (m), got {position_m!r}")
-    if np.any(np.abs(p) > 3.2):
-        raise ValueError(f"position_m {tuple(np.round(p, 3))} is outside +-3.2 m of the robot base")
+    if np.any(np.abs(p) > POSITION_LIMIT_M):
+        raise ValueError(f"position_m {tuple(np.round(p, 3))} is outside +-{POSITION_LIMIT_M} m of the robot base")
     if not math.isfinite(pitch_rad) or abs(pitch_rad) > math.pi / 2 + 1e-9:
         raise ValueError(f"pitch_rad must lie in [-pi/2, pi/2], got {pitch_rad!r}")
     if not math.isfinite(yaw_rad):
         raise ValueError(f"yaw_rad must be finite, got {yaw_rad!r}")
     return p, max(-math.pi / 2, min(math.pi / 2, float(pitch_rad))), wrap_angle(yaw_rad)
+
+
+MAX_JOINT_RAD = 2 * math.pi
+"""A reported joint angle beyond this is not a Sawyer's (its widest joint turns +-3.5 rad)."""
+MAX_EE_SPEED_MPS = 10.0
+"""A reported hand speed beyond this is not a Sawyer's (its rated maximum is 1.5 m/s)."""
+POSITION_LIMIT_M = 3.2
+"""Every position on the link lies within this of the robot base (the CAN encoding's range)."""
+
+
+def check_state(st: RobotState) -> str | None:
+    """Why a received state cannot be used (None: it can). A state is a measurement the
+    runtime decides on, so a non-finite or impossible value refuses the whole state
+    rather than reaching the distance check."""
+    p = np.asarray(st.ee_position_m, dtype=float)
+    q = np.asarray(st.joint_positions_rad, dtype=float)
+    if p.shape != (3,) or not np.isfinite(p).all() or np.abs(p).max() > POSITION_LIMIT_M:
+        return "ee_position_m"
+    if q.shape != (N_JOINTS,) or not np.isfinite(q).all() or np.abs(q).max() > MAX_JOINT_RAD:
+        return "joint_positions_rad"
+    for name, lo, hi in (("pitch_rad", -math.pi / 2 - 1e-3, math.pi / 2 + 1e-3), ("yaw_rad", -math.pi, math.pi),
+                         ("ee_speed_mps", 0.0, MAX_EE_SPEED_MPS), ("tone_hz", 0.0, MAX_TONE_HZ),
+                         ("tone_db", 0.0, MAX_TONE_DB), ("robot_time_s", 0.0, math.inf)):
+        v = getattr(st, name)
+        if not (math.isfinite(v) and lo <= v <= hi):
+            return name
+    for name, allowed in (("mode", MODES), ("light", LIGHTS), ("last_command", COMMANDS),
+                          ("last_result", RESULTS)):
+        if getattr(st, name) not in allowed:
+            return name
+    return None
+
+
+def light_name(code: float) -> str:
+    """The light of a numeric light code (0 off .. 3 red); a code that is not one of them
+    comes back as its text, which :func:`check_state` and :func:`check_alarm` refuse."""
+    if math.isfinite(code) and code == int(code) and 0 <= code < len(LIGHTS):
+        return LIGHTS[int(code)]
+    return f"code {code}"
 
 
 def check_alarm(light: str, tone_hz: float, tone_db: float) -> tuple[str, float, float]:
@@ -237,6 +279,13 @@ class SocketStream(FdStream):
 # ----------------------------------------------------------------------------------------------
 # CAN: the DBC with E2E protection
 
+@functools.lru_cache(maxsize=1)
+def robot_link_db():
+    """``robot_link.dbc``, parsed once per process (read-only afterwards; a link that is
+    reopened, or a test that makes many, does not parse it again)."""
+    return load_dbc(DBC_PATH)
+
+
 class RobotCanCodec:
     """Encodes and decodes robot-link frames with cantools from ``robot_link.dbc``, with E2E.
 
@@ -245,9 +294,10 @@ class RobotCanCodec:
     """
 
     def __init__(self, db=None):
-        self.db = db if db is not None else load_dbc(DBC_PATH)
+        self.db = db if db is not None else robot_link_db()
         self.checker = E2EChecker(db=self.db)
         self._by_name = {m.name: m for m in self.db.messages}
+        self._by_id = {m.frame_id: m for m in self.db.messages}
         self._e2e = E2EProtector()
 
     def encode(self, name: str, **signals) -> can.Message:
@@ -255,12 +305,21 @@ class RobotCanCodec:
         return self._e2e.protect(self._by_name[name], signals)
 
     def decode(self, msg: can.Message) -> tuple[str, str, dict | None]:
-        """(E2E status, message name, signals). Signals is None unless the frame is valid."""
+        """(status, message name, signals). Signals is None unless the frame is valid.
+
+        The E2E check comes first and checks the frame's shape before its bytes are read
+        (``bad_frame``: an error or remote frame, the wrong identifier kind or length; a
+        short frame would make cantools raise). The decoded values are then held to the
+        DBC: every enumerated signal one of its named values and every signal within its
+        [min|max] (``out_of_range``)."""
         res = self.checker.check(msg)
         if not res.valid:
             return res.status, "", None
-        message = self.db.get_message_by_frame_id(msg.arbitration_id)
-        return res.status, message.name, message.decode(bytes(msg.data), decode_choices=True)
+        message = self._by_id[msg.arbitration_id]
+        sig = message.decode(bytes(msg.data), decode_choices=True)
+        if not all(_signal_in_range(s, sig[s.name]) for s in message.signals):
+            return "out_of_range", message.name, None
+        return res.status, message.name, sig
 
     # -- runtime -> robot ------------------------------------------------------------------
     def target_frames(self, seq: int, position_m, pitch_rad: float, yaw_rad: float, retract: bool) -> list[can.Message]:
@@ -307,6 +366,15 @@ class RobotCanCodec:
         return self.encode("ROBOT_COUNTERS", WatchdogTrips=sat("watchdog_trips", 15),
                            RxValid=int(counters.get("rx_valid", 0)) % 65536,
                            IntegrityErrors=sat("integrity_errors", 65535), Refused=sat("refused", 65535))
+
+
+def _signal_in_range(signal, value) -> bool:
+    """A decoded signal is one of its named values (when it has choices) and within its DBC range."""
+    if signal.choices:
+        return not isinstance(value, (int, float))  # cantools leaves an unnamed raw value a number
+    lo, hi = signal.minimum, signal.maximum
+    slack = abs(signal.scale) / 2  # the DBC's limits are physical values; decoding rounds to a raw step
+    return (lo is None or value >= lo - slack) and (hi is None or value <= hi + slack)
 
 
 def open_can_bus(interface: str, channel: str, host: str | None = None, port: int | None = None,

@@ -3,13 +3,16 @@ pseudo-terminal, and in-process on a socket pair."""
 from __future__ import annotations
 
 import io
+import math
+import socket
 
 import pytest
+from pymavlink.dialects.v20 import common as mavlink2
 from support.robot import exercise_live_controller, pump, start_simulated
 
 from edge_runtime.robot.link.base import open_link
 from edge_runtime.robot.link.mavlink import MavlinkRobotLink
-from edge_runtime.robot.link.protocol import make_mavlink
+from edge_runtime.robot.link.protocol import ROBOT_COMPID, ROBOT_SYSID, SocketStream, make_mavlink
 from firmware_sim.robot.controller import TEST_SIGNING_KEY, SawyerProcess, SimulatedRobot
 
 
@@ -64,3 +67,23 @@ def test_mavlink_runtime_refuses_a_controller_with_another_key():
         assert not sim.link.link_ok and sim.link.stats.integrity_errors > 20 and sim.link.stats.outages == 1
         assert sim.link.state.t_s < sim.clock() - 0.2
         assert isinstance(sim.link, MavlinkRobotLink) and TEST_SIGNING_KEY != bytes(32)
+
+
+def test_a_non_finite_arm_state_is_refused_and_counted_never_raised():
+    """A controller reporting NaN/inf (a faulty arm, correctly signed) makes poll() refuse
+    and count those states; the next sound state is used again."""
+    a, b = socket.socketpair()
+    link = MavlinkRobotLink(stream=SocketStream(b), signing_key=TEST_SIGNING_KEY, clock=lambda: 0.0)
+    arm = make_mavlink(SocketStream(a), ROBOT_SYSID, ROBOT_COMPID, TEST_SIGNING_KEY, 0)
+    try:
+        for value in (math.nan, math.inf, 0.5):
+            arm.attitude_send(0, 0.0, value, 0.0, 0.0, 0.0, 0.0)
+            arm.actuator_output_status_send(0, 0, [value] * 32 if value != 0.5 else [0.0] * 32)
+            arm.heartbeat_send(mavlink2.MAV_TYPE_GENERIC, mavlink2.MAV_AUTOPILOT_GENERIC, 0, 0, 0)
+            state = link.poll()
+            assert (state is None) == (value != 0.5)
+        assert link.stats.states_refused == 2 and link.stats.states == 1
+        assert link.last_refused_state.startswith("joint_positions_rad")
+    finally:
+        link.close()
+        a.close()

@@ -2,14 +2,20 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
+import can
+import e2e.p01 as p01
 import numpy as np
 import pytest
 
+from edge_runtime.canbus.e2e import e2e_data_id
 from edge_runtime.robot.link.protocol import (
     CanStateAssembler,
     RobotCanCodec,
+    blank_state,
     check_alarm,
+    check_state,
     check_target,
     mav_to_robot,
     next_seq,
@@ -69,3 +75,35 @@ def test_targets_and_alarms_are_checked_field_by_field():
                         (("red", 0.0, -1.0), "tone_db")):
         with pytest.raises(ValueError, match=field):
             check_alarm(*args)
+
+
+def test_a_short_frame_with_a_valid_crc_is_refused_before_decoding():
+    codec = RobotCanCodec()
+    msg = codec.db.get_message_by_name("ROBOT_STATUS")
+    data = bytearray(5)
+    p01.e2e_p01_protect(data, e2e_data_id(msg), length=len(data), increment_counter=False)
+    short = can.Message(arbitration_id=msg.frame_id, data=bytes(data), is_extended_id=False)
+    assert codec.decode(short) == ("bad_frame", "", None)
+    good = codec.status_frame(blank_state())
+    assert codec.decode(can.Message(arbitration_id=good.arbitration_id, data=good.data,
+                                    is_extended_id=True))[0] == "bad_frame"
+    assert codec.decode(good)[2] is not None
+
+
+def test_an_unnamed_enum_value_with_a_valid_crc_is_refused():
+    codec = RobotCanCodec()
+    good = codec.status_frame(blank_state())
+    data = bytearray(good.data)
+    data[1] = (data[1] & 0x0F) | 0xD0  # Mode 13: not stopped, run or retract
+    msg = codec.db.get_message_by_name("ROBOT_STATUS")
+    p01.e2e_p01_protect(data, e2e_data_id(msg), length=len(data), increment_counter=False)
+    status, _, sig = codec.decode(can.Message(arbitration_id=msg.frame_id, data=bytes(data), is_extended_id=False))
+    assert (status, sig) == ("out_of_range", None)
+
+
+@pytest.mark.parametrize("field, value", [("ee_position_m", np.array([np.nan, 0.0, 0.5])),
+                                          ("pitch_rad", float("inf")), ("light", "code nan"),
+                                          ("joint_positions_rad", np.full(7, 1e30))])
+def test_check_state_names_what_is_not_a_measurement(field, value):
+    assert check_state(blank_state()) is None
+    assert check_state(replace(blank_state(), **{field: value})) == field
