@@ -209,6 +209,18 @@ def probability(s: str) -> float:
     return _number(s, float, "a probability in [0, 1]", lambda v: 0.0 <= v <= 1.0)
 
 
+def hex_signing_key(flag: str) -> Callable[[str], bytes]:
+    """argparse type for a MAVLink 2 signing key given as 64 hex digits (the simulators' flags)."""
+    from edge_runtime.core.serial_line import parse_signing_key
+
+    def parse(s: str) -> bytes:
+        try:
+            return parse_signing_key(s, flag)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    return parse
+
+
 def _is_journal(stream) -> bool:
     """Whether ``stream`` is systemd's journal: ``$JOURNAL_STREAM`` names its device and inode."""
     try:

@@ -286,17 +286,9 @@ class ImuFirmware:
 # ----------------------------------------------------------------------------------------------
 # `python -m firmware_sim imu ...` (the lead registers it with add_imu_parser)
 
-def _hex_key(s: str) -> bytes:
-    from edge_runtime.core.serial_line import parse_signing_key
-
-    try:
-        return parse_signing_key(s, "--sign-key")
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from edge_runtime.cli import positive_float, probability
+    from edge_runtime.cli import hex_signing_key, positive_float, probability
 
     p.add_argument("--minutes", type=positive_float, default=3.0, help="length of the simulated drive (min)")
     p.add_argument("--seed", type=int, default=0)
@@ -304,7 +296,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", default=None, help="write to this existing serial device instead of --pty")
     p.add_argument("--message", choices=("highres", "scaled"), default="highres",
                    help="HIGHRES_IMU (m/s^2) or SCALED_IMU (mG)")
-    p.add_argument("--sign-key", type=_hex_key, default=None, help="MAVLink 2 signing key, 64 hex digits")
+    p.add_argument("--sign-key", type=hex_signing_key("--sign-key"), default=None, help="MAVLink 2 signing key, 64 hex digits")
     p.add_argument("--drop", type=probability, default=0.0, help="probability per sample of a dropped burst")
     p.add_argument("--drop-burst", type=int, default=5, help="samples per dropped burst")
     p.add_argument("--corrupt", type=probability, default=0.0, help="probability per packet of a flipped byte")

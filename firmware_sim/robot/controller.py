@@ -54,7 +54,6 @@ import can
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-from edge_runtime.core.serial_line import parse_signing_key
 from edge_runtime.robot.link.base import open_link
 from edge_runtime.robot.link.options import add_bus_arguments
 from edge_runtime.robot.link.protocol import (
@@ -705,15 +704,8 @@ def run_realtime(controller: SawyerController, duration_s: float | None = None,
     return {"late_max_s": late_max, "duration_s": time.monotonic() - start}
 
 
-def _hex_key(s: str) -> bytes:
-    try:
-        return parse_signing_key(s, "--signing-key")
-    except ValueError as e:
-        raise argparse.ArgumentTypeError(str(e)) from None
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from edge_runtime.cli import positive_float, positive_int
+    from edge_runtime.cli import hex_signing_key, positive_float, positive_int
 
     p.add_argument("--link", choices=("can", "mavlink"), required=True, help="CAN (robot_link.dbc) or MAVLink 2")
     add_bus_arguments(p, defaults={"interface": "socketcand", "host": "127.0.0.1", "channel": DEFAULT_CHANNEL},
@@ -721,7 +713,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pty", action="store_true", help="MAVLink: create a pseudo-terminal pair and print its path")
     p.add_argument("--serial", default=None, metavar="PATH", help="MAVLink: use this existing serial line")
     p.add_argument("--baud", type=positive_int, default=921600, help="MAVLink --serial: baud rate")
-    p.add_argument("--signing-key", type=_hex_key, default=None, help="MAVLink 2 signing key, 64 hex digits")
+    p.add_argument("--signing-key", type=hex_signing_key("--signing-key"), default=None, help="MAVLink 2 signing key, 64 hex digits")
     p.add_argument("--runtime-sysid", type=int, choices=range(1, 256), default=None, metavar="ID",
                    help="MAVLink: take commands only from this system id (default: any)")
     p.add_argument("--rate-hz", type=positive_float, default=100.0, help="state reports per second (default 100)")
