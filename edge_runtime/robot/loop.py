@@ -7,7 +7,7 @@ Per camera frame::
     -> calibration (camera -> robot frame; each skeleton re-anchored on the floor when
        the calibration's ground_anchor is on) -> head tracker (per worker)
     -> HazardMonitor (zones, hysteresis, fail-safe) -> in level 2 the retraction
-       (:mod:`edge_runtime.robot.retract`) -> commands on the LinkInterface
+       (:mod:`edge_runtime.robot.hazard`) -> commands on the LinkInterface
 
 ``RobotLoop`` never sleeps and never reads the wall clock itself: time comes from the
 injectable ``clock`` (``time.monotonic`` by default; a scenario runner passes its
@@ -28,7 +28,7 @@ NORMAL     the task: cycle through ``task_waypoints_m``            green
 LEVEL1     ``stop()``                                              red, 2000 Hz 70 dB
 LEVEL2     ``retract(P_eff + L)`` on entry (Eq. 6; again when it  red, 4000 Hz 80 dB
            is done and the worker still comes closer), planned
-           by :mod:`edge_runtime.robot.retract`; if the
+           by :mod:`edge_runtime.robot.hazard`; if the
            controller reports it unreachable, one retraction
            straight toward the base, and if that is refused too:
            ``stop()`` (``retract_unreachable``)
@@ -68,8 +68,17 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.skeleton import HEAD
-from edge_runtime.robot.hazard import Decision, HazardMonitor, State, TrackerParams, ZoneParams
-from edge_runtime.robot.retract import Retraction, RetractLimits, eq6_retraction, radial_retraction
+from edge_runtime.robot.hazard import (
+    Decision,
+    HazardMonitor,
+    Retraction,
+    RetractLimits,
+    State,
+    TrackerParams,
+    ZoneParams,
+    eq6_retraction,
+    radial_retraction,
+)
 
 if TYPE_CHECKING:  # the caller makes the lifter (onnxruntime) and the link (python-can, pymavlink): the
     # loop only calls them, so importing it (as the box configuration does) stays light
@@ -504,7 +513,7 @@ class RobotLoop:
         return nxt.kind is MotionKind.RETRACT and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
 
     def _retract_motion(self, decision: Decision) -> Motion:
-        """Eq. 6's retraction from the effector (:func:`edge_runtime.robot.retract.eq6_retraction`)."""
+        """Eq. 6's retraction from the effector (:func:`edge_runtime.robot.hazard.eq6_retraction`)."""
         if decision.head is None:  # level 2 held without a current head (should not happen): stop
             return STOP
         return self._retraction(eq6_retraction(self.effector_m(), decision.head, self.zones,
@@ -512,7 +521,7 @@ class RobotLoop:
 
     def _radial_retract(self) -> Motion:
         """The fallback retraction, straight toward the base's axis
-        (:func:`edge_runtime.robot.retract.radial_retraction`)."""
+        (:func:`edge_runtime.robot.hazard.radial_retraction`)."""
         return self._retraction(radial_retraction(self.effector_m(), self.zones, self.params.retract_limits,
                                                   self._last_yaw, self._held_yaw()))
 
