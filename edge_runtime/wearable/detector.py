@@ -153,6 +153,11 @@ class StreamingDetector:
         return self._cap_trigger is not None
 
     @property
+    def filled(self) -> int:
+        """Frames of the capture being filled so far (0: none)."""
+        return self._cap_have if self._cap_trigger is not None else 0
+
+    @property
     def filling(self) -> tuple[int, np.ndarray] | None:
         """The capture being filled: (trigger frame, its frames so far, a read-only view valid until
         the next :meth:`push`), or None."""

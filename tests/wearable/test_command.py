@@ -21,7 +21,7 @@ from edge_runtime.wearable.mavlink_source import SourceStatus
 from edge_runtime.wearable.sources import ImuBlock, ReplayStats
 
 DECISION_KEYS = ["t_trigger_s", "t_alert_s", "label", "confidence", "alerted", "status", "probs", "compute_us",
-                 "latency_ms", "alert_seq"]
+                 "latency_ms", "alert_seq", "steps", "event_start_s"]
 
 
 def _steps_csv(path, n=3000, steps=(1000,)):
@@ -91,7 +91,7 @@ def test_replay_writes_each_decision_once_to_the_log_and_the_console(tmp_path, c
     for d, line in zip(decisions, printed):
         assert line.split()[2] == d["label"] and line.endswith("ALERT" if d["alerted"] else d["status"])
     assert out[len(decisions)].startswith("summary: 40.0 s of IMU data (4000 samples)")
-    assert f"captures {len(decisions)}:" in out[len(decisions) + 1]
+    assert f"captures {len(decisions)} (full-window decisions" in out[len(decisions) + 1]
 
 
 @pytest.mark.slow
