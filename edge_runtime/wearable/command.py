@@ -233,6 +233,26 @@ def _outputs(stack: ExitStack, alerts_path: str | None, quiet: bool) -> list[Cal
 # ---------------------------------------------------------------------------- running
 
 
+def replay(cfg, classifier, acc_mps2, outputs: Iterable[Callable[[Decision], None]] = (), t0_s: float = 0.0
+           ) -> WearableLoop:
+    """A recording already in memory, (n, 3) m/s^2 at ``[imu] sample_rate_hz``, through the path of
+    ``--replay``: the loop with its publisher on the configured bus and the data clock, each decision
+    to ``outputs``. For evaluations that would otherwise write and parse CSV files (``firmware_sim
+    drive-eval``); the loop (its stats and status) is returned."""
+    from edge_runtime.wearable.alerts import WearableStatus
+    from edge_runtime.wearable.loop import WearableLoop
+    from edge_runtime.wearable.sources import ImuBlock, ReplayStats
+
+    status = _status_of(classifier) if hasattr(classifier, "entry") else WearableStatus()
+    pub = _open_publisher(cfg, None, status, data_clock=True)
+    try:
+        loop = WearableLoop(classifier, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
+        _drive(_Source([ImuBlock(t0_s, acc_mps2)], ReplayStats()), loop, list(outputs))
+    finally:
+        pub.close()
+    return loop
+
+
 def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision], None]]) -> None:
     """Every event of the source: a block goes to the loop and its decisions to the outputs;
     a live sensor's state goes to the status. A disconnected sensor ends the run."""
