@@ -38,3 +38,35 @@ def engine(dynamic: bool = True, early: dict | None = None, seed: int = 0) -> En
     if early is not None:
         entry["early"] = early
     return Engine(model_bytes(dynamic, seed), classes=CLASSES, name="standin", precision="fp32", entry=entry)
+
+
+class Scripted:
+    """A classifier that decides early: answers (label, p) per sub-window count S, records what it got."""
+
+    classes = CLASSES
+
+    def __init__(self, answers, early_steps=(1, 2, 3, 4, 5, 6), manifest_thresholds=None):
+        self.answers, self.early_steps, self.seen = answers, tuple(early_steps), []
+        self.early = type("Early", (), {"min_confidence_by_steps": manifest_thresholds or {}})()
+
+    def _probs(self, label, p):
+        probs = np.full(len(CLASSES), (1 - p) / (len(CLASSES) - 1), np.float32)
+        probs[CLASSES.index(label)] = p
+        return probs
+
+    def classify_prefix(self, x, steps):
+        self.seen.append((steps, np.array(x)))
+        return self._probs(*self.answers.get(steps, ("Phone", 0.3)))
+
+    def classify_capture(self, x700):
+        return self.classify_prefix(x700, 6)
+
+
+def step_signal(n: int, at, rest_mps2: float = 9.81) -> np.ndarray:
+    """(n, 3) m/s^2 at rest with a 6 m/s^2 step on x at each frame of ``at`` (alternating up and down):
+    each step triggers the detector."""
+    acc = np.zeros((n, 3), np.float32)
+    acc[:, 2] = rest_mps2
+    for i, t in enumerate(at):
+        acc[t:, 0] += 6.0 if i % 2 == 0 else -6.0
+    return acc

@@ -6,6 +6,7 @@ import time
 import can
 import numpy as np
 import pytest
+from support.early_model import Scripted
 
 from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher
 from edge_runtime.wearable.detector import DetectorConfig
@@ -180,28 +181,6 @@ def test_the_heartbeat_thread_reports_what_the_loop_counts():
 
 
 # ---------------------------------------------------------------------------- early decisions and events
-
-
-class Scripted:
-    """A classifier that decides early: answers (label, p) per sub-window count S, records what it got."""
-
-    classes = CLASSES
-
-    def __init__(self, answers, early_steps=(1, 2, 3, 4, 5, 6), manifest_thresholds=None):
-        self.answers, self.early_steps, self.seen = answers, tuple(early_steps), []
-        self.early = type("Early", (), {"min_confidence_by_steps": manifest_thresholds or {}})()
-
-    def _probs(self, label, p):
-        probs = np.full(len(CLASSES), (1 - p) / (len(CLASSES) - 1), np.float32)
-        probs[CLASSES.index(label)] = p
-        return probs
-
-    def classify_prefix(self, x, steps):
-        self.seen.append((steps, np.array(x)))
-        return self._probs(*self.answers.get(steps, ("Phone", 0.3)))
-
-    def classify_capture(self, x700):
-        return self.classify_prefix(x700, 6)
 
 
 def _early_run(answers, policy=AlertPolicy(), acc=None, split=None, **kw):
