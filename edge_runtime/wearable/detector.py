@@ -139,6 +139,7 @@ class StreamingDetector:
         self.n_seen = 0
         self.triggers: list[int] = []
         self._keep = max(cfg.lag, cfg.pre_frames)  # history a new sample may need
+        self._lag, self._thr, self._axis = cfg.lag, cfg.threshold_mps2, cfg.axis  # read per sample
         self._buf = np.empty((self._keep + _ROOM_FRAMES, 3), np.float32)
         self._ax = np.empty(len(self._buf), np.float64)  # the watched axis, as detect_triggers compares it
         self._len = 0  # rows of _buf in use: frames n_seen - _len ... n_seen - 1, none before _valid_from
@@ -190,12 +191,12 @@ class StreamingDetector:
             self._buf[:keep], self._ax[:keep] = rows.copy(), ax.copy()  # the slices may overlap the target
             self._len = keep
         self._buf[self._len : self._len + n] = block
-        self._ax[self._len : self._len + n] = block[:, self.cfg.axis]
+        self._ax[self._len : self._len + n] = block[:, self._axis]
         self._len += n
 
     def push(self, block: np.ndarray) -> list[Capture]:
-        cfg = self.cfg
-        block = np.asarray(block, dtype=np.float32).reshape(-1, 3)
+        if type(block) is not np.ndarray or block.dtype != np.float32 or block.ndim != 2:
+            block = np.asarray(block, dtype=np.float32).reshape(-1, 3)
         n = len(block)
         if n == 0:
             return []
@@ -206,21 +207,23 @@ class StreamingDetector:
         if self._cap_trigger is not None:  # finish a capture that was already filling
             done += self._fill(s0, end)
         # Candidates T in this block with a full window behind them, not inside a capture's pause.
-        t_first = max(self.n_seen, self._valid_from + cfg.lag, self._allowed_from)
+        lag = self._lag
+        t_first = max(self.n_seen, self._valid_from + lag, self._allowed_from)
         if t_first < end:
             if end - t_first == 1:  # the 100 Hz loop: one sample, no array temporaries
                 j = t_first - s0
-                hit = abs(float(self._ax[j]) - float(self._ax[j - cfg.lag])) > cfg.threshold_mps2
+                hit = abs(float(self._ax[j]) - float(self._ax[j - lag])) > self._thr
                 candidates = [t_first] if hit else []
             else:
                 a = self._ax[t_first - s0 : self._len]
-                b = self._ax[t_first - s0 - cfg.lag : self._len - cfg.lag]
+                b = self._ax[t_first - s0 - lag : self._len - lag]
                 with np.errstate(invalid="ignore"):
-                    candidates = np.flatnonzero(np.abs(a - b) > cfg.threshold_mps2) + t_first
-            for t in _greedy_triggers(np.asarray(candidates, dtype=np.int64), self._allowed_from, cfg.post_frames
+                    candidates = np.flatnonzero(np.abs(a - b) > self._thr) + t_first
+            post = self.cfg.post_frames
+            for t in _greedy_triggers(np.asarray(candidates, dtype=np.int64), self._allowed_from, post
                                       ) if len(candidates) else ():
                 self.triggers.append(t)
-                self._allowed_from = t + cfg.post_frames
+                self._allowed_from = t + post
                 self._cap_trigger, self._cap_have = t, 0
                 done += self._fill(s0, end)
         self.n_seen = end

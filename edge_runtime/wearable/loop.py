@@ -262,7 +262,9 @@ class WearableLoop:
         self._seg_index0, self._seg_t0 = self.detector.n_seen, t0_s
 
     def feed(self, block: ImuBlock) -> list[Decision]:
-        acc = np.asarray(block.acc_mps2, dtype=np.float32).reshape(-1, 3)
+        acc = block.acc_mps2
+        if type(acc) is not np.ndarray or acc.dtype != np.float32 or acc.ndim != 2 or acc.shape[1] != 3:
+            acc = np.asarray(acc, dtype=np.float32).reshape(-1, 3)
         if not block.continuous or self.detector.n_seen == 0:  # nothing fed yet, or a gap
             self._restart(block.t0_s)
         self._rx = block.rx_monotonic_s
