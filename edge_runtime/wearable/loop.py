@@ -248,14 +248,21 @@ class WearableLoop:
         early = getattr(classifier, "early", None)
         self._manifest_thresholds: dict[int, float] = dict(getattr(early, "min_confidence_by_steps", {}) or {})
         self._capture: _CaptureState | None = None  # the capture being decided
-        self._next_frames = needed_frames(self._early_steps[0])  # frames the next early step needs
+        self._first_frames = needed_frames(self._early_steps[0])
+        self._next_frames = self._first_frames  # frames the next early step needs
         self._event: AlertEvent | None = None  # the alert event under way, if any
 
     def _time_of(self, index: int) -> float:
         return self._seg_t0 + (index - self._seg_index0) / self.rate_hz
 
+    def _drop_capture(self) -> None:
+        """The detector dropped the capture in progress (a gap, a hole): a preliminary alert of it
+        gets no update and expires (the DBC says after 7 s)."""
+        self._capture = None
+        self._next_frames = self._first_frames
+
     def _restart(self, t0_s: float) -> None:
-        self._capture = None  # the detector drops a capture in progress; a preliminary alert expires
+        self._drop_capture()
         if self.detector.n_seen:
             self.detector.reset()
             self.status.count_detector_restart()
@@ -281,7 +288,7 @@ class WearableLoop:
         for a, b in zip(edges[::2], edges[1::2]):
             decisions += self._push(acc[good_start:a])
             self.detector.skip(b - a)  # the hole keeps its place in stream time
-            self._capture = None
+            self._drop_capture()
             self.status.count_detector_restart()
             self._seg_index0, self._seg_t0 = self.detector.n_seen, block.t0_s + b / self.rate_hz
             good_start = b
@@ -313,9 +320,11 @@ class WearableLoop:
             d = self._decide(st, data, steps)
             if d is not None:
                 out.append(d)
-        self._next_frames = needed_frames(st.steps[0]) if st.steps else 1 << 62
-        if not st.steps:
+        if st.steps:
+            self._next_frames = needed_frames(st.steps[0])
+        else:  # decided: the next capture's first early step is the next to wait for
             self._capture = None
+            self._next_frames = self._first_frames
         return out
 
     def _open_capture(self, trigger: int) -> _CaptureState:

@@ -6,7 +6,7 @@ import time
 import can
 import numpy as np
 import pytest
-from support.early_model import Scripted
+from support.early_model import Scripted, step_signal
 
 from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher
 from edge_runtime.wearable.detector import DetectorConfig
@@ -191,7 +191,10 @@ def _early_run(answers, policy=AlertPolicy(), acc=None, split=None, **kw):
     cuts = range(0, len(acc), split) if split else [0]
     ds = []
     for a in cuts:
-        ds += loop.feed(ImuBlock(a / 100.0, acc[a : a + (split or len(acc))], continuous=a > 0))
+        got = loop.feed(ImuBlock(a / 100.0, acc[a : a + (split or len(acc))], continuous=a > 0))
+        if split == 1:  # fed sample by sample: each decision comes with the very sample it waited for
+            assert all(round(d.t_alert_s * 100) == a for d in got)
+        ds += got
     return ds, pub, clf, loop
 
 
@@ -280,3 +283,19 @@ def test_decisions_in_the_alert_log_carry_steps_and_event_start():
     ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.8)})
     line = ds[0].to_json()
     assert (line["status"], line["steps"], line["alert_seq"], line["event_start_s"]) == ("preliminary", 2, 0, 10.0)
+
+
+def test_a_capture_cut_by_a_gap_gets_no_update_and_the_next_capture_decides_early_again():
+    pub = Publisher()
+    loop = WearableLoop(Scripted({1: ("Phone", 0.95), 6: ("Phone", 0.9)}), policy=AlertPolicy(event_hold_s=0.0),
+                        publisher=pub)
+    acc = step_signal(1300, [1000])
+    first = loop.feed(ImuBlock(0.0, acc))  # the capture from frame 900 holds 400 frames when the stream stops
+    assert _summary(first) == [("preliminary", 1, "Phone", 0)]
+    later = step_signal(3000, [1000])
+    ds = []
+    for a in range(0, 3000, 1):  # after the gap, sample by sample
+        got = loop.feed(ImuBlock(100.0 + a / 100.0, later[a : a + 1], continuous=a > 0))
+        assert all(round((d.t_alert_s - 100.0) * 100) == a for d in got)
+        ds += got
+    assert _summary(ds) == [("preliminary", 1, "Phone", 1), ("confirmed", 6, "Phone", 1)]
