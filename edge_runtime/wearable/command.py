@@ -299,8 +299,9 @@ def _sensor_state(pub: AlertPublisher, state: str, detail: str = "") -> None:
 
 
 def _print_decision(d: Decision) -> None:
-    mark = "ALERT" if d.alerted else d.status
-    print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}")
+    mark = ("ALERT" if d.status == "alert" else d.status.upper()) if d.alerted else d.status
+    after = "" if d.steps == 6 else f"  (after {d.steps} of 6 sub-windows, t={d.t_alert_s:.2f}s)"
+    print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}{after}")
 
 
 def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None, wall_s: float) -> None:

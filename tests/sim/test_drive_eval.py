@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from support.early_model import Scripted, step_signal
+from support.early_model import Scripted, step_signal, write_assets
 
 from edge_runtime import config
 from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
@@ -70,3 +70,15 @@ def test_the_command_writes_json_markdown_and_the_trace(tmp_path, capsys):
     assert "| event recall |" in (tmp_path / "drive_eval.md").read_text()
     assert main(["drive-eval", "--hours", "1", "--decision", "late", "--out", str(tmp_path)]) == 2
     assert "--decision late" in capsys.readouterr().err
+
+
+def test_with_a_model_that_takes_partial_captures_both_modes_are_measured_side_by_side(tmp_path):
+    assets = write_assets(tmp_path / "assets", early={"steps": [1, 2, 3, 4, 5, 6]}, favour="Phone")
+    out = tmp_path / "out"
+    assert main(["drive-eval", "--hours", "0.1", "--drive-minutes", "3", "--seed", "5", "--assets", str(assets),
+                 "--out", str(out)]) == 0
+    report = json.loads((out / "drive_eval.json").read_text())
+    early, full = report["scores"]["early"], report["scores"]["full_window"]
+    assert report["early_steps"] == [1, 2, 3, 4, 5, 6] and early["statuses"].get("preliminary", 0) > 0
+    assert early["onset_to_first_alert_s"]["median"] < full["onset_to_first_alert_s"]["median"] - 4.0
+    assert "| figure | full_window | early |" in (out / "drive_eval.md").read_text()

@@ -5,18 +5,23 @@ Tests build this one instead of depending on new assets: a softmax of a linear m
 mean of the S sub-windows, so its answer depends on how many sub-windows it is given."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from edge_runtime.wearable.classifier import Engine
 from edge_runtime.wearable.labels import CLASSES
 
 
-def model_bytes(dynamic: bool = True, seed: int = 0) -> bytes:
+def model_bytes(dynamic: bool = True, seed: int = 0, favour: str | None = None) -> bytes:
+    """The stand-in's ONNX bytes; ``favour``: a class it answers with probability ~1 (a bias of 30)."""
     from onnx import TensorProto, helper, numpy_helper
 
     rng = np.random.default_rng(seed)
     w = rng.normal(0, 1.0, (3, len(CLASSES))).astype(np.float32)
     b = rng.normal(0, 0.5, len(CLASSES)).astype(np.float32)
+    if favour is not None:
+        b[CLASSES.index(favour)] += 30.0
     nodes = [helper.make_node("ReduceMean", ["imu"], ["m"], axes=[1, 2], keepdims=0),
              helper.make_node("MatMul", ["m", "w"], ["z0"]),
              helper.make_node("Add", ["z0", "b"], ["z"]),
@@ -30,6 +35,25 @@ def model_bytes(dynamic: bool = True, seed: int = 0) -> bytes:
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     model.ir_version = 8
     return model.SerializeToString()
+
+
+def write_assets(directory: Path, early: dict | None = None, favour: str | None = "Phone", dynamic: bool = True
+                 ) -> Path:
+    """An assets directory with the stand-in as the int8 classifier and a manifest entry (with
+    ``early`` when given), as ``--assets DIR`` takes it."""
+    from edge_runtime.core.manifest import SCHEMA_VERSION, sha256_file, write_manifest
+
+    directory.mkdir(parents=True, exist_ok=True)
+    f = directory / "standin.int8.onnx"
+    f.write_bytes(model_bytes(dynamic, favour=favour))
+    entry = {"name": "standin-int8", "file": f.name, "sha256": sha256_file(f), "precision": "int8",
+             "arch": "convlstm", "parameters": {"torch": 24}, "classes": list(CLASSES),
+             "inputs": [{"name": "imu", "shape": ["N", "S" if dynamic else 6, 33, 3], "dtype": "float32"}],
+             "outputs": [{"name": "probs", "shape": ["N", 6], "dtype": "float32"}]}
+    if early is not None:
+        entry["early"] = early
+    write_manifest(directory, {"version": SCHEMA_VERSION, "created_by": "test", "models": [entry]})
+    return directory
 
 
 def engine(dynamic: bool = True, early: dict | None = None, seed: int = 0) -> Engine:
