@@ -190,8 +190,12 @@ class StreamingDetector:
                 self._ax = np.empty(len(self._buf), np.float64)
             self._buf[:keep], self._ax[:keep] = rows.copy(), ax.copy()  # the slices may overlap the target
             self._len = keep
-        self._buf[self._len : self._len + n] = block
-        self._ax[self._len : self._len + n] = block[:, self._axis]
+        if n == 1:  # the live 100 Hz loop: item assignments, no slicing
+            self._buf[self._len] = block[0]
+            self._ax[self._len] = block[0, self._axis]
+        else:
+            self._buf[self._len : self._len + n] = block
+            self._ax[self._len : self._len + n] = block[:, self._axis]
         self._len += n
 
     def push(self, block: np.ndarray) -> list[Capture]:
@@ -233,7 +237,10 @@ class StreamingDetector:
         t, have = self._cap_trigger, self._cap_have
         start = t - self.cfg.pre_frames + have  # next absolute frame the capture needs
         stop = min(t + self.cfg.post_frames, end)
-        if stop > start:
+        if stop - start == 1:  # the 100 Hz loop: one more frame
+            self._cap[have] = self._buf[start - s0]
+            self._cap_have = have = have + 1
+        elif stop > start:
             self._cap[have : have + stop - start] = self._buf[start - s0 : stop - s0]
             self._cap_have = have = have + stop - start
         if have < self.cfg.capture_frames:

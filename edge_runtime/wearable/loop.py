@@ -37,6 +37,7 @@ heartbeat reports.
 """
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
@@ -275,11 +276,14 @@ class WearableLoop:
         if not block.continuous or self.detector.n_seen == 0:  # nothing fed yet, or a gap
             self._restart(block.t0_s)
         self._rx = block.rx_monotonic_s
-        finite = np.isfinite(acc)
-        if finite.all():  # the common case, one reduction: the 100 Hz loop's per-sample cost
+        if len(acc) == 1:  # the live 100 Hz loop: one sample, checked as three floats (no ufunc machinery)
+            fine = all(map(math.isfinite, acc[0].tolist()))
+        else:
+            fine = bool(np.isfinite(acc).all())
+        if fine:  # the common case
             self.status.count_samples(len(acc))
             return self._push(acc)
-        bad = ~finite.all(axis=1)
+        bad = ~np.isfinite(acc).all(axis=1)
         self.status.count_samples(len(acc), non_finite=int(bad.sum()))
         decisions: list[Decision] = []
         # Split at runs of bad samples: push the good runs, restart after each bad run.
