@@ -258,7 +258,11 @@ class WearableLoop:
 
     def _drop_capture(self) -> None:
         """The detector dropped the capture in progress (a gap, a hole): a preliminary alert of it
-        gets no update and expires (the DBC says after 7 s)."""
+        gets no update and expires (the DBC says after 7 s), and the event it opened ends with it,
+        so that the next capture may alert afresh instead of continuing an alert the vehicle dropped."""
+        st = self._capture
+        if st is not None and not st.continues and st.event is not None and st.event is self._event:
+            self._event = None
         self._capture = None
         self._next_frames = self._first_frames
 

@@ -287,8 +287,8 @@ def test_decisions_in_the_alert_log_carry_steps_and_event_start():
 
 def test_a_capture_cut_by_a_gap_gets_no_update_and_the_next_capture_decides_early_again():
     pub = Publisher()
-    loop = WearableLoop(Scripted({1: ("Phone", 0.95), 6: ("Phone", 0.9)}), policy=AlertPolicy(event_hold_s=0.0),
-                        publisher=pub)
+    loop = WearableLoop(Scripted({1: ("Phone", 0.95), 6: ("Phone", 0.9)}), policy=AlertPolicy(event_hold_s=60.0),
+                        publisher=pub)  # a long hold: only the cut ends the event
     acc = step_signal(1300, [1000])
     first = loop.feed(ImuBlock(0.0, acc))  # the capture from frame 900 holds 400 frames when the stream stops
     assert _summary(first) == [("preliminary", 1, "Phone", 0)]
