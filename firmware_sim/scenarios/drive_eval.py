@@ -159,6 +159,24 @@ class ModeScore:
         }
 
 
+def class_agreement(drives, engine, other, detector_cfg) -> dict:
+    """Top-class agreement of two models (int8 against fp32) on every capture of the drives, at every
+    sub-window count S the first decides at (:meth:`Engine.classify_prefix`, as the loop asks it)."""
+    from edge_runtime.wearable.classifier import needed_frames
+    from edge_runtime.wearable.detector import detect_triggers, extract_captures
+
+    same: dict[int, list[int]] = {s: [0, 0] for s in engine.early_steps}
+    for drive in drives:
+        for cap in extract_captures(drive.acc_mps2, detect_triggers(drive.acc_mps2, detector_cfg), detector_cfg):
+            for s in engine.early_steps:
+                x = cap.data[: needed_frames(s)]
+                same[s][0] += int(np.argmax(engine.classify_prefix(x, s)) == np.argmax(other.classify_prefix(x, s)))
+                same[s][1] += 1
+    agree, total = sum(a for a, _ in same.values()), sum(n for _, n in same.values())
+    return {"models": [engine.name, other.name], "agreement": round(agree / total, 4) if total else None,
+            "decisions": total, "by_steps": {str(s): round(a / n, 4) if n else None for s, (a, n) in same.items()}}
+
+
 # ---------------------------------------------------------------------------- running
 
 
@@ -263,6 +281,10 @@ def to_markdown(report: dict) -> str:
              f"Drives: {report['hours_by_kind']} (hours by kind); {report['held_out']}", "",
              "| figure | " + " | ".join(modes) + " |", "|---|" + "---:|" * len(modes)]
     lines += [f"| {name} | " + " | ".join(cell(report["scores"][m], key) for m in modes) + " |" for name, key in rows]
+    if "class_agreement" in report:
+        c = report["class_agreement"]
+        lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} on every capture and sub-window count: "
+                      f"**{c['agreement']}** over {c['decisions']} decisions (by S: {c['by_steps']})"]
     lines += ["", "Distractions: " + ", ".join(f"{m} {report['scores'][m]['distractions']}" for m in modes)
               + "; decisions by status: " + "; ".join(f"{m} {report['scores'][m]['statuses']}" for m in modes), ""]
     return "\n".join(lines)
@@ -280,6 +302,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="BOX.toml", help="the box configuration (default: the shipped defaults)")
     p.add_argument("--assets", metavar="DIR", help="model directory with manifest.json (default: the shipped models)")
     p.add_argument("--model", help="manifest entry: a name or a precision (default: [model] name, int8)")
+    p.add_argument("--agreement", metavar="ENTRY",
+                   help="also the top-class agreement with this manifest entry (e.g. fp32) on every capture, at "
+                        "every sub-window count the model decides at")
 
 
 def cmd(a) -> int:
@@ -304,6 +329,8 @@ def cmd(a) -> int:
     print(f"drive-eval: {a.hours:g} h of held-out driving (seed {a.seed}), modes {', '.join(measured)}, model "
           f"{engine.name}" + ("" if early else " (fixed S = 6: early decisions are not measurable)"), flush=True)
     drives = held_out_drives(a.hours, a.seed, a.baseline_share, a.drive_minutes)
+    if a.agreement:
+        drives = list(drives)  # walked twice
     res = evaluate(drives, engine, cfg, measured, progress=lambda line: print(line, flush=True))
     described = {m: ("one decision per capture at T+599 (the dissertation's)" if m == "full_window" else
                      f"decisions after S = {', '.join(map(str, engine.early_steps))} sub-windows") for m in measured}
@@ -313,7 +340,8 @@ def cmd(a) -> int:
     report = {
         "command": "python -m firmware_sim drive-eval " + " ".join(
             f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()
-            if k in ("hours", "seed", "out", "decision", "baseline_share", "drive_minutes", "config", "assets", "model")
+            if k in ("hours", "seed", "out", "decision", "baseline_share", "drive_minutes", "config", "assets", "model",
+                     "agreement")
             and v is not None),
         "hours": a.hours, "seed": a.seed, "model": f"{engine.name} ({engine.precision})",
         "early_steps": list(engine.early_steps), "decision_modes": described,
@@ -322,7 +350,11 @@ def cmd(a) -> int:
                      "on cohort seed 0"),
         "hours_by_kind": res["hours_by_kind"],
         "config": {"alerts": _section(cfg.alerts), "detector": _section(cfg.detector)},
-        "scores": res["scores"], "wall_s": round(time.perf_counter() - t_wall, 1)}
+        "scores": res["scores"]}
+    if a.agreement:
+        other = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, a.agreement, threads=cfg.model.threads)
+        report["class_agreement"] = class_agreement(drives, engine, other, cfg.detector)
+    report["wall_s"] = round(time.perf_counter() - t_wall, 1)
     (out / "drive_eval.json").write_text(json.dumps(report, indent=1))
     (out / "drive_eval.md").write_text(to_markdown(report))
     if res["example"] is not None:

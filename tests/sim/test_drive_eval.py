@@ -82,3 +82,16 @@ def test_with_a_model_that_takes_partial_captures_both_modes_are_measured_side_b
     assert report["early_steps"] == [1, 2, 3, 4, 5, 6] and early["statuses"].get("preliminary", 0) > 0
     assert early["onset_to_first_alert_s"]["median"] < full["onset_to_first_alert_s"]["median"] - 4.0
     assert "| figure | full_window | early |" in (out / "drive_eval.md").read_text()
+
+
+def test_class_agreement_compares_two_models_at_every_step_on_every_capture():
+    from support.early_model import engine
+
+    from edge_runtime.wearable.detector import DetectorConfig
+    from firmware_sim.scenarios.drive_eval import class_agreement
+
+    drive = _drive()  # three captures
+    phone, phone2, drink = engine(favour="Phone"), engine(favour="Phone", seed=1), engine(favour="Drink")
+    same = class_agreement([drive], phone, phone2, DetectorConfig())
+    assert (same["agreement"], same["decisions"]) == (1.0, 3 * 6) and set(same["by_steps"]) == {"1", "2", "3", "4", "5", "6"}
+    assert class_agreement([drive], phone, drink, DetectorConfig())["agreement"] == 0.0

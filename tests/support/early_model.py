@@ -56,12 +56,12 @@ def write_assets(directory: Path, early: dict | None = None, favour: str | None 
     return directory
 
 
-def engine(dynamic: bool = True, early: dict | None = None, seed: int = 0) -> Engine:
+def engine(dynamic: bool = True, early: dict | None = None, seed: int = 0, favour: str | None = None) -> Engine:
     """The stand-in on onnxruntime, with a manifest entry carrying ``early`` when given."""
     entry = {"name": "standin", "precision": "fp32"}
     if early is not None:
         entry["early"] = early
-    return Engine(model_bytes(dynamic, seed), classes=CLASSES, name="standin", precision="fp32", entry=entry)
+    return Engine(model_bytes(dynamic, seed, favour), classes=CLASSES, name="standin", precision="fp32", entry=entry)
 
 
 class Scripted:
