@@ -32,7 +32,7 @@ import e2e.p01 as p01
 COUNTER_MAX = 14  # AUTOSAR E2E Profile 1: alive counter 0..14
 HEARTBEAT_TIMEOUT_S = 0.3
 COPY_WINDOW_S = 1.0  # the DBC: copies span 200 ms; the same (AlertSeq, Status, Class) later is a new message
-UPDATE_WINDOW_S = 10.0  # the DBC: an alert's updates come within 6 s of it; an AlertSeq older than this is new
+UPDATE_WINDOW_S = 10.0  # the DBC: an alert's updates come by the end of its capture (~6 s); an older AlertSeq is new
 PRELIMINARY_EXPIRY_S = 7.0  # the DBC: a preliminary alert with no update for 7 s has expired (sensor stream cut)
 ACTION = {"alert": "warn", "preliminary": "warn (preliminary)", "confirmed": "keep warning", "revised": "warn, class changed",
           "withdrawn": "stop warning: alert void", "uncertain": "ignore"}
