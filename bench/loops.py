@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.timing import CpuShare, peak_rss_mb, sleep_until, summarize, time_calls
-from edge_runtime.wearable.sources import SAMPLE_RATE_HZ
+from edge_runtime.wearable.sources import SAMPLE_RATE_HZ, ImuBlock
 
 PRE_TRIGGER_S = 2.5
 """The real-time stretch starts this long before a trigger (the detector window is 2 s)."""
@@ -106,13 +106,8 @@ class _Wearable:
         self.decision_s.append(self._since_rx(d))
 
     def feed_one(self, i: int, acc: np.ndarray) -> None:
-        from edge_runtime.wearable.sources import ImuBlock
-
-        self.t_fed = time.monotonic()
-        block = ImuBlock(i / SAMPLE_RATE_HZ, acc[i : i + 1], continuous=i > 0)
-        if hasattr(block, "rx_monotonic_s"):
-            block.rx_monotonic_s = self.t_fed  # the sample "arrives" now
-        self.loop.feed(block)
+        self.t_fed = time.monotonic()  # the sample "arrives" now
+        self.loop.feed(ImuBlock(i / SAMPLE_RATE_HZ, acc[i : i + 1], i > 0, self.t_fed))
 
 
 def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float) -> dict:

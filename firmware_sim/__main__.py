@@ -113,6 +113,8 @@ _MODULE_COMMANDS = (
     ("hrc", "scenarios.hrc", "closed-loop collision-avoidance scenarios: worker, camera, runtime, Sawyer"),
     ("gola", "scenarios.gola", "chapter 4's posture experiment: GOLA-HRC on a simulated cohort"),
     ("head-error", "scenarios.head_error", "head position error in the robot frame after calibration, through the lifter"),
+    ("drive-eval", "scenarios.drive_eval", "held-out simulated driving through the wearable runtime: event recall, "
+                                           "first-alert class, onset to alert, false alerts per hour"),
 )
 
 

@@ -9,13 +9,15 @@ what an ECU-side integration looks like, given our DBC (edge_runtime/assets/vehi
 On a real box: ``--interface socketcan --channel can0``, or ``--interface slcan --channel /dev/ttyACM0``.
 It prints one line per alert and per heartbeat state change, warns when the
 heartbeat is missing for more than 300 ms, and on exit (SIGINT/SIGTERM or
---duration) prints a JSON summary: alerts, alert copies skipped, heartbeats, E2E errors,
-largest heartbeat gap.
+--duration) prints a JSON summary: alerts, their updates (withdrawn among them), expired
+preliminary alerts, alert copies skipped, heartbeats, E2E errors, largest heartbeat gap.
 
-Each alert comes as several DISTRACTION_ALERT frames (the DBC's GenMsgNrOfRepetition copies,
-GenMsgCycleTimeFast ms apart, all with one AlertSeq), so a lost frame costs nothing but the
-wait for the next copy. An alert counts once: the first valid frame of an AlertSeq is the
-alert, a frame with an AlertSeq accepted within the last COPY_WINDOW_S is a copy.
+Each message comes as several DISTRACTION_ALERT frames (the DBC's GenMsgNrOfRepetition copies,
+GenMsgCycleTimeFast ms apart, all alike), so a lost frame costs nothing but the wait for the
+next copy. One AlertSeq is one alert event: its first message is the alert (Status alert, or
+preliminary when decided early), later messages with the same AlertSeq are updates (confirmed,
+revised: a new Class, withdrawn: the alert is void). A frame whose (AlertSeq, Status, Class) was
+accepted within the last COPY_WINDOW_S is a copy; an alert counts once, each update once.
 """
 import argparse
 import json
@@ -29,7 +31,11 @@ import e2e.p01 as p01
 
 COUNTER_MAX = 14  # AUTOSAR E2E Profile 1: alive counter 0..14
 HEARTBEAT_TIMEOUT_S = 0.3
-COPY_WINDOW_S = 1.0  # the DBC: copies of one alert span 200 ms; the same AlertSeq later is a new alert (a restart)
+COPY_WINDOW_S = 1.0  # the DBC: copies span 200 ms; the same (AlertSeq, Status, Class) later is a new message
+UPDATE_WINDOW_S = 10.0  # the DBC: an alert's updates come by the end of its capture (~6 s); an older AlertSeq is new
+PRELIMINARY_EXPIRY_S = 7.0  # the DBC: a preliminary alert with no update for 7 s has expired (sensor stream cut)
+ACTION = {"alert": "warn", "preliminary": "warn (preliminary)", "confirmed": "keep warning", "revised": "warn, class changed",
+          "withdrawn": "stop warning: alert void", "uncertain": "ignore"}
 
 
 def data_id(message):
@@ -48,13 +54,19 @@ class AlertListener:
         self.status = db.get_message_by_name("WEARABLE_STATUS")
         self.messages = {m.frame_id: m for m in (self.alert, self.status)}
         self.ids = {m.frame_id: data_id(m) for m in (self.alert, self.status)}
-        self.counts = {"alerts": 0, "alert_copies": 0, "heartbeats": 0, "e2e_wrong_crc": 0, "e2e_repeated": 0, "e2e_lost": 0,
-                       "bad_frames": 0, "heartbeat_timeouts": 0}
+        self.counts = {"alerts": 0, "updates": 0, "withdrawn": 0, "expired": 0, "alert_copies": 0, "heartbeats": 0,
+                       "e2e_wrong_crc": 0, "e2e_repeated": 0, "e2e_lost": 0, "bad_frames": 0, "heartbeat_timeouts": 0}
         self.last_counter, self.last_beat, self.max_gap, self.state = {}, None, 0.0, None
-        self.accepted = {}  # AlertSeq -> when its alert was counted (monotonic s)
+        self.accepted = {}  # (AlertSeq, Status, Class) -> when that message was accepted (monotonic s)
+        self.events = {}  # AlertSeq -> [time of its latest message, its latest Status]
 
     def tick(self, now):
-        """The heartbeat watchdog, at monotonic time ``now``."""
+        """The heartbeat watchdog and the expiry of preliminary alerts, at monotonic time ``now``."""
+        for seq, (t, status) in list(self.events.items()):
+            if status == "preliminary" and now - t > PRELIMINARY_EXPIRY_S:
+                self.events[seq][1] = "expired"
+                self.counts["expired"] += 1
+                self.emit(f"EXPIRED {seq:>5} preliminary alert without an update for {PRELIMINARY_EXPIRY_S:g} s: stop warning")
         if self.last_beat is not None and now - self.last_beat > HEARTBEAT_TIMEOUT_S and self.state != "missing":
             self.counts["heartbeat_timeouts"] += 1
             self.state = "missing"
@@ -92,19 +104,29 @@ class AlertListener:
                 self.state = str(sig["State"])
                 self.emit(f"WEARABLE_STATUS {self.state}, sensor {sig['SensorHealth']}, dropped {sig['DroppedSamples']}")
         else:
-            seq = sig["AlertSeq"]
-            if now - self.accepted.get(seq, float("-inf")) < COPY_WINDOW_S:
-                self.counts["alert_copies"] += 1  # the alert is already counted: this is a copy
-                return
-            self.accepted = {s: t for s, t in self.accepted.items() if now - t < COPY_WINDOW_S}
-            self.accepted[seq] = now
-            self.counts["alerts"] += 1
-            rec = {k: (v if isinstance(v, (int, float)) else str(v)) for k, v in sig.items()}
-            if self.json_lines:
-                self.emit(json.dumps(rec))
-            else:
-                self.emit(f"ALERT {rec['AlertSeq']:>5} {rec['Class']:<12} confidence {rec['Confidence']:.2f}, "
-                          f"{rec['TimeSinceTrigger']} ms after the trigger")
+            self._alert(sig, now)
+
+    def _alert(self, sig, now):
+        """One valid DISTRACTION_ALERT frame: a copy, a new alert or an update of one."""
+        seq, status, cls = sig["AlertSeq"], str(sig["Status"]), str(sig["Class"])
+        key = (seq, status, cls)
+        if now - self.accepted.get(key, float("-inf")) < COPY_WINDOW_S:
+            self.counts["alert_copies"] += 1  # the message is already counted: this is a copy
+            return
+        self.accepted = {k: t for k, t in self.accepted.items() if now - t < COPY_WINDOW_S}
+        self.accepted[key] = now
+        self.events = {s: v for s, v in self.events.items() if now - v[0] < UPDATE_WINDOW_S}
+        update = seq in self.events
+        self.events[seq] = [now, status]
+        self.counts["updates" if update else "alerts"] += 1
+        self.counts["withdrawn"] += status == "withdrawn"
+        rec = {k: (v if isinstance(v, (int, float)) else str(v)) for k, v in sig.items()}
+        if self.json_lines:
+            self.emit(json.dumps({**rec, "update": update, "action": ACTION.get(status, "ignore")}))
+        else:
+            self.emit(f"{'UPDATE' if update else 'ALERT'} {seq:>5} {cls:<12} {status:<11} confidence "
+                      f"{rec['Confidence']:.2f}, {rec['TimeSinceTrigger']} ms after the trigger: "
+                      f"{ACTION.get(status, 'ignore')}")
 
     def summary(self):
         counts = dict(self.counts)

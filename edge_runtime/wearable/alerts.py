@@ -234,6 +234,8 @@ class AlertEncoder:
         self.alert_msg = self.db.get_message_by_name(ALERT)
         self.status_msg = self.db.get_message_by_name(STATUS)
         self.repetition = Repetition.of(self.alert_msg)
+        self._classes = {str(v) for v in self.alert_msg.get_signal_by_name("Class").choices.values()}
+        self._statuses = {str(v) for v in self.alert_msg.get_signal_by_name("Status").choices.values()}
         self._e2e = E2EProtector()
         self._alert_seq = 0
         self._lock = threading.Lock()
@@ -250,11 +252,13 @@ class AlertEncoder:
 
     def encode_alert(self, decision: Any, seq: int | None = None, delay_s: float = 0.0) -> can.Message:
         """A DISTRACTION_ALERT for a decision (t_trigger_s, t_alert_s, label, confidence, status, compute_us):
-        the first frame of a new alert, or with ``seq`` the copy ``delay_s`` after the first frame."""
+        the first frame of a new alert, or with ``seq`` an update of that alert or the copy ``delay_s``
+        after the first frame. Status is the decision's (preliminary, confirmed, revised, withdrawn,
+        uncertain) when the DBC lists it, else alert."""
         label = decision.label
-        choices = {str(v) for v in self.alert_msg.get_signal_by_name("Class").choices.values()}
-        cls = label if label in choices else NO_CLASS
-        status = "uncertain" if getattr(decision, "status", "alert") == "uncertain" else "alert"
+        cls = label if label in self._classes else NO_CLASS
+        status = getattr(decision, "status", "alert")
+        status = status if status in self._statuses else "alert"  # e.g. a held verdict sent late
         since_ms = ((decision.t_alert_s - decision.t_trigger_s + delay_s) * 1000.0
                     + getattr(decision, "compute_us", 0.0) / 1000.0)
         if seq is None:
@@ -383,11 +387,14 @@ class AlertPublisher:
         t_trigger_s, t_alert_s, label, confidence, status, compute_us): its first frame now
         (on the data clock: at ``t_alert_s``) and its copies scheduled after it.
 
+        An update of an alert (the alert's ``event_seq``: confirmed, revised, withdrawn) goes out under
+        that AlertSeq with copies of its own; a new alert gets a new AlertSeq.
+
         Returns the AlertSeq its frames carry, or None if the first frame did not go out:
         then no copy is sent either, so an alert is on the bus exactly when its decision says so."""
         self._send_backlog()
         now_s = self._now_for(alert)
-        seq = self.encoder.next_alert_seq()
+        seq = self._seq_of(alert)
         if not self.send(self.encoder.encode_alert(alert, seq), stamp_s=self._stamp(now_s)):
             self.backlog.hold(alert)  # sent late when the bus is back, or counted lost
             return None
@@ -397,6 +404,10 @@ class AlertPublisher:
                 heapq.heappush(self._copies, _Copy(now_s + delay_s, next(self._order), alert, seq, delay_s))
         self._wake.set()
         return seq
+
+    def _seq_of(self, alert: Any) -> int:
+        seq = getattr(alert, "event_seq", None)
+        return self.encoder.next_alert_seq() if seq is None else int(seq)
 
     def send_alert(self, alert: Any) -> bool:
         """:meth:`publish_alert`, answering only whether the alert went out."""
@@ -409,7 +420,7 @@ class AlertPublisher:
             return
         late, _ = self.backlog.take()
         for k, (alert, _) in enumerate(late):
-            if not self.send(self.encoder.encode_alert(alert)):
+            if not self.send(self.encoder.encode_alert(alert, self._seq_of(alert))):
                 for again, since in late[k:]:
                     self.backlog.hold(again.alert, since_s=since)
                 break

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Sequence
@@ -141,6 +141,89 @@ def preprocess(x700: np.ndarray) -> np.ndarray:
     return to_subsequences(resample_capture(x700))
 
 
+@lru_cache(maxsize=None)
+def needed_frames(steps: int) -> int:
+    """Raw capture frames (from capture frame 0 = trigger - 100) the first ``steps`` sub-windows of
+    :func:`preprocess` are computed from: the polyphase filter reaches 35 raw frames past resampled
+    frame j (about j * 3.5 + 36), so sub-windows 1..6 need 148, 263, 379, 494, 610 and 700 frames."""
+    if not 1 <= steps <= N_SUBSEQ:
+        raise ValueError(f"steps must lie in 1..{N_SUBSEQ}, got {steps}")
+    rows = resample_matrix()[: steps * SUBSEQ_FRAMES]
+    return int(np.flatnonzero(rows.any(axis=0)).max()) + 1
+
+
+MEAN_EDGE_FRAMES = 10
+"""Resampled frames at the start whose value depends on the whole capture's mean: the resampler pads
+with the mean (``padtype="mean"``), and these rows of its matrix do not sum to 1 (row 0: 0.64, row 9:
+0.9987; from row 10 on within 4e-5 of 1). :func:`preprocess_prefix` cannot know the mean of frames
+not yet captured, so only these frames of a prefix differ from the full capture's preprocessing."""
+
+
+def preprocess_prefix(x_prefix: np.ndarray, steps: int) -> np.ndarray:
+    """The first ``steps`` sub-windows (steps, 33, 3) float32 of a capture of which only the first
+    ``needed_frames(steps)`` frames (or more) have arrived.
+
+    The missing tail is edge-padded (the hand held where it is) and the capture preprocessed as
+    :func:`preprocess` does; for ``steps`` = 6 and a whole capture this is :func:`preprocess`. Every
+    frame computed from arrived samples only is the full preprocessing's, to float32 rounding,
+    except the first :data:`MEAN_EDGE_FRAMES`, which depend on the mean of the unseen tail."""
+    x = np.asarray(x_prefix, dtype=np.float64)
+    need = needed_frames(steps)
+    if x.ndim != 2 or len(x) < need or len(x) > CAPTURE_FRAMES:
+        raise ValueError(f"a prefix for {steps} sub-windows needs {need}..{CAPTURE_FRAMES} frames "
+                         f"of (n, 3), got {x.shape}")
+    n_rows = steps * SUBSEQ_FRAMES
+    if len(x) < CAPTURE_FRAMES:
+        x = np.concatenate([x, np.repeat(x[-1:], CAPTURE_FRAMES - len(x), axis=0)])
+    mean = x.mean(axis=0, keepdims=True)
+    y = np.matmul(resample_matrix()[:n_rows], x - mean) + mean
+    return y.astype(np.float32).reshape(steps, SUBSEQ_FRAMES, x.shape[-1])
+
+
+def calibrate(probs: np.ndarray, temperature: float) -> np.ndarray:
+    """Temperature scaling of probabilities: softmax(log p / T) (T = 1: unchanged)."""
+    p = np.asarray(probs, dtype=np.float64)
+    if temperature == 1.0:
+        return p.astype(np.float32)
+    logp = np.log(np.clip(p, 1e-12, 1.0)) / temperature
+    q = np.exp(logp - logp.max(axis=-1, keepdims=True))
+    return (q / q.sum(axis=-1, keepdims=True)).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class EarlyModel:
+    """What a classifier offers for decisions before its capture is complete."""
+
+    steps: tuple[int, ...] = (N_SUBSEQ,)
+    """Sub-window counts it decides at (only (6,): the model takes whole captures, a fixed S = 6)."""
+    temperature_by_steps: dict[int, float] = field(default_factory=dict)
+    """Calibration temperature per S (missing: 1)."""
+    min_confidence_by_steps: dict[int, float] = field(default_factory=dict)
+    """The manifest's confidence threshold per S (chosen on validation data), if any."""
+    chosen_on: str = ""
+
+    @classmethod
+    def of(cls, input_shape: tuple, entry: dict) -> "EarlyModel":
+        """From the model's input shape (N, S, 33, 3) and its manifest entry's ``"early"`` object:
+        a dynamic S means early decisions at the manifest's ``steps`` (default 1..6); a fixed S
+        (today's model) means full-window decisions only, whatever the manifest says."""
+        dynamic = len(input_shape) == 4 and input_shape[1] is None
+        early = entry.get("early") if isinstance(entry.get("early"), dict) else {}
+        if not dynamic:
+            return cls()
+        try:
+            steps = tuple(sorted({int(s) for s in early.get("steps", range(1, N_SUBSEQ + 1))} | {N_SUBSEQ}))
+            temps = {int(k): float(v) for k, v in early.get("temperature_by_steps", {}).items()}
+            thresholds = {int(k): float(v) for k, v in early.get("min_confidence_by_steps", {}).items()}
+        except (TypeError, ValueError, AttributeError):
+            raise ModelIntegrityError(f"manifest entry {entry.get('name', '?')!r}: 'early' is malformed") from None
+        if not all(1 <= s <= N_SUBSEQ for s in steps) or not all(t > 0 for t in temps.values()) \
+                or not all(0.0 <= p <= 1.0 for p in thresholds.values()):
+            raise ModelIntegrityError(f"manifest entry {entry.get('name', '?')!r}: 'early' steps must lie in "
+                                      f"1..{N_SUBSEQ}, temperatures be positive, thresholds in [0, 1]")
+        return cls(steps, temps, thresholds, str(early.get("chosen_on", "")))
+
+
 INPUT_NAME = "imu"
 OUTPUT_NAME = "probs"
 
@@ -191,7 +274,10 @@ class Engine:
         self._run = self.session.run
         self._outputs = [self.output_name]
         self._run_options = ort.RunOptions()
-        probe = self.classify(np.zeros(self._item_shape, np.float32)) if None not in self._item_shape else None
+        self.early = EarlyModel.of(self.input_shape, self.entry)
+        item = tuple(N_SUBSEQ if d is None and k == 0 and len(self._item_shape) == 3 else d
+                     for k, d in enumerate(self._item_shape))
+        probe = self.classify(np.zeros(item, np.float32)) if None not in item else None
         if probe is not None and probe.shape != (len(self.classes),):
             raise ModelIntegrityError(f"{source}: model has {probe.shape[-1]} outputs but "
                                       f"{len(self.classes)} classes are listed")
@@ -243,6 +329,24 @@ class Engine:
     def classify_capture(self, x700: np.ndarray) -> np.ndarray:
         """Probabilities for detector capture(s) (700, 3) or (N, 700, 3), m/s^2 at 100 Hz."""
         return self.classify(preprocess(np.asarray(x700, dtype=np.float32)))
+
+    @property
+    def early_steps(self) -> tuple[int, ...]:
+        """The sub-window counts S this model decides at ((6,): full-window decisions only)."""
+        return self.early.steps
+
+    def classify_prefix(self, x_prefix: np.ndarray, steps: int) -> np.ndarray:
+        """Calibrated probabilities (K,) after ``steps`` sub-windows, from the capture's first
+        ``needed_frames(steps)`` frames or more (:func:`preprocess_prefix`); the model's decision after
+        S sub-windows, temperature-scaled by the manifest's ``temperature_by_steps`` when given.
+        ``steps`` = 6 on a whole capture is :meth:`classify_capture`."""
+        if steps == N_SUBSEQ and len(x_prefix) == CAPTURE_FRAMES:
+            probs = self.classify_capture(x_prefix)
+        elif steps not in self.early.steps:
+            raise ValueError(f"{self.name}: decides after {list(self.early.steps)} sub-windows, not {steps}")
+        else:
+            probs = self.classify(preprocess_prefix(x_prefix, steps))
+        return calibrate(probs, self.early.temperature_by_steps.get(steps, 1.0))
 
     def predict(self, x: np.ndarray) -> list[str] | str:
         """Top class name(s) for model input(s)."""

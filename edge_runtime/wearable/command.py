@@ -54,6 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", help="manifest entry: a name, or a precision (int8, fp32) [model] name")
     p.add_argument("--threads", type=int, help="onnxruntime intra-op threads [model] threads")
     p.add_argument("--min-confidence", type=float, help="below this the decision is 'uncertain' [alerts] min_confidence")
+    p.add_argument("--decision", choices=("early", "full_window"),
+                   help="decide after each sub-window the capture allows (preliminary, then confirmed, revised or "
+                        "withdrawn), or once on the full 7-s window [alerts] decision")
     p.add_argument("--threshold", type=float, help="detector threshold (m/s^2) [detector] threshold_mps2")
     p.add_argument("--realtime", action="store_true", help="pace a replay at its own sample rate")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
@@ -67,7 +70,7 @@ def effective_config(args: argparse.Namespace):
 
     cfg = config.load(args.config)
     cfg = config.override(cfg, "model", assets=args.assets, name=args.model, threads=args.threads)
-    cfg = config.override(cfg, "alerts", min_confidence=args.min_confidence)
+    cfg = config.override(cfg, "alerts", min_confidence=args.min_confidence, decision=getattr(args, "decision", None))
     return config.override(cfg, "detector", threshold_mps2=args.threshold)
 
 
@@ -230,6 +233,26 @@ def _outputs(stack: ExitStack, alerts_path: str | None, quiet: bool) -> list[Cal
 # ---------------------------------------------------------------------------- running
 
 
+def replay(cfg, classifier, acc_mps2, outputs: Iterable[Callable[[Decision], None]] = (), t0_s: float = 0.0
+           ) -> WearableLoop:
+    """A recording already in memory, (n, 3) m/s^2 at ``[imu] sample_rate_hz``, through the path of
+    ``--replay``: the loop with its publisher on the configured bus and the data clock, each decision
+    to ``outputs``. For evaluations that would otherwise write and parse CSV files (``firmware_sim
+    drive-eval``); the loop (its stats and status) is returned."""
+    from edge_runtime.wearable.alerts import WearableStatus
+    from edge_runtime.wearable.loop import WearableLoop
+    from edge_runtime.wearable.sources import ImuBlock, ReplayStats
+
+    status = _status_of(classifier) if hasattr(classifier, "entry") else WearableStatus()
+    pub = _open_publisher(cfg, None, status, data_clock=True)
+    try:
+        loop = WearableLoop(classifier, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
+        _drive(_Source([ImuBlock(t0_s, acc_mps2)], ReplayStats()), loop, list(outputs))
+    finally:
+        pub.close()
+    return loop
+
+
 def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision], None]]) -> None:
     """Every event of the source: a block goes to the loop and its decisions to the outputs;
     a live sensor's state goes to the status. A disconnected sensor ends the run."""
@@ -276,8 +299,9 @@ def _sensor_state(pub: AlertPublisher, state: str, detail: str = "") -> None:
 
 
 def _print_decision(d: Decision) -> None:
-    mark = "ALERT" if d.alerted else d.status
-    print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}")
+    mark = ("ALERT" if d.status == "alert" else d.status.upper()) if d.alerted else d.status
+    after = "" if d.steps == 6 else f"  (after {d.steps} of 6 sub-windows, t={d.t_alert_s:.2f}s)"
+    print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}{after}")
 
 
 def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None, wall_s: float) -> None:
@@ -286,9 +310,9 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
     print(
         f"summary: {stream_s:.1f} s of IMU data ({h.samples} samples) in {wall_s:.3f} s "
         f"({stream_s / max(wall_s, 1e-9):,.0f}x real time); model {engine.name} ({engine.precision})\n"
-        f"  captures {s.captures}: alerts {s.statuses['alert']}, uncertain {s.statuses['uncertain']}, "
-        f"not alerted {s.statuses['not_alerted']}\n"
-        f"  by class: " + (", ".join(f"{k} {v}" for k, v in sorted(s.labels.items())) or "none") + "\n"
+        f"  captures {s.captures} ({loop.decision_mode}): alert events {s.events}; decisions "
+        + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(s.statuses.items())) + "\n"
+        "  by class: " + (", ".join(f"{k} {v}" for k, v in sorted(s.labels.items())) or "none") + "\n"
         f"  bad samples: non-finite or out of range {h.non_finite} (out of range "
         f"{r.out_of_range if source.live is None else source.live.stats.out_of_range}), saturated {h.saturated}, "
         f"dropped (time not advancing) {r.dropped_non_monotonic}, gaps {r.gaps}, detector restarts {h.detector_restarts}"

@@ -116,31 +116,62 @@ def extract_captures(x: np.ndarray, triggers: np.ndarray, cfg: DetectorConfig = 
     return caps
 
 
+_ROOM_FRAMES = 4096
+"""Free rows of the detector's buffer before it is compacted (one copy of the window per this many samples)."""
+
+
 class StreamingDetector:
     """Sample-by-sample (or block) version of :func:`detect_triggers`.
 
     ``push(block)`` takes an (n, 3) block of m/s^2 samples and returns the
     captures that completed inside it; ``triggers`` lists every trigger so
-    far, including one whose capture is still filling.
+    far, including one whose capture is still filling (:attr:`filling`).
+
+    Per sample it costs a copy into a preallocated buffer and, while the detector
+    is not paused by a capture, one subtraction: the 100 Hz loop feeds one sample
+    at a time, so nothing proportional to the window may happen per call (the buffer
+    is compacted once every ``_ROOM_FRAMES`` samples, and a capture fills its own
+    preallocated array).
     """
 
     def __init__(self, cfg: DetectorConfig = DetectorConfig()):
         self.cfg = cfg
         self.n_seen = 0
         self.triggers: list[int] = []
-        self._hist = np.zeros((0, 3), dtype=np.float32)
+        self._keep = max(cfg.lag, cfg.pre_frames)  # history a new sample may need
+        self._lag, self._thr, self._axis = cfg.lag, cfg.threshold_mps2, cfg.axis  # read per sample
+        self._buf = np.empty((self._keep + _ROOM_FRAMES, 3), np.float32)
+        self._ax = np.empty(len(self._buf), np.float64)  # the watched axis, as detect_triggers compares it
+        self._len = 0  # rows of _buf in use: frames n_seen - _len ... n_seen - 1, none before _valid_from
         self._valid_from = 0  # first sample of the current continuous stretch
         self._allowed_from = cfg.lag  # earliest frame that may trigger
-        self._open: tuple[int, list[np.ndarray], int] | None = None  # (trigger, chunks, frames so far)
+        self._cap = np.empty((cfg.capture_frames, 3), np.float32)
+        self._cap_trigger: int | None = None  # the capture filling, if any ...
+        self._cap_have = 0  # ... and its frames so far
 
     @property
     def capturing(self) -> bool:
-        return self._open is not None
+        return self._cap_trigger is not None
+
+    @property
+    def filled(self) -> int:
+        """Frames of the capture being filled so far (0: none)."""
+        return self._cap_have if self._cap_trigger is not None else 0
+
+    @property
+    def filling(self) -> tuple[int, np.ndarray] | None:
+        """The capture being filled: (trigger frame, its frames so far, a read-only view valid until
+        the next :meth:`push`), or None."""
+        if self._cap_trigger is None:
+            return None
+        view = self._cap[: self._cap_have]
+        view.flags.writeable = False
+        return self._cap_trigger, view
 
     def reset(self) -> None:
         """Continuity lost: drop the window and any capture in progress."""
-        self._hist = self._hist[:0]
-        self._open = None
+        self._len = 0
+        self._cap_trigger = None
         self._valid_from = self.n_seen
         self._allowed_from = self.n_seen + self.cfg.lag
 
@@ -149,53 +180,70 @@ class StreamingDetector:
         self.n_seen += int(n)
         self.reset()
 
+    def _append(self, block: np.ndarray) -> None:
+        n = len(block)
+        if self._len + n > len(self._buf):  # compact: keep the window's history, make room
+            keep = min(self._len, self._keep)
+            rows, ax = self._buf[self._len - keep : self._len], self._ax[self._len - keep : self._len]
+            if keep + n > len(self._buf):  # a block longer than the room: a buffer that holds it
+                self._buf = np.empty((self._keep + max(n, _ROOM_FRAMES), 3), np.float32)
+                self._ax = np.empty(len(self._buf), np.float64)
+            self._buf[:keep], self._ax[:keep] = rows.copy(), ax.copy()  # the slices may overlap the target
+            self._len = keep
+        if n == 1:  # the live 100 Hz loop: item assignments, no slicing
+            self._buf[self._len] = block[0]
+            self._ax[self._len] = block[0, self._axis]
+        else:
+            self._buf[self._len : self._len + n] = block
+            self._ax[self._len : self._len + n] = block[:, self._axis]
+        self._len += n
+
     def push(self, block: np.ndarray) -> list[Capture]:
-        cfg = self.cfg
-        block = np.asarray(block, dtype=np.float32).reshape(-1, 3)
+        if type(block) is not np.ndarray or block.dtype != np.float32 or block.ndim != 2:
+            block = np.asarray(block, dtype=np.float32).reshape(-1, 3)
         n = len(block)
         if n == 0:
             return []
+        self._append(block)
+        end = self.n_seen + n
+        s0 = end - self._len  # absolute index of _buf[0]
         done: list[Capture] = []
-        buf = np.concatenate([self._hist, block]) if len(self._hist) else block
-        s0 = self.n_seen - len(self._hist)  # absolute index of buf[0]
-
-        # Candidates T in this block with a full window behind them.
-        t_first = max(self.n_seen, self._valid_from + cfg.lag)
-        if t_first < self.n_seen + n:
-            i = np.arange(t_first - s0, len(buf))
-            ax = buf[:, cfg.axis].astype(np.float64)
-            with np.errstate(invalid="ignore"):
-                hit = np.abs(ax[i] - ax[i - cfg.lag]) > cfg.threshold_mps2
-            candidates = i[hit] + s0
-        else:
-            candidates = np.zeros(0, dtype=np.int64)
-
-        # Finish a capture that was already filling.
-        if self._open is not None:
-            done += self._fill(buf, s0)
-        for t in _greedy_triggers(candidates, self._allowed_from, cfg.post_frames):
-            self.triggers.append(t)
-            self._allowed_from = t + cfg.post_frames
-            self._open = (t, [], 0)
-            done += self._fill(buf, s0)
-
-        self.n_seen += n
-        keep = max(cfg.lag, cfg.pre_frames)
-        self._hist = buf[-keep:].copy() if len(buf) > keep else buf.copy()
-        if self.n_seen - len(self._hist) < self._valid_from:  # never look back across a reset
-            self._hist = self._hist[self._valid_from - (self.n_seen - len(self._hist)) :]
+        if self._cap_trigger is not None:  # finish a capture that was already filling
+            done += self._fill(s0, end)
+        # Candidates T in this block with a full window behind them, not inside a capture's pause.
+        lag = self._lag
+        t_first = max(self.n_seen, self._valid_from + lag, self._allowed_from)
+        if t_first < end:
+            if end - t_first == 1:  # the 100 Hz loop: one sample, no array temporaries
+                j = t_first - s0
+                hit = abs(float(self._ax[j]) - float(self._ax[j - lag])) > self._thr
+                candidates = [t_first] if hit else []
+            else:
+                a = self._ax[t_first - s0 : self._len]
+                b = self._ax[t_first - s0 - lag : self._len - lag]
+                with np.errstate(invalid="ignore"):
+                    candidates = np.flatnonzero(np.abs(a - b) > self._thr) + t_first
+            post = self.cfg.post_frames
+            for t in _greedy_triggers(np.asarray(candidates, dtype=np.int64), self._allowed_from, post
+                                      ) if len(candidates) else ():
+                self.triggers.append(t)
+                self._allowed_from = t + post
+                self._cap_trigger, self._cap_have = t, 0
+                done += self._fill(s0, end)
+        self.n_seen = end
         return done
 
-    def _fill(self, buf: np.ndarray, s0: int) -> list[Capture]:
-        t, chunks, have = self._open
+    def _fill(self, s0: int, end: int) -> list[Capture]:
+        t, have = self._cap_trigger, self._cap_have
         start = t - self.cfg.pre_frames + have  # next absolute frame the capture needs
-        stop = t + self.cfg.post_frames
-        lo, hi = start - s0, min(stop - s0, len(buf))
-        if hi > lo:
-            chunks.append(buf[lo:hi])
-            have += hi - lo
-        if have == self.cfg.capture_frames:
-            self._open = None
-            return [Capture(t, t - self.cfg.pre_frames, np.concatenate(chunks).astype(np.float32))]
-        self._open = (t, chunks, have)
-        return []
+        stop = min(t + self.cfg.post_frames, end)
+        if stop - start == 1:  # the 100 Hz loop: one more frame
+            self._cap[have] = self._buf[start - s0]
+            self._cap_have = have = have + 1
+        elif stop > start:
+            self._cap[have : have + stop - start] = self._buf[start - s0 : stop - s0]
+            self._cap_have = have = have + stop - start
+        if have < self.cfg.capture_frames:
+            return []
+        self._cap_trigger = None
+        return [Capture(t, t - self.cfg.pre_frames, self._cap.copy())]

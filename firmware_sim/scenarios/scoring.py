@@ -4,6 +4,9 @@ A decision matches a truth event when its trigger time falls within
 [start_s - tolerance_s, end_s] (the detector's capture starts 1 s before the
 trigger, so a trigger just before the annotated start still sees the motion).
 
+Alerts are the decisions that raise one (:func:`raises_alert`): an update of an alert (confirmed,
+revised, withdrawn) is not a second alert.
+
 * recall    = distraction events with at least one alert / distraction events
 * precision = alerts that match a distraction event / alerts
 * label accuracy = matched alerts whose class equals the event's / matched alerts
@@ -45,10 +48,16 @@ class AlertScore:
         }
 
 
+def raises_alert(d: dict) -> bool:
+    """A decision that warned the driver of a new distraction: an alert that went out, the first of
+    its event (``alert``, or ``preliminary`` when decided early); its updates are not new alerts."""
+    return bool(d["alerted"]) and d.get("status", "alert") in ("alert", "preliminary")
+
+
 def score_alerts(decisions: list[dict], events: list[dict], tolerance_s: float = 1.0) -> AlertScore:
     """``decisions``: dicts with t_trigger_s, label, alerted; ``events``: dicts with start_s, end_s, label."""
     truth = [e for e in events if e["label"] in DISTRACTIONS]
-    alerts = [d for d in decisions if d["alerted"]]
+    alerts = [d for d in decisions if raises_alert(d)]
 
     def match(d):
         for e in truth:

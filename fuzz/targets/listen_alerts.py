@@ -44,10 +44,10 @@ def run(msgs: list[can.Message]) -> None:
     lines: list[str] = []
     listener = listener_module().AlertListener(dbc(), emit=lines.append)
     for k, msg in enumerate(msgs):
-        before = listener.counts["alerts"] + listener.counts["heartbeats"]
+        before = listener.counts["alerts"] + listener.counts["updates"] + listener.counts["heartbeats"]
         listener.tick(k * 0.01)
         listener.frame(msg, k * 0.01)
-        if listener.counts["alerts"] + listener.counts["heartbeats"] > before:
+        if listener.counts["alerts"] + listener.counts["updates"] + listener.counts["heartbeats"] > before:
             message = dbc().get_message_by_frame_id(msg.arbitration_id)
             if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or len(msg.data) != message.length:
                 raise SilentAcceptance(f"the listener took a malformed frame for a {message.name}")

@@ -12,12 +12,14 @@ def _every_alert_once(r: dict) -> None:
     assert r["hub_dropped"] > 0.1 * r["hub_frames_in"]  # the hub did drop about a fifth
     assert (r["alerts_received"], r["received_twice"], r["unknown"]) == (r["alerts_sent"], 0, 0)
     assert r["classes_match"] and r["max_recovery_ms"] <= 200
-    assert r["listener"]["alerts"] == r["alerts_sent"] and r["listener"]["alert_copies"] > 0
+    assert r["listener"]["alerts"] + r["listener"]["updates"] == r["alerts_sent"] and r["listener"]["alert_copies"] > 0
 
 
 def test_every_replayed_alert_reaches_the_listener_once_at_20_percent_frame_drop(tmp_path):
     """A replay is on the data clock: the frames' order, hence which the seeded hub drops, is fixed."""
-    r = measure(tmp_path, minutes=5, seed=11, drop=0.2, hub_seed=4)
+    # hub seed 5: among the 9 alerts of this drive some lose their first frame (with one alert event per
+    # distraction, hub seed 4 happened to drop none of the 9 first frames: 0.8^9 = 13 %)
+    r = measure(tmp_path, minutes=5, seed=11, drop=0.2, hub_seed=5)
     assert r["alerts_sent"] >= 8
     assert r["first_frame_lost"] >= 1  # some alert was recovered from a copy, not from its first frame
     _every_alert_once(r)

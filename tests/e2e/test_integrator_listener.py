@@ -58,3 +58,46 @@ def test_listener_counts_alerts_e2e_errors_and_heartbeat_loss(tmp_path):
     alerts = [int(line.split()[1]) for line in out.splitlines() if line.startswith("ALERT")]
     assert sorted(alerts) == list(range(20))  # by AlertSeq, each once (a copy may come after the next alert)
     assert "treat the wearable as unavailable" in out
+
+
+def _listener_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("listen_alerts", LISTENER)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_updates_of_an_alert_are_neither_swallowed_as_copies_nor_counted_twice():
+    """In-process: the listener's AlertListener fed the frames of an early alert and its updates,
+    every message in 5 copies, with the first copy of some lost."""
+    import cantools
+
+    from edge_runtime.wearable.alerts import AlertEncoder
+
+    enc, lines = AlertEncoder(), []
+    listener = _listener_module().AlertListener(cantools.database.load_file(DBC_PATH), emit=lines.append)
+
+    def message(t, label, status, seq, lose_first=False):
+        d = SimpleNamespace(t_trigger_s=10.0, t_alert_s=t, label=label, confidence=0.9, status=status, compute_us=0.0)
+        for k in range(5):
+            if not (lose_first and k == 0):
+                listener.tick(t + 0.05 * k)
+                listener.frame(enc.encode_alert(d, seq, 0.05 * k), t + 0.05 * k)
+
+    message(11.62, "Phone", "preliminary", 7)
+    message(13.93, "Texting", "revised", 7, lose_first=True)
+    message(15.99, "Texting", "confirmed", 7)
+    message(40.0, "Drink", "preliminary", 8, lose_first=True)
+    message(42.0, "Drink", "withdrawn", 8)
+    message(60.0, "Marker", "alert", 9)
+    message(70.0, "Phone", "preliminary", 10)  # then nothing: the sensor stream was cut
+    listener.tick(77.5)
+    c = listener.summary()
+    assert (c["alerts"], c["updates"], c["withdrawn"], c["expired"], c["alert_copies"]) == (4, 3, 1, 1, 4 * 4 + 4 + 2 * 3)
+    kinds = [line.split()[:3] for line in lines if line.split()[0] in ("ALERT", "UPDATE", "EXPIRED")]
+    assert kinds == [["ALERT", "7", "Phone"], ["UPDATE", "7", "Texting"], ["UPDATE", "7", "Texting"],
+                     ["ALERT", "8", "Drink"], ["UPDATE", "8", "Drink"], ["ALERT", "9", "Marker"],
+                     ["ALERT", "10", "Phone"], ["EXPIRED", "10", "preliminary"]]
+    assert "stop warning: alert void" in lines[4]

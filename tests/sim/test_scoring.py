@@ -27,3 +27,10 @@ def test_event_level_precision_recall_and_label_accuracy():
 def test_trigger_after_the_event_or_long_before_does_not_match():
     s = score_alerts([_d(15.01, "Drink"), _d(8.9, "Drink")], EVENTS)
     assert s.detected == 0 and s.precision == 0.0
+
+
+def test_updates_of_an_alert_are_not_new_alerts():
+    decisions = [{**_d(9.5, "Drink"), "status": "preliminary"}, {**_d(9.5, "Drink"), "status": "confirmed"},
+                 {**_d(41.0, "Texting"), "status": "alert"}, {**_d(70.5, "Marker"), "status": "withdrawn"}]
+    s = score_alerts(decisions, EVENTS)
+    assert (s.alerts, s.detected, s.precision) == (2, 2, 1.0)

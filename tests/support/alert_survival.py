@@ -77,16 +77,18 @@ def measure(workdir: Path, minutes: float, seed: int, drop: float, hub_seed: int
     if summary is None:
         raise RuntimeError(f"listener: no summary: {err.strip()[-500:]}")
     got = [json.loads(x) for x in lines if x.startswith("{")]
-    by_seq = {d["alert_seq"]: d for d in sent}
-    # which frame of its alert the listener counted: 0 the first, k the k-th copy (k * 50 ms later)
-    recovery_ms = [g["TimeSinceTrigger"] - _first_frame_ms(by_seq[g["AlertSeq"]]) for g in got if g["AlertSeq"] in by_seq]
-    seqs = [g["AlertSeq"] for g in got]
+    # one message per decision that went out: an alert, or an update of it under the same AlertSeq
+    # (early decisions); the listener de-duplicates on (AlertSeq, Status, Class), and so does this count
+    by_key = {(d["alert_seq"], d["status"], d["label"]): d for d in sent}
+    keys = [(g["AlertSeq"], g["Status"], g["Class"]) for g in got]
+    # which frame of its message the listener counted: 0 the first, k the k-th copy (k * 50 ms later)
+    recovery_ms = [g["TimeSinceTrigger"] - _first_frame_ms(by_key[k]) for g, k in zip(got, keys) if k in by_key]
     return {
         "alerts_sent": len(sent),
-        "alerts_received": len(set(seqs) & set(by_seq)),
-        "received_twice": len(seqs) - len(set(seqs)),
-        "unknown": len(set(seqs) - set(by_seq)),
-        "classes_match": all(g["Class"] == by_seq[g["AlertSeq"]]["label"] for g in got if g["AlertSeq"] in by_seq),
+        "alerts_received": len(set(keys) & set(by_key)),
+        "received_twice": len(keys) - len(set(keys)),
+        "unknown": len(set(keys) - set(by_key)),
+        "classes_match": all(k in by_key for k in keys),  # every message heard, class and status, was sent
         "first_frame_lost": sum(r > 0 for r in recovery_ms),
         "max_recovery_ms": max(recovery_ms, default=0),
         "hub_frames_in": hub.stats["frames_in"],

@@ -30,7 +30,7 @@ def decision(label="Phone", conf=0.87, alerted=True, status="alert"):
 
 def test_dbc_loads_with_version_and_labels():
     db = load_vehicle_dbc()
-    assert db.version == "1.1.0"
+    assert db.version == "1.2.0"
     alert = db.get_message_by_name("DISTRACTION_ALERT")
     status = db.get_message_by_name("WEARABLE_STATUS")
     assert (alert.frame_id, status.frame_id) == (0x3A0, 0x3A1)
@@ -258,3 +258,22 @@ def test_on_the_data_clock_frames_are_stamped_with_the_recording_time(tmp_path):
 def test_advance_to_is_for_the_data_clock_only():
     with pytest.raises(RuntimeError):
         AlertPublisher(None).advance_to(1.0)
+
+
+def test_updates_of_an_alert_go_out_under_its_alert_seq_with_their_own_status_and_copies(tmp_path):
+    bus = can.Bus(interface="virtual", channel="updates", receive_own_messages=False)
+    pub = AlertPublisher(bus, heartbeat_period_s=0.1, log_path=tmp_path / "f.log", clock=Clock.DATA).start()
+
+    def verdict(t, label, status, event_seq=None):
+        return SimpleNamespace(t_trigger_s=10.0, t_alert_s=t, label=label, confidence=0.9, status=status,
+                               compute_us=0.0, event_seq=event_seq)
+
+    seq = pub.publish_alert(verdict(11.62, "Phone", "preliminary"))
+    assert pub.publish_alert(verdict(13.93, "Texting", "revised", seq)) == seq
+    assert pub.publish_alert(verdict(15.99, "Texting", "confirmed", seq)) == seq
+    assert pub.publish_alert(verdict(30.0, "Drink", "alert")) == seq + 1
+    assert pub.publish_alert(verdict(31.0, "Other", "withdrawn", seq + 1)) == seq + 1
+    pub.close()
+    got = [(d["AlertSeq"], str(d["Status"]), str(d["Class"])) for _, i, d in _frames(tmp_path / "f.log") if i == 0x3A0]
+    assert got == ([(0, "preliminary", "Phone")] * 5 + [(0, "revised", "Texting")] * 5 + [(0, "confirmed", "Texting")] * 5
+                   + [(1, "alert", "Drink")] * 5 + [(1, "withdrawn", "Other")] * 5)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy import signal
 from support import REPO_ROOT
+from support.early_model import engine as early_engine
 
 from edge_runtime.core.manifest import (
     ASSETS_DIR,
@@ -23,8 +24,12 @@ from edge_runtime.core.manifest import (
 )
 from edge_runtime.core.onnx import session_options
 from edge_runtime.wearable.classifier import (
+    MEAN_EDGE_FRAMES,
     Engine,
+    calibrate,
+    needed_frames,
     preprocess,
+    preprocess_prefix,
     resample_capture,
     resample_matrix,
     resample_poly,
@@ -230,3 +235,84 @@ def test_shipped_manifest_describes_its_models():
     q = by["int8"]["quantization"]
     assert q["int8_operators"] and q["method"]
     assert abs(by["int8"]["metrics"]["macro_f1_delta_vs_fp32"]) <= 0.01
+
+
+# ---------------------------------------------------------------------------- early decisions (partial captures)
+
+
+def _capture(seed: int = 0) -> np.ndarray:
+    """A capture with the hand moving: gravity swings between the axes, as a reach does."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(700) / 100.0
+    lift = 1 / (1 + np.exp(-(t - 2.0) * 3))
+    x = np.stack([9.81 * np.sin(lift), 2 * np.sin(3 * t), 9.81 * np.cos(lift)], axis=1)
+    return (x + rng.normal(0, 0.3, x.shape)).astype(np.float32)
+
+
+def test_needed_frames_are_the_last_raw_frames_the_first_s_subwindows_read():
+
+    assert [needed_frames(s) for s in range(1, 7)] == [148, 263, 379, 494, 610, 700]
+    m = resample_matrix()
+    for s in range(1, 7):  # nothing after needed_frames(s) reaches the first s * 33 resampled frames
+        assert not m[: s * 33, needed_frames(s):].any() and m[: s * 33, needed_frames(s) - 1].any()
+    with pytest.raises(ValueError):
+        needed_frames(0)
+
+
+@pytest.mark.parametrize("steps", [1, 2, 3, 4, 5, 6])
+def test_a_prefix_gives_the_full_preprocessing_of_its_subwindows(steps):
+
+    x = _capture(steps)
+    full = preprocess(x)[:steps].reshape(-1, 3)
+    part = preprocess_prefix(x[: needed_frames(steps)], steps)
+    assert part.shape == (steps, 33, 3)
+    part = part.reshape(-1, 3)
+    if steps == 6:  # the whole capture: exactly preprocess
+        np.testing.assert_array_equal(part, full)
+        return
+    # Only the mean padding differs: row j is off by (mean of the padded prefix - mean of the capture)
+    # times (1 - the row's sum), which is within 4e-5 of 0 from MEAN_EDGE_FRAMES on.
+    rows = 1 - resample_matrix().sum(axis=1)[: steps * 33, None]
+    x64 = x.astype(np.float64)
+    padded = np.concatenate([x64[: needed_frames(steps)], np.repeat(x64[needed_frames(steps) - 1 : needed_frames(steps)],
+                                                                   700 - needed_frames(steps), axis=0)])
+    bound = np.abs(rows) * np.abs(padded.mean(axis=0) - x64.mean(axis=0)) + 2e-5  # + float32 rounding
+    assert (np.abs(part - full) <= bound).all()
+    assert np.abs(rows[MEAN_EDGE_FRAMES:]).max() < 4e-5 < 1e-3 < np.abs(rows[MEAN_EDGE_FRAMES - 1])
+    np.testing.assert_allclose(part[MEAN_EDGE_FRAMES:], full[MEAN_EDGE_FRAMES:], rtol=0, atol=1e-3)
+    with pytest.raises(ValueError):
+        preprocess_prefix(x[: needed_frames(steps) - 1], steps)
+
+
+def test_a_dynamic_s_model_decides_on_prefixes_with_the_manifests_temperature():
+
+    eng = early_engine(early={"steps": [2, 3, 4, 5, 6], "temperature_by_steps": {"2": 2.0},
+                        "min_confidence_by_steps": {"2": 0.8}})
+    assert eng.early_steps == (2, 3, 4, 5, 6) and eng.early.min_confidence_by_steps == {2: 0.8}
+    x = _capture(1)
+    raw2 = eng.classify(preprocess_prefix(x[: needed_frames(2)], 2))
+    got2 = eng.classify_prefix(x[: needed_frames(2)], 2)
+    want2 = np.exp(np.log(raw2) / 2.0) / np.exp(np.log(raw2) / 2.0).sum()
+    np.testing.assert_allclose(got2, want2, rtol=1e-5)
+    assert got2.max() < raw2.max()  # T > 1 softens
+    np.testing.assert_allclose(eng.classify_prefix(x, 6), eng.classify_capture(x), rtol=1e-6)  # no T for S = 6
+    assert not np.allclose(eng.classify_prefix(x[: needed_frames(3)], 3), eng.classify_capture(x))
+    with pytest.raises(ValueError):
+        eng.classify_prefix(x[: needed_frames(1)], 1)  # not among the manifest's steps
+    np.testing.assert_allclose(calibrate(raw2, 1.0), raw2)
+
+
+def test_a_fixed_s_model_decides_on_the_full_window_only_whatever_the_manifest_says():
+
+    assert early_engine(dynamic=False, early={"steps": [1, 2, 3]}).early_steps == (6,)
+    assert early_engine(dynamic=True).early_steps == (1, 2, 3, 4, 5, 6)  # dynamic S, no manifest 'early'
+    shipped = Engine.from_manifest(ASSETS_DIR, "int8")
+    assert shipped.early_steps == (6,)  # today's model: fixed S = 6
+
+
+@pytest.mark.parametrize("early", [{"steps": [0, 2]}, {"temperature_by_steps": {"2": 0}}, {"steps": "x"},
+                                   {"min_confidence_by_steps": {"3": 1.5}}])
+def test_a_malformed_early_object_is_refused(early):
+
+    with pytest.raises(ModelIntegrityError, match="early"):
+        early_engine(early=early)

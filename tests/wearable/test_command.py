@@ -7,21 +7,23 @@ import re
 import subprocess
 import sys
 
+import can
 import numpy as np
 import pytest
+from support.early_model import write_assets
 
 from edge_runtime import __main__ as table
 from edge_runtime.cli import run_command
 from edge_runtime.errors import InputError, LinkError, ModelIntegrityError
 from edge_runtime.wearable import command
-from edge_runtime.wearable.alerts import WearableStatus
+from edge_runtime.wearable.alerts import AlertEncoder, WearableStatus
 from edge_runtime.wearable.labels import CLASSES
 from edge_runtime.wearable.loop import WearableLoop
 from edge_runtime.wearable.mavlink_source import SourceStatus
 from edge_runtime.wearable.sources import ImuBlock, ReplayStats
 
 DECISION_KEYS = ["t_trigger_s", "t_alert_s", "label", "confidence", "alerted", "status", "probs", "compute_us",
-                 "latency_ms", "alert_seq"]
+                 "latency_ms", "alert_seq", "steps", "event_start_s"]
 
 
 def _steps_csv(path, n=3000, steps=(1000,)):
@@ -91,7 +93,7 @@ def test_replay_writes_each_decision_once_to_the_log_and_the_console(tmp_path, c
     for d, line in zip(decisions, printed):
         assert line.split()[2] == d["label"] and line.endswith("ALERT" if d["alerted"] else d["status"])
     assert out[len(decisions)].startswith("summary: 40.0 s of IMU data (4000 samples)")
-    assert f"captures {len(decisions)}:" in out[len(decisions) + 1]
+    assert f"captures {len(decisions)} (full-window decisions" in out[len(decisions) + 1]
 
 
 @pytest.mark.slow
@@ -174,3 +176,23 @@ def test_a_key_file_is_read_and_never_shown(tmp_path, capsys):
     assert table.main(["wearable", "--imu", f"serial:/nonexistent/tty?key=@{key}"]) == 2
     err = capsys.readouterr().err
     assert "cannot open IMU serial line '/nonexistent/tty'" in err and KEY_HEX not in err
+
+
+def test_a_model_that_takes_partial_captures_makes_early_decisions_unless_full_window_is_asked(tmp_path, capsys):
+    assets = write_assets(tmp_path / "assets", early={"steps": [2, 3, 4, 5, 6],
+                                                      "min_confidence_by_steps": {"2": 0.5}})
+    csv = _steps_csv(tmp_path / "steps.csv", n=4000, steps=(1000,))
+    runs = {}
+    for mode in ("early", "full_window"):
+        log = tmp_path / f"{mode}.jsonl"
+        assert table.main(["wearable", "--replay", str(csv), "--assets", str(assets), "--decision", mode,
+                           "--alerts", str(log), "--can-log", str(tmp_path / f"{mode}.log")]) == 0
+        runs[mode] = [json.loads(line) for line in log.read_text().splitlines()]
+    out = capsys.readouterr().out
+    early = [(d["status"], d["steps"], d["label"], d["alert_seq"], d["t_alert_s"]) for d in runs["early"]]
+    assert early == [("preliminary", 2, "Phone", 0, 11.62), ("confirmed", 6, "Phone", 0, 15.99)]
+    assert [(d["status"], d["steps"]) for d in runs["full_window"]] == [("alert", 6)]
+    assert "early decisions after S = 2,3,4,5,6" in out and "PRELIMINARY  (after 2 of 6 sub-windows" in out
+    enc = AlertEncoder()
+    frames = [enc.decode(m) for m in can.LogReader(str(tmp_path / "early.log")) if m.arbitration_id == 0x3A0]
+    assert [(f["AlertSeq"], str(f["Status"])) for f in frames] == [(0, "preliminary")] * 5 + [(0, "confirmed")] * 5

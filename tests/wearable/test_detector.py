@@ -130,3 +130,20 @@ def test_skip_keeps_stream_indices_and_refills_the_window():
     y[250:, 0] = 8.0  # stream frame 600; a full window after the hole starts at 350 + 199 = 549
     det.push(y)
     assert det.n_seen == 1050 and det.triggers == [600]
+
+
+def test_blocks_longer_than_the_buffer_after_history_and_a_capture_seen_while_it_fills():
+    x = _signal(11, 14000)
+    ref = extract_captures(x, detect_triggers(x))
+    det, caps = _stream(x, [150, 150 + 9000])  # a short block, then one longer than the buffer's room
+    assert [c.trigger_index for c in caps] == [c.trigger_index for c in ref]
+    for c, r in zip(caps, ref):
+        np.testing.assert_array_equal(c.data, r.data)
+    det = StreamingDetector()
+    t = ref[0].trigger_index
+    det.push(x[: t + 50])
+    trigger, so_far = det.filling
+    assert trigger == t and len(so_far) == 150 and not so_far.flags.writeable
+    np.testing.assert_array_equal(so_far, ref[0].data[:150])
+    det.reset()
+    assert det.filling is None

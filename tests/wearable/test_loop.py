@@ -6,6 +6,7 @@ import time
 import can
 import numpy as np
 import pytest
+from support.early_model import Scripted, step_signal
 
 from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher
 from edge_runtime.wearable.detector import DetectorConfig
@@ -95,7 +96,12 @@ class Publisher:
 
     def publish_alert(self, alert):
         self.handed.append(copy.deepcopy(alert))
-        return len(self.handed) - 1 if self.goes_out else None  # the AlertSeq its frames carry
+        if not self.goes_out:
+            return None
+        if getattr(alert, "event_seq", None) is not None:  # an update goes out under its event's AlertSeq
+            return alert.event_seq
+        self.seqs = getattr(self, "seqs", -1) + 1
+        return self.seqs  # the AlertSeq its frames carry
 
 
 def _one_capture(label="Texting", p=0.9, goes_out=True, rx=None):
@@ -130,7 +136,7 @@ def test_what_the_policy_does_not_alert_never_reaches_the_publisher(label, p):
 
 def test_a_decision_is_complete_when_made_and_never_changed_afterwards():
     seen = []  # (the object an output handler got, a copy of it as it was then)
-    loop = WearableLoop(Fixed(), publisher=Publisher(goes_out=False),
+    loop = WearableLoop(Fixed(), publisher=Publisher(goes_out=False), policy=AlertPolicy(event_hold_s=0.0),
                         on_decision=lambda d: seen.append((d, copy.deepcopy(d))))
     acc = _steps(9000, [1000, 2000, 5000])
     returned = loop.feed(ImuBlock(0.0, acc[:4000], rx_monotonic_s=time.monotonic()))
@@ -172,3 +178,124 @@ def test_the_heartbeat_thread_reports_what_the_loop_counts():
         rx.shutdown()
     counts = pub.status.counts()
     assert (counts.samples, counts.non_finite, counts.detector_restarts) == (300, 5, 1)
+
+
+# ---------------------------------------------------------------------------- early decisions and events
+
+
+def _early_run(answers, policy=AlertPolicy(), acc=None, split=None, **kw):
+    pub = Publisher()
+    clf = Scripted(answers, **kw)
+    loop = WearableLoop(clf, policy=policy, publisher=pub)
+    acc = _steps(3000, [1000]) if acc is None else acc
+    cuts = range(0, len(acc), split) if split else [0]
+    ds = []
+    for a in cuts:
+        got = loop.feed(ImuBlock(a / 100.0, acc[a : a + (split or len(acc))], continuous=a > 0))
+        if split == 1:  # fed sample by sample: each decision comes with the very sample it waited for
+            assert all(round(d.t_alert_s * 100) == a for d in got)
+        ds += got
+    return ds, pub, clf, loop
+
+
+def _summary(ds):
+    return [(d.status, d.steps, d.label, d.alert_seq) for d in ds]
+
+
+def test_a_confident_early_step_is_a_preliminary_alert_then_the_full_window_confirms_it():
+    ds, pub, clf, _ = _early_run({2: ("Phone", 0.95), 3: ("Phone", 0.97), 6: ("Phone", 0.8)})
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    # the trigger is frame 1000, the capture starts at 900: S sub-windows are decided at frame 900 + needed - 1
+    assert [d.t_alert_s for d in ds] == [(900 + 263 - 1) / 100, (900 + 700 - 1) / 100]
+    assert all(d.event_start_s == 10.0 and d.t_trigger_s == 10.0 for d in ds)
+    assert [v.event_seq for v in pub.handed] == [None, 0]  # the update goes out under the event's AlertSeq
+    acc = _steps(3000, [1000])
+    for steps, x in clf.seen:  # each step saw exactly the capture's first frames it needs
+        assert len(x) == [148, 263, 379, 494, 610, 700][steps - 1]
+        np.testing.assert_array_equal(x, acc[900 : 900 + len(x)])
+    assert [s for s, _ in clf.seen] == [1, 2, 3, 4, 5, 6]
+
+
+def test_a_preliminary_alert_may_be_revised_and_the_full_window_may_withdraw_it():
+    ds, *_ = _early_run({2: ("Phone", 0.95), 4: ("Texting", 0.95), 6: ("Texting", 0.9)})
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("revised", 4, "Texting", 0), ("confirmed", 6, "Texting", 0)]
+    ds, *_ = _early_run({1: ("Drink", 0.99), 6: ("Marker", 0.9)})
+    assert _summary(ds) == [("preliminary", 1, "Drink", 0), ("revised", 6, "Marker", 0)]
+    for final in [("Other", 0.95), ("Drink", 0.4)]:  # Other, or uncertain: the alert is withdrawn
+        ds, pub, _, loop = _early_run({1: ("Drink", 0.99), 6: final})
+        assert _summary(ds) == [("preliminary", 1, "Drink", 0), ("withdrawn", 6, final[0], 0)]
+        assert ds[-1].alerted and pub.handed[-1].status == "withdrawn"
+
+
+def test_unconfident_early_steps_wait_and_full_window_mode_decides_once():
+    ds, pub, *_ = _early_run({2: ("Phone", 0.85), 6: ("Phone", 0.8)})  # 0.85 < 0.9, the default early threshold
+    assert _summary(ds) == [("alert", 6, "Phone", 0)] and pub.handed[0].event_seq is None
+    ds, _, clf, _ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.8)}, policy=AlertPolicy(decision="full_window"))
+    assert _summary(ds) == [("alert", 6, "Phone", 0)] and [s for s, _ in clf.seen] == [6]
+    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.8)}, early_steps=(6,))  # a fixed-S model
+    assert _summary(ds) == [("alert", 6, "Phone", 0)]
+
+
+def test_early_thresholds_come_from_the_config_else_the_manifest():
+    answers = {2: ("Phone", 0.85), 6: ("Phone", 0.8)}
+    ds, *_ = _early_run(answers, manifest_thresholds={2: 0.8})
+    assert _summary(ds)[0] == ("preliminary", 2, "Phone", 0)
+    ds, *_ = _early_run(answers, manifest_thresholds={2: 0.8},
+                        policy=AlertPolicy(early_min_confidence=(-1.0, 0.86, -1.0, -1.0, -1.0)))
+    assert _summary(ds) == [("alert", 6, "Phone", 0)]
+
+
+def test_early_decisions_do_not_depend_on_how_the_stream_is_cut():
+    acc = _steps(9000, [1000, 4000])
+    answers = {1: ("Drink", 0.99), 3: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    policy = AlertPolicy(event_hold_s=0.0)
+    whole = _summary(_early_run(answers, policy, acc)[0])
+    assert whole == [("preliminary", 1, "Drink", 0), ("revised", 3, "Phone", 0), ("confirmed", 6, "Phone", 0),
+                     ("preliminary", 1, "Drink", 1), ("revised", 3, "Phone", 1), ("confirmed", 6, "Phone", 1)]
+    for split in (1, 7, 100, 333):
+        ds = _early_run(answers, policy, acc, split=split)[0]
+        assert _summary(ds) == whole
+        assert [d.t_alert_s for d in ds] == [d.t_alert_s for d in _early_run(answers, policy, acc)[0]]
+
+
+def test_a_capture_during_an_active_event_continues_it_and_raises_no_alert():
+    # captures at 10 s, 20 s (4 s after the first ended: the hand returning), 45 s (19 s of quiet: a new event)
+    acc = _steps(8000, [1000, 2000, 4500])
+    ds, pub, _, loop = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.9)}, AlertPolicy(event_hold_s=10.0), acc)
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("confirmed", 6, "Phone", 0),
+                            ("continued", 6, "Phone", None),
+                            ("preliminary", 2, "Phone", 1), ("confirmed", 6, "Phone", 1)]
+    assert [d.event_start_s for d in ds] == [10.0, 10.0, 10.0, 45.0, 45.0]
+    assert not ds[2].alerted and len(pub.handed) == 4 and loop.stats.events == 2
+    # event_hold_s = 0: every capture is its own event
+    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.9)}, AlertPolicy(event_hold_s=0.0), acc)
+    assert [d.alert_seq for d in ds if d.steps == 2] == [0, 1, 2]
+
+
+def test_a_withdrawn_alert_ends_its_event():
+    acc = _steps(8000, [1000, 2000])
+    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Other", 0.9)}, AlertPolicy(event_hold_s=10.0), acc)
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("withdrawn", 6, "Other", 0),
+                            ("preliminary", 2, "Phone", 1), ("withdrawn", 6, "Other", 1)]
+
+
+def test_decisions_in_the_alert_log_carry_steps_and_event_start():
+    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.8)})
+    line = ds[0].to_json()
+    assert (line["status"], line["steps"], line["alert_seq"], line["event_start_s"]) == ("preliminary", 2, 0, 10.0)
+
+
+def test_a_capture_cut_by_a_gap_gets_no_update_and_the_next_capture_decides_early_again():
+    pub = Publisher()
+    loop = WearableLoop(Scripted({1: ("Phone", 0.95), 6: ("Phone", 0.9)}), policy=AlertPolicy(event_hold_s=60.0),
+                        publisher=pub)  # a long hold: only the cut ends the event
+    acc = step_signal(1300, [1000])
+    first = loop.feed(ImuBlock(0.0, acc))  # the capture from frame 900 holds 400 frames when the stream stops
+    assert _summary(first) == [("preliminary", 1, "Phone", 0)]
+    later = step_signal(3000, [1000])
+    ds = []
+    for a in range(0, 3000, 1):  # after the gap, sample by sample
+        got = loop.feed(ImuBlock(100.0 + a / 100.0, later[a : a + 1], continuous=a > 0))
+        assert all(round((d.t_alert_s - 100.0) * 100) == a for d in got)
+        ds += got
+    assert _summary(ds) == [("preliminary", 1, "Phone", 1), ("confirmed", 6, "Phone", 1)]

@@ -1,0 +1,370 @@
+"""``python -m firmware_sim drive-eval``: what a driver gets, on held-out simulated driving.
+
+    python -m firmware_sim drive-eval --hours 10 --seed 0 --out reports/drive_eval
+        [--decision early,full_window] [--baseline-share 0.3] [--drive-minutes 30]
+        [--config BOX.toml] [--assets DIR] [--model int8|fp32]
+
+Simulates ``--hours`` of driving by drivers the models never saw: drives with distractions and
+Other motions (``firmware_sim.devices.wrist.simulate_drive``) and, for ``--baseline-share`` of the
+hours, baseline drives with Other motions and no distraction (``simulate_trial(..., "baseline")``).
+Held out: every drive's subject comes from a cohort seed that ``models/`` never uses (training and
+validation draw subjects from the 20-subject cohort of seed 0, ``make_subjects(20, seed=0)``):
+distraction drives use drive seeds ``DRIVE_SEED0 + 1000 * seed + k`` (each drive a new driver, drawn
+from cohort seed drive seed + 10000), baseline drives the subjects of cohort seed
+``BASELINE_COHORT0 + seed``.
+
+Each drive is replayed through the runtime in-process, by the path of ``python -m edge_runtime
+wearable --replay`` (:func:`edge_runtime.wearable.command.replay`: the box configuration, the loop,
+the publisher on the data clock), once per decision mode. Scored per mode against the simulator's
+truth (a decision belongs to the distraction its trigger falls in, from 1 s before its start to its
+end, as :mod:`firmware_sim.scenarios.scoring` matches):
+
+* event recall: distractions with at least one alert (an ``alert`` or ``preliminary`` decision that
+  went out; updates are not new alerts) / distractions;
+* first-alert class accuracy: the first alert's class is the distraction's;
+* onset -> first alert frame: ``t_alert_s`` of the first alert (its frame on the bus, recording
+  time) - the distraction's start, median and p95;
+* false alerts per driving hour: alerts that belong to no distraction (and how many of them the
+  full window withdrew);
+* late alerts: first alerts whose frame went out after the distraction had ended.
+
+Writes ``OUT/drive_eval.json``, ``OUT/drive_eval.md`` and ``OUT/imu_trace.png`` (a distraction with
+its onset, end, the preliminary and final alert frames).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from edge_runtime.cli import CliError, positive_float
+from edge_runtime.wearable.labels import DISTRACTIONS
+from firmware_sim.scenarios.scoring import raises_alert
+
+DRIVE_SEED0 = 900_000
+"""Distraction drives use seeds DRIVE_SEED0 + 1000 * seed + k: no other command or test uses them."""
+BASELINE_COHORT0 = 950_000
+"""Baseline drives: the subjects of cohort seed BASELINE_COHORT0 + seed (models/ uses cohort seed 0)."""
+MATCH_BEFORE_S = 1.0
+"""A trigger up to 1 s before a distraction's start belongs to it (the capture starts 1 s before the trigger)."""
+MODES = ("full_window", "early")
+
+
+@dataclass
+class Drive:
+    name: str
+    acc_mps2: np.ndarray
+    events: list[dict]
+    kind: str
+    """'distraction' or 'baseline'."""
+
+    @property
+    def hours(self) -> float:
+        return len(self.acc_mps2) / 100.0 / 3600.0
+
+
+def held_out_drives(hours: float, seed: int, baseline_share: float = 0.3, drive_minutes: float = 30.0):
+    """The drives of an evaluation (a generator): distraction drives, then baseline drives."""
+    from firmware_sim.devices.wrist import make_subjects, simulate_drive, simulate_trial
+
+    n = max(1, round(hours * 60 / drive_minutes))
+    n_base = min(n - 1, round(n * baseline_share)) if n > 1 else 0
+    for k in range(n - n_base):
+        s = DRIVE_SEED0 + 1000 * seed + k
+        rec = simulate_drive(drive_minutes, s)
+        yield Drive(f"drive seed {s}", rec.acc_mps2, [e.to_json() for e in rec.events], "distraction")
+    cohort_seed = BASELINE_COHORT0 + seed
+    for k, subj in enumerate(make_subjects(n_base, seed=cohort_seed)):
+        rec = simulate_trial(subj, "baseline", cohort_seed, drive_minutes)
+        yield Drive(f"baseline cohort {cohort_seed} subject {k + 1}", rec.acc_mps2, [e.to_json() for e in rec.events],
+                    "baseline")
+
+
+# ---------------------------------------------------------------------------- scoring
+
+
+@dataclass
+class ModeScore:
+    """The event figures of one decision mode, accumulated over drives."""
+
+    hours: float = 0.0
+    distractions: int = 0
+    detected: int = 0
+    first_correct: int = 0
+    onset_to_alert_s: list[float] = field(default_factory=list)
+    late: int = 0
+    false_alerts: int = 0
+    false_withdrawn: int = 0
+    repeat_alerts: int = 0
+    """Alerts for a distraction that had already been alerted (a second warning for one distraction)."""
+    decisions: int = 0
+    statuses: dict[str, int] = field(default_factory=dict)
+
+    def add(self, drive: Drive, decisions: list[dict]) -> list[tuple[dict, dict | None]]:
+        """Score one drive; returns each distraction with its first alert (None: missed)."""
+        self.hours += drive.hours
+        self.decisions += len(decisions)
+        for d in decisions:
+            self.statuses[d["status"]] = self.statuses.get(d["status"], 0) + 1
+        truth = [e for e in drive.events if e["label"] in DISTRACTIONS]
+
+        def owner(d):
+            return next((e for e in truth if e["start_s"] - MATCH_BEFORE_S <= d["t_trigger_s"] <= e["end_s"]), None)
+
+        alerts = [d for d in decisions if raises_alert(d)]
+        firsts: dict[int, dict] = {}
+        for d in sorted(alerts, key=lambda d: d["t_alert_s"]):
+            e = owner(d)
+            if e is None:
+                self.false_alerts += 1
+                self.false_withdrawn += any(u["status"] == "withdrawn" and u["alert_seq"] == d["alert_seq"]
+                                            and u["event_start_s"] == d["event_start_s"] for u in decisions)
+            elif id(e) in firsts:
+                self.repeat_alerts += 1
+            else:
+                firsts[id(e)] = d
+        out = []
+        for e in truth:
+            first = firsts.get(id(e))
+            self.distractions += 1
+            if first is not None:
+                self.detected += 1
+                self.first_correct += first["label"] == e["label"]
+                self.onset_to_alert_s.append(first["t_alert_s"] - e["start_s"])
+                self.late += first["t_alert_s"] > e["end_s"]
+            out.append((e, first))
+        return out
+
+    def as_dict(self) -> dict:
+        t = np.asarray(self.onset_to_alert_s)
+        return {
+            "driving_hours": round(self.hours, 3),
+            "distractions": self.distractions,
+            "event_recall": round(self.detected / self.distractions, 4) if self.distractions else None,
+            "first_alert_class_accuracy": round(self.first_correct / self.detected, 4) if self.detected else None,
+            "onset_to_first_alert_s": {"median": round(float(np.median(t)), 3) if t.size else None,
+                                       "p95": round(float(np.percentile(t, 95)), 3) if t.size else None,
+                                       "n": int(t.size)},
+            "false_alerts": self.false_alerts,
+            "false_alerts_per_hour": round(self.false_alerts / self.hours, 3) if self.hours else None,
+            "false_alerts_withdrawn": self.false_withdrawn,
+            "first_alerts_after_the_distraction_ended": self.late,
+            "repeat_alerts": self.repeat_alerts,
+            "decisions": self.decisions,
+            "statuses": dict(sorted(self.statuses.items())),
+        }
+
+
+def class_agreement(drives, engine, other, detector_cfg) -> dict:
+    """Top-class agreement of two models (int8 against fp32) on every capture of the drives, at every
+    sub-window count S the first decides at (:meth:`Engine.classify_prefix`, as the loop asks it)."""
+    from edge_runtime.wearable.classifier import needed_frames
+    from edge_runtime.wearable.detector import detect_triggers, extract_captures
+
+    same: dict[int, list[int]] = {s: [0, 0] for s in engine.early_steps}
+    for drive in drives:
+        for cap in extract_captures(drive.acc_mps2, detect_triggers(drive.acc_mps2, detector_cfg), detector_cfg):
+            for s in engine.early_steps:
+                x = cap.data[: needed_frames(s)]
+                same[s][0] += int(np.argmax(engine.classify_prefix(x, s)) == np.argmax(other.classify_prefix(x, s)))
+                same[s][1] += 1
+    agree, total = sum(a for a, _ in same.values()), sum(n for _, n in same.values())
+    return {"models": [engine.name, other.name], "agreement": round(agree / total, 4) if total else None,
+            "decisions": total, "by_steps": {str(s): round(a / n, 4) if n else None for s, (a, n) in same.items()}}
+
+
+# ---------------------------------------------------------------------------- running
+
+
+def evaluate(drives, classifier, cfg, modes=MODES, progress=print) -> dict:
+    """Replay every drive through the runtime once per mode; the scores, and an example for the trace."""
+    from edge_runtime import config
+    from edge_runtime.wearable.command import replay
+
+    scores = {m: ModeScore() for m in modes}
+    example: dict | None = None
+    kinds: dict[str, float] = {}
+    for drive in drives:
+        kinds[drive.kind] = kinds.get(drive.kind, 0.0) + drive.hours
+        for mode in modes:
+            decisions: list[dict] = []
+            mode_cfg = config.override(cfg, "alerts", decision=mode)
+            replay(mode_cfg, classifier, drive.acc_mps2, outputs=[lambda d, out=decisions: out.append(d.to_json())])
+            matched = scores[mode].add(drive, decisions)
+            example = _better_example(example, mode, drive, decisions, matched)
+        progress(f"  {drive.name}: {drive.hours * 60:.0f} min, {sum(e['label'] in DISTRACTIONS for e in drive.events)} "
+                 f"distractions")
+    return {"scores": {m: s.as_dict() for m, s in scores.items()},
+            "hours_by_kind": {k: round(v, 3) for k, v in kinds.items()}, "example": example}
+
+
+def _better_example(best: dict | None, mode: str, drive: Drive, decisions: list[dict], matched) -> dict | None:
+    """The distraction to plot: a preliminary alert that arrived before the distraction ended beats a
+    full-window alert; among equals the earliest alert relative to the onset."""
+    for e, first in matched:
+        if first is None:
+            continue
+        rank = (first["status"] == "preliminary" and first["t_alert_s"] < e["end_s"], -(first["t_alert_s"] - e["start_s"]))
+        if best is None or rank > best["rank"]:
+            related = [d for d in decisions if d.get("event_start_s") == first["event_start_s"]]
+            lo = max(0, int((e["start_s"] - 4.0) * 100))
+            hi = min(len(drive.acc_mps2), int((max(e["end_s"], related[-1]["t_alert_s"]) + 3.0) * 100))
+            best = {"rank": rank, "mode": mode, "drive": drive.name, "event": e, "decisions": related,
+                    "t0_s": lo / 100.0, "acc": drive.acc_mps2[lo:hi]}
+    return best
+
+
+def plot_example(ex: dict, out_png: Path) -> None:
+    """The IMU trace of one distraction: onset and end, the trigger, each alert frame (preliminary, final)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = ex["t0_s"] + np.arange(len(ex["acc"])) / 100.0
+    e = ex["event"]
+    fig, ax = plt.subplots(figsize=(11, 4.2))
+    for k, name in enumerate("xyz"):
+        ax.plot(t, ex["acc"][:, k], lw=0.7, label=f"a{name}")
+    ax.axvspan(e["start_s"], e["end_s"], color="C3", alpha=0.12, label=f"{e['label']} (truth)")
+    ax.axvline(e["start_s"], color="C3", lw=1.2)
+    ax.axvline(e["end_s"], color="C3", lw=1.2, ls=":")
+    ymax = float(np.nanmax(np.abs(ex["acc"]))) * 1.05 + 1.0
+    ax.text(e["start_s"], ymax * 0.92, " onset", color="C3", fontsize=8)
+    ax.text(e["end_s"], ymax * 0.92, " end", color="C3", fontsize=8)
+    shown_trigger = set()
+    for d in ex["decisions"]:
+        if d["t_trigger_s"] not in shown_trigger:
+            shown_trigger.add(d["t_trigger_s"])
+            ax.axvline(d["t_trigger_s"], color="0.4", lw=0.8, ls="--")
+            ax.text(d["t_trigger_s"], -ymax * 0.95, " trigger", color="0.3", fontsize=7)
+        final = d["steps"] == 6
+        colour = {"preliminary": "C1", "withdrawn": "0.5", "continued": "0.7"}.get(d["status"], "C2" if final else "C1")
+        ax.axvline(d["t_alert_s"], color=colour, lw=1.6 if d["alerted"] else 0.8)
+        ax.text(d["t_alert_s"], ymax * (0.75 if final else 0.6),
+                f" {d['status']} {d['label']}\n S={d['steps']}, p={d['confidence']:.2f}", color=colour, fontsize=7)
+    ax.set_ylim(-ymax, ymax)
+    ax.set_xlabel("recording time (s)")
+    ax.set_ylabel("acceleration (m/s²)")
+    first = next((d for d in ex["decisions"] if d["alerted"]), None)
+    lead = "" if first is None else f"; first alert frame {first['t_alert_s'] - e['start_s']:.2f} s after the onset"
+    ax.set_title(f"{ex['drive']}, {ex['mode']} decisions: {e['label']} from {e['start_s']:.1f} to {e['end_s']:.1f} s"
+                 f"{lead}", fontsize=9)
+    ax.legend(loc="lower right", fontsize=7, ncol=4)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+
+
+def to_markdown(report: dict) -> str:
+    modes = list(report["scores"])
+    rows = [("event recall", "event_recall"), ("first-alert class accuracy", "first_alert_class_accuracy"),
+            ("onset → first alert frame, median (s)", ("onset_to_first_alert_s", "median")),
+            ("onset → first alert frame, p95 (s)", ("onset_to_first_alert_s", "p95")),
+            ("false alerts per driving hour", "false_alerts_per_hour"), ("false alerts (withdrawn later)", None),
+            ("first alerts after the distraction ended", "first_alerts_after_the_distraction_ended"),
+            ("repeat alerts (a second alert for one distraction)", "repeat_alerts")]
+
+    def cell(s: dict, key) -> str:
+        if key is None:
+            return f"{s['false_alerts']} ({s['false_alerts_withdrawn']})"
+        v = s[key[0]][key[1]] if isinstance(key, tuple) else s[key]
+        return "–" if v is None else f"{v:g}"
+
+    lines = [f"# Held-out simulated driving: {report['hours']:g} h", "",
+             f"`{report['command']}`", "",
+             f"Model {report['model']}; " + "; ".join(f"{m}: {d}" for m, d in report["decision_modes"].items()), "",
+             f"Drives: {report['hours_by_kind']} (hours by kind); {report['held_out']}", "",
+             "| figure | " + " | ".join(modes) + " |", "|---|" + "---:|" * len(modes)]
+    lines += [f"| {name} | " + " | ".join(cell(report["scores"][m], key) for m in modes) + " |" for name, key in rows]
+    if "class_agreement" in report:
+        c = report["class_agreement"]
+        lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} on every capture and sub-window count: "
+                      f"**{c['agreement']}** over {c['decisions']} decisions (by S: {c['by_steps']})"]
+    lines += ["", "Distractions: " + ", ".join(f"{m} {report['scores'][m]['distractions']}" for m in modes)
+              + "; decisions by status: " + "; ".join(f"{m} {report['scores'][m]['statuses']}" for m in modes), ""]
+    return "\n".join(lines)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--hours", type=positive_float, default=10.0, help="hours of held-out driving (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="selects the held-out drives and drivers")
+    p.add_argument("--out", required=True, help="output directory (drive_eval.json, drive_eval.md, imu_trace.png)")
+    p.add_argument("--decision", default="full_window,early",
+                   help="decision modes to compare, comma-separated (default full_window,early)")
+    p.add_argument("--baseline-share", type=float, default=0.3,
+                   help="share of the drives that are baseline drives: Other motions, no distraction (default 0.3)")
+    p.add_argument("--drive-minutes", type=positive_float, default=30.0, help="length of each drive (default 30)")
+    p.add_argument("--config", metavar="BOX.toml", help="the box configuration (default: the shipped defaults)")
+    p.add_argument("--assets", metavar="DIR", help="model directory with manifest.json (default: the shipped models)")
+    p.add_argument("--model", help="manifest entry: a name or a precision (default: [model] name, int8)")
+    p.add_argument("--agreement", metavar="ENTRY",
+                   help="also the top-class agreement with this manifest entry (e.g. fp32) on every capture, at "
+                        "every sub-window count the model decides at")
+
+
+def cmd(a) -> int:
+    from edge_runtime import config
+    from edge_runtime.core.manifest import ASSETS_DIR
+    from edge_runtime.wearable import alerts, classifier, detector, loop, sources  # noqa: F401 - their sections
+    from edge_runtime.wearable.classifier import Engine
+    from firmware_sim.__main__ import _out_dir
+
+    modes = tuple(m.strip() for m in a.decision.split(",") if m.strip())
+    if not modes or set(modes) - set(MODES):
+        raise CliError(f"--decision {a.decision}: give full_window, early or both, comma-separated")
+    if not 0.0 <= a.baseline_share < 1.0:
+        raise CliError(f"--baseline-share {a.baseline_share}: must lie in [0, 1)")
+    cfg = config.load(a.config)
+    cfg = config.override(cfg, "model", assets=a.assets, name=a.model)
+    out = _out_dir(a.out)
+    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
+    early = engine.early_steps != (6,)
+    measured = modes if early else tuple(m for m in modes if m != "early") or ("full_window",)
+    t_wall = time.perf_counter()
+    print(f"drive-eval: {a.hours:g} h of held-out driving (seed {a.seed}), modes {', '.join(measured)}, model "
+          f"{engine.name}" + ("" if early else " (fixed S = 6: early decisions are not measurable)"), flush=True)
+    drives = held_out_drives(a.hours, a.seed, a.baseline_share, a.drive_minutes)
+    if a.agreement:
+        drives = list(drives)  # walked twice
+    res = evaluate(drives, engine, cfg, measured, progress=lambda line: print(line, flush=True))
+    described = {m: ("one decision per capture at T+599 (the dissertation's)" if m == "full_window" else
+                     f"decisions after S = {', '.join(map(str, engine.early_steps))} sub-windows") for m in measured}
+    if "early" in modes and "early" not in measured:
+        described["not measured"] = ("early: the model takes S = 6 only, so early decisions are the full "
+                                     "window's (re-run with a model that accepts 1..6 sub-windows)")
+    report = {
+        "command": "python -m firmware_sim drive-eval " + " ".join(
+            f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()
+            if k in ("hours", "seed", "out", "decision", "baseline_share", "drive_minutes", "config", "assets", "model",
+                     "agreement")
+            and v is not None),
+        "hours": a.hours, "seed": a.seed, "model": f"{engine.name} ({engine.precision})",
+        "early_steps": list(engine.early_steps), "decision_modes": described,
+        "held_out": (f"distraction drives: seeds {DRIVE_SEED0 + 1000 * a.seed}+k (a new driver each); baseline "
+                     f"drives: subjects of cohort seed {BASELINE_COHORT0 + a.seed}; models/ trains and validates "
+                     "on cohort seed 0"),
+        "hours_by_kind": res["hours_by_kind"],
+        "config": {"alerts": _section(cfg.alerts), "detector": _section(cfg.detector)},
+        "scores": res["scores"]}
+    if a.agreement:
+        other = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, a.agreement, threads=cfg.model.threads)
+        report["class_agreement"] = class_agreement(drives, engine, other, cfg.detector)
+    report["wall_s"] = round(time.perf_counter() - t_wall, 1)
+    (out / "drive_eval.json").write_text(json.dumps(report, indent=1))
+    (out / "drive_eval.md").write_text(to_markdown(report))
+    if res["example"] is not None:
+        plot_example(res["example"], out / "imu_trace.png")
+    print(to_markdown(report))
+    print(f"wrote {out / 'drive_eval.json'}, {out / 'drive_eval.md'}"
+          + (f", {out / 'imu_trace.png'}" if res["example"] is not None else "") + f" in {report['wall_s']} s")
+    return 0
+
+
+def _section(obj) -> dict:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(obj).items()}
+

@@ -1,0 +1,97 @@
+"""firmware_sim/scenarios/drive_eval.py: the event figures of held-out driving, per decision mode,
+from the runtime's own decisions (a scripted early classifier on a step signal: known answers)."""
+import json
+
+import numpy as np
+import pytest
+from support.early_model import Scripted, step_signal, write_assets
+
+from edge_runtime import config
+from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
+from firmware_sim.__main__ import main
+from firmware_sim.scenarios.drive_eval import Drive, evaluate, held_out_drives, plot_example
+
+
+def _drive():
+    # triggers at 10 s (a Phone distraction 9.5..14 s), 40 s (nothing there: a false alert),
+    # 52 s (a Drink 51.8..70 s whose capture the classifier calls Phone)
+    acc = step_signal(9000, [1000, 4000, 5200])
+    events = [{"start_s": 9.5, "end_s": 14.0, "label": "Phone"}, {"start_s": 51.8, "end_s": 70.0, "label": "Drink"},
+              {"start_s": 80.0, "end_s": 81.0, "label": "Other"}]
+    return Drive("steps", acc, events, "distraction")
+
+
+def test_each_mode_is_scored_from_its_first_alerts():
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0)
+    res = evaluate([_drive()], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), cfg, progress=lambda _: None)
+    early, full = res["scores"]["early"], res["scores"]["full_window"]
+    for s in (early, full):
+        assert (s["distractions"], s["event_recall"], s["first_alert_class_accuracy"]) == (2, 1.0, 0.5)
+        assert s["false_alerts"] == 1 and s["false_alerts_per_hour"] == pytest.approx(1 / (90 / 3600), rel=1e-3)
+    # early: the preliminary frame goes out when the capture (from frame 900) holds 263 frames
+    assert early["onset_to_first_alert_s"]["median"] == pytest.approx(np.median([11.62 - 9.5, 53.62 - 51.8]), abs=1e-3)
+    assert full["onset_to_first_alert_s"]["median"] == pytest.approx(np.median([15.99 - 9.5, 57.99 - 51.8]), abs=1e-3)
+    assert (early["first_alerts_after_the_distraction_ended"], full["first_alerts_after_the_distraction_ended"]) == (0, 1)
+    assert early["statuses"] == {"confirmed": 3, "preliminary": 3} and full["statuses"] == {"alert": 3}
+    ex = res["example"]
+    assert ex["mode"] == "early" and ex["decisions"][0]["status"] == "preliminary"
+
+
+def test_a_withdrawn_false_alert_and_a_repeat_alert_are_counted(tmp_path):
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0)
+    acc = step_signal(9000, [1000, 1700, 4000])  # 17 s: the hand returns during the Phone event (9.5..20 s)
+    drive = Drive("steps", acc, [{"start_s": 9.5, "end_s": 20.0, "label": "Phone"}], "distraction")
+    res = evaluate([drive], Scripted({2: ("Phone", 0.95), 6: ("Other", 0.9)}), cfg, modes=("early",),
+                   progress=lambda _: None)
+    s = res["scores"]["early"]
+    assert (s["repeat_alerts"], s["false_alerts"], s["false_alerts_withdrawn"]) == (1, 1, 1)
+    plot_example(res["example"], tmp_path / "trace.png")
+    assert (tmp_path / "trace.png").stat().st_size > 10_000
+    # with the event tracker, the hand returning continues the event: no repeat alert
+    held = config.override(config.load(None), "alerts", event_hold_s=10.0)
+    res = evaluate([drive], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), held, modes=("early",),
+                   progress=lambda _: None)
+    assert res["scores"]["early"]["repeat_alerts"] == 0 and res["scores"]["early"]["statuses"]["continued"] == 1
+
+
+def test_held_out_drives_mix_baseline_drives_without_distractions():
+    drives = list(held_out_drives(hours=0.2, seed=3, baseline_share=0.5, drive_minutes=3))
+    assert [d.kind for d in drives] == ["distraction"] * 2 + ["baseline"] * 2
+    assert all(e["label"] == "Other" for d in drives if d.kind == "baseline" for e in d.events)
+    assert sum(d.hours for d in drives) == pytest.approx(0.2)
+
+
+def test_the_command_writes_json_markdown_and_the_trace(tmp_path, capsys):
+    assert main(["drive-eval", "--hours", "0.1", "--drive-minutes", "3", "--seed", "5", "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "drive_eval.json").read_text())
+    assert set(report["scores"]) == {"full_window"}  # the shipped model takes S = 6 only
+    assert "early" in report["decision_modes"]["not measured"]
+    assert report["scores"]["full_window"]["driving_hours"] == pytest.approx(0.1)
+    assert "| event recall |" in (tmp_path / "drive_eval.md").read_text()
+    assert main(["drive-eval", "--hours", "1", "--decision", "late", "--out", str(tmp_path)]) == 2
+    assert "--decision late" in capsys.readouterr().err
+
+
+def test_with_a_model_that_takes_partial_captures_both_modes_are_measured_side_by_side(tmp_path):
+    assets = write_assets(tmp_path / "assets", early={"steps": [1, 2, 3, 4, 5, 6]}, favour="Phone")
+    out = tmp_path / "out"
+    assert main(["drive-eval", "--hours", "0.1", "--drive-minutes", "3", "--seed", "5", "--assets", str(assets),
+                 "--out", str(out)]) == 0
+    report = json.loads((out / "drive_eval.json").read_text())
+    early, full = report["scores"]["early"], report["scores"]["full_window"]
+    assert report["early_steps"] == [1, 2, 3, 4, 5, 6] and early["statuses"].get("preliminary", 0) > 0
+    assert early["onset_to_first_alert_s"]["median"] < full["onset_to_first_alert_s"]["median"] - 4.0
+    assert "| figure | full_window | early |" in (out / "drive_eval.md").read_text()
+
+
+def test_class_agreement_compares_two_models_at_every_step_on_every_capture():
+    from support.early_model import engine
+
+    from edge_runtime.wearable.detector import DetectorConfig
+    from firmware_sim.scenarios.drive_eval import class_agreement
+
+    drive = _drive()  # three captures
+    phone, phone2, drink = engine(favour="Phone"), engine(favour="Phone", seed=1), engine(favour="Drink")
+    same = class_agreement([drive], phone, phone2, DetectorConfig())
+    assert (same["agreement"], same["decisions"]) == (1.0, 3 * 6) and set(same["by_steps"]) == {"1", "2", "3", "4", "5", "6"}
+    assert class_agreement([drive], phone, drink, DetectorConfig())["agreement"] == 0.0
