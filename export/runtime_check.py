@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-# The child: numpy and onnxruntime only. argv: assets dir, inputs .npz, outputs .npz.
+# The child: numpy and onnxruntime only. argv: assets dir, inputs .npz, outputs .npz, timed calls.
 CHILD = r"""
-import json, sys, numpy as np, onnxruntime as ort
-assets, inp, out = sys.argv[1:4]
+import json, sys, time, numpy as np, onnxruntime as ort
+assets, inp, out = sys.argv[1:4]  # then the timed batch-1 calls per model
 m = json.load(open(assets + "/manifest.json"))
 x = np.load(inp)
 res = {"__version__": np.array(ort.__version__)}
@@ -38,8 +38,14 @@ for e in m["models"]:
     except Exception as err:
         res[e["name"] + "/__error__"] = np.array(str(err).strip().splitlines()[0][:300])
         continue
-    for k, v in zip([o.name for o in s.get_outputs()], s.run(None, {i.name: x[e["name"] + "/" + i.name] for i in s.get_inputs()})):
+    feed = {i.name: x[e["name"] + "/" + i.name] for i in s.get_inputs()}
+    for k, v in zip([o.name for o in s.get_outputs()], s.run(None, feed)):
         res[e["name"] + "/" + k] = v
+    one = {k: v[:1] for k, v in feed.items()}
+    ts = []
+    for _ in range(int(sys.argv[4])):
+        t = time.perf_counter_ns(); s.run(None, one); ts.append(time.perf_counter_ns() - t)
+    res[e["name"] + "/__p50_us__"] = np.array(np.median(ts) / 1e3 if ts else np.nan)
 np.savez(out, **res)
 """
 TOL = 1e-3
@@ -62,14 +68,16 @@ def fixed_inputs(manifest: dict, n: int = 4, seed: int = 0) -> dict[str, np.ndar
     return feed
 
 
-def run_outputs(python: list[str], assets: Path, feed: dict[str, np.ndarray], timeout_s: float = 3600
-                ) -> dict[str, np.ndarray]:
-    """The child's outputs (``name/output`` arrays, ``name/__error__``, ``__version__``)."""
+def run_outputs(python: list[str], assets: Path, feed: dict[str, np.ndarray], *, env: dict | None = None,
+                timed_calls: int = 50, timeout_s: float = 3600) -> dict[str, np.ndarray]:
+    """The child's outputs (``name/output`` arrays, ``name/__error__``, ``__version__``) and the
+    median time of ``timed_calls`` batch-1 calls per model (``name/__p50_us__``), in an
+    environment ``env`` (default this one's)."""
     with tempfile.TemporaryDirectory() as td:
         inp, out = Path(td) / "in.npz", Path(td) / "out.npz"
         np.savez(inp, **feed)
-        r = subprocess.run([*python, "-c", CHILD, str(assets), str(inp), str(out)], capture_output=True,
-                           text=True, timeout=timeout_s)
+        r = subprocess.run([*python, "-c", CHILD, str(assets), str(inp), str(out), str(timed_calls)],
+                           capture_output=True, text=True, timeout=timeout_s, env=env)
         if r.returncode != 0:
             tail = (r.stderr.strip().splitlines() or ["no output"])[-1]
             raise RuntimeError(f"{' '.join(python)}: exit {r.returncode}: {tail}")
@@ -85,7 +93,7 @@ def compare(manifest: dict, ref: dict[str, np.ndarray], other: dict[str, np.ndar
         if f"{name}/__error__" in other:
             rows[name] = {"loaded": False, "error": str(other[f"{name}/__error__"]), "ok": False}
             continue
-        keys = [k for k in ref if k.startswith(name + "/")]
+        keys = [k for k in ref if k.startswith(name + "/") and not k.endswith("__")]
         diff = max(float(np.abs(ref[k].astype(np.float64) - other[k]).max()) for k in keys)
         row = {"loaded": True, "max_abs": diff, "ok": diff <= tol}
         probs = f"{name}/probs"
