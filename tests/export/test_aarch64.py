@@ -29,3 +29,10 @@ def test_wheel_record_lines_are_pip_s_format():
     data = b"abc"
     digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
     assert _record_line("e2e/p01.abi3.so", data) == f"e2e/p01.abi3.so,sha256={digest},3"
+
+
+def test_label_agreement_counts_the_captures_both_runs_classified():
+    from export.aarch64 import label_agreement
+
+    r = label_agreement([_d(1.0), _d(9.0, "Drink"), _d(20.0)], [_d(1.0), _d(9.0, "Other"), _d(30.0)])
+    assert r == {"captures": 2, "same_class": 1, "agreement": 0.5}
