@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint venv clean assets report bench bundle fuzz
+.PHONY: demo test test-fast lint venv clean assets report bench bundle fuzz aarch64-check
 
 $(STAMP): setup.cfg pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +48,11 @@ bundle: $(STAMP)
 ## make fuzz: every parser and frame decoder with 100,000 mutated inputs each (fuzz/README.md)
 fuzz: $(STAMP)
 	$(PY) -m fuzz --inputs 100000 --seed 0 --json reports/fuzz/fuzz.json --md reports/fuzz/fuzz.md
+
+## make aarch64-check: the aarch64 wearable bundle on an emulated arm64 Debian 12 (qemu-user-static,
+## mmdebstrap, gcc-aarch64-linux-gnu), the same recording's alerts as x86 (export/aarch64.py); not in make test
+aarch64-check: $(STAMP)
+	$(PY) -m export.aarch64 --work runs/aarch64
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache

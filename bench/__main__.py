@@ -45,6 +45,7 @@ def build_parser() -> OneLineParser:
     p.add_argument("--assets", default=None, help="assets directory with manifest.json (default: the shipped one)")
     p.add_argument("--models", type=_name_list, default=(), help="only these archs or entry names, comma-separated")
     p.add_argument("--no-torch", action="store_true", help="skip the torch eager rows")
+    p.add_argument("--no-openvino", action="store_true", help="skip the OpenVINO rows")
     p.add_argument("--no-loops", action="store_true", help="skip the loop costs")
     p.add_argument("--realtime", type=positive_float, default=None, metavar="S",
                    help="seconds of the real-time wearable and robot loops (default 15 and 10)")
@@ -86,7 +87,7 @@ def cmd(a) -> int:
     if a.realtime:
         sizes.update(realtime_s=a.realtime, robot_s=a.realtime)
     opts = BenchOptions(assets=a.assets or "", threads=tuple(a.threads), use_torch=not a.no_torch,
-                        models=a.models, loops=not a.no_loops, seed=a.seed,
+                        use_openvino=not a.no_openvino, models=a.models, loops=not a.no_loops, seed=a.seed,
                         command="python -m bench " + " ".join(sys.argv[1:]), **sizes)
     report = run_bench(opts)
     print(format_table(report))

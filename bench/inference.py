@@ -8,6 +8,11 @@ process (``bench.worker``) so that its peak resident memory is its own:
   (``edge_runtime.core.onnx.open_session``: N intra-op threads, 1 inter-op,
   no spinning, all graph optimisations); ``session.run`` with a pre-built feed.
   The child imports numpy and onnxruntime only (no torch), as a box would.
+* ``openvino``: the same ONNX file on OpenVINO's CPU plugin when the ``openvino`` extra is
+  installed (else the row is skipped with a note): ``INFERENCE_NUM_THREADS`` N, one stream,
+  the latency hint, fp32 inference precision (OpenVINO would otherwise run fp32 layers in
+  bf16 on a CPU that has it), ``InferRequest.infer`` with a pre-built feed. Its int8 rows
+  run the QDQ graph through OpenVINO's own low-precision transformations.
 * ``torch-eager``: the same network rebuilt in torch, in eval mode under
   ``torch.inference_mode`` with ``torch.set_num_threads(N)``. The ConvLSTM and
   its baselines come from ``models.nets`` with the training checkpoint's
@@ -35,7 +40,7 @@ import numpy as np
 
 from bench.timing import peak_rss_mb, rss_mb, time_calls
 
-RUNTIMES = ("onnxruntime", "torch-eager")
+RUNTIMES = ("onnxruntime", "openvino", "torch-eager")
 REPO_ROOT = Path(__file__).resolve().parent.parent
 NETS_ARCHS = ("convlstm", "cnn", "lstm")
 """Architectures ``models.nets.build`` rebuilds."""
@@ -48,7 +53,7 @@ class InferenceConfig:
     entry: str
     """Manifest entry name, e.g. ``convlstm-int8``."""
     runtime: str = "onnxruntime"
-    """``onnxruntime`` or ``torch-eager``."""
+    """One of :data:`RUNTIMES`."""
     threads: int = 1
     """Intra-op threads."""
     n: int = 2000
@@ -88,6 +93,22 @@ def _ort_runner(cfg: InferenceConfig, entry: dict, feed: dict) -> tuple[Callable
     outputs = [o.name for o in sess.get_outputs()]
     ro = ort.RunOptions()
     return (lambda: sess.run(outputs, feed, ro)), {}
+
+
+def _openvino_runner(cfg: InferenceConfig, entry: dict, feed: dict) -> tuple[Callable[[], object], dict]:
+    try:
+        import openvino as ov
+    except ImportError:
+        raise CannotRebuild("openvino not installed (pip install 'edge-safety[openvino]')") from None
+    from edge_runtime.core.manifest import read_verified
+
+    read_verified(cfg.assets, entry)  # the file OpenVINO reads is the one the manifest names
+    core = ov.Core()
+    compiled = core.compile_model(core.read_model(str(Path(cfg.assets) / entry["file"])), "CPU", {
+        "INFERENCE_NUM_THREADS": cfg.threads, "NUM_STREAMS": 1, "PERFORMANCE_HINT": "LATENCY",
+        "INFERENCE_PRECISION_HINT": "f32"})
+    request = compiled.create_infer_request()
+    return (lambda: request.infer(feed)), {"openvino": ov.__version__}
 
 
 def find_checkpoint(entry: dict) -> Path | None:
@@ -187,6 +208,10 @@ def _torch_runner(cfg: InferenceConfig, entry: dict, feed: dict) -> tuple[Callab
     return run, {"weights": weights, "file_bytes": weights_file.stat().st_size if weights_file else None}
 
 
+RUNNERS = {"onnxruntime": _ort_runner, "openvino": _openvino_runner, "torch-eager": _torch_runner}
+"""runtime -> function(config, entry, feed) -> (one timed call, extra row fields)."""
+
+
 def measure(cfg: InferenceConfig) -> dict:
     """Run in a child process: load, warm up, time ``cfg.n`` calls. Returns the per-call
     times (ns), resident memory before loading the model and at the peak, load time,
@@ -204,17 +229,22 @@ def measure(cfg: InferenceConfig) -> dict:
             import torch  # noqa: F401
         except ImportError:
             return {"skipped": "torch not installed"}
+    elif cfg.runtime == "openvino":
+        try:
+            import openvino  # noqa: F401
+        except ImportError:
+            return {"skipped": "openvino not installed (pip install 'edge-safety[openvino]')"}
     else:
         import onnxruntime  # noqa: F401
     idle = rss_mb()
     t0 = time.perf_counter()
     try:
-        fn, info = (_ort_runner if cfg.runtime == "onnxruntime" else _torch_runner)(cfg, entry, feed)
+        fn, info = RUNNERS[cfg.runtime](cfg, entry, feed)
     except CannotRebuild as e:
         return {"skipped": str(e)}
     load_ms = (time.perf_counter() - t0) * 1e3
     times = time_calls(fn, cfg.n, cfg.warmup)
-    # file_bytes: the ONNX file for onnxruntime, the torch checkpoint (or None) for torch eager
+    # file_bytes: the ONNX file for onnxruntime and openvino, the torch checkpoint (or None) for torch eager
     return {"config": asdict(cfg), "times_ns": times.tolist(), "rss_idle_mb": idle, "peak_rss_mb": peak_rss_mb(),
             "load_ms": round(load_ms, 1), "file_bytes": (mpath.parent / entry["file"]).stat().st_size,
             "torch_loaded": "torch" in sys.modules, **info}

@@ -32,9 +32,19 @@ def _cpuinfo() -> tuple[str, list[str]]:
     return cpu, flags
 
 
+def openvino_version() -> str | None:
+    """OpenVINO's installed version (from its metadata: importing it takes a second), or None."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("openvino")
+    except metadata.PackageNotFoundError:
+        return None
+
+
 def machine_info(with_torch: bool = True) -> dict:
     """CPU model, cores, the cores this process may use, ISA extensions that matter for int8,
-    load average (a noisy machine shows here), python, numpy, onnxruntime and torch versions."""
+    load average (a noisy machine shows here), python, numpy, onnxruntime, openvino and torch versions."""
     import onnxruntime
 
     cpu, flags = _cpuinfo()
@@ -56,6 +66,7 @@ def machine_info(with_torch: bool = True) -> dict:
         "python": platform.python_version(),
         "numpy": np.__version__,
         "onnxruntime": onnxruntime.__version__,
+        "openvino": openvino_version(),
         "torch": torch_version() if with_torch else None,
     }
 

@@ -96,7 +96,8 @@ def format_table(report: dict) -> str:
     """The plain-text table printed by ``python -m bench``."""
     m = report["machine"]
     lines = [f"{m['cpu']} ({m['cores']} cores, using {m['cpus_used']}), load {m['load_avg_1_5_15']}, "
-             f"python {m['python']}, onnxruntime {m['onnxruntime']}, torch {m['torch'] or 'absent'}",
+             f"python {m['python']}, onnxruntime {m['onnxruntime']}, openvino {m.get('openvino') or 'absent'}, "
+             f"torch {m['torch'] or 'absent'}",
              f"{'model':<10} {'precision':<9} {'runtime':<12} {'threads':>7} {'p50 us':>9} {'p99 us':>9} "
              f"{'mean us':>9} {'n':>6} {'file KiB':>9} {'peak RSS MiB':>12}"]
     for r in report["results"]:
@@ -118,7 +119,7 @@ def format_markdown(report: dict) -> str:
     m = report["machine"]
     lines = [f"Measured with `{report['method']['command']}` on {m['cpu']} ({m['cores']} cores, CPUs "
              f"{m['cpus_used']}, load average {m['load_avg_1_5_15']} at the start), python {m['python']}, "
-             f"onnxruntime {m['onnxruntime']}, torch "
+             f"onnxruntime {m['onnxruntime']}, openvino {m.get('openvino') or 'absent'}, torch "
              f"{m['torch'] or 'absent'}; batch 1, {report['method']['n']} timed calls per row after "
              f"{report['method']['warmup']} warm-up calls. A shared machine: expect noise.", "",
              "| model | precision | runtime | threads | p50 µs | p99 µs | mean µs | file KiB | peak RSS MiB |",

@@ -38,6 +38,8 @@ class BenchOptions:
     """Sweeps over all configurations (see the module docstring)."""
     use_torch: bool = True
     """Time torch eager too (when torch is importable)."""
+    use_openvino: bool = True
+    """Time OpenVINO too (each row skipped with a note when openvino is not installed)."""
     models: tuple[str, ...] = ()
     """Only these archs or manifest entry names (empty = all)."""
     loops: bool = True
@@ -73,13 +75,15 @@ def _entries(assets: Path, only: tuple[str, ...]) -> list[dict]:
 
 
 def _configs(entries: list[dict], opts: BenchOptions, assets: Path, with_torch: bool) -> list[InferenceConfig]:
-    """ORT for every entry; torch eager for the fp32 entries (torch has no int8 counterpart)."""
+    """ORT and OpenVINO for every entry; torch eager for the fp32 entries (torch has no int8 counterpart)."""
     per_round = -(-opts.n // opts.rounds)
     out = []
     for t in opts.threads:
         for e in entries:
             for rt in RUNTIMES:
                 if rt == "torch-eager" and (not with_torch or e["precision"] != "fp32"):
+                    continue
+                if rt == "openvino" and not opts.use_openvino:
                     continue
                 out.append(InferenceConfig(str(assets), e["name"], rt, t, per_round, opts.warmup, opts.seed))
     return out

@@ -27,9 +27,12 @@ EXTRAS = {"wearable": "serial-imu", "lift": "robot", "robot": "robot"}
 serial IMU: a replay or a simulated IMU runs on the base install)."""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The command table; with ``only`` (a command's name) that command alone, so that a run
+    imports its own modules and not the other products' (the wearable's start-up does not pay
+    for the robot's lifter, camera and link modules)."""
     parser, sub = make_parser("python -m edge_runtime", __doc__.splitlines()[0])
-    add_module_commands(sub, __package__, COMMANDS, EXTRAS)
+    add_module_commands(sub, __package__, [c for c in COMMANDS if only in (None, c[0])], EXTRAS)
     return parser
 
 
@@ -47,7 +50,9 @@ def load_all_sections() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_command(build_parser().parse_args(argv))
+    argv = sys.argv[1:] if argv is None else argv
+    named = argv[0] if argv and argv[0] in {c[0] for c in COMMANDS} else None
+    return run_command(build_parser(named).parse_args(argv))
 
 
 # Console entry points (setup.cfg, the bundle's wheel). One per product, beside the

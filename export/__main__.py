@@ -7,6 +7,10 @@
   assets        --seed S [--subjects 20] [--epochs 40] [--minutes 15] [--out edge_runtime/assets]
                 [--train TRAIN.npz --test TEST.npz] [--loso-dir DIR | --no-loso] [--work DIR]
                 simulate, train the ConvLSTM, export fp32 + int8, score, write manifest.json
+  int8          [--variants a,b,...] [--assets DIR] [--train TRAIN.npz --test TEST.npz] [--loso-dir DIR] [--work DIR]
+                the shipped fp32 ConvLSTM quantised again (no training): recipe chosen and gated as `assets` does
+  opsets        [--assets DIR]
+                every shipped model declares only the opset domains its nodes use; manifest sha256 updated
   compare-int8  --loso-dir DIR [--method NAME] [--train TRAIN.npz] [--test TEST.npz] [--json OUT.json]
                 per LOSO fold (DIR/folds/*/model.pt): fp32 vs int8 on the held-out subject; pooled macro-F1
 
@@ -52,6 +56,17 @@ def _parser() -> argparse.ArgumentParser:
     a.add_argument("--no-loso", action="store_true", help="do not look for reports/wearable/convlstm/loso")
     a.add_argument("--variants", default=None, help="comma-separated quantisation candidates (default: all)")
     a.add_argument("--no-progress", action="store_true")
+
+    i = sub.add_parser("int8", help="quantise the shipped fp32 ConvLSTM again (no training)")
+    i.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
+    i.add_argument("--variants", default=None, help="comma-separated quantisation candidates (default: all)")
+    i.add_argument("--train", default=None, help="calibration windows NPZ instead of the fp32 entry's simulated cohort")
+    i.add_argument("--test", default=None, help="gate windows NPZ instead of the fp32 entry's simulated cohort")
+    i.add_argument("--loso-dir", default=None, help="also compare fp32 and int8 over these LOSO folds")
+    i.add_argument("--work", default=None, help="scratch directory (default: runs/assets-seed<S>)")
+
+    s = sub.add_parser("opsets", help="declare only the opset domains each shipped model uses")
+    s.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
 
     c = sub.add_parser("compare-int8", help="LOSO folds: fp32 vs int8 macro-F1 on held-out subjects")
     c.add_argument("--loso-dir", required=True)
@@ -130,6 +145,23 @@ def cmd_assets(a) -> int:
     return 0
 
 
+def cmd_int8(a) -> int:
+    from export.assets import DEFAULT_ASSETS, requantize
+
+    requantize(out=a.assets or DEFAULT_ASSETS, work=a.work, train_npz=a.train, test_npz=a.test,
+               variants=_variants(a.variants), loso_dir=a.loso_dir)
+    return 0
+
+
+def cmd_opsets(a) -> int:
+    from edge_runtime.core.manifest import ASSETS_DIR
+    from export.opsets import apply_to_assets
+
+    changed = apply_to_assets(a.assets or ASSETS_DIR)
+    print(f"rewrote {', '.join(changed)}" if changed else "every model already declares only the domains it uses")
+    return 0
+
+
 def cmd_compare(a) -> int:
     from export.assets import compare_int8
 
@@ -147,7 +179,8 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from edge_runtime.core.manifest import ModelIntegrityError
 
-    cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "compare-int8": cmd_compare}
+    cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "int8": cmd_int8, "opsets": cmd_opsets,
+            "compare-int8": cmd_compare}
     func = getattr(args, "func", None) or cmds[args.command]
     # ExportError, QuantizeError and DataError are ValueErrors: naming them here would import
     # torch and onnx, which `export bundle` on an install without the train extra does not have.

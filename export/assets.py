@@ -34,7 +34,15 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from edge_runtime.core.manifest import SCHEMA_VERSION, ManifestError, load_manifest, sha256_file, write_manifest
+from edge_runtime.core.manifest import (
+    SCHEMA_VERSION,
+    ManifestError,
+    load_manifest,
+    select_model,
+    sha256_file,
+    verify_all,
+    write_manifest,
+)
 from edge_runtime.wearable.classifier import preprocess
 from export.onnx_export import (
     DEFAULT_OPSET,
@@ -325,12 +333,17 @@ def _quantise(fp32_path: Path, X_train: np.ndarray, y_train: np.ndarray, X_test:
     :func:`export.quantize.choose` gated on the test captures; and its quantisation report."""
     log("[4/5] quantising: candidates timed with 1 thread, gated on the test captures")
     int8_path = fp32_path.with_name(f"{ARCH}.int8.onnx")
-    quant = choose(fp32_path, int8_path, X_train[pick_windows(y_train, N_CALIB, seed)], eval_x=X_test, eval_y=y_test,
+    quant = choose(fp32_path, int8_path, calibration_windows(X_train, y_train, seed), eval_x=X_test, eval_y=y_test,
                    variants=variants, log=log)
     quant["calibration"].update(source="training windows (ground-truth segments), stratified by class",
                                 seed=seed)
     log(f"      chose {quant['method']}: int8 operators {quant['int8_operators']}")
     return int8_path, quant
+
+
+def calibration_windows(X_train: np.ndarray, y_train: np.ndarray, seed: int) -> np.ndarray:
+    """The int8 model's calibration inputs: N_CALIB preprocessed training windows, stratified by class."""
+    return X_train[pick_windows(y_train, N_CALIB, seed)]
 
 
 def _loso_dir(loso_dir: str | None, auto_loso: bool) -> str | None:
@@ -393,6 +406,72 @@ def _entries(fp32_path: Path, int8_path: Path, common: dict, parity: dict, quant
                         if loso else {})},
          "quantization": quant},
     ]
+
+
+# --------------------------------------------------------------------------- int8 only
+
+def cohort_of(entry: dict, work: str | Path | None = None, *, log: Callable[[str], None] = print):
+    """The training and test window sets a manifest entry was built from: its provenance's
+    simulated cohort, simulated again (deterministic for the seed) into ``work``."""
+    from models.dataset import load_npz
+
+    data = entry["provenance"]["data"]
+    if "subjects" not in data:
+        raise ExportError(f"{entry['name']}: field 'provenance.data': built from given NPZ files "
+                          f"({data.get('train')}); pass --train and --test")
+    work = Path(work) if work else REPO_ROOT / "runs" / f"assets-seed{data['seed']}"
+    train_npz, test_npz, _ = _cohort(None, None, subjects=data["subjects"], seed=data["seed"],
+                                     minutes=data["minutes_per_trial"], work=work, log=log, progress=False)
+    return load_npz(train_npz), load_npz(test_npz)
+
+
+def requantize(*, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = None, train_npz: str | None = None,
+               test_npz: str | None = None, variants: Sequence[str] | None = None, loso_dir: str | None = None,
+               command: str | None = None, log: Callable[[str], None] = print) -> dict:
+    """``python -m export int8``: the shipped fp32 ConvLSTM quantised again, without training.
+
+    Calibration and test windows are the fp32 entry's own (its cohort simulated again, or
+    ``--train``/``--test``), the recipe is chosen as :func:`build_assets` chooses it (step 4)
+    and gated the same way (step 5); the int8 file and its manifest entry (sha256, size,
+    quantisation report, test-capture metrics) are replaced, the fp32 file is untouched. The
+    LOSO comparison is kept only when it was made with the chosen recipe (or is redone over
+    ``loso_dir``)."""
+    from models.dataset import load_npz
+
+    out = Path(out)
+    manifest = verify_all(out)
+    fp32_entry = select_model(manifest, f"{ARCH}-fp32", arch=ARCH)
+    int8_entry = select_model(manifest, f"{ARCH}-int8", arch=ARCH)
+    seed = int(fp32_entry["provenance"]["seed"])
+    if train_npz or test_npz:
+        if not (train_npz and test_npz):
+            raise ExportError("--train and --test go together")
+        train, test = load_npz(train_npz), load_npz(test_npz)
+    else:
+        train, test = cohort_of(fp32_entry, work, log=log)
+    if list(train.classes) != list(fp32_entry["classes"]):
+        raise ExportError(f"{out / fp32_entry['file']}: field 'classes': {fp32_entry['classes']} differ from the "
+                          f"windows' {list(train.classes)}")
+    X_train, X_test = preprocess(train.X), preprocess(test.X)
+    with tempfile.TemporaryDirectory() as td:
+        fp32_path = Path(shutil.copyfile(out / fp32_entry["file"], Path(td) / fp32_entry["file"]))
+        int8_path, quant = _quantise(fp32_path, X_train, train.y, X_test, test.y, seed=seed, variants=variants,
+                                     log=log)
+        scores = _score(fp32_path, int8_path, X_test, test.y, list(train.classes), method=quant["method"],
+                        loso_dir=loso_dir, log=log)
+        shutil.copyfile(int8_path, out / int8_entry["file"])
+    quant["command"] = command or "python -m export " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    old_loso = int8_entry["metrics"].get("loso")
+    new = _entries(out / fp32_entry["file"], out / int8_entry["file"],
+                   {k: v for k, v in int8_entry.items() if k not in ("name", "file", "sha256", "precision",
+                                                                     "size_bytes", "metrics", "quantization")},
+                   fp32_entry["metrics"].get("parity_vs_torch", {}), quant, scores)[1]
+    if scores["loso"] is None and old_loso and old_loso.get("method") == quant["method"]:
+        new["metrics"]["loso"] = old_loso
+    manifest["models"] = [new if e is int8_entry else e for e in manifest["models"]]
+    write_manifest(out, manifest)
+    log(f"wrote {out / int8_entry['file']} ({quant['method']}) and {out / 'manifest.json'}")
+    return manifest
 
 
 def _install(out: Path, entries: list[dict], files: Sequence[Path], command: str) -> tuple[dict, Path]:

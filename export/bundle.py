@@ -55,6 +55,15 @@ REQUIRES_PYTHON = ">=3.11"
 PYTHON_VERSION = "3.11"
 """The box's Python (Debian 12's python3.11): the wheelhouse is built for it."""
 PLATFORMS = ("x86_64", "aarch64")
+ONNXRUNTIME_PINS = {"aarch64": "onnxruntime==1.22.1"}
+"""The onnxruntime a platform's wheelhouse takes instead of the newest: 1.32's aarch64 wheel dies
+at import under Debian 12's qemu 7.2, where 1.22.1 runs the shipped models (make aarch64-check)."""
+ONNXRUNTIME_TESTED = {
+    "x86_64": "1.16.3, 1.22.1 and 1.32.0 (python -m export.runtime_check: the same outputs as the "
+              "wheelhouse's onnxruntime; the runtime itself asks for >=1.17)",
+    "aarch64": "1.22.1 (pinned; under qemu-aarch64 7.2: python -m export.aarch64, make aarch64-check)",
+}
+"""What INSTALL.md states each bundle's onnxruntime range was tested with (docs/install.md)."""
 GLIBC_MINOR = 36
 """The box's glibc is 2.36 (Debian 12): a wheel may need any glibc up to it. pip download matches
 the platform tags it is given exactly, so :func:`platform_tags` lists every manylinux tag up to it
@@ -304,6 +313,9 @@ package index.
 Installs the runtime wheel with extras `{",".join(b.extras) or "none (the base install)"}`:
 {", ".join(f"`{r}`" for r in b.requirements)}.
 
+onnxruntime: the shipped models (they declare only the opset domains they use) were tested on
+{b.platform} with onnxruntime {ONNXRUNTIME_TESTED[b.platform]}.
+
 Models:
 {models}
 
@@ -367,6 +379,9 @@ def build_bundle(out: str | os.PathLike, package: str | os.PathLike = RUNTIME_PA
     version, reqs = runtime_metadata(setup_cfg)
     extras_reqs = product_extras(setup_cfg)
     extras, requirements = product_requirements(product, with_extras, setup_cfg)
+    if platform_name in ONNXRUNTIME_PINS:
+        requirements = tuple(ONNXRUNTIME_PINS[platform_name] if _requirement_name(r) == "onnxruntime" else r
+                             for r in requirements)
     manifest = verify_all(package / "assets")  # a tampered model never gets into a bundle
     from edge_runtime.config import load as load_config
 

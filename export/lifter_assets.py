@@ -121,7 +121,7 @@ def export_onnx(model, path: str | Path, meta: dict | None = None) -> Path:
     import onnx
     import torch
 
-    from export.onnx_export import set_metadata
+    from export.onnx_export import save_onnx, set_metadata
 
     model = model.eval()
     rf = model.config.receptive_field
@@ -139,10 +139,7 @@ def export_onnx(model, path: str | Path, meta: dict | None = None) -> Path:
                       f"{ROOT_OUTPUT} (N,1,3) m, camera frame, last input frame")
     set_metadata(onx, {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in (meta or {}).items()})
     onnx.checker.check_model(onx)
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_bytes(onx.SerializeToString(deterministic=True))
-    return p
+    return save_onnx(onx, path)
 
 
 def onnx_runner(path: str | Path, threads: int = 1):

@@ -46,6 +46,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from edge_runtime.wearable.classifier import CAPTURE_FRAMES, DOWN, MODEL_INPUT_SHAPE, RESAMPLED_FRAMES, UP
+from export.opsets import declare_used_opsets
 from models import nets
 
 DEFAULT_OPSET = 17
@@ -344,7 +345,7 @@ def to_onnx(model: nn.Module, classes: Sequence[str], *, opset: int = DEFAULT_OP
 def save_onnx(onx: onnx.ModelProto, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(onx.SerializeToString(deterministic=True))
+    path.write_bytes(declare_used_opsets(onx).SerializeToString(deterministic=True))
     return path
 
 

@@ -64,6 +64,7 @@ from onnxruntime.quantization.shape_inference import quant_pre_process
 from bench.timing import interleaved_calls
 from edge_runtime.core.onnx import open_session
 from export.onnx_export import INPUT_NAME, PROBS, get_metadata, op_counts, set_metadata
+from export.opsets import declare_used_opsets
 from export.variants import Variant
 
 MIN_AGREEMENT = 0.98
@@ -190,7 +191,8 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
                 ops = None if v.static_ops is None else [o for o in v.static_ops if o in present]
                 stage = Path(td) / "static.onnx"
                 quantize_static(str(cur), str(stage), WindowReader(calib, input_name=model.graph.input[0].name),
-                                quant_format=QuantFormat.QDQ, op_types_to_quantize=ops, per_channel=v.per_channel,
+                                quant_format=QuantFormat.QOperator if v.qoperator else QuantFormat.QDQ,
+                                op_types_to_quantize=ops, per_channel=v.per_channel,
                                 activation_type=QuantType.QInt8 if v.activation == "int8" else QuantType.QUInt8,
                                 weight_type=QuantType.QInt8,
                                 calibrate_method=CalibrationMethod.MinMax,
@@ -208,6 +210,7 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
     set_metadata(q, meta)
     if describe:
         q.doc_string = onnx.load(str(fp32_path), load_external_data=False).doc_string + f" [int8: {v.description}]"
+    declare_used_opsets(q)  # the quantiser declares nine domains; older onnxruntimes refuse some
     out_path.write_bytes(q.SerializeToString(deterministic=True))
     return out_path
 

@@ -12,6 +12,7 @@ behind a valid check never meets a frame it cannot decode.
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,20 +29,48 @@ def e2e_data_id(message) -> int:
     return int(attr.value) if attr is not None else int(message.frame_id)
 
 
+COUNTER_BYTE = 1
+"""Profile 1's alive counter: the low nibble of this byte (the DBCs' AliveCounter, bits 8..11)."""
+PAYLOAD_CACHE = 512
+"""Encoded payloads kept per protector: a heartbeat repeats its signals (a replay sends 864,000
+WEARABLE_STATUS frames a day, 10 per distinct Uptime_s), and cantools' checked encoding was the
+largest single cost of a replay."""
+
+
 class E2EProtector:
     """Send side of E2E Profile 1 for any DBC message: cantools encodes the signals, then
     the alive counter (one per frame ID, wrapping at COUNTER_MAX) and the CRC go in.
-    Thread-safe: a heartbeat thread and the main loop may send at once."""
+    Thread-safe: a heartbeat thread and the main loop may send at once.
+
+    The signals' encoding (checked against the DBC, counter and CRC zero) is remembered for
+    the last PAYLOAD_CACHE signal sets: the same signals encode to the same bytes, so only
+    the counter and the CRC are computed again."""
 
     def __init__(self):
         self._counters: dict[int, int] = {}
         self._lock = threading.Lock()
+        self._payloads: OrderedDict[tuple, bytes] = OrderedDict()
+
+    def _payload(self, message, signals: dict) -> bytes:
+        key = (message.frame_id, *sorted(signals.items()))
+        with self._lock:
+            data = self._payloads.get(key)
+            if data is not None:
+                self._payloads.move_to_end(key)
+                return data
+        data = message.encode(dict(signals, E2E_CRC=0, AliveCounter=0), strict=True)
+        with self._lock:
+            self._payloads[key] = data
+            if len(self._payloads) > PAYLOAD_CACHE:
+                self._payloads.popitem(last=False)
+        return data
 
     def protect(self, message, signals: dict) -> can.Message:
         with self._lock:
             counter = self._counters.get(message.frame_id, 0)
             self._counters[message.frame_id] = (counter + 1) % (COUNTER_MAX + 1)
-        data = bytearray(message.encode(dict(signals, E2E_CRC=0, AliveCounter=counter), strict=True))
+        data = bytearray(self._payload(message, signals))
+        data[COUNTER_BYTE] |= counter
         p01.e2e_p01_protect(data, e2e_data_id(message), length=len(data), increment_counter=False)
         return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
 

@@ -14,7 +14,7 @@ import io
 import math
 from dataclasses import dataclass, field
 from fractions import Fraction
-from itertools import chain, islice
+from itertools import chain
 from pathlib import Path
 from typing import Iterator
 
@@ -83,6 +83,8 @@ class ReplayStats:
 CHUNK_ROWS = 1 << 14
 """Rows parsed at a time: a replay holds one chunk, whatever the recording's length (larger
 chunks parse no faster and leave the allocator a larger high-water mark)."""
+ROW_BYTES = 32
+"""Bytes of a typical row (``12345.67,-1.2345,9.8765,0.1234``): chunks are read as bytes."""
 SATURATION_TOLERANCE = 1e-6
 """A reading within this fraction of full scale is at full scale (saturated), beyond it: impossible."""
 
@@ -150,8 +152,9 @@ def _parse_rows(path: Path, lines: list[bytes], first_no: int) -> np.ndarray:
 
 
 def _parse_plain_rows(lines: list[bytes]) -> np.ndarray | None:
-    """The common case, about twice as fast as np.loadtxt: every line has exactly four
-    comma-separated numbers. None for anything else (blank lines, text, non-UTF-8 ...)."""
+    """Lines that :func:`_parse_plain_block` could not take but that hold four comma-separated
+    numbers each (exponents, spaces, ``inf`` ...): numpy's text parser. None for anything else
+    (blank lines, text, non-UTF-8 ...)."""
     if any(line.count(b",") != 3 for line in lines):
         return None
     try:
@@ -161,18 +164,92 @@ def _parse_plain_rows(lines: list[bytes]) -> np.ndarray | None:
     return values.reshape(-1, 4) if values.size == 4 * len(lines) else None
 
 
+MAX_PLAIN_DIGITS = 15
+"""Digits of one number :func:`_parse_plain_block` takes: its digits as one integer stay below
+2**53, exact in float64."""
+_POW10 = 10.0 ** np.arange(MAX_PLAIN_DIGITS + 1)  # exact powers of ten
+_COMMA, _NEWLINE, _DOT, _MINUS, _ZERO = map(ord, ",\n.-0")
+
+
+def _parse_plain_block(buf: bytes) -> np.ndarray | None:
+    """The recordings the firmware and loggers write, parsed with array operations (no
+    per-number Python or text parser): whole lines of four plain decimals (``-12.3456``),
+    ``buf`` ending with a newline -> (lines, 4) float64. None for anything else (exponents,
+    signs other than a leading minus, spaces, blank lines, more than 15 digits ...): the
+    caller then parses line by line and names a bad line.
+
+    Each number is its digits as one integer M (exact: < 2**53) divided by 10**k for its k
+    digits after the point; IEEE division of two exact values rounds correctly, so the result
+    is the float64 nearest the decimal, as ``float()`` gives it."""
+    b = np.frombuffer(buf, dtype=np.uint8)
+    digit = b - np.uint8(_ZERO)  # wraps: every non-digit byte is >= 10
+    is_digit = digit < 10
+    sep = (b == _COMMA) | (b == _NEWLINE)
+    dot, minus = b == _DOT, b == _MINUS
+    n_dot, n_minus = int(np.count_nonzero(dot)), int(np.count_nonzero(minus))
+    if int(np.count_nonzero(is_digit)) + int(np.count_nonzero(sep)) + n_dot + n_minus != len(b):
+        return None  # a byte that is none of 0-9 , \n . -
+    ends = np.flatnonzero(sep)
+    n_lines = int(np.count_nonzero(b[ends] == _NEWLINE))
+    if not n_lines or len(ends) != 4 * n_lines or not (b[ends[3::4]] == _NEWLINE).all():
+        return None  # every line: exactly three commas, then the newline
+    at = np.flatnonzero(is_digit)  # where the digits are, in order
+    end_count = np.searchsorted(at, ends)  # digits before each number's end
+    n_digits = np.diff(end_count, prepend=0)
+    if n_digits.min() < 1 or n_digits.max() > MAX_PLAIN_DIGITS:
+        return None
+    negative = minus[np.r_[0, ends[:-1] + 1]]
+    if int(np.count_nonzero(negative)) != n_minus:
+        return None  # a minus that is not a number's first byte
+    dots = np.flatnonzero(dot)
+    dot_field = np.searchsorted(ends, dots)  # the number each point belongs to
+    if dots.size > 1 and not (np.diff(dot_field) > 0).all():
+        return None  # two points in one number
+    frac_digits = np.zeros(len(ends), dtype=np.int64)
+    frac_digits[dot_field] = end_count[dot_field] - np.searchsorted(at, dots)
+    # each digit times 10 ** (digits after it in its number), summed per number: exact integers
+    power = np.repeat(end_count, n_digits) - np.arange(1, len(at) + 1)
+    mantissa = np.add.reduceat(digit[at] * _POW10[power], end_count - n_digits)
+    values = mantissa / _POW10[frac_digits]
+    np.negative(values, out=values, where=negative)
+    return values.reshape(-1, 4)
+
+
+def _line_blocks(f, block_bytes: int) -> Iterator[bytes]:
+    """The rest of ``f`` in blocks of whole lines of about ``block_bytes`` (a line longer than
+    that is one block); the last line gets its newline if the file lacks one."""
+    rest = b""
+    while buf := f.read(block_bytes):
+        buf = rest + buf
+        cut = buf.rfind(b"\n") + 1
+        if not cut:
+            rest = buf
+            continue
+        rest = buf[cut:]
+        yield buf[:cut]
+    if rest:
+        yield rest + b"\n"
+
+
 def _chunks(path: Path, f, chunk_rows: int) -> Iterator[tuple[int, np.ndarray]]:
-    """(line number of the first row, rows) of at most ``chunk_rows``; checks 't' is finite."""
+    """(line number of the first row, rows) of about ``chunk_rows`` rows each (read as bytes:
+    ``chunk_rows`` x ``ROW_BYTES``); checks 't' is finite."""
     no = 2
-    while lines := list(islice(f, chunk_rows)):
-        data = _parse_rows(path, lines, no)
+    for buf in _line_blocks(f, chunk_rows * ROW_BYTES):
+        data = _parse_plain_block(buf)
+        if data is None:
+            lines = io.BytesIO(buf).readlines()
+            data = _parse_rows(path, lines, no)
+            n_lines = len(lines)
+        else:
+            n_lines = len(data)
         with np.errstate(invalid="ignore"):
             bad_t = np.flatnonzero(~(np.abs(data[:, 0]) <= MAX_TIME_S))  # NaN fails the comparison too
         if bad_t.size:
             raise InputError(f"{path}:{no + bad_t[0]}: field 't' is not a time in seconds "
                              f"(finite, at most {MAX_TIME_S:g}): {data[bad_t[0], 0]!r}")
         yield no, data
-        no += len(lines)
+        no += n_lines
 
 
 def _rate_ratio(rate_hz: float) -> Fraction:

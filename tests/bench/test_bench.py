@@ -41,6 +41,12 @@ def _torch_importable() -> bool:
     return True
 
 
+def _openvino_importable() -> bool:
+    from bench.machine import openvino_version
+
+    return openvino_version() is not None
+
+
 @pytest.mark.slow
 def test_rows_follow_the_manifest(quick):
     report, _ = quick
@@ -67,6 +73,14 @@ def test_rows_follow_the_manifest(quick):
             assert (e["name"], 1) not in torch_rows
     if _torch_importable():
         assert ("convlstm-fp32", 1) in torch_rows  # models.nets rebuilds the ConvLSTM
+    # openvino: every entry timed when it is installed, else each skipped with the extra to install
+    ov_rows = {(r["name"], r["threads"]) for r in rows if r["runtime"] == "openvino"}
+    ov_skips = [s for s in report["skipped"] if s["runtime"] == "openvino"]
+    if _openvino_importable():
+        assert ov_rows == {(e["name"], 1) for e in entries} and not ov_skips
+    else:
+        assert not ov_rows and len(ov_skips) == len(entries)
+        assert all("edge-safety[openvino]" in s["note"] for s in ov_skips)
 
 
 @pytest.mark.slow
@@ -132,7 +146,7 @@ def test_compare_flags_regressions(quick):
 
 @pytest.mark.slow
 def test_threads_and_compare_cli_exit_status(tmp_path, capsys):
-    base = ["--quick", "--no-torch", "--no-loops", "--threads", "1", "2", "--models", "convlstm-int8"]
+    base = ["--quick", "--no-torch", "--no-openvino", "--no-loops", "--threads", "1", "2", "--models", "convlstm-int8"]
     out = tmp_path / "now.json"
     assert main(base + ["--json", str(out)]) == 0
     old = json.loads(out.read_text())
@@ -156,7 +170,8 @@ def test_unknown_arch_is_timed_on_onnxruntime_and_skipped_on_torch(tmp_path):
     out = tmp_path / "b.json"
     assert main(["--quick", "--no-loops", "--threads", "1", "--assets", str(assets), "--json", str(out)]) == 0
     rep = json.loads(out.read_text())
-    assert [(r["model"], r["runtime"]) for r in rep["results"]] == [("mystery", "onnxruntime")]
+    assert [(r["model"], r["runtime"]) for r in rep["results"]] == [("mystery", "onnxruntime")] + (
+        [("mystery", "openvino")] if _openvino_importable() else [])
     if _torch_importable():
         assert [(s["model"], s["runtime"]) for s in rep["skipped"]] == [("mystery", "torch-eager")]
         assert "mystery" in rep["skipped"][0]["note"]
@@ -174,7 +189,8 @@ def test_a_failing_configuration_is_reported_not_hidden(tmp_path, capsys):
     m["models"] = [i8, broken]
     write_manifest(assets, m)
     out = tmp_path / "b.json"
-    assert main(["--quick", "--no-loops", "--threads", "1", "--assets", str(assets), "--json", str(out)]) == 1
+    assert main(["--quick", "--no-loops", "--no-openvino", "--threads", "1", "--assets", str(assets), "--json",
+                 str(out)]) == 1
     rep = json.loads(out.read_text())
     assert [r["name"] for r in rep["results"]] == ["convlstm-int8"] and rep["failures"] == 1
     assert rep["skipped"][0]["note"].startswith("FAILED") and "broken-int8" in rep["skipped"][0]["note"]
@@ -246,3 +262,21 @@ def test_bench_runs_without_torch():
     r = _run_bench(["--quick", "--no-loops", "--threads", "1"], blocked=("torch", "onnx", "models", "export"))
     assert r.returncode == 0, r.stderr[-2000:]
     assert "torch absent" in r.stdout and "torch-eager" not in r.stdout and "int8" in r.stdout
+
+
+def test_openvino_missing_is_a_skip_naming_the_extra(monkeypatch):
+    from bench.inference import InferenceConfig, measure
+
+    monkeypatch.setitem(sys.modules, "openvino", None)  # import openvino raises ImportError
+    r = measure(InferenceConfig(str(ASSETS_DIR), "convlstm-int8", "openvino", n=5, warmup=1))
+    assert r == {"skipped": "openvino not installed (pip install 'edge-safety[openvino]')"}
+
+
+@pytest.mark.slow  # OpenVINO's CPU plugin forks a helper process when it loads
+def test_openvino_times_the_shipped_file():
+    pytest.importorskip("openvino")
+    from bench.inference import InferenceConfig, measure
+
+    r = measure(InferenceConfig(str(ASSETS_DIR), "convlstm-int8", "openvino", n=5, warmup=1))
+    assert len(r["times_ns"]) == 5 and min(r["times_ns"]) > 0
+    assert r["file_bytes"] == (ASSETS_DIR / "convlstm.int8.onnx").stat().st_size and r["openvino"]

@@ -54,3 +54,49 @@ def test_frames_the_dbc_does_not_describe_are_refused_before_the_crc():
         res = chk.check(msg)
         assert (res.status, res.reason, res.valid) == ("bad_frame", reason, False)
     assert chk.check(good).status == "initial" and chk.errors == 4
+
+
+def _reference_protect(message, signals, counter):
+    """What protect() computed before its payload cache: cantools with the counter, then the CRC."""
+    from edge_runtime.canbus.e2e import e2e_data_id
+
+    data = bytearray(message.encode(dict(signals, E2E_CRC=0, AliveCounter=counter), strict=True))
+    p01.e2e_p01_protect(data, e2e_data_id(message), length=len(data), increment_counter=False)
+    return bytes(data)
+
+
+def _random_signals(message, rng):
+    out = {}
+    for s in message.signals:
+        if s.name in ("E2E_CRC", "AliveCounter"):
+            continue
+        if s.choices:
+            out[s.name] = str(list(s.choices.values())[int(rng.integers(len(s.choices)))])
+        else:
+            lo, hi = s.minimum if s.minimum is not None else 0, s.maximum if s.maximum is not None else 1
+            v = lo + (hi - lo) * float(rng.random())
+            out[s.name] = v if s.is_float or s.scale != 1 else int(round(v))
+    return out
+
+
+def test_cached_payloads_give_cantools_bytes_for_every_message_counter_and_repeat():
+    import cantools
+    import numpy as np
+    import pytest
+
+    rng = np.random.default_rng(0)
+    for dbc in ("vehicle_alerts.dbc", "robot_link.dbc"):
+        db = load_dbc(ASSETS_DIR / dbc)
+        protector = E2EProtector()
+        for message in db.messages:
+            sets = [_random_signals(message, rng) for _ in range(3)]
+            for k in range(40):  # each set again and again: cached after its first frame
+                signals = sets[k % 3]
+                counter = protector._counters.get(message.frame_id, 0)
+                got = bytes(protector.protect(message, signals).data)
+                assert got == _reference_protect(message, signals, counter), (dbc, message.name, k)
+        bad = dict(_random_signals(db.messages[0], rng))
+        bad[next(iter(bad))] = 1e12  # out of the DBC's range: refused every time, never cached
+        for _ in range(2):
+            with pytest.raises(cantools.database.EncodeError):
+                protector.protect(db.messages[0], bad)

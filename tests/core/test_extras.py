@@ -71,3 +71,21 @@ def test_commands_without_their_extra_say_what_to_install(argv, message):
 def test_the_base_install_runs_the_commands_that_need_no_extra(argv):
     r = run_without(NOT_IN_BASE, *argv)
     assert r.returncode == 0 and r.stderr == "" and "usage:" in r.stdout
+
+
+@pytest.mark.slow
+def test_a_command_imports_its_own_modules_only():
+    """`python -m edge_runtime wearable ...` sets up the wearable command alone: the robot's
+    modules (lifter, camera, link) are not imported at start-up; the bare table lists all."""
+    from edge_runtime.__main__ import COMMANDS, build_parser
+
+    def commands(parser):
+        sub = next(a for a in parser._actions if a.dest == "command")
+        return sorted(sub.choices)
+
+    assert commands(build_parser("wearable")) == ["wearable"]
+    assert commands(build_parser()) == sorted(c[0] for c in COMMANDS)
+    r = subprocess.run([sys.executable, "-c", "import sys; from edge_runtime.__main__ import build_parser; "
+                        "build_parser('wearable'); print(sorted(m for m in sys.modules if m.startswith("
+                        "'edge_runtime.robot')))"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stderr

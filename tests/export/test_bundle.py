@@ -197,3 +197,16 @@ def test_offline_install_gives_the_development_checkouts_alerts(bundle, tmp_path
     assert edge_main(["wearable", "--replay", str(drive / "imu.csv"), "--alerts", str(dev),
                                                  "--quiet"]) == 0
     assert _decisions(installed) == _decisions(dev) and any(d["alerted"] for d in _decisions(dev))
+
+
+@pytest.mark.slow  # pip builds the runtime wheel
+def test_an_aarch64_bundle_pins_the_onnxruntime_that_runs_there_and_says_what_was_tested(tmp_path):
+    from export.bundle import ONNXRUNTIME_PINS, ONNXRUNTIME_TESTED
+
+    b = build_bundle(tmp_path / "arm", product="wearable", platform_name="aarch64", wheelhouse=False)
+    assert ONNXRUNTIME_PINS["aarch64"] in b.requirements
+    assert not any(r.startswith("onnxruntime>") for r in b.requirements)
+    assert ONNXRUNTIME_TESTED["aarch64"] in (b.out / "INSTALL.md").read_text()
+    x86 = build_bundle(tmp_path / "x86", product="wearable", platform_name="x86_64", wheelhouse=False)
+    assert "onnxruntime>=1.17" in x86.requirements
+    assert ONNXRUNTIME_TESTED["x86_64"] in (x86.out / "INSTALL.md").read_text()

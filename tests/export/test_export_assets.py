@@ -86,3 +86,45 @@ def test_compare_int8_over_loso_folds(tmp_path, capsys):
     assert r["max_parity_torch_onnx"] < 1e-4
     assert rc == (0 if r["holds"] else 1)
     assert "LOSO over 3 folds" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_int8_requantises_the_shipped_fp32_without_training(small_assets, tmp_path):
+    """`python -m export int8`: the int8 file and entry replaced, the fp32 file untouched, and the
+    int8 bytes are what build_variant makes of the fp32 file with the entry's calibration windows."""
+    import shutil
+
+    from edge_runtime.wearable.classifier import preprocess
+    from export.assets import calibration_windows, cohort_of, requantize
+    from export.quantize import build_variant
+
+    out, work = small_assets
+    dst = tmp_path / "assets"
+    shutil.copytree(out, dst)
+    fp32_before = (dst / "convlstm.fp32.onnx").read_bytes()
+    m = requantize(out=dst, work=work, variants=["qdq_conv+dyn_lstm"], command="test", log=lambda s: None)
+    by = {e["precision"]: e for e in m["models"]}
+    assert by["int8"]["quantization"]["method"] == "qdq_conv+dyn_lstm"
+    assert by["int8"]["quantization"]["command"] == "test"
+    assert by["int8"]["quantization"]["runtime_op_types"].get("DynamicQuantizeLSTM") == 1
+    assert (dst / "convlstm.fp32.onnx").read_bytes() == fp32_before
+    verify_all(dst)  # the manifest's sha256 is the new file's
+    train, _ = cohort_of(by["fp32"], work, log=lambda s: None)
+    again = build_variant(dst / "convlstm.fp32.onnx", tmp_path / "again.onnx", "qdq_conv+dyn_lstm",
+                          calibration_windows(preprocess(train.X), train.y, seed=1))
+    assert again.read_bytes() == (dst / "convlstm.int8.onnx").read_bytes()
+
+
+@pytest.mark.slow  # simulates the 20-subject cohort the shipped model was calibrated on (about a minute)
+def test_requantising_the_shipped_fp32_gives_the_shipped_int8_bytes(tmp_path):
+    from edge_runtime.core.manifest import ASSETS_DIR, select_model
+    from edge_runtime.wearable.classifier import preprocess
+    from export.assets import calibration_windows, cohort_of
+    from export.quantize import build_variant
+
+    m = verify_all(ASSETS_DIR)
+    fp32, int8 = select_model(m, "convlstm-fp32"), select_model(m, "convlstm-int8")
+    train, _ = cohort_of(fp32, tmp_path, log=lambda s: None)
+    again = build_variant(ASSETS_DIR / fp32["file"], tmp_path / "int8.onnx", int8["quantization"]["method"],
+                          calibration_windows(preprocess(train.X), train.y, seed=fp32["provenance"]["seed"]))
+    assert again.read_bytes() == (ASSETS_DIR / int8["file"]).read_bytes()

@@ -107,3 +107,47 @@ def test_a_long_recording_is_streamed_in_chunks_with_the_same_blocks(tmp_path):
                                   np.concatenate([b.acc_mps2 for b in whole]))
     gap_block = next(b for b in chunked if not b.continuous)
     assert gap_block.t0_s == 4.0
+
+
+PLAIN_LINES = [b"0.00,4.0510,-6.8857,6.0334\n", b"-0.5,.5,5.,007\n", b"123456.789012345,0.1,-0.0,9\n",
+               b"1e3,1,2,3\n", b"1,2,3\n", b"1,2,3,4,5\n", b"1,,2,3\n", b"1.2.3,1,2,3\n", b"1-2,1,2,3\n",
+               b"-,1,2,3\n", b"\n", b" 1,2,3,4\n", b"1,2,3,4\r\n", b"1234567890123456,1,2,3\n", b"+1,2,3,4\n",
+               b"inf,1,2,3\n", b".,1,2,3\n"]
+
+
+@pytest.mark.parametrize("line", PLAIN_LINES)
+def test_the_array_parser_gives_float_or_leaves_the_line_to_the_line_parser(line):
+    """Bit for bit what float() makes of each number, or None (then the line parser names a bad line)."""
+    from edge_runtime.wearable.sources import _parse_plain_block
+
+    got = _parse_plain_block(line)
+    cells = line.rstrip(b"\n").split(b",")
+    plain = (len(cells) == 4 and all(c and set(c) <= set(b"0123456789.-") and c.count(b".") <= 1
+                                     and b"-" not in c[1:] and any(d in c for d in b"0123456789")
+                                     and sum(d in b"0123456789" for d in c) <= 15 for c in cells))
+    if not plain:
+        assert got is None
+        return
+    want = np.array([float(c) for c in cells])
+    assert got.shape == (1, 4)
+    np.testing.assert_array_equal(got[0].view(np.int64), want.view(np.int64))
+
+
+def test_the_array_parser_equals_float_on_a_whole_drive():
+    from edge_runtime.wearable.sources import _parse_plain_block
+
+    rng = np.random.default_rng(0)
+    rows = np.c_[np.arange(5000) / 100, rng.normal(0, 30, (5000, 3))]
+    text = "".join(f"{t:.2f},{a:.4f},{b:.6f},{c:.1f}\n" for t, a, b, c in rows).encode()
+    want = np.array([[float(c) for c in line.split(",")] for line in text.decode().splitlines()])
+    np.testing.assert_array_equal(_parse_plain_block(text).view(np.int64), want.view(np.int64))
+
+
+def test_a_bad_line_after_plain_chunks_is_named_and_a_missing_last_newline_is_fine(tmp_path):
+    lines = "".join(f"{i / 100:.2f},1.0000,2.0000,9.8100\n" for i in range(300))
+    p = tmp_path / "r.csv"
+    p.write_text("t,ax,ay,az\n" + lines + "3.00,1,2,3")  # no newline at the end
+    assert sum(len(b.acc_mps2) for b in read_imu_csv(p, chunk_rows=16)) == 301
+    p.write_text("t,ax,ay,az\n" + lines + "3.00,1,x,3\n")
+    with pytest.raises(InputError, match=r"r\.csv:302: field 'ay' is not a number"):
+        list(read_imu_csv(p, chunk_rows=16))
