@@ -8,7 +8,7 @@ from its seed::
     python -m bench.holds arm-stop --trials 20 --seed 0        # both links, link loss and pose loss
     python -m bench.holds forged --commands 200 --seed 0       # unsigned, forged, replayed at a signed arm
     python -m bench.holds tampered                             # every shipped model, three ways
-    python -m bench.holds memory --wearable-hours 12 --robot-hours 3
+    python -m bench.holds memory --wearable-hours 12 --robot-hours 3 [--robot-link sim|stand-in]
 
 Each prints one JSON document (``--json OUT`` writes it too). What each measures:
 
@@ -38,8 +38,9 @@ Each prints one JSON document (``--json OUT`` writes it too). What each measures
 ``memory``
     The wearable loop (``WearableLoop`` with the int8 ConvLSTM + ``AlertPublisher`` on a
     virtual CAN bus) fed a simulated drive in 100 ms blocks for N hours of stream time, and
-    the robot loop (int8 lifter + ``RobotLoop`` + the simulated Sawyer over CAN, a worker
-    walking in and out of the zones) for M hours of simulated time, both as fast as they go;
+    the robot loop (int8 lifter + ``RobotLoop`` + the simulated Sawyer over CAN, or a recording
+    stand-in link, a worker walking in and out of the zones) for M hours of simulated time, both
+    as fast as they go;
     resident memory (VmRSS) and the number of live Python objects after every hour
     (``--every-h``). Growth is the last sample's against the first's.
 """
@@ -338,10 +339,12 @@ def wearable_memory(hours: float, seed: int, drive_minutes: float = 60.0, every_
             "alerts_sent": decisions["alerted"], "samples": samples, "growth": _growth(samples)}
 
 
-def robot_memory(hours: float, seed: int, every_h: float = 1.0, progress=None) -> dict:
-    """The robot loop over ``hours`` of simulated time: int8 lifter, RobotLoop, the simulated
-    Sawyer over CAN, a worker walking from 6 m to 1 m of the base and back, again and again."""
-    from bench.robot_cycle import CAMERA_FROM_ROBOT, CAMERA_POSITION_M, _KnownTransform
+def robot_memory(hours: float, seed: int, every_h: float = 1.0, link: str = "sim", progress=None) -> dict:
+    """The robot loop over ``hours`` of simulated time: int8 lifter, RobotLoop, a worker walking
+    from 6 m to 1 m of the base and back, again and again; ``link`` "sim": the simulated Sawyer
+    over CAN (the real link code both ways; most of the CPU goes to the simulated arm), "stand-in":
+    bench.robot_cycle's recording link (the loop and the lifter alone, about 6x faster)."""
+    from bench.robot_cycle import CAMERA_FROM_ROBOT, CAMERA_POSITION_M, _KnownTransform, _TimedLink
     from edge_runtime.robot.keypoints import CameraModel
     from edge_runtime.robot.lifter import StreamingLifter
     from edge_runtime.robot.loop import RobotLoop
@@ -360,9 +363,13 @@ def robot_memory(hours: float, seed: int, every_h: float = 1.0, progress=None) -
     keypoints = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
     lp = replace(box.robot_loop, records=1000)  # the loop keeps its last frame records by design
     clock = SimClock()
-    sim = SimulatedRobot("can", clock=clock,
-                         q0_rad=task_start_posture(lp.task_waypoints_m[0], lp.task_pitch_rad, lp.task_yaw_rad))
-    loop = RobotLoop(sim.link, calibration=_KnownTransform(), zones=box.zones, tracker=box.tracker, params=lp,
+    if link == "sim":
+        sim = SimulatedRobot("can", clock=clock,
+                             q0_rad=task_start_posture(lp.task_waypoints_m[0], lp.task_pitch_rad, lp.task_yaw_rad))
+        the_link, step, close = sim.link, sim.step, sim.close
+    else:
+        the_link, step, close = _TimedLink(), clock.advance, lambda: None
+    loop = RobotLoop(the_link, calibration=_KnownTransform(), zones=box.zones, tracker=box.tracker, params=lp,
                      clock=clock)
     ticks_per_frame = 3  # 10 ms ticks, a frame every 30 ms: 33.3 Hz, close to the camera's 30
     n_frames = int(hours * 3600 / (ticks_per_frame * TICK_S))
@@ -375,15 +382,15 @@ def robot_memory(hours: float, seed: int, every_h: float = 1.0, progress=None) -
             loop.feed_lifted(lifter.push(clock(), keypoints[k % len(keypoints)]))
             for _ in range(ticks_per_frame):
                 loop.tick()
-                sim.step(TICK_S)
+                step(TICK_S)
             if (k + 1) % per_sample == 0:
                 samples.append(_sample((k + 1) / per_hour, t0))
                 if progress:
                     progress(f"robot hour {samples[-1]['hour']:g}: {samples[-1]}")
         status = loop.status()
     finally:
-        sim.close()
-    return {"hours": hours, "frames": n_frames, "stops": status["stops"], "retracts": status["retracts"],
+        close()
+    return {"hours": hours, "link": link, "frames": n_frames, "stops": status["stops"], "retracts": status["retracts"],
             "link_errors": status["link_errors"], "samples": samples, "growth": _growth(samples)}
 
 
@@ -404,6 +411,8 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("memory", help="resident memory over hours of the wearable and robot loops")
     p.add_argument("--wearable-hours", type=float, default=12.0)
     p.add_argument("--robot-hours", type=float, default=3.0)
+    p.add_argument("--robot-link", choices=("sim", "stand-in"), default="sim",
+                   help="the robot loop's link: the simulated Sawyer over CAN, or a recording stand-in")
     p.add_argument("--every-h", type=float, default=1.0, help="a memory sample every this many hours")
     p.add_argument("--seed", type=int, default=5)
     for p in sub.choices.values():
@@ -421,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
         if a.wearable_hours > 0:
             out["wearable"] = wearable_memory(a.wearable_hours, a.seed, every_h=a.every_h, progress=log)
         if a.robot_hours > 0:
-            out["robot"] = robot_memory(a.robot_hours, a.seed, every_h=a.every_h, progress=log)
+            out["robot"] = robot_memory(a.robot_hours, a.seed, every_h=a.every_h, link=a.robot_link, progress=log)
     out = {"command": "python -m bench.holds " + " ".join(sys.argv[1:] if argv is None else argv), **out}
     text = json.dumps(out, indent=1)
     print(text)
