@@ -107,6 +107,12 @@ class HealthCounts:
         return min(self.non_finite + self.source_dropped, DROPPED_SAMPLES_MAX)
 
 
+UNDELIVERED_HEARTBEATS = 5
+"""Heartbeats that say degraded after alerts were sent late or lost: 0.5 s at 10 Hz, longer than
+the 300 ms a receiver waits for a heartbeat (docs/integrator.md), so a receiver either sees one
+of them or has declared the wearable unavailable meanwhile."""
+
+
 def heartbeat_state(now: HealthCounts, before: HealthCounts) -> tuple[str, str]:
     """(State, SensorHealth) of WEARABLE_STATUS from the counters ``now`` and at the previous
     heartbeat: a counter that grew since then marks the sensor degraded for this period."""
@@ -139,6 +145,7 @@ class WearableStatus:
         self._sensor = "ok"
         self._samples = self._non_finite = self._restarts = self._saturated = self._source_dropped = 0
         self._alerts_undelivered = 0
+        self._undelivered_beats = 0  # heartbeats still to say degraded for undelivered alerts
         self._latencies_ms: list[float] = []
         self._reported = HealthCounts()  # as of the previous heartbeat
 
@@ -189,11 +196,20 @@ class WearableStatus:
     def heartbeat(self, uptime_s: float | None = None) -> dict[str, Any]:
         """The WEARABLE_STATUS signals now (:meth:`AlertEncoder.encode_status`'s arguments);
         what is reported becomes the baseline of the next heartbeat. ``uptime_s``: on the data
-        clock, the data time since the first sample (default: wall time since this object)."""
+        clock, the data time since the first sample (default: wall time since this object).
+
+        Alerts the bus did not take keep State degraded for ``UNDELIVERED_HEARTBEATS``
+        heartbeats, not one: they are reported right after the bus comes back, when a receiver
+        may itself still be reconnecting, and a single frame is easily missed."""
         with self._lock:
             now, before = self._counts(), self._reported
             self._reported = now
+            if now.alerts_undelivered > before.alerts_undelivered:
+                self._undelivered_beats = UNDELIVERED_HEARTBEATS
+            held, self._undelivered_beats = self._undelivered_beats > 0, max(0, self._undelivered_beats - 1)
         state, health = heartbeat_state(now, before)
+        if held and state == "running":
+            state = "degraded"  # the sensor is fine; alerts were late or lost while the bus was down
         return {"state": state, "sensor_health": health, "dropped_samples": now.dropped_samples,
                 "model_version": self.model_version,
                 "uptime_s": time.monotonic() - self._t0 if uptime_s is None else uptime_s}

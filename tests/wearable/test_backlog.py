@@ -3,7 +3,7 @@ from types import SimpleNamespace
 
 import can
 
-from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher, WearableStatus
+from edge_runtime.wearable.alerts import UNDELIVERED_HEARTBEATS, AlertEncoder, AlertPublisher, WearableStatus
 from edge_runtime.wearable.backlog import AlertBacklog
 
 
@@ -73,3 +73,16 @@ def test_the_summary_reports_alerts_still_held_at_the_end_as_lost():
     assert not pub.send_alert(alert())
     pub.close()
     assert pub.summary()["alerts_lost"] == 1
+
+
+def test_undelivered_alerts_keep_the_status_degraded_for_five_heartbeats_then_running():
+    bus = SwitchableBus()
+    pub = AlertPublisher(bus, status=WearableStatus())
+    pub.status.count_samples(100)
+    assert pub.status.heartbeat()["state"] == "running"
+    assert not pub.send_alert(alert("Phone"))
+    bus.down = False
+    assert pub.send_alert(alert("Drink"))  # the held Phone goes out late first
+    states = [pub.status.heartbeat() for _ in range(UNDELIVERED_HEARTBEATS + 2)]
+    assert [s["state"] for s in states] == ["degraded"] * UNDELIVERED_HEARTBEATS + ["running"] * 2
+    assert {s["sensor_health"] for s in states} == {"ok"}  # the sensor is not what went wrong
