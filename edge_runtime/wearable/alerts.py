@@ -402,10 +402,18 @@ class AlertPublisher:
         Returns the AlertSeq its frames carry, or None if the first frame did not go out:
         then no copy is sent either, so an alert is on the bus exactly when its decision says so."""
         self._send_backlog()
-        now_s = self._now_for(alert)
+        seq = self._publish(alert, self._now_for(alert))
+        if seq is None:
+            self.backlog.hold(alert)  # sent late when the bus is back, or counted lost
+        return seq
+
+    def _publish(self, alert: Any, now_s: float) -> int | None:
+        """An alert's first frame now and its copies scheduled after it, on time or late alike (a
+        late alert goes out just after the bus came back, when a receiver may still be
+        reconnecting: one frame alone is easily lost). Its AlertSeq, or None if the first frame
+        did not go out."""
         seq = self.encoder.next_alert_seq()
         if not self.send(self.encoder.encode_alert(alert, seq), stamp_s=self._stamp(now_s)):
-            self.backlog.hold(alert)  # sent late when the bus is back, or counted lost
             return None
         self.alerts_sent += 1
         with self._copies_lock:
@@ -424,13 +432,13 @@ class AlertPublisher:
         if self.bus is None or not len(self.backlog):
             return
         late, _ = self.backlog.take()
+        now_s = time.monotonic() if self.clock is Clock.WALL else (self._data_now_s or 0.0)
         for k, (alert, _) in enumerate(late):
-            if not self.send(self.encoder.encode_alert(alert)):
+            if self._publish(alert, now_s) is None:
                 for again, since in late[k:]:
                     self.backlog.hold(again.alert, since_s=since)
                 break
             self.backlog.sent()
-            self.alerts_sent += 1
         c = self.backlog.counts()
         self.status.set_alerts_undelivered(c.sent_late + c.lost)
 
