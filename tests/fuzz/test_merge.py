@@ -55,3 +55,23 @@ def test_a_target_in_two_shards_or_a_foreign_file_is_one_line_and_exit_2(tmp_pat
     assert main(["merge", str(tmp_path / "c.json")]) == 2
     err = capsys.readouterr().err
     assert "c.json: not a python -m fuzz --json report" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_running_shard_is_read_from_its_log_with_the_targets_it_finished(tmp_path, capsys):
+    done = _shard(tmp_path / "a.json", ["t1", "t2"], crash_every=7)
+    log = tmp_path / "b.log"
+    # the header a shard prints first, then one row per finished target, among warnings
+    header = "  ".join(("target", "inputs", "refused", "crashes", "silent acceptances", "hangs", "inputs/s"))
+    rows = [f"{r.name.replace('t', 'u')}  {r.inputs}  {r.refused}  {r.crashes}  0  0  1,234" for r in done]
+    log.write_text("\n".join([header, "/x.py:1: RuntimeWarning: overflow", *rows, "  r = det(a)"]) + "\n")
+    out = tmp_path / "fuzz.json"
+    rc = main(["merge", str(tmp_path / "a.json"), str(log), "--command", "python -m fuzz --target t1 --target t2",
+               "--command", "python -m fuzz --target u1 --target u2", "--json", str(out)])
+    doc = json.loads(out.read_text())
+    assert rc == 1 and [t["name"] for t in doc["targets"]] == ["t1", "t2", "u1", "u2"]
+    u1 = doc["targets"][2]
+    assert (u1["inputs"], u1["crashes"], u1["rate_per_s"]) == (done[0].inputs, done[0].crashes, 1234.0)
+    assert doc["commands"][1] == "python -m fuzz --target u1 --target u2"
+    (tmp_path / "c.log").write_text("nothing here\n")
+    assert main(["merge", str(tmp_path / "c.log")]) == 2
+    assert "no table header" in capsys.readouterr().err
