@@ -1,5 +1,7 @@
 """``python -m fuzz [--target NAME ...] [--inputs N] [--seed S] [--json OUT] [--md OUT] [--timeout-s T]``
 
+(``python -m fuzz merge SHARD.json ...``: one report from shard runs, :mod:`fuzz.merge`.)
+
 Drives every target of fuzz/targets (or the named ones) with N inputs each and prints
 one line per target: inputs, refused (the documented error), crashes, silent
 acceptances, hangs, rate; then the first distinct tracebacks of each finding. Exit 1
@@ -21,9 +23,18 @@ def _row(r: TargetReport) -> tuple:
     return (r.name, r.inputs, r.refused, r.crashes, r.silent_acceptances, r.hangs, f"{r.rate_per_s:,.0f}")
 
 
-def markdown(reports: list[TargetReport], command: str) -> str:
-    lines = [f"# Fuzz run\n\n`{command}`\n", "| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
+def markdown(reports: list[TargetReport], commands: str | list[str], commit: str | None = None) -> str:
+    """The table (and a total row for several targets), the command lines, the tracebacks."""
+    commands = [commands] if isinstance(commands, str) else commands
+    lines = ["# Fuzz run\n", *(f"`{c}`\n" for c in commands)]
+    if commit:
+        lines.append(f"Code: commit `{commit}`.\n")
+    lines += ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
     lines += ["| " + " | ".join(map(str, _row(r))) + " |" for r in reports]
+    if len(reports) > 1:
+        total = TargetReport("**all**", *(sum(getattr(r, k) for r in reports)
+                                          for k in ("inputs", "refused", "crashes", "silent_acceptances", "hangs")))
+        lines.append("| " + " | ".join(map(str, _row(total)[:-1])) + " | |")
     for r in reports:
         for f in r.findings:
             lines += [f"\n## {r.name}: {f.key} ({f.count} inputs)\n", "```", f.traceback.rstrip(),
@@ -32,6 +43,11 @@ def markdown(reports: list[TargetReport], command: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["merge"]:
+        from fuzz.merge import main as merge_main
+
+        return merge_main(argv[1:])
     ap = argparse.ArgumentParser(prog="python -m fuzz", description=__doc__.splitlines()[0])
     ap.add_argument("--target", action="append", metavar="NAME", help="only this target (repeatable)")
     ap.add_argument("--inputs", type=int, default=100_000, metavar="N", help="inputs per target (default 100000)")
@@ -58,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     for r in reports:
         for f in r.findings:
             print(f"\n{r.name}: {f.key} ({f.count} inputs)\n{f.traceback.rstrip()}\nfirst input: {f.example}")
-    command = "python -m fuzz " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = "python -m fuzz " + " ".join(argv)
     if a.json:
         Path(a.json).parent.mkdir(parents=True, exist_ok=True)
         Path(a.json).write_text(json.dumps({"command": command, "seed": a.seed, "inputs_per_target": a.inputs,

@@ -107,6 +107,12 @@ class HealthCounts:
         return min(self.non_finite + self.source_dropped, DROPPED_SAMPLES_MAX)
 
 
+UNDELIVERED_HEARTBEATS = 5
+"""Heartbeats that say degraded after alerts were sent late or lost: 0.5 s at 10 Hz, longer than
+the 300 ms a receiver waits for a heartbeat (docs/integrator.md), so a receiver either sees one
+of them or has declared the wearable unavailable meanwhile."""
+
+
 def heartbeat_state(now: HealthCounts, before: HealthCounts) -> tuple[str, str]:
     """(State, SensorHealth) of WEARABLE_STATUS from the counters ``now`` and at the previous
     heartbeat: a counter that grew since then marks the sensor degraded for this period."""
@@ -139,6 +145,7 @@ class WearableStatus:
         self._sensor = "ok"
         self._samples = self._non_finite = self._restarts = self._saturated = self._source_dropped = 0
         self._alerts_undelivered = 0
+        self._undelivered_beats = 0  # heartbeats still to say degraded for undelivered alerts
         self._latencies_ms: list[float] = []
         self._reported = HealthCounts()  # as of the previous heartbeat
 
@@ -189,11 +196,20 @@ class WearableStatus:
     def heartbeat(self, uptime_s: float | None = None) -> dict[str, Any]:
         """The WEARABLE_STATUS signals now (:meth:`AlertEncoder.encode_status`'s arguments);
         what is reported becomes the baseline of the next heartbeat. ``uptime_s``: on the data
-        clock, the data time since the first sample (default: wall time since this object)."""
+        clock, the data time since the first sample (default: wall time since this object).
+
+        Alerts the bus did not take keep State degraded for ``UNDELIVERED_HEARTBEATS``
+        heartbeats, not one: they are reported right after the bus comes back, when a receiver
+        may itself still be reconnecting, and a single frame is easily missed."""
         with self._lock:
             now, before = self._counts(), self._reported
             self._reported = now
+            if now.alerts_undelivered > before.alerts_undelivered:
+                self._undelivered_beats = UNDELIVERED_HEARTBEATS
+            held, self._undelivered_beats = self._undelivered_beats > 0, max(0, self._undelivered_beats - 1)
         state, health = heartbeat_state(now, before)
+        if held and state == "running":
+            state = "degraded"  # the sensor is fine; alerts were late or lost while the bus was down
         return {"state": state, "sensor_health": health, "dropped_samples": now.dropped_samples,
                 "model_version": self.model_version,
                 "uptime_s": time.monotonic() - self._t0 if uptime_s is None else uptime_s}
@@ -393,10 +409,18 @@ class AlertPublisher:
         Returns the AlertSeq its frames carry, or None if the first frame did not go out:
         then no copy is sent either, so an alert is on the bus exactly when its decision says so."""
         self._send_backlog()
-        now_s = self._now_for(alert)
+        seq = self._publish(alert, self._now_for(alert))
+        if seq is None:
+            self.backlog.hold(alert)  # sent late when the bus is back, or counted lost
+        return seq
+
+    def _publish(self, alert: Any, now_s: float) -> int | None:
+        """An alert's first frame now and its copies scheduled after it, on time or late alike (a
+        late alert goes out just after the bus came back, when a receiver may still be
+        reconnecting: one frame alone is easily lost). Its AlertSeq (an update's is its
+        alert's, see :meth:`_seq_of`), or None if the first frame did not go out."""
         seq = self._seq_of(alert)
         if not self.send(self.encoder.encode_alert(alert, seq), stamp_s=self._stamp(now_s)):
-            self.backlog.hold(alert)  # sent late when the bus is back, or counted lost
             return None
         self.alerts_sent += 1
         with self._copies_lock:
@@ -419,13 +443,13 @@ class AlertPublisher:
         if self.bus is None or not len(self.backlog):
             return
         late, _ = self.backlog.take()
+        now_s = time.monotonic() if self.clock is Clock.WALL else (self._data_now_s or 0.0)
         for k, (alert, _) in enumerate(late):
-            if not self.send(self.encoder.encode_alert(alert, self._seq_of(alert))):
+            if self._publish(alert, now_s) is None:
                 for again, since in late[k:]:
                     self.backlog.hold(again.alert, since_s=since)
                 break
             self.backlog.sent()
-            self.alerts_sent += 1
         c = self.backlog.counts()
         self.status.set_alerts_undelivered(c.sent_late + c.lost)
 

@@ -3,7 +3,7 @@ from types import SimpleNamespace
 
 import can
 
-from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher, WearableStatus
+from edge_runtime.wearable.alerts import UNDELIVERED_HEARTBEATS, AlertEncoder, AlertPublisher, Clock, WearableStatus
 from edge_runtime.wearable.backlog import AlertBacklog
 
 
@@ -73,3 +73,37 @@ def test_the_summary_reports_alerts_still_held_at_the_end_as_lost():
     assert not pub.send_alert(alert())
     pub.close()
     assert pub.summary()["alerts_lost"] == 1
+
+
+def test_undelivered_alerts_keep_the_status_degraded_for_five_heartbeats_then_running():
+    bus = SwitchableBus()
+    pub = AlertPublisher(bus, status=WearableStatus())
+    pub.status.count_samples(100)
+    assert pub.status.heartbeat()["state"] == "running"
+    assert not pub.send_alert(alert("Phone"))
+    bus.down = False
+    assert pub.send_alert(alert("Drink"))  # the held Phone goes out late first
+    states = [pub.status.heartbeat() for _ in range(UNDELIVERED_HEARTBEATS + 2)]
+    assert [s["state"] for s in states] == ["degraded"] * UNDELIVERED_HEARTBEATS + ["running"] * 2
+    assert {s["sensor_health"] for s in states} == {"ok"}  # the sensor is not what went wrong
+
+
+def test_an_alert_sent_late_goes_out_with_its_copies_like_one_sent_on_time():
+    bus, clock = SwitchableBus(), FakeClock()
+    pub = AlertPublisher(bus, status=WearableStatus(), clock=Clock.DATA)
+    pub.backlog = AlertBacklog(clock=clock)
+    assert not pub.send_alert(alert("Phone"))  # held: the bus is down
+    bus.down = False
+    clock.t += 1.0
+    on_time = SimpleNamespace(**{**vars(alert("Drink")), "t_trigger_s": 20.0, "t_alert_s": 20.75})
+    assert pub.send_alert(on_time)  # the held Phone goes out late first, then the Drink
+    pub.advance_to(30.0)  # every copy is due by then
+    enc = AlertEncoder()
+    frames = [enc.decode(m) for m in bus.sent if m.arbitration_id == enc.alert_msg.frame_id]
+    by_seq: dict[int, list] = {}
+    for f in frames:
+        by_seq.setdefault(f["AlertSeq"], []).append(f)
+    assert [str(fs[0]["Class"]) for fs in by_seq.values()] == ["Phone", "Drink"]
+    assert [len(fs) for fs in by_seq.values()] == [1 + enc.repetition.copies] * 2
+    late = [f["TimeSinceTrigger"] for f in by_seq[min(by_seq)]]
+    assert late[0] == 750 + 3 + 1000 and late == sorted(late)  # its wait counted, each copy older
