@@ -53,7 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--assets", metavar="DIR", help="model directory with manifest.json [model] assets")
     p.add_argument("--model", help="manifest entry: a name, or a precision (int8, fp32) [model] name")
     p.add_argument("--threads", type=int, help="onnxruntime intra-op threads [model] threads")
-    p.add_argument("--min-confidence", type=float, help="below this the decision is 'uncertain' [alerts] min_confidence")
+    p.add_argument("--min-confidence", type=float, help="below this a full-window decision is 'uncertain' "
+                   "[alerts] min_confidence (and the S = 6 entry of min_confidence_by_steps)")
     p.add_argument("--decision", choices=("early", "full_window"),
                    help="decide after each sub-window the capture allows (preliminary, then confirmed, revised or "
                         "withdrawn), or once on the full 7-s window [alerts] decision")
@@ -70,7 +71,11 @@ def effective_config(args: argparse.Namespace):
 
     cfg = config.load(args.config)
     cfg = config.override(cfg, "model", assets=args.assets, name=args.model, threads=args.threads)
-    cfg = config.override(cfg, "alerts", min_confidence=args.min_confidence, decision=getattr(args, "decision", None))
+    by_steps = None
+    if args.min_confidence is not None:  # the flag is the full window's threshold, before the manifest's
+        by_steps = [*cfg.alerts.min_confidence_by_steps[:-1], args.min_confidence]
+    cfg = config.override(cfg, "alerts", min_confidence=args.min_confidence, decision=getattr(args, "decision", None),
+                          min_confidence_by_steps=by_steps)
     return config.override(cfg, "detector", threshold_mps2=args.threshold)
 
 

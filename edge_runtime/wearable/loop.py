@@ -78,18 +78,20 @@ class AlertPolicy:
     """Which classifier decisions become a DISTRACTION_ALERT."""
 
     min_confidence: float = config.setting(0.6, config.PROBABILITY)
-    """Below this top-class probability a decision is 'uncertain' and not alerted."""
+    """Below this top-class probability a full-window decision is 'uncertain' and not alerted (unless
+    min_confidence_by_steps or the model's manifest gives S = 6 its own)."""
     never_alert: tuple[str, ...] = (OTHER,)
     """Classes that are logged but never alerted (non-coupled hand motions)."""
     decision: str = config.setting("early", config.one_of(*DECISIONS))
     """'early': decide after each sub-window the capture's evidence allows (preliminary, then confirmed,
     revised or withdrawn), when the model accepts partial captures; 'full_window': one decision per
     capture at T+599, the dissertation's."""
-    early_min_confidence: tuple[float, ...] = config.setting(
-        (-1.0, -1.0, -1.0, -1.0, -1.0), ("a list of 5 numbers, each in [0, 1] or negative",
-                                         lambda v: len(v) == N_SUBSEQ - 1 and all(p <= 1.0 for p in v)))
-    """Threshold of a preliminary alert (or a revision) after S = 1..5 sub-windows; a negative entry:
-    the model manifest's min_confidence_by_steps for that S, else 0.9. The full window uses min_confidence."""
+    min_confidence_by_steps: tuple[float, ...] = config.setting(
+        (-1.0,) * N_SUBSEQ, ("a list of 6 numbers, each in [0, 1] or negative",
+                             lambda v: len(v) == N_SUBSEQ and all(p <= 1.0 for p in v)))
+    """Threshold of a decision after S = 1..6 sub-windows (a preliminary alert or a revision for S < 6,
+    the full window's for S = 6); a negative entry: the model manifest's min_confidence_by_steps for
+    that S (chosen on validation data), else 0.9 for S < 6 and min_confidence for S = 6."""
     event_hold_s: float = config.setting(5.0, config.within(0.0, 120.0, "s"))
     """An alert event stays active until this long after the end of its last capture: a capture
     triggered meanwhile continues it and raises no new alert. 0: every capture is its own event.
@@ -111,10 +113,13 @@ class AlertPolicy:
             return "uncertain"
         return "alert"
 
-    def early_threshold(self, steps: int, manifest: dict[int, float]) -> float:
-        """The threshold after ``steps`` < 6 sub-windows: configured, else the manifest's, else 0.9."""
-        configured = self.early_min_confidence[steps - 1]
-        return configured if configured >= 0 else manifest.get(steps, EARLY_MIN_CONFIDENCE)
+    def threshold(self, steps: int, manifest: dict[int, float]) -> float:
+        """The threshold after ``steps`` sub-windows: configured, else the manifest's, else 0.9 before
+        the full window and min_confidence at it."""
+        configured = self.min_confidence_by_steps[steps - 1]
+        if configured >= 0:
+            return configured
+        return manifest.get(steps, EARLY_MIN_CONFIDENCE if steps < N_SUBSEQ else self.min_confidence)
 
 
 @dataclass
@@ -382,7 +387,7 @@ class WearableLoop:
         compute_us = (time.perf_counter() - t_start) * 1e6
         k = int(np.argmax(probs))
         label, conf = self.classes[k], float(probs[k])
-        threshold = None if full else self.policy.early_threshold(steps, self._manifest_thresholds)
+        threshold = self.policy.threshold(steps, self._manifest_thresholds)
         status = self.policy.status(label, conf, threshold)
         ev = st.event
         if st.continues:

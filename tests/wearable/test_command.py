@@ -196,3 +196,10 @@ def test_a_model_that_takes_partial_captures_makes_early_decisions_unless_full_w
     enc = AlertEncoder()
     frames = [enc.decode(m) for m in can.LogReader(str(tmp_path / "early.log")) if m.arbitration_id == 0x3A0]
     assert [(f["AlertSeq"], str(f["Status"])) for f in frames] == [(0, "preliminary")] * 5 + [(0, "confirmed")] * 5
+
+
+def test_the_min_confidence_flag_is_the_full_windows_threshold_before_the_models_manifest(capsys):
+    assert table.main(["wearable", "--min-confidence", "0.7", "--decision", "full_window", "--print-config"]) == 0
+    out = capsys.readouterr().out
+    assert "min_confidence = 0.7" in out and "min_confidence_by_steps = [-1.0, -1.0, -1.0, -1.0, -1.0, 0.7]" in out
+    assert 'decision = "full_window"' in out

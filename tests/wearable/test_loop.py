@@ -241,8 +241,12 @@ def test_early_thresholds_come_from_the_config_else_the_manifest():
     ds, *_ = _early_run(answers, manifest_thresholds={2: 0.8})
     assert _summary(ds)[0] == ("preliminary", 2, "Phone", 0)
     ds, *_ = _early_run(answers, manifest_thresholds={2: 0.8},
-                        policy=AlertPolicy(early_min_confidence=(-1.0, 0.86, -1.0, -1.0, -1.0)))
+                        policy=AlertPolicy(min_confidence_by_steps=(-1.0, 0.86, -1.0, -1.0, -1.0, -1.0)))
     assert _summary(ds) == [("alert", 6, "Phone", 0)]
+    # the full window: configured, else the manifest's, else min_confidence
+    assert _summary(_early_run(answers, manifest_thresholds={6: 0.85})[0])[-1] == ("uncertain", 6, "Phone", None)
+    assert _summary(_early_run(answers, manifest_thresholds={6: 0.85}, policy=AlertPolicy(
+        min_confidence_by_steps=(-1.0,) * 5 + (0.7,)))[0])[-1] == ("alert", 6, "Phone", 0)
 
 
 def test_early_decisions_do_not_depend_on_how_the_stream_is_cut():
