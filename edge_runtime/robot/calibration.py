@@ -143,7 +143,8 @@ ANCHOR_CAMERA_LOW = "camera_low"
 ANCHOR_RAY_FLAT = "ray_flat"
 
 
-def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationParams()) -> tuple[float, str | None]:
+def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationParams(),
+                  observed=None) -> tuple[float, str | None]:
     """The floor re-anchoring of one lifted skeleton: ``(k, reason)``.
 
     ``joints_cam_m`` (17, 3) are camera-frame joints (m) and ``p_robot = A @ p_cam + b`` the
@@ -152,6 +153,10 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     viewing ray (every 2D projection is kept) and moves it in depth; ``k`` is chosen so that
     the lower ankle (lower in the robot frame: the foot on the ground mid-stride) lies
     ``ankle_height_m`` above the floor, then clamped to ``[anchor_min_scale, anchor_max_scale]``.
+    The lifter puts each joint on the ray of its keypoint (:mod:`edge_runtime.robot.lifter`), so
+    this slides the skeleton along the observed rays: the ankle's ray meets the floor, and the
+    head stays on its own ray. ``observed`` (17,) bool, when given, restricts the choice to the
+    ankles seen in this frame (a held ankle's ray is an old one); with none seen, both count.
 
     ``k`` is 1 with a reason when the anchoring cannot be trusted: ``no_ankle`` (no finite
     ankle), ``camera_low`` (camera centre less than ``anchor_min_camera_height_m`` above the
@@ -163,6 +168,9 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     ankles = j[[L_ANKLE, R_ANKLE]]
     rays = ankles @ A.T                                  # camera centre -> ankle, robot frame
     ok = np.isfinite(rays).all(axis=1)
+    if observed is not None:
+        seen = ok & np.asarray(observed, bool)[[L_ANKLE, R_ANKLE]]
+        ok = seen if seen.any() else ok
     if not ok.any():
         return 1.0, ANCHOR_NO_ANKLE
     ray = rays[ok][np.argmin(rays[ok, 1])]               # the lower ankle
@@ -200,7 +208,7 @@ class Calibration:
         """The camera centre (the camera frame's origin) in the robot frame (m)."""
         return self.b.copy()
 
-    def anchor_to_floor(self, joints_cam_m) -> tuple[np.ndarray, bool]:
+    def anchor_to_floor(self, joints_cam_m, observed=None) -> tuple[np.ndarray, bool]:
         """Robot-frame joints (17, 3) of one camera-frame skeleton re-anchored on the floor
         (:func:`anchor_factor`: scaled about the camera centre so its lower ankle is
         ``ankle_height_m`` above the floor), and whether the anchoring applied (False: a
@@ -209,17 +217,20 @@ class Calibration:
         j = np.asarray(joints_cam_m, float)
         if not self.params.ground_anchor:
             return self.apply(j), False
-        k, reason = anchor_factor(j, self.A, self.b, self.params)
+        k, reason = anchor_factor(j, self.A, self.b, self.params, observed)
         return self.apply(k * j), reason is None
 
-    def to_robot(self, joints_cam_m) -> np.ndarray:
+    def to_robot(self, joints_cam_m, observed=None) -> np.ndarray:
         """Robot-frame joints of camera-frame skeletons (17, 3) or (P, 17, 3): each one
-        re-anchored on the floor when ``params.ground_anchor`` is on, else :meth:`apply`."""
+        re-anchored on the floor when ``params.ground_anchor`` is on, else :meth:`apply`.
+        ``observed`` ((17,) or (P, 17) bool, optional): the joints seen in this frame, so the
+        anchoring uses an observed ankle's ray (:func:`anchor_factor`)."""
         j = np.asarray(joints_cam_m, float)
         if not self.params.ground_anchor or j.shape[-2:] != (17, 3):
             return self.apply(j)
         flat = j.reshape(-1, 17, 3)
-        return np.stack([self.anchor_to_floor(p)[0] for p in flat]).reshape(j.shape)
+        seen = [None] * len(flat) if observed is None else np.asarray(observed, bool).reshape(-1, 17)
+        return np.stack([self.anchor_to_floor(p, o)[0] for p, o in zip(flat, seen)]).reshape(j.shape)
 
     @property
     def scale(self) -> float:

@@ -65,8 +65,26 @@ and, when present, must agree with the format the reader was asked for.
 Blank lines are skipped. Anything else is a :class:`KeypointInputError` naming
 the file and the line. A person with fewer than 17 keypoints is passed on as
 given (shape (n, 3)): the lifter counts every joint of such a frame as missing
-(held for a few frames, then the frame is invalid). :class:`PersonSelector`
-picks whom to follow when several people are in a frame.
+(held for a few frames, then the frame is invalid). :class:`PersonTracker` gives every
+person seen a stable id across frames (who is who), so each is lifted with his own
+temporal window and judged by the hazard monitor; :class:`PersonSelector` picks one
+person to follow (``lift --person largest|confident|id:N``).
+
+Who is who (:class:`PersonTracker`)
+===================================
+Tracking is part of the input step, on 2D keypoints, because that is where identity is
+visible: a person's keypoints move a little between frames, his size in the image says
+how far away he is, and nothing downstream can repair a swap (a lifter window holding
+two people's frames lifts neither). Each track predicts its keypoints at constant image
+velocity; a detection is matched to the track whose prediction is nearest, in units of the
+track's size in the image (so the same gate holds near and far), plus a penalty for a
+change of apparent size (two people crossing at different distances differ in size). Pairs
+are matched greedily, cheapest first (a handful of people: greedy equals the optimal
+assignment almost always, and needs no solver on the box). A track unseen for up to
+``max_lost_s`` keeps its id and is matched again within a gate that grows with the time it
+was gone (a person occluded while crossing, or leaving the image and coming back); the
+exporter's own id, when it sends one, is kept as ``source_id`` but never trusted over the
+motion (exporters reuse ids).
 
 Camera models (:class:`CameraModel`)
 ====================================
@@ -78,14 +96,16 @@ as VideoPose3D does (:func:`normalize_screen`): ``u/w*2 - 1``, ``v/w*2 - h/w``.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator, Sequence
 
 import numpy as np
 
+from edge_runtime import config
 from edge_runtime.core import strict_json
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
@@ -251,7 +271,9 @@ class Person:
     keypoints: np.ndarray
     """(J, 3) x, y (pixels), score; J is 17 unless the source sent fewer."""
     id: int | None = None
-    """The exporter's track id, when it has one."""
+    """The exporter's track id, when it has one; after :class:`PersonTracker`, the tracker's id."""
+    source_id: int | None = None
+    """After :class:`PersonTracker`: the exporter's id (None when it sent none)."""
 
 
 @dataclass
@@ -397,6 +419,139 @@ class PersonSelector:
         if self.mode == "track":
             self.track_id = best.id
         return best
+
+
+# ---------------------------------------------------------------------------- who is who
+
+
+@config.section("people")
+@dataclass(frozen=True)
+class PeopleTrackParams:
+    """Stable ids for every person seen ([people] in the box configuration)."""
+
+    min_joints: int = config.setting(5, config.within(1, 17))
+    """A detection needs this many keypoints seen (score >= ``min_score``) to be a person."""
+    min_score: float = config.setting(0.3, config.within(0, 1))
+    """A keypoint scoring below this does not count for tracking (the lifter's threshold)."""
+    gate: float = config.setting(0.6, config.POSITIVE)
+    """A detection may join a track whose predicted keypoints are at most this far on average,
+    in units of the track's size in the image (its keypoints' bounding-box diagonal)."""
+    gate_growth_per_s: float = config.setting(0.5, config.NON_NEGATIVE)
+    """The gate of a track not seen for a while grows by this much per second unseen (where he
+    reappears is less certain the longer he was hidden)."""
+    size_weight: float = config.setting(0.5, config.NON_NEGATIVE)
+    """Cost of a change in apparent size: this times |ln(size now / size before)|."""
+    max_lost_s: float = config.setting(3.0, config.POSITIVE)
+    """A track unseen this long (s) is forgotten; a person back within it keeps his id."""
+    max_predict_s: float = config.setting(0.5, config.POSITIVE)
+    """Constant-velocity prediction runs at most this far (s) past the last sighting; a person
+    hidden longer is looked for where he was last predicted."""
+    velocity_smoothing: float = config.setting(0.5, config.within(0, 1))
+    """Weight of the newest image velocity in the track's smoothed velocity."""
+
+
+@dataclass
+class _Track:
+    id: int
+    xy: np.ndarray
+    """(J, 2) the last keypoints seen (NaN: not seen then)."""
+    size_px: float
+    t_s: float
+    velocity_pxps: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    def predicted(self, t_s: float, max_predict_s: float) -> np.ndarray:
+        return self.xy + self.velocity_pxps * min(t_s - self.t_s, max_predict_s)
+
+
+def _seen(kp: np.ndarray, min_score: float) -> np.ndarray:
+    return np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= min_score)
+
+
+class PersonTracker:
+    """Stable ids for the people of successive frames (see "Who is who" in the module docstring).
+
+        tracker = PersonTracker()
+        people = tracker.update(frame.t_s, frame.people)   # the same Person objects' data, id = track id
+    """
+
+    def __init__(self, params: PeopleTrackParams = PeopleTrackParams()):
+        self.params = params
+        self.tracks: dict[int, _Track] = {}
+        self._ids = itertools.count()
+        self.created = 0
+        """Tracks started (ids handed out)."""
+        self.rejected = 0
+        """Detections with fewer than ``min_joints`` keypoints seen (not people)."""
+
+    def update(self, t_s: float, people: Sequence[Person]) -> list[Person]:
+        """The people of the frame at ``t_s`` with track ids (in the order given; detections
+        that are not people are left out). Tracks unseen for ``max_lost_s`` are forgotten."""
+        p = self.params
+        for tid in [k for k, tr in self.tracks.items() if t_s - tr.t_s > p.max_lost_s or t_s < tr.t_s]:
+            del self.tracks[tid]  # gone too long, or the clock went back: a new stream
+        dets = []
+        for person in people:
+            kp = np.asarray(person.keypoints, float)
+            if kp.ndim != 2 or kp.shape[1] != 3 or _seen(kp, p.min_score).sum() < p.min_joints:
+                self.rejected += 1
+                continue
+            dets.append((person, kp))
+        costs = sorted((self._cost(tr, kp, t_s), tid, i) for tid, tr in self.tracks.items()
+                       for i, (_, kp) in enumerate(dets))
+        assigned: dict[int, int] = {}
+        taken: set[int] = set()
+        for cost, tid, i in costs:
+            if math.isfinite(cost) and i not in assigned and tid not in taken:
+                assigned[i] = tid
+                taken.add(tid)
+        out = []
+        for i, (person, kp) in enumerate(dets):
+            tid = assigned.get(i)
+            if tid is None:
+                tid = next(self._ids)
+                self.created += 1
+                self.tracks[tid] = _Track(tid, np.where(_seen(kp, p.min_score)[:, None], kp[:, :2], np.nan),
+                                          _size_px(kp, p.min_score), t_s)
+            else:
+                self._follow(self.tracks[tid], kp, t_s)
+            out.append(replace(person, id=tid, source_id=person.id))
+        return out
+
+    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float) -> float:
+        """Mean distance of the detection's keypoints from the track's prediction, in track
+        sizes, plus the size-change penalty; inf beyond the gate or without common joints."""
+        p = self.params
+        if len(tr.xy) != len(kp):
+            return math.inf
+        pred = tr.predicted(t_s, p.max_predict_s)
+        both = _seen(kp, p.min_score) & np.isfinite(pred).all(axis=1)
+        if both.sum() < 2:
+            return math.inf
+        d = float(np.mean(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
+        if d > p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0):
+            return math.inf
+        return d + p.size_weight * abs(math.log(_size_px(kp, p.min_score) / tr.size_px))
+
+    def _follow(self, tr: _Track, kp: np.ndarray, t_s: float) -> None:
+        p = self.params
+        seen = _seen(kp, p.min_score)
+        dt = t_s - tr.t_s
+        both = seen & np.isfinite(tr.xy).all(axis=1)
+        if dt > 0 and both.any():
+            v = np.mean(kp[both, :2] - tr.xy[both], axis=0) / dt
+            a = p.velocity_smoothing
+            tr.velocity_pxps = a * v + (1 - a) * tr.velocity_pxps
+        # joints not seen now keep their last position, moved with the person
+        moved = tr.xy + tr.velocity_pxps * max(dt, 0.0)
+        tr.xy = np.where(seen[:, None], kp[:, :2], moved)
+        tr.size_px = _size_px(kp, p.min_score)
+        tr.t_s = t_s
+
+
+def _size_px(kp: np.ndarray, min_score: float) -> float:
+    """A person's size in the image: the diagonal of his seen keypoints' bounding box (px)."""
+    xy = kp[_seen(kp, min_score), :2]
+    return max(float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0))), 1.0)
 
 
 # ---------------------------------------------------------------------------- cameras

@@ -239,6 +239,19 @@ def test_recovers_a_known_depth_and_keeps_the_2d_projections(scale):
     assert off > 0.2 * abs(scale - 1) * np.linalg.norm(cam.to_camera(truth[HEAD]))
 
 
+def test_anchors_on_an_observed_ankle_not_a_held_one():
+    cam = Camera.look_at((0.0, 1.5, 6.0), (0.0, -0.2, 1.0))
+    cal = true_calibration(cam)
+    truth = anchored_worker((0.0, 1.5))
+    lifted = cam.to_camera(truth) * 1.15
+    lifted[L_ANKLE] *= 1.3                              # a held ankle on a stale ray, lower in the robot frame
+    observed = np.ones(17, bool)
+    observed[L_ANKLE] = False
+    robot = cal.to_robot(lifted, observed)
+    np.testing.assert_allclose(robot[R_ANKLE], truth[R_ANKLE], atol=1e-6)
+    assert np.abs(cal.to_robot(lifted)[R_ANKLE] - truth[R_ANKLE]).max() > 0.05  # the held one would move it
+
+
 def test_uses_the_lower_ankle_of_a_stride():
     cam = Camera.look_at((0.0, 1.5, 6.0), (0.0, -0.2, 1.0))
     cal = true_calibration(cam)
