@@ -113,6 +113,9 @@ _MODULE_COMMANDS = (
     ("hrc", "scenarios.hrc", "closed-loop collision-avoidance scenarios: worker, camera, runtime, Sawyer"),
     ("gola", "scenarios.gola", "chapter 4's posture experiment: GOLA-HRC on a simulated cohort"),
     ("head-error", "scenarios.head_error", "head position error in the robot frame after calibration, through the lifter"),
+    ("record", "scenarios.recording", "a ready-to-use recording: several people's COCO keypoints, camera, calibration walk, truth"),
+    ("score-lift", "scenarios.lift_score", "a lift's output against a recording's truth: reprojection, MPJPE per motion type"),
+    ("crossings", "scenarios.crossings", "people crossing in front of the camera: how often the tracker keeps the right id"),
 )
 
 

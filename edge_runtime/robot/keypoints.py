@@ -77,10 +77,10 @@ visible: a person's keypoints move a little between frames, his size in the imag
 how far away he is, and nothing downstream can repair a swap (a lifter window holding
 two people's frames lifts neither). Each track predicts its keypoints at constant image
 velocity; a detection is matched to the track whose prediction is nearest, in units of the
-track's size in the image (so the same gate holds near and far), plus a penalty for a
-change of apparent size (two people crossing at different distances differ in size). Pairs
-are matched greedily, cheapest first (a handful of people: greedy equals the optimal
-assignment almost always, and needs no solver on the box). A track unseen for up to
+track's size in the image (so the same gate holds near and far; the size comes from his bones,
+so a half-hidden person keeps his). The assignment with the most pairs
+and the least cost is searched exhaustively for up to four people in a frame (greedy beyond:
+no solver on the box). A track unseen for up to
 ``max_lost_s`` keeps its id and is matched again within a gate that grows with the time it
 was gone (a person occluded while crossing, or leaving the image and coming back); the
 exporter's own id, when it sends one, is kept as ``source_id`` but never trusted over the
@@ -106,6 +106,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from edge_runtime import config
+from edge_runtime.core import skeleton as sk
 from edge_runtime.core import strict_json
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
@@ -429,8 +430,10 @@ class PersonSelector:
 class PeopleTrackParams:
     """Stable ids for every person seen ([people] in the box configuration)."""
 
-    min_joints: int = config.setting(5, config.within(1, 17))
-    """A detection needs this many keypoints seen (score >= ``min_score``) to be a person."""
+    min_joints: int = config.setting(8, config.within(1, 17))
+    """A detection needs this many keypoints seen (score >= ``min_score``) to be tracked: a
+    sliver of a half-hidden person matches anyone nearby (fewer than 8 mixed people up in
+    ``python -m firmware_sim crossings``)."""
     min_score: float = config.setting(0.3, config.within(0, 1))
     """A keypoint scoring below this does not count for tracking (the lifter's threshold)."""
     gate: float = config.setting(0.6, config.POSITIVE)
@@ -439,14 +442,12 @@ class PeopleTrackParams:
     gate_growth_per_s: float = config.setting(0.5, config.NON_NEGATIVE)
     """The gate of a track not seen for a while grows by this much per second unseen (where he
     reappears is less certain the longer he was hidden)."""
-    size_weight: float = config.setting(0.5, config.NON_NEGATIVE)
-    """Cost of a change in apparent size: this times |ln(size now / size before)|."""
     max_lost_s: float = config.setting(3.0, config.POSITIVE)
     """A track unseen this long (s) is forgotten; a person back within it keeps his id."""
-    max_predict_s: float = config.setting(0.5, config.POSITIVE)
+    max_predict_s: float = config.setting(1.5, config.POSITIVE)
     """Constant-velocity prediction runs at most this far (s) past the last sighting; a person
     hidden longer is looked for where he was last predicted."""
-    velocity_smoothing: float = config.setting(0.5, config.within(0, 1))
+    velocity_smoothing: float = config.setting(0.15, config.within(0, 1))
     """Weight of the newest image velocity in the track's smoothed velocity."""
 
 
@@ -474,8 +475,11 @@ class PersonTracker:
         people = tracker.update(frame.t_s, frame.people)   # the same Person objects' data, id = track id
     """
 
-    def __init__(self, params: PeopleTrackParams = PeopleTrackParams()):
+    def __init__(self, params: PeopleTrackParams = PeopleTrackParams(), keypoint_format: str = "coco"):
+        if keypoint_format not in FORMATS:
+            raise ValueError(f"keypoint format {keypoint_format!r}: one of {', '.join(FORMATS)}")
         self.params = params
+        self.keypoint_format = keypoint_format
         self.tracks: dict[int, _Track] = {}
         self._ids = itertools.count()
         self.created = 0
@@ -492,18 +496,16 @@ class PersonTracker:
         dets = []
         for person in people:
             kp = np.asarray(person.keypoints, float)
-            if kp.ndim != 2 or kp.shape[1] != 3 or _seen(kp, p.min_score).sum() < p.min_joints:
+            if kp.shape not in ((N_JOINTS, 2), (N_JOINTS, 3)):
+                self.rejected += 1
+                continue
+            kp = to_h36m(kp, self.keypoint_format)  # tracked on the lifter's joints: one set of bones
+            if _seen(kp, p.min_score).sum() < p.min_joints:
                 self.rejected += 1
                 continue
             dets.append((person, kp))
-        costs = sorted((self._cost(tr, kp, t_s), tid, i) for tid, tr in self.tracks.items()
-                       for i, (_, kp) in enumerate(dets))
-        assigned: dict[int, int] = {}
-        taken: set[int] = set()
-        for cost, tid, i in costs:
-            if math.isfinite(cost) and i not in assigned and tid not in taken:
-                assigned[i] = tid
-                taken.add(tid)
+        assigned = _assign({(tid, i): self._cost(tr, kp, t_s) for tid, tr in self.tracks.items()
+                            for i, (_, kp) in enumerate(dets)})
         out = []
         for i, (person, kp) in enumerate(dets):
             tid = assigned.get(i)
@@ -519,7 +521,9 @@ class PersonTracker:
 
     def _cost(self, tr: _Track, kp: np.ndarray, t_s: float) -> float:
         """Mean distance of the detection's keypoints from the track's prediction, in track
-        sizes, plus the size-change penalty; inf beyond the gate or without common joints."""
+        sizes; inf beyond the gate or without common joints. (Apparent size is no cue: at a real
+        detector's noise it varies 13 % from frame to frame, as much as between two people
+        crossing, and weighing it mixed more people up in ``firmware_sim crossings``.)"""
         p = self.params
         if len(tr.xy) != len(kp):
             return math.inf
@@ -530,7 +534,7 @@ class PersonTracker:
         d = float(np.mean(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
         if d > p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0):
             return math.inf
-        return d + p.size_weight * abs(math.log(_size_px(kp, p.min_score) / tr.size_px))
+        return d
 
     def _follow(self, tr: _Track, kp: np.ndarray, t_s: float) -> None:
         p = self.params
@@ -548,9 +552,58 @@ class PersonTracker:
         tr.t_s = t_s
 
 
+_BONES = ((L_SHOULDER, sk.L_HIP, 0.288), (R_SHOULDER, sk.R_HIP, 0.288), (sk.L_HIP, sk.L_KNEE, 0.245),
+          (sk.R_HIP, sk.R_KNEE, 0.245), (sk.L_KNEE, sk.L_ANKLE, 0.246), (sk.R_KNEE, sk.R_ANKLE, 0.246),
+          (L_SHOULDER, sk.L_ELBOW, 0.186), (R_SHOULDER, sk.R_ELBOW, 0.186), (sk.L_ELBOW, sk.L_WRIST, 0.146),
+          (sk.R_ELBOW, sk.R_WRIST, 0.146))
+"""(H36M joint, H36M joint, length as a fraction of body height; docs/design.md section 5)."""
+
+
+MAX_EXACT_ASSIGNMENT = 4
+"""Up to this many detections in a frame the best assignment is searched exhaustively (at most
+5^4 cases); beyond (a crowd), pairs are taken greedily, cheapest first."""
+
+
+def _assign(costs: dict[tuple[int, int], float]) -> dict[int, int]:
+    """Detection index -> track id over the finite-cost (gated) pairs: as many pairs as
+    possible, and of those the least total cost."""
+    pairs = {k: c for k, c in costs.items() if math.isfinite(c)}
+    dets = sorted({d for _, d in pairs})
+    if len(dets) > MAX_EXACT_ASSIGNMENT:
+        assigned: dict[int, int] = {}
+        for (tid, i), _ in sorted(pairs.items(), key=lambda kv: kv[1]):
+            if i not in assigned and tid not in assigned.values():
+                assigned[i] = tid
+        return assigned
+    options = {d: [t for t, dd in pairs if dd == d] for d in dets}
+
+    def best(k: int, taken: frozenset) -> tuple[int, float, dict]:
+        if k == len(dets):
+            return 0, 0.0, {}
+        d = dets[k]
+        n, c, m = best(k + 1, taken)                     # detection d starts a new track
+        result = (n, c, m)
+        for t in options[d]:
+            if t not in taken:
+                n, c, m = best(k + 1, taken | {t})
+                n, c = n + 1, c + pairs[(t, d)]
+                if (n, -c) > (result[0], -result[1]):
+                    result = (n, c, {**m, d: t})
+        return result
+
+    return best(0, frozenset())[2]
+
+
 def _size_px(kp: np.ndarray, min_score: float) -> float:
-    """A person's size in the image: the diagonal of his seen keypoints' bounding box (px)."""
-    xy = kp[_seen(kp, min_score), :2]
+    """A person's size in the image (px), whichever of his joints are seen: the largest body
+    height his seen bones imply (bone length / its fraction of the height; the largest,
+    because a bone seen end-on looks short, never long), else his keypoints' box diagonal.
+    A partly hidden person so keeps his size (a box of his visible joints would shrink)."""
+    seen = _seen(kp, min_score)
+    heights = [np.linalg.norm(kp[a, :2] - kp[b, :2]) / frac for a, b, frac in _BONES if seen[a] and seen[b]]
+    if len(heights) >= 2:
+        return max(float(np.sort(heights)[-2]), 1.0)  # the second largest: one bad keypoint cannot inflate it
+    xy = kp[seen, :2]
     return max(float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0))), 1.0)
 
 

@@ -82,7 +82,7 @@ Several people
 memory and clock: one :class:`StreamingLifter` per id, all sharing one onnxruntime
 session and one :class:`LifterStats`. A person's window only ever holds his own frames;
 a person who is not in a frame is not pushed (he is absent, not "missing joints"), and
-his lifter is dropped once the tracker has forgotten him.
+his lifter is dropped after ``lost_timeout_s`` without him.
 """
 from __future__ import annotations
 
@@ -490,17 +490,19 @@ class PeopleLifter:
     def stats(self) -> LifterStats:
         return self.template.stats
 
-    def push(self, t_s: float, people, keep_ids=None) -> list[tuple[int, LiftedPose]]:
-        """Lift each person (objects with ``id`` and ``keypoints``) with his own window; the
-        lifters of ids not in ``keep_ids`` (default: the ids of this frame) are dropped."""
+    def push(self, t_s: float, people) -> list[tuple[int, LiftedPose]]:
+        """Lift each person (objects with ``id`` and ``keypoints``) with his own window. A
+        person absent for longer than ``lost_timeout_s`` loses his lifter (his window would
+        be reset anyway); a shorter absence is bridged like any hole."""
         out = []
         for person in people:
             lifter = self.lifters.get(person.id)
             if lifter is None:
                 lifter = self.lifters[person.id] = self.template.sibling()
             out.append((person.id, lifter.push(t_s, person.keypoints)))
-        keep = {p.id for p in people} if keep_ids is None else set(keep_ids)
-        for pid in [k for k in self.lifters if k not in keep]:
+        timeout = self.template.params.lost_timeout_s
+        for pid in [k for k, lf in self.lifters.items() if lf._last_t is None or not
+                    (t_s - timeout <= lf._last_t <= t_s)]:
             del self.lifters[pid]
         return out
 

@@ -352,5 +352,7 @@ def test_people_lifter_gives_each_person_his_own_window(assets):
         both = people.push(i * PERIOD, [Person(a[i], 7), Person(b[i], 9)] if i % 3 != 2 else [Person(a[i], 7)])
         want = alone.push(i * PERIOD, a[i])
         np.testing.assert_allclose(dict(both)[7].joints_cam_m, want.joints_cam_m, atol=1e-6)
-    assert set(people.lifters) == {7}  # 9 was not in the last frame: his lifter is dropped
-    assert people.stats.frames == 30 + 20
+    assert set(people.lifters) == {7, 9}  # 9 missed the last frame only: his window waits for him
+    people.push(30 * PERIOD + 0.6, [Person(a[0], 7)])
+    assert set(people.lifters) == {7}  # gone longer than lost_timeout_s (0.5 s): dropped
+    assert people.stats.frames == 31 + 20
