@@ -356,6 +356,9 @@ def fit(head_cam_m, ankle_cam_m, params: CalibrationParams = CalibrationParams()
     if params.method == "eq2":
         A, b = _fit_eq2(heads, ankles, head_r, ankle_r)
     elif params.method == "pnp":
+        if not params.worker_height_m:  # the rays say how tall he is better than the lifter's depth
+            height = _pnp_height(heads, ankles, params, height)
+            head_r, ankle_r = targets(params, height)
         A, b = _fit_pnp(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]))
     else:
         A, b = _fit_similarity(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]), params.scale)
@@ -387,6 +390,35 @@ def _fit_eq2(heads, ankles, head_r, ankle_r) -> tuple[np.ndarray, np.ndarray]:
     # rows: rob_i = A cam_i  ->  rob = cam A^T
     A = np.linalg.solve(cam, rob).T
     return A, ankle_r[0] - A @ ankles[0]
+
+
+PNP_HEIGHTS_M = np.arange(1.1, 2.11, 0.01)
+"""Worker heights (head joint above the ankle midpoint, m) the pnp fit tries when measuring."""
+
+
+def _pnp_height(heads, ankles, params: CalibrationParams, guess_m: float) -> float:
+    """L_y for the pnp fit from the six rays alone: the height whose marker targets the rays fit
+    best (the least squared reprojection error in normalised image coordinates). The ankles lie
+    at known floor points, so the heads' rays above them fix how tall the worker is; the lifter's
+    depth, which the similarity-corrected measure relies on, is not used."""
+    import cv2
+
+    src = np.vstack([heads, ankles])
+    uv = src[:, :2] / src[:, 2:3]
+    best = (np.inf, guess_m)
+    for h in PNP_HEIGHTS_M:
+        head_r, ankle_r = targets(params, float(h))
+        dst = np.vstack([head_r, ankle_r])
+        try:
+            A, b = _fit_pnp(src, dst)
+        except CalibrationError:
+            continue
+        R = A.T
+        proj, _ = cv2.projectPoints(dst.reshape(-1, 1, 3), cv2.Rodrigues(R)[0], -R @ b, np.eye(3), None)
+        err = float(((proj.reshape(-1, 2) - uv) ** 2).sum())
+        if err < best[0]:
+            best = (err, float(h))
+    return best[1]
 
 
 def _fit_pnp(src, dst) -> tuple[np.ndarray, np.ndarray]:
@@ -429,18 +461,24 @@ def segment_stands(t_s, ankle_cam_m, params: CalibrationParams = CalibrationPara
     A frame is standing when the medians of the ankle midpoint over the half second
     before it and the half second after it are less than ``still_speed_mps * 0.5 s``
     apart (medians, so keypoint noise and outliers do not break a stand); standing runs
-    shorter than ``still_min_s`` are dropped.
+    shorter than ``still_min_s`` are dropped. The distance is measured across the viewing
+    ray (the ankle's direction, (x/z, y/z), times its median depth): the lifter's depth
+    jitters by decimetres from frame to frame at a real detector's noise, its rays do not
+    (they are the keypoints), and a worker walking between markers moves across the image.
     """
     t = np.asarray(t_s, float)
     a = np.asarray(ankle_cam_m, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ray = a[:, :2] / a[:, 2:3]
     half = 0.5
     still = np.zeros(len(t), bool)
+    ok = np.isfinite(ray).all(axis=1) & (a[:, 2] > 0)
     for i, ti in enumerate(t):
-        before = a[(t > ti - half) & (t <= ti)]
-        after = a[(t >= ti) & (t < ti + half)]
-        before, after = before[np.isfinite(before).all(axis=1)], after[np.isfinite(after).all(axis=1)]
-        if len(before) >= 3 and len(after) >= 3:
-            moved = np.linalg.norm(np.median(after, axis=0) - np.median(before, axis=0))
+        before = ok & (t > ti - half) & (t <= ti)
+        after = ok & (t >= ti) & (t < ti + half)
+        if before.sum() >= 3 and after.sum() >= 3:
+            depth_m = float(np.median(a[before | after, 2]))
+            moved = np.linalg.norm(np.median(ray[after], axis=0) - np.median(ray[before], axis=0)) * depth_m
             still[i] = moved < params.still_speed_mps * half
     runs, start = [], None
     for i, s in enumerate(np.append(still, False)):

@@ -32,10 +32,10 @@ BAD_INPUT = (OSError,)
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--recording", required=True, metavar="DIR", help="a firmware_sim record directory")
-    parser.add_argument("--lifted", required=True, metavar="LIFTED.jsonl",
-                        help="python -m edge_runtime lift --person all output for DIR/keypoints.jsonl")
-    parser.add_argument("--keypoints", metavar="KP.jsonl", help="the lifted keypoints [DIR/keypoints.jsonl]")
+    parser.add_argument("--recording", required=True, nargs="+", metavar="DIR",
+                        help="firmware_sim record directories (their figures are pooled)")
+    parser.add_argument("--lifted", required=True, nargs="+", metavar="LIFTED.jsonl",
+                        help="python -m edge_runtime lift --person all output for each DIR/keypoints.jsonl")
     parser.add_argument("--json", metavar="OUT.json", help="write the figures here")
 
 
@@ -73,14 +73,31 @@ def _read_jsonl(path: Path) -> list[dict]:
     return out
 
 
-def score(recording: Path, lifted: Path, keypoints: Path | None = None) -> dict:
-    """The figures of the module docstring, as a dict."""
+def score(recordings: list[Path], lifted: list[Path]) -> dict:
+    """The figures of the module docstring, as a dict, pooled over the recordings."""
+    rows, frames, persons = [], 0, 0
+    for rec, lift in zip(recordings, lifted):
+        r, f, p = _rows(rec, lift)
+        rows += r
+        frames += f
+        persons += p
+    if not rows:
+        raise CliError(f"{', '.join(map(str, lifted))}: no valid lifted person past warm-up matched the truth")
+    out = {"lifted": list(map(str, lifted)), "recordings": list(map(str, recordings)), "frames": frames,
+           "person_frames": persons, "scored_person_frames": len(rows), "all": _figures(rows), "by_motion": {}}
+    for motion in sorted({r[0] for r in rows}):
+        out["by_motion"][motion] = _figures([r for r in rows if r[0] == motion])
+    return out
+
+
+def _rows(recording: Path, lifted: Path) -> tuple[list, int, int]:
+    """Per scored person-frame (motion, reprojection errors px, errors mm...); frames; person-frames."""
     import cv2
 
     cam_d = json.loads((recording / "camera.json").read_text())
     camera = CameraModel.from_dict(cam_d, str(recording / "camera.json"))
     truth = {row["frame"]: {p["id"]: p for p in row["people"]} for row in _read_jsonl(recording / "truth.jsonl")}
-    kp_path = keypoints or recording / "keypoints.jsonl"
+    kp_path = recording / "keypoints.jsonl"
     observed_2d = {f.frame: {p.id: to_h36m(p.keypoints, "coco") for p in f.people}
                    for f in read_keypoints_jsonl(kp_path, "coco")}
     rows = []  # (motion, reprojection errors px (observed joints), mpjpe mm, p-mpjpe mm, root mm)
@@ -106,13 +123,7 @@ def score(recording: Path, lifted: Path, keypoints: Path | None = None) -> dict:
             reproj = np.linalg.norm(img.reshape(17, 2)[obs] - seen_2d[obs, :2], axis=1)
             model = np.asarray(p.get("joints_model_cam_m", j), float)
             rows.append((true["motion"], reproj, *_errors_mm(j, tj), *_errors_mm(model, tj)[:2]))
-    if not rows:
-        raise CliError(f"{lifted}: no valid lifted person past warm-up matched the truth")
-    out = {"lifted": str(lifted), "recording": str(recording), "frames": frames, "person_frames": persons,
-           "scored_person_frames": len(rows), "all": _figures(rows), "by_motion": {}}
-    for motion in sorted({r[0] for r in rows}):
-        out["by_motion"][motion] = _figures([r for r in rows if r[0] == motion])
-    return out
+    return rows, frames, persons
 
 
 def _figures(rows) -> dict:
@@ -127,11 +138,14 @@ def _figures(rows) -> dict:
 
 
 def cmd(args) -> int:
-    rec = Path(args.recording)
-    for name in ("camera.json", "truth.jsonl"):
-        if not (rec / name).is_file():
-            raise CliError(f"--recording {rec}: no {name} (make one with python -m firmware_sim record)")
-    res = score(rec, Path(args.lifted), Path(args.keypoints) if args.keypoints else None)
+    if len(args.recording) != len(args.lifted):
+        raise CliError(f"{len(args.recording)} --recording directories but {len(args.lifted)} --lifted files")
+    recs = [Path(r) for r in args.recording]
+    for rec in recs:
+        for name in ("camera.json", "truth.jsonl", "keypoints.jsonl"):
+            if not (rec / name).is_file():
+                raise CliError(f"--recording {rec}: no {name} (make one with python -m firmware_sim record)")
+    res = score(recs, [Path(x) for x in args.lifted])
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1) + "\n")
     print(f"{'motion':<12} {'n':>6} {'reproj px med/p95':>18} {'MPJPE mm':>9} {'P-MPJPE mm':>11} "

@@ -317,3 +317,15 @@ def test_old_calibration_files_still_load(tmp_path):
     assert loaded.params == CalibrationParams() and np.allclose(loaded.A, cam.R.T)
     with pytest.raises(ValueError, match="anchor_min_scale"):
         CalibrationParams(anchor_min_scale=1.2)
+
+
+def test_pnp_measures_the_worker_from_the_rays_not_the_lifters_depth():
+    from edge_runtime.robot.calibration import targets
+
+    cam = Camera.look_at((2.5, 1.6, 6.5), (0.0, -0.2, 1.0))
+    params = CalibrationParams(method="pnp")
+    heads, ankles = targets(params, 1.62)
+    depth_wrong = np.array([1.25, 0.9, 1.1])[:, None]           # the lifter misjudged each stand's depth
+    cal = fit(cam.to_camera(heads) * depth_wrong, cam.to_camera(ankles) * depth_wrong, params)
+    assert cal.worker_height_m == pytest.approx(1.62, abs=0.011)
+    np.testing.assert_allclose(cal.b, cam.position_m, atol=0.02)  # the camera centre, from the rays alone
