@@ -117,7 +117,7 @@ def _rows(recording: Path, lifted: Path) -> tuple[list, int, int]:
             if true is None or seen_2d is None:
                 continue
             j = np.asarray(p["joints_cam_m"], float)
-            tj = np.asarray(true["joints_cam_m"], float)
+            tj = np.asarray(true["camera_joints_m"], float)
             obs = np.asarray(p["observed"], bool)
             img, _ = cv2.projectPoints(j, np.zeros(3), np.zeros(3), camera.K, camera.dist_array)
             reproj = np.linalg.norm(img.reshape(17, 2)[obs] - seen_2d[obs, :2], axis=1)

@@ -16,7 +16,9 @@ barrel distortion, 30 Hz):
 * ``DIR/calibration.jsonl`` -- one worker walking onto the three floor markers and standing 3 s
   on each (``python -m edge_runtime robot --keypoints ... --calibrate CAL.json``);
 * ``DIR/truth.jsonl`` -- per frame and person: ``id``, ``motion`` (the motion type),
-  ``joints_robot_m`` and ``joints_cam_m`` (H36M-17, metres);
+  ``joints_robot_m`` and ``camera_joints_m`` (H36M-17, metres): the form ``python -m
+  edge_runtime robot --joints`` reads, so the decision chain can also be replayed on the truth
+  (``robot --link none --fast --joints DIR/truth.jsonl``);
 * ``DIR/recording.json`` -- what was simulated, and the commands to try next.
 
 Motion types (:data:`MOTIONS`), each an episode of a few seconds: ``walk``, ``run`` (2 m/s with
@@ -188,7 +190,7 @@ def write_truth(path: Path, camera: Camera, sessions: list[motions.Motion], t0_s
         for k in range(len(sessions[0])):
             f.write(json.dumps({"t": round(t0_s + k / RATE_HZ, 4), "frame": k, "people": [
                 {"id": i, "motion": str(s.labels[k]), "joints_robot_m": np.round(s.joints_m[k], 4).tolist(),
-                 "joints_cam_m": np.round(camera.to_camera(s.joints_m[k]), 4).tolist()}
+                 "camera_joints_m": np.round(camera.to_camera(s.joints_m[k]), 4).tolist()}
                 for i, s in enumerate(sessions)]}) + "\n")
 
 

@@ -61,3 +61,16 @@ def test_every_motion_type_makes_an_episode(kind):
     rng = np.random.default_rng(0)
     m = episode(kind, random_body(rng), (0.0, 3.0), 0.0, (2.0, 4.0), rng)
     assert len(m) > 30 and set(m.labels) == {kind} and np.isfinite(m.joints_m).all()
+
+
+def test_the_truth_replays_through_the_decision_chain_with_heads_as_given(recording, tmp_path):
+    log = tmp_path / "truth_replay.jsonl"
+    assert runtime(["robot", "--link", "none", "--fast", "--joints", str(recording / "truth.jsonl"), "--log",
+                    str(log), "--quiet"]) == 0
+    truth = [json.loads(x) for x in (recording / "truth.jsonl").read_text().splitlines()]
+    frames = [json.loads(x) for x in log.read_text().splitlines()][:-1]
+    assert len(frames) == len(truth)
+    for row, rec in zip(truth, frames):
+        got = {p["id"]: p["head_robot_m"] for p in rec["people"]}
+        for p in row["people"]:
+            assert np.abs(np.subtract(got[p["id"]], p["joints_robot_m"][10])).max() <= 1e-3
