@@ -73,18 +73,19 @@ person to follow (``lift --person largest|confident|id:N``).
 Who is who (:class:`PersonTracker`)
 ===================================
 Tracking is part of the input step, on 2D keypoints, because that is where identity is
-visible: a person's keypoints move a little between frames, his size in the image says
-how far away he is, and nothing downstream can repair a swap (a lifter window holding
+visible: a person's keypoints move a little between frames,
+and nothing downstream can repair a swap (a lifter window holding
 two people's frames lifts neither). Each track predicts its keypoints at constant image
-velocity; a detection is matched to the track whose prediction is nearest, in units of the
-track's size in the image (so the same gate holds near and far; the size comes from his bones,
-so a half-hidden person keeps his). The assignment with the most pairs
-and the least cost is searched exhaustively for up to four people in a frame (greedy beyond:
-no solver on the box). A track unseen for up to
-``max_lost_s`` keeps its id and is matched again within a gate that grows with the time it
-was gone (a person occluded while crossing, or leaving the image and coming back); the
-exporter's own id, when it sends one, is kept as ``source_id`` but never trusted over the
-motion (exporters reuse ids).
+velocity; a detection is matched to the track whose prediction is nearest (the median over the
+joints, in units of the track's size in the image, so the same gate holds near and far; the
+size comes from his bones, so a half-hidden person keeps his). The assignment with the most
+pairs and the least cost is searched exhaustively for up to four people in a frame (greedy
+beyond: no solver on the box). A track unseen for up to ``max_lost_s`` keeps its id and is
+matched again within a gate that grows with the time it was gone (a person occluded while
+crossing, or leaving the image and coming back); the exporter's own id, when it sends one, is
+kept as ``source_id`` but never trusted over the motion (exporters reuse ids). Detections with
+fewer than ``min_joints`` keypoints are not tracked. Measured by ``python -m firmware_sim
+crossings`` (reports/lifter/perception.md).
 
 Camera models (:class:`CameraModel`)
 ====================================
@@ -437,8 +438,8 @@ class PeopleTrackParams:
     min_score: float = config.setting(0.3, config.within(0, 1))
     """A keypoint scoring below this does not count for tracking (the lifter's threshold)."""
     gate: float = config.setting(0.6, config.POSITIVE)
-    """A detection may join a track whose predicted keypoints are at most this far on average,
-    in units of the track's size in the image (its keypoints' bounding-box diagonal)."""
+    """A detection may join a track whose predicted keypoints are at most this far (median over
+    the joints), in units of the track's size in the image (his height, from his bones)."""
     gate_growth_per_s: float = config.setting(0.5, config.NON_NEGATIVE)
     """The gate of a track not seen for a while grows by this much per second unseen (where he
     reappears is less certain the longer he was hidden)."""
@@ -520,7 +521,7 @@ class PersonTracker:
         return out
 
     def _cost(self, tr: _Track, kp: np.ndarray, t_s: float) -> float:
-        """Mean distance of the detection's keypoints from the track's prediction, in track
+        """Median distance of the detection's keypoints from the track's prediction, in track
         sizes; inf beyond the gate or without common joints. (Apparent size is no cue: at a real
         detector's noise it varies 13 % from frame to frame, as much as between two people
         crossing, and weighing it mixed more people up in ``firmware_sim crossings``.)"""
@@ -531,7 +532,8 @@ class PersonTracker:
         both = _seen(kp, p.min_score) & np.isfinite(pred).all(axis=1)
         if both.sum() < 2:
             return math.inf
-        d = float(np.mean(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
+        # the median: a swinging limb or one gross keypoint error must not decide who is who
+        d = float(np.median(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
         if d > p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0):
             return math.inf
         return d
