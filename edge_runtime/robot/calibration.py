@@ -238,12 +238,19 @@ class Calibration:
         return float(np.cbrt(abs(np.linalg.det(self.A))))
 
     def residuals_m(self) -> dict[str, list[float]]:
-        """Distance (m) between each transformed input and its marker target."""
+        """Distance (m) between each transformed input and its marker target; for ``pnp``, which
+        fits the rays and not the lifter's depths, the distance of each target from its ray."""
         heads, ankles = targets(self.params, self.worker_height_m)
-        return {
-            "head": np.linalg.norm(self.apply(self.head_cam_m) - heads, axis=1).round(4).tolist(),
-            "ankle": np.linalg.norm(self.apply(self.ankle_cam_m) - ankles, axis=1).round(4).tolist(),
-        }
+        return {"head": self._residual(self.head_cam_m, heads), "ankle": self._residual(self.ankle_cam_m, ankles)}
+
+    def _residual(self, cam_m: np.ndarray, target_m: np.ndarray) -> list[float]:
+        if self.method != "pnp":
+            return np.linalg.norm(self.apply(cam_m) - target_m, axis=1).round(4).tolist()
+        ray = cam_m @ self.A.T
+        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+        off = target_m - self.b
+        across = off - np.sum(off * ray, axis=1, keepdims=True) * ray
+        return np.linalg.norm(across, axis=1).round(4).tolist()
 
     def to_json(self) -> dict:
         return {

@@ -5,7 +5,7 @@
         [--calibration CAL.json] [--duration S] [--log OUT.jsonl]
     python -m edge_runtime robot --link none [--fast] (--keypoints KP.jsonl | --joints J.jsonl)
         [--calibration CAL.json] --log OUT.jsonl
-    python -m edge_runtime robot --joints|--keypoints RECORDING.jsonl --calibrate CAL.json
+    python -m edge_runtime robot --joints|--keypoints RECORDING.jsonl --calibrate CAL.json [--calibration-method pnp]
     python -m edge_runtime robot --config BOX.toml --print-config
 
 Inputs (one of):
@@ -81,7 +81,7 @@ from edge_runtime.cli import CliError, positive_float
 from edge_runtime.core import strict_json
 from edge_runtime.core.manifest import ManifestError
 from edge_runtime.errors import InputError
-from edge_runtime.robot.calibration import Calibration, CalibrationError
+from edge_runtime.robot.calibration import METHODS, Calibration, CalibrationError
 from edge_runtime.robot.keypoints import timestamp_s
 from edge_runtime.robot.link.options import add_bus_arguments
 
@@ -123,6 +123,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--intrinsics", metavar="CAM.json", help="the keypoints' camera model [camera] intrinsics")
     parser.add_argument("--calibration", metavar="CAL.json", help="camera -> robot calibration for camera-frame joints")
     parser.add_argument("--calibrate", metavar="OUT.json", help="run the 3-marker calibration on the recording, write it")
+    parser.add_argument("--calibration-method", choices=METHODS,
+                        help="the --calibrate fit [calibration] method (pnp: the camera pose from the rays alone)")
     parser.add_argument("--sizing", choices=("eq45", "iso15066"), help="zone sizing [zones] sizing")
     parser.add_argument("--duration", type=positive_float, metavar="S", help="stop after S seconds")
     parser.add_argument("--log", metavar="OUT.jsonl", help="one JSON object per frame, then a summary")
@@ -141,6 +143,7 @@ def effective_config(args):
     cfg = config.override(cfg, "robot_link", kind=kind, interface=args.can_interface, channel=args.can_channel,
                           host=args.can_host, port=args.can_port, serial=args.serial)
     cfg = config.override(cfg, "camera", pose_model=args.pose_model, intrinsics=args.intrinsics)
+    cfg = config.override(cfg, "calibration", method=args.calibration_method)
     return config.override(cfg, "zones", sizing=args.sizing)
 
 

@@ -329,3 +329,5 @@ def test_pnp_measures_the_worker_from_the_rays_not_the_lifters_depth():
     cal = fit(cam.to_camera(heads) * depth_wrong, cam.to_camera(ankles) * depth_wrong, params)
     assert cal.worker_height_m == pytest.approx(1.62, abs=0.011)
     np.testing.assert_allclose(cal.b, cam.position_m, atol=0.02)  # the camera centre, from the rays alone
+    r = cal.residuals_m()  # across the rays: the lifter's wrong depths are no residual of a ray fit
+    assert max(r["head"] + r["ankle"]) < 0.02

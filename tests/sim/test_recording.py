@@ -44,7 +44,8 @@ def test_lifted_joints_project_onto_their_keypoints_and_are_scored_per_motion(re
 def test_calibrate_then_replay_every_person_with_no_arm(recording, tmp_path, capsys):
     cal, log = tmp_path / "cal.json", tmp_path / "replay.jsonl"
     assert runtime(["robot", "--keypoints", str(recording / "calibration.jsonl"), "--intrinsics",
-                    str(recording / "camera.json"), "--calibrate", str(cal)]) == 0
+                    str(recording / "camera.json"), "--calibrate", str(cal), "--calibration-method", "pnp"]) == 0
+    assert json.loads(cal.read_text())["method"] == "pnp"
     assert runtime(["robot", "--link", "none", "--fast", "--keypoints", str(recording / "keypoints.jsonl"),
                     "--intrinsics", str(recording / "camera.json"), "--calibration", str(cal), "--log", str(log),
                     "--quiet"]) == 0
