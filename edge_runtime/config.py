@@ -32,7 +32,7 @@ from edge_runtime.errors import ConfigError
 
 BOX_SECTIONS: tuple[str, ...] = (
     "imu", "detector", "model", "alerts", "can",                        # the wearable
-    "robot_link", "camera", "camera_source", "calibration", "tracker",  # the robot side
+    "robot_link", "camera", "camera_source", "people", "calibration", "tracker",  # the robot side
     "zones", "robot_loop", "lifter",
     "cap", "gola",                                                      # posture
 )

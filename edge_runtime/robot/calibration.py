@@ -143,7 +143,8 @@ ANCHOR_CAMERA_LOW = "camera_low"
 ANCHOR_RAY_FLAT = "ray_flat"
 
 
-def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationParams()) -> tuple[float, str | None]:
+def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationParams(),
+                  observed=None) -> tuple[float, str | None]:
     """The floor re-anchoring of one lifted skeleton: ``(k, reason)``.
 
     ``joints_cam_m`` (17, 3) are camera-frame joints (m) and ``p_robot = A @ p_cam + b`` the
@@ -152,6 +153,10 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     viewing ray (every 2D projection is kept) and moves it in depth; ``k`` is chosen so that
     the lower ankle (lower in the robot frame: the foot on the ground mid-stride) lies
     ``ankle_height_m`` above the floor, then clamped to ``[anchor_min_scale, anchor_max_scale]``.
+    The lifter puts each joint on the ray of its keypoint (:mod:`edge_runtime.robot.lifter`), so
+    this slides the skeleton along the observed rays: the ankle's ray meets the floor, and the
+    head stays on its own ray. ``observed`` (17,) bool, when given, restricts the choice to the
+    ankles seen in this frame (a held ankle's ray is an old one); with none seen, both count.
 
     ``k`` is 1 with a reason when the anchoring cannot be trusted: ``no_ankle`` (no finite
     ankle), ``camera_low`` (camera centre less than ``anchor_min_camera_height_m`` above the
@@ -163,6 +168,9 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     ankles = j[[L_ANKLE, R_ANKLE]]
     rays = ankles @ A.T                                  # camera centre -> ankle, robot frame
     ok = np.isfinite(rays).all(axis=1)
+    if observed is not None:
+        seen = ok & np.asarray(observed, bool)[[L_ANKLE, R_ANKLE]]
+        ok = seen if seen.any() else ok
     if not ok.any():
         return 1.0, ANCHOR_NO_ANKLE
     ray = rays[ok][np.argmin(rays[ok, 1])]               # the lower ankle
@@ -200,7 +208,7 @@ class Calibration:
         """The camera centre (the camera frame's origin) in the robot frame (m)."""
         return self.b.copy()
 
-    def anchor_to_floor(self, joints_cam_m) -> tuple[np.ndarray, bool]:
+    def anchor_to_floor(self, joints_cam_m, observed=None) -> tuple[np.ndarray, bool]:
         """Robot-frame joints (17, 3) of one camera-frame skeleton re-anchored on the floor
         (:func:`anchor_factor`: scaled about the camera centre so its lower ankle is
         ``ankle_height_m`` above the floor), and whether the anchoring applied (False: a
@@ -209,17 +217,20 @@ class Calibration:
         j = np.asarray(joints_cam_m, float)
         if not self.params.ground_anchor:
             return self.apply(j), False
-        k, reason = anchor_factor(j, self.A, self.b, self.params)
+        k, reason = anchor_factor(j, self.A, self.b, self.params, observed)
         return self.apply(k * j), reason is None
 
-    def to_robot(self, joints_cam_m) -> np.ndarray:
+    def to_robot(self, joints_cam_m, observed=None) -> np.ndarray:
         """Robot-frame joints of camera-frame skeletons (17, 3) or (P, 17, 3): each one
-        re-anchored on the floor when ``params.ground_anchor`` is on, else :meth:`apply`."""
+        re-anchored on the floor when ``params.ground_anchor`` is on, else :meth:`apply`.
+        ``observed`` ((17,) or (P, 17) bool, optional): the joints seen in this frame, so the
+        anchoring uses an observed ankle's ray (:func:`anchor_factor`)."""
         j = np.asarray(joints_cam_m, float)
         if not self.params.ground_anchor or j.shape[-2:] != (17, 3):
             return self.apply(j)
         flat = j.reshape(-1, 17, 3)
-        return np.stack([self.anchor_to_floor(p)[0] for p in flat]).reshape(j.shape)
+        seen = [None] * len(flat) if observed is None else np.asarray(observed, bool).reshape(-1, 17)
+        return np.stack([self.anchor_to_floor(p, o)[0] for p, o in zip(flat, seen)]).reshape(j.shape)
 
     @property
     def scale(self) -> float:
@@ -227,12 +238,19 @@ class Calibration:
         return float(np.cbrt(abs(np.linalg.det(self.A))))
 
     def residuals_m(self) -> dict[str, list[float]]:
-        """Distance (m) between each transformed input and its marker target."""
+        """Distance (m) between each transformed input and its marker target; for ``pnp``, which
+        fits the rays and not the lifter's depths, the distance of each target from its ray."""
         heads, ankles = targets(self.params, self.worker_height_m)
-        return {
-            "head": np.linalg.norm(self.apply(self.head_cam_m) - heads, axis=1).round(4).tolist(),
-            "ankle": np.linalg.norm(self.apply(self.ankle_cam_m) - ankles, axis=1).round(4).tolist(),
-        }
+        return {"head": self._residual(self.head_cam_m, heads), "ankle": self._residual(self.ankle_cam_m, ankles)}
+
+    def _residual(self, cam_m: np.ndarray, target_m: np.ndarray) -> list[float]:
+        if self.method != "pnp":
+            return np.linalg.norm(self.apply(cam_m) - target_m, axis=1).round(4).tolist()
+        ray = cam_m @ self.A.T
+        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+        off = target_m - self.b
+        across = off - np.sum(off * ray, axis=1, keepdims=True) * ray
+        return np.linalg.norm(across, axis=1).round(4).tolist()
 
     def to_json(self) -> dict:
         return {
@@ -345,6 +363,9 @@ def fit(head_cam_m, ankle_cam_m, params: CalibrationParams = CalibrationParams()
     if params.method == "eq2":
         A, b = _fit_eq2(heads, ankles, head_r, ankle_r)
     elif params.method == "pnp":
+        if not params.worker_height_m:  # the rays say how tall he is better than the lifter's depth
+            height = _pnp_height(heads, ankles, params, height)
+            head_r, ankle_r = targets(params, height)
         A, b = _fit_pnp(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]))
     else:
         A, b = _fit_similarity(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]), params.scale)
@@ -376,6 +397,35 @@ def _fit_eq2(heads, ankles, head_r, ankle_r) -> tuple[np.ndarray, np.ndarray]:
     # rows: rob_i = A cam_i  ->  rob = cam A^T
     A = np.linalg.solve(cam, rob).T
     return A, ankle_r[0] - A @ ankles[0]
+
+
+PNP_HEIGHTS_M = np.arange(1.1, 2.11, 0.01)
+"""Worker heights (head joint above the ankle midpoint, m) the pnp fit tries when measuring."""
+
+
+def _pnp_height(heads, ankles, params: CalibrationParams, guess_m: float) -> float:
+    """L_y for the pnp fit from the six rays alone: the height whose marker targets the rays fit
+    best (the least squared reprojection error in normalised image coordinates). The ankles lie
+    at known floor points, so the heads' rays above them fix how tall the worker is; the lifter's
+    depth, which the similarity-corrected measure relies on, is not used."""
+    import cv2
+
+    src = np.vstack([heads, ankles])
+    uv = src[:, :2] / src[:, 2:3]
+    best = (np.inf, guess_m)
+    for h in PNP_HEIGHTS_M:
+        head_r, ankle_r = targets(params, float(h))
+        dst = np.vstack([head_r, ankle_r])
+        try:
+            A, b = _fit_pnp(src, dst)
+        except CalibrationError:
+            continue
+        R = A.T
+        proj, _ = cv2.projectPoints(dst.reshape(-1, 1, 3), cv2.Rodrigues(R)[0], -R @ b, np.eye(3), None)
+        err = float(((proj.reshape(-1, 2) - uv) ** 2).sum())
+        if err < best[0]:
+            best = (err, float(h))
+    return best[1]
 
 
 def _fit_pnp(src, dst) -> tuple[np.ndarray, np.ndarray]:
@@ -418,18 +468,24 @@ def segment_stands(t_s, ankle_cam_m, params: CalibrationParams = CalibrationPara
     A frame is standing when the medians of the ankle midpoint over the half second
     before it and the half second after it are less than ``still_speed_mps * 0.5 s``
     apart (medians, so keypoint noise and outliers do not break a stand); standing runs
-    shorter than ``still_min_s`` are dropped.
+    shorter than ``still_min_s`` are dropped. The distance is measured across the viewing
+    ray (the ankle's direction, (x/z, y/z), times its median depth): the lifter's depth
+    jitters by decimetres from frame to frame at a real detector's noise, its rays do not
+    (they are the keypoints), and a worker walking between markers moves across the image.
     """
     t = np.asarray(t_s, float)
     a = np.asarray(ankle_cam_m, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ray = a[:, :2] / a[:, 2:3]
     half = 0.5
     still = np.zeros(len(t), bool)
+    ok = np.isfinite(ray).all(axis=1) & (a[:, 2] > 0)
     for i, ti in enumerate(t):
-        before = a[(t > ti - half) & (t <= ti)]
-        after = a[(t >= ti) & (t < ti + half)]
-        before, after = before[np.isfinite(before).all(axis=1)], after[np.isfinite(after).all(axis=1)]
-        if len(before) >= 3 and len(after) >= 3:
-            moved = np.linalg.norm(np.median(after, axis=0) - np.median(before, axis=0))
+        before = ok & (t > ti - half) & (t <= ti)
+        after = ok & (t >= ti) & (t < ti + half)
+        if before.sum() >= 3 and after.sum() >= 3:
+            depth_m = float(np.median(a[before | after, 2]))
+            moved = np.linalg.norm(np.median(ray[after], axis=0) - np.median(ray[before], axis=0)) * depth_m
             still[i] = moved < params.still_speed_mps * half
     runs, start = [], None
     for i, s in enumerate(np.append(still, False)):

@@ -3,13 +3,17 @@
     python -m edge_runtime robot --config BOX.toml --link can|mavlink [link options]
         (--keypoints KP.jsonl | --camera DEV --pose-model POSE.onnx | --joints J.jsonl)
         [--calibration CAL.json] [--duration S] [--log OUT.jsonl]
-    python -m edge_runtime robot --joints|--keypoints RECORDING.jsonl --calibrate CAL.json
+    python -m edge_runtime robot --link none [--fast] (--keypoints KP.jsonl | --joints J.jsonl)
+        [--calibration CAL.json] --log OUT.jsonl
+    python -m edge_runtime robot --joints|--keypoints RECORDING.jsonl --calibrate CAL.json [--calibration-method pnp]
     python -m edge_runtime robot --config BOX.toml --print-config
 
 Inputs (one of):
 
 * ``--keypoints KP.jsonl``: 2D keypoints (:func:`edge_runtime.robot.keypoints.read_keypoints_jsonl`;
-  [camera] keypoint_format), lifted to 3D by the shipped lifter ([lifter]).
+  [camera] keypoint_format, [camera] intrinsics or ``--intrinsics CAM.json``): every person is
+  tracked (:class:`edge_runtime.robot.keypoints.PersonTracker`, [people]) and lifted to 3D with
+  his own window by the shipped lifter ([lifter]); each goes to the hazard monitor.
 * ``--camera DEV --pose-model POSE.onnx``: a camera through a 2D pose model
   (:mod:`edge_runtime.robot.camera_source`), then the lifter.
 * ``--joints J.jsonl``: 3D joints, one JSON object per frame::
@@ -47,6 +51,13 @@ JSON object per frame (``t_in_s``, ``t_command_s``, ``state``, ``reason``,
 iso15066`` sizes the stop zone by ISO/TS 15066's protective separation distance
 ([zones]).
 
+``--link none`` runs the same chain with no arm (:mod:`edge_runtime.robot.replay`): the
+commands go to a stand-in that carries them nowhere, and the summary says that no arm was
+connected; ``--fast`` replays the recording on its own timestamps as fast as it goes (the
+log's ``t_in_s`` are then recording time). Each log line then also holds, per person,
+``head_robot_m``, ``predicted_head_m``, the nearest body point and its distance
+(``FrameRecord.people``).
+
 ``--calibrate OUT.json`` runs the 3-marker procedure of :mod:`edge_runtime.robot.calibration`
 on a recording of the worker standing on markers 1, 2 and 3 (camera-frame joints or
 keypoints), writes the calibration and prints its residuals; no link is opened.
@@ -70,7 +81,7 @@ from edge_runtime.cli import CliError, positive_float
 from edge_runtime.core import strict_json
 from edge_runtime.core.manifest import ManifestError
 from edge_runtime.errors import InputError
-from edge_runtime.robot.calibration import Calibration, CalibrationError
+from edge_runtime.robot.calibration import METHODS, Calibration, CalibrationError
 from edge_runtime.robot.keypoints import timestamp_s
 from edge_runtime.robot.link.options import add_bus_arguments
 
@@ -82,6 +93,8 @@ TICK_S = 0.01
 """Control cycle of the real-time driver (s)."""
 EXIT_LINK_FAULT = 3
 """Exit status when the arm could not be reached or did not confirm a safety command."""
+NO_LINK = "none"
+"""``--link none``: no arm (:mod:`edge_runtime.robot.replay`)."""
 
 
 class JointsInputError(InputError):
@@ -101,11 +114,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", metavar="BOX.toml", help="the box configuration (edge_runtime/box.example.toml)")
     parser.add_argument("--print-config", action="store_true", help="print the effective configuration and exit")
     link = parser.add_argument_group("robot link (override [robot_link])")
-    link.add_argument("--link", choices=("can", "mavlink"), help="[robot_link] kind")
+    link.add_argument("--link", choices=("can", "mavlink", NO_LINK),
+                      help=f"[robot_link] kind; {NO_LINK}: no arm, an offline replay that sends nothing")
     add_bus_arguments(link, config_section="robot_link")
     link.add_argument("--serial", metavar="serial:PATH[?key=HEX]", help="MAVLink serial line [robot_link] serial")
+    parser.add_argument("--fast", action="store_true", help="with --link none: replay the recording as fast as it "
+                        "goes, on its own timestamps")
+    parser.add_argument("--intrinsics", metavar="CAM.json", help="the keypoints' camera model [camera] intrinsics")
     parser.add_argument("--calibration", metavar="CAL.json", help="camera -> robot calibration for camera-frame joints")
     parser.add_argument("--calibrate", metavar="OUT.json", help="run the 3-marker calibration on the recording, write it")
+    parser.add_argument("--calibration-method", choices=METHODS,
+                        help="the --calibrate fit [calibration] method (pnp: the camera pose from the rays alone)")
     parser.add_argument("--sizing", choices=("eq45", "iso15066"), help="zone sizing [zones] sizing")
     parser.add_argument("--duration", type=positive_float, metavar="S", help="stop after S seconds")
     parser.add_argument("--log", metavar="OUT.jsonl", help="one JSON object per frame, then a summary")
@@ -120,9 +139,11 @@ def effective_config(args):
     from edge_runtime.robot.link import options  # noqa: F401 - [robot_link]
 
     cfg = config.load(args.config)
-    cfg = config.override(cfg, "robot_link", kind=args.link, interface=args.can_interface, channel=args.can_channel,
+    kind = None if args.link == NO_LINK else args.link  # no arm: the configured link is not opened
+    cfg = config.override(cfg, "robot_link", kind=kind, interface=args.can_interface, channel=args.can_channel,
                           host=args.can_host, port=args.can_port, serial=args.serial)
-    cfg = config.override(cfg, "camera", pose_model=args.pose_model)
+    cfg = config.override(cfg, "camera", pose_model=args.pose_model, intrinsics=args.intrinsics)
+    cfg = config.override(cfg, "calibration", method=args.calibration_method)
     return config.override(cfg, "zones", sizing=args.sizing)
 
 
@@ -242,20 +263,41 @@ def read_joints_jsonl(path: str) -> list[JointsFrame]:
 
 @dataclass
 class KeypointSource:
-    """2D keypoints of the followed person per frame, and the lifter for them."""
+    """2D keypoints of the people per frame, and the lifter for them."""
 
     frames: Any
-    """Iterator of (t_s, keypoints (17, 3) or None for nobody)."""
+    """Iterator of (t_s, people: a list of ``keypoints.Person``, as detected)."""
     lifter: Any
+    """The shipped StreamingLifter (one person's window; ``PeopleLifter`` makes one per person)."""
     live: bool
     """A camera (frames come in real time) rather than a recording (replayed at its timestamps)."""
+    tracking: Any = None
+    """The [people] parameters of the PersonTracker."""
+
+    def followed(self):
+        """(t_s, keypoints (17, 3) or None): the largest person of each frame (a calibration
+        recording has one worker)."""
+        from edge_runtime.robot.keypoints import PersonSelector
+
+        selector = PersonSelector()
+        for t_s, people in self.frames:
+            person = selector.select(people)
+            yield t_s, None if person is None else person.keypoints
+
+    def tracked(self):
+        """(t_s, people with stable ids) for every frame (``keypoints.PersonTracker``)."""
+        from edge_runtime.robot.keypoints import PersonTracker
+
+        tracker = PersonTracker(self.tracking)
+        for t_s, people in self.frames:
+            yield t_s, tracker.update(t_s, people)
 
 
 def _keypoint_source(args, cfg) -> KeypointSource:
     """--keypoints or --camera, with the shipped lifter ([lifter]) and the camera model
     ([camera] intrinsics; else a 100 degree camera at the video's size, or 1280 x 720)."""
     from edge_runtime.core.manifest import ASSETS_DIR
-    from edge_runtime.robot.keypoints import CameraModel, PersonSelector, read_keypoints_jsonl
+    from edge_runtime.robot.keypoints import CameraModel, read_keypoints_jsonl
     from edge_runtime.robot.lifter import StreamingLifter
 
     cam = cfg.camera
@@ -275,14 +317,7 @@ def _keypoint_source(args, cfg) -> KeypointSource:
         size = source.frame_size() if source is not None else None
         camera = CameraModel.from_fov(*(size or (1280, 720)))
     lifter = StreamingLifter.from_manifest(ASSETS_DIR, cfg.lifter, camera=camera, keypoint_format=cam.keypoint_format)
-    selector = PersonSelector()
-
-    def followed():
-        for t_s, people in frames:
-            person = selector.select(people)
-            yield t_s, None if person is None else person.keypoints
-
-    return KeypointSource(followed(), lifter, live=source is not None)
+    return KeypointSource(frames, lifter, live=source is not None, tracking=cfg.people)
 
 
 def _camera_frames(source, quiet: bool):
@@ -315,7 +350,7 @@ def run_calibrate(args, cfg) -> int:
         marker = labels if labels.any() else None
     elif args.keypoints:
         src = _keypoint_source(args, cfg)
-        lifted = [(t, p) for t, p in ((t, src.lifter.push(t, kp)) for t, kp in src.frames) if p.valid]
+        lifted = [(t, p) for t, p in ((t, src.lifter.push(t, kp)) for t, kp in src.followed()) if p.valid]
         t = np.array([x[0] for x in lifted])
         joints = np.stack([x[1].joints_cam_m for x in lifted]) if lifted else np.empty((0, 17, 3))
         marker = None
@@ -371,31 +406,46 @@ def _frames(args, cfg, calibration):
                 for f in frames), camera_frame, False
     if calibration is None:
         raise CliError("lifted joints are in the camera frame: give --calibration CAL.json")
+    from edge_runtime.robot.lifter import PeopleLifter
+
     src = _keypoint_source(args, cfg)
-    return ((t_s, (lambda loop, t_s=t_s, kp=kp: loop.feed_keypoints(src.lifter, t_s, kp)))
-            for t_s, kp in src.frames), True, src.live
+    people_lifter = PeopleLifter(src.lifter)
+    return ((t_s, (lambda loop, t_s=t_s, people=people: loop.feed_people(people_lifter, t_s, people)))
+            for t_s, people in src.tracked()), True, src.live
 
 
 def run_loop(args, cfg) -> int:
     from edge_runtime.core.service import keepalive
     from edge_runtime.robot.loop import RobotLoop
+    from edge_runtime.robot.replay import NO_ARM_VERDICT, NoArm, ReplayClock, fast_frames
 
     calibration = Calibration.load(args.calibration) if args.calibration else None
+    no_arm = args.link == NO_LINK
+    if args.fast and not no_arm:
+        raise CliError("--fast replays without an arm: it needs --link none")
     frames, camera_frame, live = _frames(args, cfg, calibration)
+    if args.fast and live:
+        raise CliError("--fast replays a recording (--keypoints or --joints), not a camera")
     if not live:
         frames = _first_read(frames)  # a bad file is reported before the link opens
     log = _open_log(args.log)
-    link = _open_link(cfg)
+    clock = ReplayClock() if args.fast else time.monotonic
+    link = NoArm(clock, cfg.robot_loop.task_waypoints_m[0]) if no_arm else _open_link(cfg)
     loop = RobotLoop(link, calibration if camera_frame else None, cfg.zones, cfg.tracker, cfg.robot_loop,
-                     clock=time.monotonic, on_record=(lambda r: log.write(json.dumps(asdict(r)) + "\n")) if log else None)
+                     clock=clock, on_record=(lambda r: log.write(json.dumps(asdict(r)) + "\n")) if log else None)
     progress = _Progress(loop, args.quiet)
     start = time.monotonic()
+    recording_s = 0.0
     try:
-        timed = _live_frames if live else _replayed_frames
+        if args.fast:
+            timed = lambda loop, frames, start, duration: fast_frames(loop, clock, frames, duration)  # noqa: E731
+        else:
+            timed = _live_frames if live else _replayed_frames
         with closing(timed(loop, frames, start, args.duration)) as due_frames:
             for t_rel_s, feed in due_frames:
                 keepalive()  # READY, then the watchdog's keep-alives, only while this loop turns
                 progress.show(t_rel_s, feed(loop))
+                recording_s = t_rel_s
                 if loop.fault:
                     break
     except KeyboardInterrupt:
@@ -403,6 +453,9 @@ def run_loop(args, cfg) -> int:
     finally:
         _safe_stop(link)
         summary = _summary(loop, link, progress.states, time.monotonic() - start)
+        if no_arm:
+            summary.update(link_verdict=NO_ARM_VERDICT, recording_s=round(recording_s, 3),
+                           x_real_time=round(recording_s / max(summary["wall_s"], 1e-9), 1), fast=bool(args.fast))
         if log:
             log.write(json.dumps({"summary": summary}) + "\n")
             log.close()
@@ -573,6 +626,8 @@ def _summary_text(s: dict, log_path: str | None) -> str:
             f"  motion commands acknowledged {s['acked']}, unacknowledged {s['unacked']}, sent again {s['retries']}; "
             f"link {s['link_verdict']}\n"
             "  robot link: " + ", ".join(f"{k} {v}" for k, v in s["robot_link"].items() if k != "link_ok")
+            + (f"\n  replayed {s['recording_s']:.1f} s of recording at {s['x_real_time']:g}x real time"
+               if "x_real_time" in s else "")
             + (f"\n  log: {log_path}" if log_path else ""))
 
 

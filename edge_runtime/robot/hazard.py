@@ -307,6 +307,8 @@ class HazardMonitor:
         self.level = State.NORMAL  # the zone level, before faults
         self._alarms = alarms(self.zones)
         self._trackers: dict[int, HeadTracker] = {}
+        self.estimates: dict[int, HeadEstimate] = {}
+        """Each worker's head estimate of the last valid frame (for the loop's log)."""
         self._last_pose_s: float | None = None
         self._fault: str | None = "no_pose_yet"  # nothing is known until poses have flowed for dwell_s
         self._fault_clear = _Hold()
@@ -321,11 +323,13 @@ class HazardMonitor:
     def observe(self, t_s: float, heads: dict[int, np.ndarray], effector_m) -> Decision:
         """A valid pose frame: update the trackers and the zone level."""
         self._last_pose_s = t_s
+        self.estimates = {}
         for wid in [w for w in self._trackers if w not in heads]:
             del self._trackers[wid]
         nearest = (math.inf, None, None)
         for wid, head in heads.items():
             est = self._trackers.setdefault(wid, HeadTracker(self.tracker, self.zones.predict_s)).update(t_s, head)
+            self.estimates[wid] = est
             d = distance_to_effector(est, effector_m)
             if d < nearest[0]:
                 nearest = (d, wid, est)

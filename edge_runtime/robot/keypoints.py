@@ -65,8 +65,27 @@ and, when present, must agree with the format the reader was asked for.
 Blank lines are skipped. Anything else is a :class:`KeypointInputError` naming
 the file and the line. A person with fewer than 17 keypoints is passed on as
 given (shape (n, 3)): the lifter counts every joint of such a frame as missing
-(held for a few frames, then the frame is invalid). :class:`PersonSelector`
-picks whom to follow when several people are in a frame.
+(held for a few frames, then the frame is invalid). :class:`PersonTracker` gives every
+person seen a stable id across frames (who is who), so each is lifted with his own
+temporal window and judged by the hazard monitor; :class:`PersonSelector` picks one
+person to follow (``lift --person largest|confident|id:N``).
+
+Who is who (:class:`PersonTracker`)
+===================================
+Tracking is part of the input step, on 2D keypoints, because that is where identity is
+visible: a person's keypoints move a little between frames,
+and nothing downstream can repair a swap (a lifter window holding
+two people's frames lifts neither). Each track predicts its keypoints at constant image
+velocity; a detection is matched to the track whose prediction is nearest (the median over the
+joints, in units of the track's size in the image, so the same gate holds near and far; the
+size comes from his bones, so a half-hidden person keeps his). The assignment with the most
+pairs and the least cost is searched exhaustively for up to four people in a frame (greedy
+beyond: no solver on the box). A track unseen for up to ``max_lost_s`` keeps its id and is
+matched again within a gate that grows with the time it was gone (a person occluded while
+crossing, or leaving the image and coming back); the exporter's own id, when it sends one, is
+kept as ``source_id`` but never trusted over the motion (exporters reuse ids). Detections with
+fewer than ``min_joints`` keypoints are not tracked. Measured by ``python -m firmware_sim
+crossings`` (reports/lifter/perception.md).
 
 Camera models (:class:`CameraModel`)
 ====================================
@@ -78,14 +97,17 @@ as VideoPose3D does (:func:`normalize_screen`): ``u/w*2 - 1``, ``v/w*2 - h/w``.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator, Sequence
 
 import numpy as np
 
+from edge_runtime import config
+from edge_runtime.core import skeleton as sk
 from edge_runtime.core import strict_json
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
@@ -251,7 +273,9 @@ class Person:
     keypoints: np.ndarray
     """(J, 3) x, y (pixels), score; J is 17 unless the source sent fewer."""
     id: int | None = None
-    """The exporter's track id, when it has one."""
+    """The exporter's track id, when it has one; after :class:`PersonTracker`, the tracker's id."""
+    source_id: int | None = None
+    """After :class:`PersonTracker`: the exporter's id (None when it sent none)."""
 
 
 @dataclass
@@ -397,6 +421,192 @@ class PersonSelector:
         if self.mode == "track":
             self.track_id = best.id
         return best
+
+
+# ---------------------------------------------------------------------------- who is who
+
+
+@config.section("people")
+@dataclass(frozen=True)
+class PeopleTrackParams:
+    """Stable ids for every person seen ([people] in the box configuration)."""
+
+    min_joints: int = config.setting(8, config.within(1, 17))
+    """A detection needs this many keypoints seen (score >= ``min_score``) to be tracked: a
+    sliver of a half-hidden person matches anyone nearby (fewer than 8 mixed people up in
+    ``python -m firmware_sim crossings``)."""
+    min_score: float = config.setting(0.3, config.within(0, 1))
+    """A keypoint scoring below this does not count for tracking (the lifter's threshold)."""
+    gate: float = config.setting(0.6, config.POSITIVE)
+    """A detection may join a track whose predicted keypoints are at most this far (median over
+    the joints), in units of the track's size in the image (his height, from his bones)."""
+    gate_growth_per_s: float = config.setting(0.5, config.NON_NEGATIVE)
+    """The gate of a track not seen for a while grows by this much per second unseen (where he
+    reappears is less certain the longer he was hidden)."""
+    max_lost_s: float = config.setting(3.0, config.POSITIVE)
+    """A track unseen this long (s) is forgotten; a person back within it keeps his id."""
+    max_predict_s: float = config.setting(1.5, config.POSITIVE)
+    """Constant-velocity prediction runs at most this far (s) past the last sighting; a person
+    hidden longer is looked for where he was last predicted."""
+    velocity_smoothing: float = config.setting(0.15, config.within(0, 1))
+    """Weight of the newest image velocity in the track's smoothed velocity."""
+
+
+@dataclass
+class _Track:
+    id: int
+    xy: np.ndarray
+    """(J, 2) the last keypoints seen (NaN: not seen then)."""
+    size_px: float
+    t_s: float
+    velocity_pxps: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    def predicted(self, t_s: float, max_predict_s: float) -> np.ndarray:
+        return self.xy + self.velocity_pxps * min(t_s - self.t_s, max_predict_s)
+
+
+def _seen(kp: np.ndarray, min_score: float) -> np.ndarray:
+    return np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= min_score)
+
+
+class PersonTracker:
+    """Stable ids for the people of successive frames (see "Who is who" in the module docstring).
+
+        tracker = PersonTracker()
+        people = tracker.update(frame.t_s, frame.people)   # the same Person objects' data, id = track id
+    """
+
+    def __init__(self, params: PeopleTrackParams = PeopleTrackParams(), keypoint_format: str = "coco"):
+        if keypoint_format not in FORMATS:
+            raise ValueError(f"keypoint format {keypoint_format!r}: one of {', '.join(FORMATS)}")
+        self.params = params
+        self.keypoint_format = keypoint_format
+        self.tracks: dict[int, _Track] = {}
+        self._ids = itertools.count()
+        self.created = 0
+        """Tracks started (ids handed out)."""
+        self.rejected = 0
+        """Detections with fewer than ``min_joints`` keypoints seen (not people)."""
+
+    def update(self, t_s: float, people: Sequence[Person]) -> list[Person]:
+        """The people of the frame at ``t_s`` with track ids (in the order given; detections
+        that are not people are left out). Tracks unseen for ``max_lost_s`` are forgotten."""
+        p = self.params
+        for tid in [k for k, tr in self.tracks.items() if t_s - tr.t_s > p.max_lost_s or t_s < tr.t_s]:
+            del self.tracks[tid]  # gone too long, or the clock went back: a new stream
+        dets = []
+        for person in people:
+            kp = np.asarray(person.keypoints, float)
+            if kp.shape not in ((N_JOINTS, 2), (N_JOINTS, 3)):
+                self.rejected += 1
+                continue
+            kp = to_h36m(kp, self.keypoint_format)  # tracked on the lifter's joints: one set of bones
+            if _seen(kp, p.min_score).sum() < p.min_joints:
+                self.rejected += 1
+                continue
+            dets.append((person, kp))
+        assigned = _assign({(tid, i): self._cost(tr, kp, t_s) for tid, tr in self.tracks.items()
+                            for i, (_, kp) in enumerate(dets)})
+        out = []
+        for i, (person, kp) in enumerate(dets):
+            tid = assigned.get(i)
+            if tid is None:
+                tid = next(self._ids)
+                self.created += 1
+                self.tracks[tid] = _Track(tid, np.where(_seen(kp, p.min_score)[:, None], kp[:, :2], np.nan),
+                                          _size_px(kp, p.min_score), t_s)
+            else:
+                self._follow(self.tracks[tid], kp, t_s)
+            out.append(replace(person, id=tid, source_id=person.id))
+        return out
+
+    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float) -> float:
+        """Median distance of the detection's keypoints from the track's prediction, in track
+        sizes; inf beyond the gate or without common joints. (Apparent size is no cue: at a real
+        detector's noise it varies 13 % from frame to frame, as much as between two people
+        crossing, and weighing it mixed more people up in ``firmware_sim crossings``.)"""
+        p = self.params
+        if len(tr.xy) != len(kp):
+            return math.inf
+        pred = tr.predicted(t_s, p.max_predict_s)
+        both = _seen(kp, p.min_score) & np.isfinite(pred).all(axis=1)
+        if both.sum() < 2:
+            return math.inf
+        # the median: a swinging limb or one gross keypoint error must not decide who is who
+        d = float(np.median(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
+        if d > p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0):
+            return math.inf
+        return d
+
+    def _follow(self, tr: _Track, kp: np.ndarray, t_s: float) -> None:
+        p = self.params
+        seen = _seen(kp, p.min_score)
+        dt = t_s - tr.t_s
+        both = seen & np.isfinite(tr.xy).all(axis=1)
+        if dt > 0 and both.any():
+            v = np.mean(kp[both, :2] - tr.xy[both], axis=0) / dt
+            a = p.velocity_smoothing
+            tr.velocity_pxps = a * v + (1 - a) * tr.velocity_pxps
+        # joints not seen now keep their last position, moved with the person
+        moved = tr.xy + tr.velocity_pxps * max(dt, 0.0)
+        tr.xy = np.where(seen[:, None], kp[:, :2], moved)
+        tr.size_px = _size_px(kp, p.min_score)
+        tr.t_s = t_s
+
+
+_BONES = ((L_SHOULDER, sk.L_HIP, 0.288), (R_SHOULDER, sk.R_HIP, 0.288), (sk.L_HIP, sk.L_KNEE, 0.245),
+          (sk.R_HIP, sk.R_KNEE, 0.245), (sk.L_KNEE, sk.L_ANKLE, 0.246), (sk.R_KNEE, sk.R_ANKLE, 0.246),
+          (L_SHOULDER, sk.L_ELBOW, 0.186), (R_SHOULDER, sk.R_ELBOW, 0.186), (sk.L_ELBOW, sk.L_WRIST, 0.146),
+          (sk.R_ELBOW, sk.R_WRIST, 0.146))
+"""(H36M joint, H36M joint, length as a fraction of body height; docs/design.md section 5)."""
+
+
+MAX_EXACT_ASSIGNMENT = 4
+"""Up to this many detections in a frame the best assignment is searched exhaustively (at most
+5^4 cases); beyond (a crowd), pairs are taken greedily, cheapest first."""
+
+
+def _assign(costs: dict[tuple[int, int], float]) -> dict[int, int]:
+    """Detection index -> track id over the finite-cost (gated) pairs: as many pairs as
+    possible, and of those the least total cost."""
+    pairs = {k: c for k, c in costs.items() if math.isfinite(c)}
+    dets = sorted({d for _, d in pairs})
+    if len(dets) > MAX_EXACT_ASSIGNMENT:
+        assigned: dict[int, int] = {}
+        for (tid, i), _ in sorted(pairs.items(), key=lambda kv: kv[1]):
+            if i not in assigned and tid not in assigned.values():
+                assigned[i] = tid
+        return assigned
+    options = {d: [t for t, dd in pairs if dd == d] for d in dets}
+
+    def best(k: int, taken: frozenset) -> tuple[int, float, dict]:
+        if k == len(dets):
+            return 0, 0.0, {}
+        d = dets[k]
+        n, c, m = best(k + 1, taken)                     # detection d starts a new track
+        result = (n, c, m)
+        for t in options[d]:
+            if t not in taken:
+                n, c, m = best(k + 1, taken | {t})
+                n, c = n + 1, c + pairs[(t, d)]
+                if (n, -c) > (result[0], -result[1]):
+                    result = (n, c, {**m, d: t})
+        return result
+
+    return best(0, frozenset())[2]
+
+
+def _size_px(kp: np.ndarray, min_score: float) -> float:
+    """A person's size in the image (px), whichever of his joints are seen: the largest body
+    height his seen bones imply (bone length / its fraction of the height; the largest,
+    because a bone seen end-on looks short, never long), else his keypoints' box diagonal.
+    A partly hidden person so keeps his size (a box of his visible joints would shrink)."""
+    seen = _seen(kp, min_score)
+    heights = [np.linalg.norm(kp[a, :2] - kp[b, :2]) / frac for a, b, frac in _BONES if seen[a] and seen[b]]
+    if len(heights) >= 2:
+        return max(float(np.sort(heights)[-2]), 1.0)  # the second largest: one bad keypoint cannot inflate it
+    xy = kp[seen, :2]
+    return max(float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0))), 1.0)
 
 
 # ---------------------------------------------------------------------------- cameras

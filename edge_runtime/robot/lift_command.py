@@ -13,10 +13,20 @@ OpenCV ``dist``); without it, a distortion-free camera with the lifter's 100 deg
 horizontal field of view at ``--width`` x ``--height`` (a video's own size by default).
 
 Output (``--out``): one JSON object per frame -- ``t``, ``frame``, ``person`` (the
-exporter's id), ``valid``, ``reason``, ``warming_up``, ``observed`` (17 booleans),
-``joints_cam_m`` (17 x [x, y, z], metres, camera frame; null when invalid) and
-``root_cam_m`` -- then one ``{"summary": {...}}`` line: frames, valid share, mean
+exporter's id), ``valid``, ``reason``, ``warming_up``, ``observed`` and ``held`` (17
+booleans each: seen in this frame / standing at its last observation), ``joints_cam_m``
+(17 x [x, y, z], metres, camera frame, each joint on its keypoint's ray; null when invalid)
+and ``root_cam_m`` -- then one ``{"summary": {...}}`` line: frames, valid share, mean
 per-frame lifter time (ms) and every counter. The summary is also printed.
+
+``--person all`` lifts every person: they are tracked with stable ids
+(:class:`edge_runtime.robot.keypoints.PersonTracker`, ``[people]`` of ``--config``) and each is
+lifted with his own window (:class:`edge_runtime.robot.lifter.PeopleLifter`). A frame's line is
+then ``{"t", "frame", "valid", "reason", "people": [{"id", "source_id", "warming_up",
+"joints_cam_m", "root_cam_m", "observed", "held", "joints_model_cam_m"}, ...], "invalid": [{"id", "reason"}, ...]}``:
+``people`` holds the valid lifts, ``invalid`` the others, and the frame is valid when nobody is
+invalid -- the form ``python -m edge_runtime robot --joints`` reads (``joints_model_cam_m``: the
+network's own joints before they were put on the keypoints' rays, for evaluation).
 """
 from __future__ import annotations
 
@@ -24,6 +34,8 @@ import argparse
 import json
 import sys
 import time
+
+import numpy as np
 
 from edge_runtime.cli import CliError, positive_float, positive_int, probability
 from edge_runtime.core.manifest import PRECISIONS, ModelIntegrityError
@@ -48,8 +60,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "(edge_runtime/box.example.toml)")
     parser.add_argument("--precision", choices=PRECISIONS, help="which lifter [lifter] precision (int8)")
     parser.add_argument("--threads", type=positive_int, help="onnxruntime intra-op threads [lifter] threads (1)")
-    parser.add_argument("--person", default="largest", metavar="|".join(SELECT_MODES) + "|id:N",
-                        help="whom to follow when several people are seen [largest]")
+    parser.add_argument("--person", default="largest", metavar="all|" + "|".join(SELECT_MODES) + "|id:N",
+                        help="whom to lift when several people are seen: all of them (tracked), or one [largest]")
     parser.add_argument("--min-score", type=probability, help="keypoints scoring lower are missing "
                         "[lifter] min_score (0.3)")
     parser.add_argument("--hold-frames", type=int, help="frames a missing joint is held [lifter] hold_frames (3)")
@@ -59,14 +71,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no status lines on stderr")
 
 
-def _selector(spec: str, min_score: float) -> PersonSelector:
+ALL = "all"
+
+
+def _selector(spec: str, min_score: float) -> PersonSelector | None:
+    """The one person to follow (None: ``--person all``)."""
+    if spec == ALL:
+        return None
     if spec.startswith("id:"):
         try:
             return PersonSelector("track", track_id=int(spec[3:]), min_score=min_score)
         except ValueError:
             raise CliError(f"--person {spec}: expected id:<integer>") from None
     if spec not in SELECT_MODES:
-        raise CliError(f"--person {spec}: one of {', '.join(SELECT_MODES)} or id:N")
+        raise CliError(f"--person {spec}: {ALL}, one of {', '.join(SELECT_MODES)} or id:N")
     return PersonSelector(spec, min_score=min_score)
 
 
@@ -87,13 +105,13 @@ def _camera(args, size: tuple[int, int] | None) -> CameraModel:
 
 
 def _params(args):
-    """The [lifter] section of --config (defaults without one), the flags on top."""
+    """The [lifter] and [people] sections of --config (defaults without one), the flags on top."""
     from edge_runtime import config
-    from edge_runtime.robot import lifter  # noqa: F401 - [lifter]
+    from edge_runtime.robot import lifter  # noqa: F401 - [lifter], [people]
 
     cfg = config.override(config.load(args.config), "lifter", precision=args.precision, threads=args.threads,
                           min_score=args.min_score, hold_frames=args.hold_frames)
-    return cfg.lifter
+    return cfg.lifter, cfg.people
 
 
 def _frames_from_file(args):
@@ -134,7 +152,7 @@ def cmd(args) -> int:
     from edge_runtime.core.manifest import ASSETS_DIR
     from edge_runtime.robot.lifter import StreamingLifter
 
-    params = _params(args)
+    params, tracking = _params(args)
     selector = _selector(args.person, params.min_score)
     camera_stats: dict = {}
     frames, size = _frames(args, camera_stats, params.threads)
@@ -147,7 +165,10 @@ def cmd(args) -> int:
         raise CliError(f"--out {args.out}: cannot write ({e.strerror or e})") from None
     t_wall = time.perf_counter()
     try:
-        _lift_all(frames, selector, lifter, out)
+        if selector is None:
+            _lift_everyone(frames, tracking, lifter, out)
+        else:
+            _lift_all(frames, selector, lifter, out)
     except KeyboardInterrupt:
         pass
     finally:
@@ -181,6 +202,31 @@ def _lift_all(frames, selector: PersonSelector, lifter, out) -> None:
             rec = {"t": t_s, "frame": index, "person": None if person is None else person.id}
             rec.update(pose.to_json())
             out.write(json.dumps(rec) + "\n")
+
+
+def _lift_everyone(frames, tracking, lifter, out) -> None:
+    """Every person of every frame, tracked and lifted with his own window; one JSON line per frame."""
+    from edge_runtime.robot.keypoints import PersonTracker
+    from edge_runtime.robot.lifter import PeopleLifter
+
+    tracker, people_lifter = PersonTracker(tracking), PeopleLifter(lifter)
+    for t_s, index, people in frames:
+        tracked = tracker.update(t_s, people)
+        source = {p.id: p.source_id for p in tracked}
+        poses = people_lifter.push(t_s, tracked)
+        valid = [{"id": pid, "source_id": source[pid], **_person_json(pose)} for pid, pose in poses if pose.valid]
+        invalid = [{"id": pid, "reason": pose.reason} for pid, pose in poses if not pose.valid]
+        if out:
+            out.write(json.dumps({"t": t_s, "frame": index, "valid": not invalid,
+                                  "reason": None if not invalid else f"person {invalid[0]['id']}: {invalid[0]['reason']}",
+                                  "people": valid, "invalid": invalid}) + "\n")
+
+
+def _person_json(pose) -> dict:
+    d = pose.to_json()
+    model = np.round(pose.joints_model_cam_m, 5).tolist()  # the network's own joints, for evaluation
+    return {**{k: d[k] for k in ("warming_up", "joints_cam_m", "root_cam_m", "observed", "held")},
+            "joints_model_cam_m": model}
 
 
 def _summary_text(lifter, summary: dict, out_path: str | None) -> str:

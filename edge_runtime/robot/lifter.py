@@ -17,6 +17,19 @@ pose_3d + root_3d. Pixels of another camera are undistorted and re-projected int
 the canonical camera (the manifest's ``camera``) before normalising
 (:mod:`edge_runtime.robot.keypoints`).
 
+3D that agrees with the 2D it came from
+=======================================
+The model's x and y come from a network that learnt from simulated bodies; the camera's
+rays do not. So the runtime keeps only the model's per-joint DEPTH and puts every joint
+on the ray of the keypoint it was lifted from (the undistorted, canonical-camera pixel,
+or the held one): ``joints_cam_m[j] = z_j * ((u_j - cx) / fx, (v_j - cy) / fy, 1)`` with
+``z_j`` the model's depth of joint ``j``. Projected back with the camera (its distortion
+included) every joint lands on its input keypoint; only depth, the part 2D cannot give,
+rests on the model (and on the floor anchoring of
+:mod:`edge_runtime.robot.calibration`, which slides the skeleton along these rays). The
+model's own joints stay in ``joints_model_cam_m``. A joint the model puts less than
+``MIN_DEPTH_M`` in front of the camera makes the frame invalid (``model_output``).
+
 Streaming
 =========
 A causal ring buffer holds the last ``receptive_field`` (27) frames; each camera
@@ -60,7 +73,16 @@ Missing data is never fed through as garbage:
   forgotten; ``stats.restarts``).
 
 Every outcome is counted in :class:`LifterStats`. This module never imports
-torch, onnx, or edge_runtime.config.
+torch or onnx.
+
+Several people
+==============
+:class:`PeopleLifter` lifts every tracked person of a frame (ids from
+:class:`edge_runtime.robot.keypoints.PersonTracker`) with his own ring buffer, joint
+memory and clock: one :class:`StreamingLifter` per id, all sharing one onnxruntime
+session and one :class:`LifterStats`. A person's window only ever holds his own frames;
+a person who is not in a frame is not pushed (he is absent, not "missing joints"), and
+his lifter is dropped after ``lost_timeout_s`` without him.
 """
 from __future__ import annotations
 
@@ -75,7 +97,7 @@ import numpy as np
 from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
 from edge_runtime.core.onnx import session_from_manifest
-from edge_runtime.core.skeleton import JOINTS, N_JOINTS
+from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS
 from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, image_to_canonical, to_h36m
 
 LIFTER_ARCH = "lifter"
@@ -98,6 +120,9 @@ MAX_NORMALISED = 10.0
 """A keypoint whose normalised coordinate (the image spans [-1, 1] in x) is beyond +-this
 (4.5 image widths outside the image) counts as missing: the model's input stays finite and
 within what a camera can show."""
+MIN_DEPTH_M = 0.1
+"""A lifted joint must lie at least this far in front of the camera (m): its ray is
+scaled by its depth, and a depth at or behind the optical centre has no ray to be on."""
 
 
 @config.section("lifter")
@@ -150,7 +175,7 @@ class LiftedPose:
     """(17, 3) absolute H36M joints in the camera frame (m; x right, y down, z forward);
     all NaN when the frame is invalid."""
     root_cam_m: np.ndarray
-    """(3,) the pelvis in the camera frame (m); NaN when invalid."""
+    """(3,) the pelvis in the camera frame (m; ``joints_cam_m[0]``, on its keypoint's ray); NaN when invalid."""
     valid: bool
     reason: str | None
     """None when valid; else a code (``no_person``, ``joint_count``, ``missing_joints``,
@@ -161,6 +186,12 @@ class LiftedPose:
     """The buffer still holds start-up padding (fewer than 27 real frames since a reset)."""
     infer_s: float = 0.0
     """Time of this frame's onnxruntime call (s); 0 when the model was not run."""
+    held: np.ndarray | None = None
+    """(17,) bool: the joint was not seen in this frame and stands at its last observation
+    (its ray); False for observed joints and for every joint of an invalid frame."""
+    joints_model_cam_m: np.ndarray | None = None
+    """(17, 3) the model's own absolute joints (before they were put on the keypoints' rays);
+    None when the model did not run."""
 
     @property
     def code(self) -> str | None:
@@ -171,9 +202,10 @@ class LiftedPose:
         def fin(a):
             return np.round(a, 5).tolist() if self.valid else None
 
+        held = self.held if self.held is not None else np.zeros(N_JOINTS, bool)
         return {"t": self.t_s, "valid": self.valid, "reason": self.reason, "warming_up": self.warming_up,
                 "joints_cam_m": fin(self.joints_cam_m), "root_cam_m": fin(self.root_cam_m),
-                "observed": [bool(v) for v in self.observed]}
+                "observed": [bool(v) for v in self.observed], "held": [bool(v) for v in held]}
 
 
 @dataclass
@@ -319,7 +351,7 @@ class StreamingLifter:
         st.joints_held += int(held.sum())
         frame = self._last_seen.astype(np.float32)
         self._buffer(frame)
-        return self._run(t_s, observed)
+        return self._run(t_s, observed, held)
 
     def _steps_since_last(self, t_s: float) -> int:
         """Frame periods since the previous frame (1, or more when frames were dropped)."""
@@ -371,7 +403,7 @@ class StreamingLifter:
         self._buffered_t = self._last_t
         self._frames_since_buffered = 0
 
-    def _run(self, t_s: float, observed: np.ndarray) -> LiftedPose:
+    def _run(self, t_s: float, observed: np.ndarray, held: np.ndarray) -> LiftedPose:
         x = self.window()[None]
         t0 = time.perf_counter()
         pose, root = self.session.run(self._outputs, {INPUT_NAME: x})
@@ -379,20 +411,32 @@ class StreamingLifter:
         st = self.stats
         st.inferences += 1
         st.infer_s += dt
-        root_m = root.reshape(3).astype(np.float64)
-        joints = pose.reshape(N_JOINTS, 3).astype(np.float64) + root_m
-        if not np.isfinite(joints).all():
+        model_joints = pose.reshape(N_JOINTS, 3).astype(np.float64) + root.reshape(3)
+        if not np.isfinite(model_joints).all():
             return self._invalid(t_s, "model_output: non-finite joints", observed)
+        if model_joints[:, 2].min() < MIN_DEPTH_M:
+            return self._invalid(t_s, f"model_output: a joint {model_joints[:, 2].min():.2f} m in front of the "
+                                      "camera", observed)
+        joints = self._rays() * model_joints[:, 2:3]
         warming = self.warming_up
         st.valid += 1
         st.warming_up += warming
-        return LiftedPose(t_s, joints, root_m, True, None, observed, warming, dt)
+        return LiftedPose(t_s, joints, joints[HIP].copy(), True, None, observed, warming, dt, held, model_joints)
+
+    def _rays(self) -> np.ndarray:
+        """(17, 3) canonical-camera rays (x/z, y/z, 1) of this frame's keypoints (observed or held):
+        the model's input for the last frame, un-normalised (``normalize_screen`` inverted)."""
+        cam = self.canonical_camera
+        half_w = cam.width_px / 2
+        px = (self._last_seen + (1.0, cam.height_px / cam.width_px)) * half_w
+        return np.column_stack([(px[:, 0] - cam.cx_px) / cam.fx_px, (px[:, 1] - cam.cy_px) / cam.fy_px,
+                                np.ones(N_JOINTS)])
 
     def _invalid(self, t_s: float, reason: str, observed: np.ndarray | None) -> LiftedPose:
         self.stats.invalid[reason.split(":", 1)[0]] += 1
         obs = np.zeros(N_JOINTS, bool) if observed is None else observed
         return LiftedPose(t_s, np.full((N_JOINTS, 3), np.nan), np.full(3, np.nan), False, reason, obs,
-                          self.warming_up, 0.0)
+                          self.warming_up, 0.0, np.zeros(N_JOINTS, bool))
 
     # ------------------------------------------------------------------ batch (reference, tools)
 
@@ -403,6 +447,22 @@ class StreamingLifter:
         pose, root = self.session.run(self._outputs, {INPUT_NAME: x})
         return pose[:, 0], root[:, 0]
 
+    def sibling(self) -> "StreamingLifter":
+        """A new lifter for another person: the same session, model checks and parameters,
+        its own buffer and clock, counting into the same :class:`LifterStats`."""
+        other = object.__new__(StreamingLifter)
+        other.__dict__.update({k: v for k, v in self.__dict__.items()
+                               if k in ("session", "entry", "params", "source", "name", "precision",
+                                        "keypoint_format", "receptive_field", "canonical_camera", "camera",
+                                        "_outputs", "stats", "_period_s")})
+        r = self.receptive_field
+        other._ring = np.zeros((2 * r, N_JOINTS, 2), np.float32)
+        other._last_seen = np.zeros((N_JOINTS, 2), np.float64)
+        other._age = np.full(N_JOINTS, np.inf)
+        other._last_t = None
+        other.reset()
+        return other
+
     def describe(self) -> dict:
         return {"name": self.name, "precision": self.precision, "source": self.source,
                 "receptive_field": self.receptive_field, "threads": self.params.threads,
@@ -411,6 +471,40 @@ class StreamingLifter:
 
     def __repr__(self) -> str:
         return f"StreamingLifter({self.name!r}, precision={self.precision!r}, rf={self.receptive_field})"
+
+
+class PeopleLifter:
+    """One temporal window per tracked person (module docstring, "Several people").
+
+        people_lifter = PeopleLifter(StreamingLifter.from_manifest(...))
+        for pid, pose in people_lifter.push(t_s, tracked_people):   # [(id, LiftedPose)]
+            ...
+    """
+
+    def __init__(self, lifter: StreamingLifter):
+        self.template = lifter
+        """Never pushed itself: each person gets a sibling of it."""
+        self.lifters: dict[int, StreamingLifter] = {}
+
+    @property
+    def stats(self) -> LifterStats:
+        return self.template.stats
+
+    def push(self, t_s: float, people) -> list[tuple[int, LiftedPose]]:
+        """Lift each person (objects with ``id`` and ``keypoints``) with his own window. A
+        person absent for longer than ``lost_timeout_s`` loses his lifter (his window would
+        be reset anyway); a shorter absence is bridged like any hole."""
+        out = []
+        for person in people:
+            lifter = self.lifters.get(person.id)
+            if lifter is None:
+                lifter = self.lifters[person.id] = self.template.sibling()
+            out.append((person.id, lifter.push(t_s, person.keypoints)))
+        timeout = self.template.params.lost_timeout_s
+        for pid in [k for k, lf in self.lifters.items() if lf._last_t is None or not
+                    (t_s - timeout <= lf._last_t <= t_s)]:
+            del self.lifters[pid]
+        return out
 
 
 def padded_windows(frames: np.ndarray, receptive_field: int) -> np.ndarray:
@@ -459,4 +553,4 @@ def _check_session(session, rf: int, source: str) -> None:
                                   f"(1, 1, 17, 3) and (1, 1, 3)")
 
 
-__all__ = ["LifterParams", "LiftedPose", "LifterStats", "StreamingLifter", "padded_windows", "LIFTER_ARCH"]
+__all__ = ["LifterParams", "LiftedPose", "LifterStats", "StreamingLifter", "PeopleLifter", "padded_windows", "LIFTER_ARCH", "MIN_DEPTH_M"]

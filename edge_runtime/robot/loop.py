@@ -13,7 +13,8 @@ Per camera frame::
 injectable ``clock`` (``time.monotonic`` by default; a scenario runner passes its
 simulated clock). Its driver calls
 
-* ``feed_joints(...)`` / ``feed_lifted(...)`` for every camera frame, and
+* ``feed_joints(...)`` / ``feed_lifted(...)`` / ``feed_people(...)`` (every tracked person
+  lifted with his own window) for every camera frame, and
 * ``tick()`` at the control rate (e.g. every 10 ms): link polling, the 200 ms staleness
   check, the task motion and the heartbeat.
 
@@ -53,7 +54,10 @@ loop calls ``heartbeat()`` every ``heartbeat_period_s``.
 
 Every frame leaves a ``FrameRecord`` with ``t_in_s`` (the clock when the frame
 arrived) and ``t_command_s`` (the clock after the link call it caused returned, or
-None), so the reaction time keypoints-in -> command-on-link can be measured.
+None), so the reaction time keypoints-in -> command-on-link can be measured, and
+``people``: per person, what the runtime believed (``head_robot_m``, ``predicted_head_m``,
+the body point nearest the end effector and its distance), so a recorded shift can be
+audited (``python -m edge_runtime robot --link none``).
 """
 from __future__ import annotations
 
@@ -61,13 +65,13 @@ import enum
 import math
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable, Protocol
 
 import numpy as np
 
 from edge_runtime import config
-from edge_runtime.core.skeleton import HEAD
+from edge_runtime.core.skeleton import HEAD, JOINTS
 from edge_runtime.robot.hazard import (
     Decision,
     HazardMonitor,
@@ -82,7 +86,7 @@ from edge_runtime.robot.hazard import (
 
 if TYPE_CHECKING:  # the caller makes the lifter (onnxruntime) and the link (python-can, pymavlink): the
     # loop only calls them, so importing it (as the box configuration does) stays light
-    from edge_runtime.robot.lifter import LiftedPose, StreamingLifter
+    from edge_runtime.robot.lifter import LiftedPose, PeopleLifter, StreamingLifter
     from edge_runtime.robot.link.base import LinkInterface
 
 
@@ -153,8 +157,9 @@ class LoopParams:
 class CameraToRobot(Protocol):
     """What the loop uses of :class:`edge_runtime.robot.calibration.Calibration`."""
 
-    def to_robot(self, joints_cam_m) -> np.ndarray:
-        """Robot-frame joints (P, 17, 3) of camera-frame ones (P, 17, 3)."""
+    def to_robot(self, joints_cam_m, observed=None) -> np.ndarray:
+        """Robot-frame joints (P, 17, 3) of camera-frame ones (P, 17, 3); ``observed`` (P, 17)
+        the joints seen in this frame (the floor anchoring prefers their rays)."""
 
 
 class MotionKind(enum.Enum):
@@ -190,6 +195,10 @@ class FrameRecord:
     reason: str
     distance_m: float
     command: str | None
+    people: list = field(default_factory=list)
+    """Per person seen (valid frames): ``id``, ``head_robot_m``, ``predicted_head_m`` (Eq. 3),
+    ``nearest_joint``, ``nearest_point_m`` (his joint nearest the end effector) and
+    ``nearest_distance_m`` (3D, m); robot frame."""
 
 
 @dataclass
@@ -224,6 +233,11 @@ class PendingCommand:
     earlier: tuple[int, ...] = ()
     """The sequence numbers of its earlier sends (it is a retry): a late answer to one of
     them confirms it too, since the arm then did carry it out."""
+
+
+def _rounded(v) -> list[float]:
+    """A robot-frame point for the log: metres to 0.1 mm."""
+    return [round(float(x), 4) for x in np.asarray(v, float).reshape(3)]
 
 
 def _vec3(v) -> tuple[float, float, float]:
@@ -287,13 +301,14 @@ class RobotLoop:
     # -- inputs ---------------------------------------------------------------------------
 
     def feed_joints(self, joints_m, valid: bool = True, reason: str = "", ids=None,
-                    t_in_s: float | None = None) -> FrameRecord:
+                    t_in_s: float | None = None, observed=None) -> FrameRecord:
         """One frame of 3D joints: (17, 3) for one worker, (P, 17, 3) for several, (0, 17, 3)
         or None for nobody seen. ``valid``/``reason``: the lifter's verdict; an invalid frame
         stops the arm, except ``no_person`` (nobody detected): that is an empty scene, judged
         like any frame without workers (a worker lost inside a zone holds the arm). ``ids``:
         a stable id per person (default: their index) so each keeps his own tracker.
-        ``t_in_s``: when the frame's input arrived (default: now)."""
+        ``t_in_s``: when the frame's input arrived (default: now). ``observed`` ((P, 17) bool,
+        optional): the joints seen in this frame, for the floor anchoring."""
         t_in = self.clock() if t_in_s is None else t_in_s
         if not valid and reason.split(":", 1)[0] == NO_PERSON:
             joints_m, valid = None, True
@@ -303,17 +318,51 @@ class RobotLoop:
         if persons.ndim == 2:
             persons = persons[None]
         shaped = persons.ndim == 3 and persons.shape[1:] == (17, 3)
+        if self.calibration is not None and shaped and len(persons):
+            # a stand-in calibration may take the joints only: pass the mask when there is one
+            persons = (self.calibration.to_robot(persons) if observed is None
+                       else self.calibration.to_robot(persons, observed))
         heads = persons[:, HEAD, :] if shaped and len(persons) else np.empty((0, 3))
-        if self.calibration is not None and len(heads):
-            heads = self.calibration.to_robot(persons)[:, HEAD, :]
+        keys = list(range(len(heads))) if ids is None else list(ids)
+        people = []
         if not valid or not shaped or not np.isfinite(heads).all():
             self.counters.invalid += 1
             why = reason if not valid else "non-finite joints" if shaped else f"joints of shape {persons.shape}"
             decision = self.monitor.invalid(t_in, why)
         else:
-            keys = list(range(len(heads))) if ids is None else list(ids)
             decision = self.monitor.observe(t_in, dict(zip(keys, heads)), self.effector_m())
-        return self._act(t_in, decision, record=True)
+            people = self._people(keys, persons)
+        return self._act(t_in, decision, record=True, people=people)
+
+    def feed_people(self, lifter: PeopleLifter, t_frame_s: float, people) -> FrameRecord:
+        """One frame of tracked people (``Person`` objects with stable ids, from
+        ``keypoints.PersonTracker``), each lifted with his own window by ``lifter``. A person
+        whose lift is invalid makes the frame invalid (the arm stops, as for one person); an
+        empty list is an empty scene. ``t_in_s`` is taken before lifting."""
+        t_in = self.clock()
+        poses = lifter.push(t_frame_s, people)
+        bad = next(((pid, p) for pid, p in poses if not p.valid), None)
+        if bad is not None:
+            return self.feed_joints(None, False, f"person {bad[0]}: {bad[1].reason}", t_in_s=t_in)
+        if not poses:
+            return self.feed_joints(None, t_in_s=t_in)
+        return self.feed_joints(np.stack([p.joints_cam_m for _, p in poses]), ids=[pid for pid, _ in poses],
+                                t_in_s=t_in, observed=np.stack([p.observed for _, p in poses]))
+
+    def _people(self, keys, persons: np.ndarray) -> list[dict]:
+        """What the runtime believes about each person (robot frame): FrameRecord.people."""
+        eff = self.effector_m()
+        out = []
+        for key, joints in zip(keys, persons):
+            gap = np.linalg.norm(joints - eff, axis=1)
+            j = int(np.nanargmin(gap)) if np.isfinite(gap).any() else 0
+            est = self.monitor.estimates.get(key)
+            out.append({"id": key.item() if isinstance(key, np.generic) else key,
+                        "head_robot_m": _rounded(joints[HEAD]),
+                        "predicted_head_m": None if est is None else _rounded(est.predicted_m),
+                        "nearest_joint": JOINTS[j], "nearest_point_m": _rounded(joints[j]),
+                        "nearest_distance_m": round(float(gap[j]), 4)})
+        return out
 
     def feed_lifted(self, out: LiftedPose, t_in_s: float | None = None) -> FrameRecord:
         """A StreamingLifter output (``joints_cam_m`` (17, 3), ``valid``, ``reason``), judged
@@ -545,7 +594,7 @@ class RobotLoop:
             self._retract_fallback = True
             self._retract = self._radial_retract()
 
-    def _act(self, t_s: float, decision: Decision, record: bool) -> FrameRecord | None:
+    def _act(self, t_s: float, decision: Decision, record: bool, people=()) -> FrameRecord | None:
         state = decision.state
         motion = self._desired_motion(state, decision)
         alarm = self.monitor.alarm(state)
@@ -561,7 +610,7 @@ class RobotLoop:
         self._report_runtime_state(state)
         if not record:
             return None
-        rec = FrameRecord(t_s, t_cmd, state.name, self.status()["reason"], decision.distance_m, sent)
+        rec = FrameRecord(t_s, t_cmd, state.name, self.status()["reason"], decision.distance_m, sent, list(people))
         self.records.append(rec)
         if self.on_record:
             self.on_record(rec)

@@ -32,6 +32,12 @@ Detector
   the whole person is missed with ``p_miss_frame``. A missed joint has score 0 and NaN
   coordinates. Joints outside the image or behind the camera are missed too.
 * Scores: about 0.9 for a clean joint, falling with the joint's error.
+* A real detector's scale (``coco_k`` > 0, :data:`REAL_DETECTOR`): the noise of joint ``j``
+  is ``coco_k * COCO_SIGMAS[j] * s`` pixels, ``s`` the square root of the person's bounding
+  box area in the image, as COCO's keypoint similarity (OKS) measures detectors; with
+  ``coco_k`` = 1 the mean OKS is about 0.8, a good 2019-2023 detector. ``offset_sd_m`` adds a
+  systematic offset per joint and person (a detector's hip is not the hip joint centre), fixed
+  for the whole sequence. :func:`occlude` hides what a nearer person covers.
 
 ``fmt="coco"`` reports the 17 COCO keypoints instead (eyes and ears placed on the head by
 :func:`edge_runtime.robot.keypoints.h36m_to_coco_3d`), so that the runtime's COCO -> H36M
@@ -44,9 +50,11 @@ with ``null`` coordinates for a missed joint and ``"people": []`` when nobody wa
 """
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -185,15 +193,27 @@ class DetectorNoise:
     p_miss: float = 0.005            #: chance per joint and frame that a burst of misses starts
     miss_burst_frames: int = 4       #: mean length of a burst of misses (frames)
     p_miss_frame: float = 0.003      #: chance per frame that the person is not detected at all
+    coco_k: float = 0.0              #: > 0: noise sd = coco_k * COCO sigma * sqrt(box area) (px), not sigma_m
+    offset_sd_m: float = 0.0         #: systematic per-joint offset on the body (m, 1 sd), fixed per sequence
 
     def scaled(self, k: float) -> "DetectorNoise":
         """Noise and error rates multiplied by ``k`` (0: a perfect detector)."""
         return DetectorNoise(self.sigma_m * k, self.min_sigma_px * k, self.drift_tau_s, self.p_outlier * k,
                              self.outlier_m, self.p_swap * k, self.p_miss * k, self.miss_burst_frames,
-                             self.p_miss_frame * k)
+                             self.p_miss_frame * k, self.coco_k * k, self.offset_sd_m * k)
 
 
 PERFECT = DetectorNoise().scaled(0.0)
+REAL_DETECTOR = DetectorNoise(coco_k=1.0, offset_sd_m=0.03, p_outlier=0.01, p_swap=0.005, p_miss=0.01,
+                              p_miss_frame=0.005)
+"""A real 2D detector's scale (module docstring): COCO sigmas at the person's size in the image,
+systematic joint offsets, more misses and gross errors than the default."""
+COCO_SIGMAS = np.array([0.026, 0.025, 0.025, 0.035, 0.035, 0.079, 0.079, 0.072, 0.072, 0.062, 0.062,
+                        0.107, 0.107, 0.087, 0.087, 0.089, 0.089])
+"""COCO's per-keypoint sigmas (Ronchi & Perona 2017), COCO-17 order."""
+COCO_SIGMAS_H36M = np.array([0.107, 0.107, 0.087, 0.089, 0.107, 0.087, 0.089, 0.093, 0.079, 0.026, 0.035,
+                             0.079, 0.072, 0.062, 0.079, 0.072, 0.062])
+"""The same for H36M-17 (pelvis and spine from the hips and shoulders, head from the ears)."""
 
 _SWAP = np.arange(17)
 _SWAP[list(sk.JOINTS_LEFT)] = sk.JOINTS_RIGHT
@@ -227,7 +247,16 @@ def detect(camera: Camera, joints_m: np.ndarray, rng: np.random.Generator, noise
     per_joint = JOINT_NOISE if fmt == "h36m" else np.ones(17)
     with np.errstate(invalid="ignore", divide="ignore"):
         px_per_m = np.where(depth > 0.05, f / depth, np.nan)
-    sigma = np.maximum(noise.sigma_m * px_per_m * per_joint, noise.min_sigma_px)       # (T, 17)
+    if noise.offset_sd_m:
+        uv = uv + rng.normal(0.0, noise.offset_sd_m, (1, 17, 2)) * px_per_m[..., None]
+    if noise.coco_k > 0:  # OKS-scaled: COCO sigma of the joint times the person's size in the image
+        with np.errstate(invalid="ignore"):
+            span = np.nanmax(uv, axis=1) - np.nanmin(uv, axis=1)                            # (T, 2)
+        size_px = np.sqrt(np.maximum(span[:, 0] * span[:, 1], 1.0))
+        sigmas = COCO_SIGMAS_H36M if fmt == "h36m" else COCO_SIGMAS
+        sigma = np.maximum(noise.coco_k * sigmas[None, :] * size_px[:, None], noise.min_sigma_px)
+    else:
+        sigma = np.maximum(noise.sigma_m * px_per_m * per_joint, noise.min_sigma_px)   # (T, 17)
     # half white jitter, half AR(1) drift
     a = math.exp(-1.0 / (max(noise.drift_tau_s, 1e-6) * camera.rate_hz))
     drift = np.empty((T, 17, 2))
@@ -257,6 +286,28 @@ def detect(camera: Camera, joints_m: np.ndarray, rng: np.random.Generator, noise
     score[missed] = 0.0
     return np.concatenate([det, score[..., None]], axis=-1)
 
+
+
+def occlude(keypoints: list[np.ndarray], depth_m: list[np.ndarray], rng: np.random.Generator,
+            p_hidden: float = 0.85, shrink: float = 0.7) -> list[np.ndarray]:
+    """Several people's detector output ((T, 17, 3) each, same frames) with what a nearer person
+    covers hidden: a keypoint of a farther person (``depth_m`` (T,) per person: his distance
+    from the camera) inside a nearer person's keypoint box, narrowed to ``shrink`` of its width
+    (a body is no box), is missed with probability ``p_hidden`` (NaN, score 0)."""
+    out = [np.array(k, float) for k in keypoints]
+    for a, b in itertools.permutations(range(len(out)), 2):  # a hides b where a is nearer
+        front = np.asarray(depth_m[a]) < np.asarray(depth_m[b])
+        with warnings.catch_warnings():  # a frame in which a is not seen at all hides nothing
+            warnings.simplefilter("ignore", RuntimeWarning)
+            lo, hi = np.nanmin(keypoints[a][..., :2], axis=1), np.nanmax(keypoints[a][..., :2], axis=1)
+        mid, half = (lo[:, 0] + hi[:, 0]) / 2, (hi[:, 0] - lo[:, 0]) / 2 * shrink
+        x, y = out[b][..., 0], out[b][..., 1]
+        with np.errstate(invalid="ignore"):
+            inside = ((np.abs(x - mid[:, None]) <= half[:, None]) & (y >= lo[:, 1:2]) & (y <= hi[:, 1:2])
+                      & front[:, None])
+        hidden = inside & (rng.random(inside.shape) < p_hidden)
+        out[b][hidden] = [np.nan, np.nan, 0.0]
+    return out
 
 
 def to_model_input(keypoints_px: np.ndarray, camera: Camera | None = None) -> np.ndarray:

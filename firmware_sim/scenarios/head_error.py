@@ -41,7 +41,7 @@ from edge_runtime.robot.calibration import (
     anchor_factor,
     from_recording,
 )
-from firmware_sim.devices.camera import Camera, DetectorNoise, detect, random_placement
+from firmware_sim.devices.camera import REAL_DETECTOR, Camera, DetectorNoise, detect, random_placement
 from firmware_sim.people import motions
 from firmware_sim.people.human import Body
 
@@ -52,6 +52,7 @@ WORK_S = 3.0                              # test: time working at each stop (s)
 STOPS = 5                                 # test: stops per placement
 WORKER_HEIGHTS_M = (1.60, 1.90)           # workers' heights are drawn uniformly from this range
 RATE_HZ = 30.0
+NOISES = {"default": DetectorNoise(), "real": REAL_DETECTOR}
 TRUTH = "truth"                           # --calibration-method: the true extrinsics, no fit
 
 BAD_INPUT = (OSError,)
@@ -63,6 +64,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--anchor", choices=("on", "off", "both"), default="both",
                         help="floor re-anchoring of the lifted skeleton: measure with it, without, or both")
     parser.add_argument("--precision", choices=("int8", "fp32"), default="int8", help="which shipped lifter")
+    parser.add_argument("--noise", choices=sorted(NOISES), default="default",
+                        help="the 2D detector's errors: default (DetectorNoise()) or real (REAL_DETECTOR: COCO "
+                             "sigmas at the person's size, offsets, more misses)")
     parser.add_argument("--calibration-method", choices=(*METHODS_FIT, TRUTH), default=CalibrationParams().method,
                         help="the calibration fit (edge_runtime.robot.calibration; default: its default), or "
                              f"'{TRUTH}': the simulated camera's true extrinsics (the reference)")
@@ -134,13 +138,13 @@ def true_calibration(camera: Camera, params: CalibrationParams = CalibrationPara
 
 
 def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
-                  params: CalibrationParams = CalibrationParams(), truth: bool = False) -> dict:
+                  params: CalibrationParams = CalibrationParams(), truth: bool = False,
+                  noise: DetectorNoise = DetectorNoise()) -> dict:
     """One camera placement: calibrate (``truth``: take the true extrinsics instead; the
     calibration walk is still simulated, so the random streams match), then the worker's
     frames. Returns per-frame arrays (``distance_m``, per method ``err`` (T, 3) rows of 3-D,
     ground, height errors) or ``{"refused": reason}``."""
     camera = random_placement(rng)
-    noise = DetectorNoise()
     cal_mot, labels = calibration_motion(_body(rng), rng)
     cal_joints = lift(lifter, detect(camera, cal_mot.joints_m, rng, noise), 0.0)
     try:
@@ -189,7 +193,7 @@ def summarise(results: list[dict], methods, args) -> dict:
     dist = np.concatenate([r["distance_m"] for r in done]) if done else np.zeros(0)
     out = {"command": (f"python -m firmware_sim head-error --placements {args.placements} --seed {args.seed} "
                        f"--anchor {args.anchor} --precision {args.precision} "
-                       f"--calibration-method {args.calibration_method} --json {args.json}"
+                       f"--calibration-method {args.calibration_method} --noise {args.noise} --json {args.json}"
                        + (f" --plot {args.plot}" if args.plot else "")),
            "lifter_precision": args.precision, "calibration_method": args.calibration_method, "placements": args.placements,
            "calibrations_refused": [r["refused"] for r in results if "refused" in r],
@@ -271,7 +275,8 @@ def cmd(args) -> int:
     it = tqdm(seeds, desc="placements", unit="cam") if tqdm else seeds
     for s in it:
         lifter.restart()
-        results.append(run_placement(lifter, np.random.default_rng(int(s)), methods, params, truth))
+        results.append(run_placement(lifter, np.random.default_rng(int(s)), methods, params, truth,
+                                     NOISES[args.noise]))
     summary = summarise(results, methods, args)
     Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
     if args.plot:

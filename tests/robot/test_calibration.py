@@ -239,6 +239,19 @@ def test_recovers_a_known_depth_and_keeps_the_2d_projections(scale):
     assert off > 0.2 * abs(scale - 1) * np.linalg.norm(cam.to_camera(truth[HEAD]))
 
 
+def test_anchors_on_an_observed_ankle_not_a_held_one():
+    cam = Camera.look_at((0.0, 1.5, 6.0), (0.0, -0.2, 1.0))
+    cal = true_calibration(cam)
+    truth = anchored_worker((0.0, 1.5))
+    lifted = cam.to_camera(truth) * 1.15
+    lifted[L_ANKLE] *= 1.3                              # a held ankle on a stale ray, lower in the robot frame
+    observed = np.ones(17, bool)
+    observed[L_ANKLE] = False
+    robot = cal.to_robot(lifted, observed)
+    np.testing.assert_allclose(robot[R_ANKLE], truth[R_ANKLE], atol=1e-6)
+    assert np.abs(cal.to_robot(lifted)[R_ANKLE] - truth[R_ANKLE]).max() > 0.05  # the held one would move it
+
+
 def test_uses_the_lower_ankle_of_a_stride():
     cam = Camera.look_at((0.0, 1.5, 6.0), (0.0, -0.2, 1.0))
     cal = true_calibration(cam)
@@ -304,3 +317,17 @@ def test_old_calibration_files_still_load(tmp_path):
     assert loaded.params == CalibrationParams() and np.allclose(loaded.A, cam.R.T)
     with pytest.raises(ValueError, match="anchor_min_scale"):
         CalibrationParams(anchor_min_scale=1.2)
+
+
+def test_pnp_measures_the_worker_from_the_rays_not_the_lifters_depth():
+    from edge_runtime.robot.calibration import targets
+
+    cam = Camera.look_at((2.5, 1.6, 6.5), (0.0, -0.2, 1.0))
+    params = CalibrationParams(method="pnp")
+    heads, ankles = targets(params, 1.62)
+    depth_wrong = np.array([1.25, 0.9, 1.1])[:, None]           # the lifter misjudged each stand's depth
+    cal = fit(cam.to_camera(heads) * depth_wrong, cam.to_camera(ankles) * depth_wrong, params)
+    assert cal.worker_height_m == pytest.approx(1.62, abs=0.011)
+    np.testing.assert_allclose(cal.b, cam.position_m, atol=0.02)  # the camera centre, from the rays alone
+    r = cal.residuals_m()  # across the rays: the lifter's wrong depths are no residual of a ray fit
+    assert max(r["head"] + r["ankle"]) < 0.02

@@ -234,3 +234,38 @@ def test_a_stalled_live_camera_is_caught_by_the_staleness_check():
     s = loop.status()
     assert "NORMAL" in seen and s["state"] == "FAULT" and s["reason"] == "pose_stale" and s["stale"] == 1
     assert [c for c in link.calls if c[0] != "heartbeat"][-1] == ("stop",)
+
+
+# ------------------------------------------------------------------ --link none: an offline replay
+
+
+def test_link_none_fast_logs_each_persons_head_as_given_and_says_no_arm(tmp_path, capsys):
+    rows = []
+    for i in range(150):                                  # two workers, 5 s; one walks at the arm
+        a = human.joints(BODY, human.Posture(), pelvis_xz_m=(0.0, 9.0 - 1.2 * i / 30), heading_rad=np.pi)
+        b = human.joints(BODY, human.Posture(), pelvis_xz_m=(6.0, 6.0), heading_rad=np.pi)
+        rows.append({"t": i / 30, "people": [{"id": 4, "joints_robot_m": a.round(4).tolist()},
+                                             {"id": 9, "joints_robot_m": b.round(4).tolist()}]})
+    src = write_jsonl(tmp_path / "j.jsonl", rows)
+    log = tmp_path / "log.jsonl"
+    assert main(["robot", "--link", "none", "--fast", "--joints", str(src), "--log", str(log), "--quiet"]) == 0
+    lines = [json.loads(x) for x in log.read_text().splitlines()]
+    frames, summary = lines[:-1], lines[-1]["summary"]
+    assert len(frames) == 150
+    for row, rec in zip(rows, frames):
+        got = {p["id"]: p for p in rec["people"]}
+        for person in row["people"]:
+            assert np.abs(np.subtract(got[person["id"]]["head_robot_m"], person["joints_robot_m"][10])).max() <= 1e-3
+    last = {p["id"]: p for p in frames[-1]["people"]}
+    assert last[4]["nearest_distance_m"] < last[9]["nearest_distance_m"] and last[4]["predicted_head_m"] is not None
+    assert {f["state"] for f in frames} >= {"NORMAL", "LEVEL1"} and frames[-1]["state"] != "NORMAL"
+    assert any(f["command"] == "stop" for f in frames)
+    assert summary["link_verdict"].startswith("none: no arm was connected") and summary["fast"] is True
+    assert summary["recording_s"] == pytest.approx(149 / 30, abs=1e-3)
+    assert "ok" not in summary["link_verdict"].split(";")[0]
+    assert "no arm was connected" in capsys.readouterr().out
+
+
+def test_fast_needs_link_none(tmp_path):
+    src = approach(tmp_path / "j.jsonl")
+    assert main(["robot", "--link", "can", "--fast", "--joints", str(src)]) == 2

@@ -287,3 +287,50 @@ def test_camera_files(tmp_path):
         p.write_text(text)
         with pytest.raises(InputError, match=msg):
             CameraModel.from_json(p)
+
+
+# ---------------------------------------------------------------------------- who is who
+
+
+def _person_px(centre_x: float, height_px: float, rng) -> np.ndarray:
+    """A standing person's 17 keypoints (x, y, score) around ``centre_x``, ``height_px`` tall."""
+    shape = np.array([[0, -0.45], [-0.02, -0.47], [0.02, -0.47], [-0.05, -0.46], [0.05, -0.46], [-0.12, -0.3],
+                      [0.12, -0.3], [-0.15, -0.1], [0.15, -0.1], [-0.16, 0.05], [0.16, 0.05], [-0.08, 0.05],
+                      [0.08, 0.05], [-0.08, 0.28], [0.08, 0.28], [-0.08, 0.5], [0.08, 0.5]])
+    xy = shape * height_px + [centre_x, 360] + rng.normal(0, 2, (17, 2))
+    return np.column_stack([xy, np.full(17, 0.9)])
+
+
+def test_tracker_keeps_ids_through_a_crossing_and_a_short_absence():
+    from edge_runtime.robot.keypoints import PersonTracker
+
+    rng = np.random.default_rng(0)
+    tracker = PersonTracker()
+    ids = []
+    for k in range(90):                               # a near (big) and a far (small) person cross
+        t = k / 30
+        near, far = _person_px(200 + 10 * k, 400, rng), _person_px(1100 - 10 * k, 250, rng)
+        people = [Person(far, 5), Person(near, 5)] if k % 2 else [Person(near, 5), Person(far, 5)]
+        if 40 <= k < 50:
+            people = [people[0]] if people[0].keypoints is near else [people[1]]  # the far one hidden
+        out = tracker.update(t, people)
+        ids.append({("near" if p.keypoints is near else "far"): p.id for p in out})
+        assert all(p.source_id == 5 for p in out)
+    assert len({d["near"] for d in ids}) == 1 and len({d["far"] for d in ids if "far" in d}) == 1
+    assert ids[0]["near"] != ids[0]["far"]
+    near_id = ids[0]["near"]
+    # the near one leaves and comes back where he left within max_lost_s: the same id
+    back = tracker.update(90 / 30 + 1.0, [Person(_person_px(200 + 10 * 90, 400, rng))])
+    assert back[0].id == near_id
+    # gone longer than max_lost_s: a new person
+    again = tracker.update(90 / 30 + 1.0 + tracker.params.max_lost_s + 0.1, [Person(_person_px(1100, 400, rng))])
+    assert again[0].id not in (near_id, ids[0]["far"]) and tracker.created == 3
+
+
+def test_tracker_drops_detections_that_are_not_people():
+    from edge_runtime.robot.keypoints import PersonTracker
+
+    kp = _person_px(500, 300, np.random.default_rng(1))
+    kp[4:, 2] = 0.0                                  # only 4 keypoints seen
+    tracker = PersonTracker()
+    assert tracker.update(0.0, [Person(kp)]) == [] and tracker.rejected == 1

@@ -10,7 +10,7 @@ import shutil
 
 import numpy as np
 import pytest
-from support.lifter import CANONICAL, RF, make_lifter_assets, random_walk_keypoints
+from support.lifter import CANONICAL, F_CANON, RF, make_lifter_assets, random_walk_keypoints
 
 from edge_runtime.core.manifest import (
     CLASSIFIER_ARCHS,
@@ -68,9 +68,14 @@ def test_streaming_equals_batch_over_padded_sequence(assets, precision, seed):
     norm = normalize_screen(kp[..., :2], 1280, 720).astype(np.float32)
     pose, root = lifter.lift_windows(padded_windows(norm, RF))
     want = pose + root[:, None, :]
-    got = np.stack([p.joints_cam_m for p in stream])
+    got = np.stack([p.joints_model_cam_m for p in stream])
     np.testing.assert_allclose(got, want, atol=2e-5)
-    np.testing.assert_allclose(np.stack([p.root_cam_m for p in stream]), root, atol=2e-5)
+    # the output keeps the model's depth and lies on the keypoints' rays: it projects onto them
+    out = np.stack([p.joints_cam_m for p in stream])
+    np.testing.assert_allclose(out[..., 2], want[..., 2], atol=2e-5)
+    reproj = out[..., :2] / out[..., 2:] * F_CANON + [640.0, 360.0]
+    np.testing.assert_allclose(reproj, kp[..., :2], atol=1e-3)
+    np.testing.assert_allclose(np.stack([p.root_cam_m for p in stream]), out[:, 0], atol=1e-12)
     assert lifter.stats.inferences == n and lifter.stats.valid == n and lifter.stats.warming_up == RF - 1
     # the stand-in really uses old frames: a different first frame changes the 27th output
     other = norm.copy()
@@ -95,7 +100,7 @@ def test_dropped_frame_is_interpolated_into_the_buffer(assets):
     filled[32] = norm[30] + (norm[33] - norm[30]) * 2 / 3
     pose, root = lifter.lift_windows(padded_windows(filled.astype(np.float32), RF))
     for i in keep:
-        np.testing.assert_allclose(out[i].joints_cam_m, pose[i] + root[i], atol=2e-5)
+        np.testing.assert_allclose(out[i].joints_model_cam_m, pose[i] + root[i], atol=2e-5)
 
 
 # ---------------------------------------------------------------------------- missing data
@@ -226,7 +231,7 @@ def test_slow_camera_is_spaced_out_to_the_model_rate(assets):
     dense = np.stack([np.stack([np.interp(t, np.arange(10), norm[:, j, d]) for d in range(2)], -1)
                       for j in range(17)], 1)
     pose, root = lifter.lift_windows(padded_windows(dense.astype(np.float32), RF))
-    np.testing.assert_allclose(outs[-1].joints_cam_m, pose[-1] + root[-1], atol=2e-5)
+    np.testing.assert_allclose(outs[-1].joints_model_cam_m, pose[-1] + root[-1], atol=2e-5)
 
 
 def test_long_timestamp_gap_resets(assets):
@@ -253,6 +258,9 @@ def test_distorted_camera_keypoints_are_undistorted_before_lifting(assets):
     a = _lifter(assets, camera=cam).push(0.0, kp_img)
     b = _lifter(assets).push(0.0, canon_px)
     np.testing.assert_allclose(a.joints_cam_m, b.joints_cam_m, atol=1e-3)
+    # projected with the distorted camera itself, the 3D joints land on the keypoints they came from
+    back, _ = cv2.projectPoints(a.joints_cam_m, np.zeros(3), np.zeros(3), cam.K, cam.dist_array)
+    np.testing.assert_allclose(back.reshape(17, 2), kp_img[:, :2], atol=0.01)
 
 
 # ---------------------------------------------------------------------------- model loading
@@ -316,3 +324,35 @@ def test_params_are_validated():
                 {"max_gap_periods": 0.5}, {"lost_timeout_s": 0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             LifterParams(**bad)
+
+
+def test_held_joints_are_marked_and_stay_on_their_last_ray(assets):
+    kp = random_walk_keypoints(np.random.default_rng(4), 5)
+    lifter = _lifter(assets)
+    for i in range(4):
+        lifter.push(i * PERIOD, kp[i])
+    gone = kp[4].copy()
+    gone[3, 2] = 0.0  # the right ankle not seen: held at frame 3's position
+    pose = lifter.push(4 * PERIOD, gone)
+    assert pose.valid and not pose.observed[3] and pose.held[3] and pose.held.sum() == 1
+    assert pose.to_json()["held"][3] is True and pose.to_json()["observed"][3] is False
+    x, y, z = pose.joints_cam_m[3]
+    np.testing.assert_allclose([x / z * F_CANON + 640, y / z * F_CANON + 360], kp[3, 3, :2], atol=1e-3)
+
+
+def test_people_lifter_gives_each_person_his_own_window(assets):
+    from edge_runtime.robot.keypoints import Person
+    from edge_runtime.robot.lifter import PeopleLifter
+
+    rng = np.random.default_rng(5)
+    a, b = random_walk_keypoints(rng, 30), random_walk_keypoints(rng, 30)
+    people = PeopleLifter(_lifter(assets))
+    alone = _lifter(assets)
+    for i in range(30):
+        both = people.push(i * PERIOD, [Person(a[i], 7), Person(b[i], 9)] if i % 3 != 2 else [Person(a[i], 7)])
+        want = alone.push(i * PERIOD, a[i])
+        np.testing.assert_allclose(dict(both)[7].joints_cam_m, want.joints_cam_m, atol=1e-6)
+    assert set(people.lifters) == {7, 9}  # 9 missed the last frame only: his window waits for him
+    people.push(30 * PERIOD + 0.6, [Person(a[0], 7)])
+    assert set(people.lifters) == {7}  # gone longer than lost_timeout_s (0.5 s): dropped
+    assert people.stats.frames == 31 + 20
