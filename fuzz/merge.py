@@ -65,7 +65,8 @@ def merge(paths: list[Path], commit: str | None = None, commands: list[str] | No
     for i, path in enumerate(paths):
         doc, reports = load_log(path) if path.suffix == ".log" else load_shard(path)
         commands.append(given[i] if i < len(given) else doc.get("command", "?"))
-        seeds.add(doc.get("seed"))
+        if "seed" in doc:  # a log does not say
+            seeds.add(doc["seed"])
         for r in reports:
             if r.name in seen:
                 raise MergeError(f"{path}: target {r.name} is also in {seen[r.name]}")

@@ -130,11 +130,15 @@ def measure(workdir: Path, minutes: float, seed: int, speed: float, outages: lis
     hubs = [_Hub(workdir, port, 0)]
     heard = workdir / "listener.out"
     listener = subprocess.Popen([sys.executable, "-m", "support.hub_outage", "--listen", str(port)],
-                                stdout=heard.open("w"), stderr=subprocess.PIPE, text=True,
+                                stdout=heard.open("w"), stderr=(workdir / "listener.err").open("w"), text=True,
                                 env={**os.environ, "PYTHONPATH": f"{REPO_ROOT}{os.pathsep}{REPO_ROOT / 'tests'}"})
     box = workdir / "box.toml"
     box.write_text(f'[can]\ninterface = "socketcand"\nchannel = "vcan0"\nport = {port}\n')
     alerts = workdir / "alerts.jsonl"
+    # the runtime's and the listener's output go to files, never to pipes read at the end: a
+    # process whose pipe is full blocks on its next log line (a flood of python-can warnings
+    # did that once: the runtime stalled for a whole outage)
+    rt_out, rt_err = workdir / "wearable.out", workdir / "wearable.err"
     rt = None
     done_outages = []
     try:
@@ -142,7 +146,7 @@ def measure(workdir: Path, minutes: float, seed: int, speed: float, outages: lis
             raise RuntimeError(f"listener did not start: {heard.read_text()[-300:]}")
         rt = subprocess.Popen([sys.executable, "-m", "edge_runtime", "wearable", "--imu",
                                f"sim?csv={workdir / 'imu.csv'}&speed={speed:g}", "--config", str(box), "--alerts",
-                               str(alerts), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               str(alerts), "--quiet"], stdout=rt_out.open("w"), stderr=rt_err.open("w"), text=True)
         if not _wait_for(heard, "WEARABLE_STATUS", rt, 60):
             raise RuntimeError("no heartbeat from the runtime reached the listener")
         t0 = time.monotonic()
@@ -155,20 +159,22 @@ def measure(workdir: Path, minutes: float, seed: int, speed: float, outages: lis
             time.sleep(length_s)
             hubs.append(_Hub(workdir, port, len(hubs)))
             done_outages.append({"down_at_s": round(down, 2), "up_at_s": round(time.monotonic() - t0, 2)})
-        out, err = rt.communicate(timeout=minutes * 60 / speed + 120)
+        rt.wait(timeout=minutes * 60 / speed + 120)
         time.sleep(1.0)  # the last alert's copies
     finally:
         if rt is not None and rt.poll() is None:
             rt.kill()
-            rt.communicate()
+            rt.wait()
         listener.send_signal(signal.SIGTERM)
         try:
-            _, listener_err = listener.communicate(timeout=30)
+            listener.wait(timeout=30)
         except subprocess.TimeoutExpired:
             listener.kill()
-            _, listener_err = listener.communicate()
+            listener.wait()
         for h in hubs:
             h.stop()
+    out, err = rt_out.read_text(), rt_err.read_text()
+    listener_err = (workdir / "listener.err").read_text()
     if rt.returncode != 0:
         raise RuntimeError(f"wearable: exit {rt.returncode}: {err.strip()[-500:]}")
     decisions = [json.loads(x) for x in alerts.read_text().splitlines()]
@@ -189,6 +195,7 @@ def measure(workdir: Path, minutes: float, seed: int, speed: float, outages: lis
         "wearable_status": [x for x in lines if x.startswith(("WEARABLE_STATUS", "connected"))],
         "hubs": [next((x.split(": ", 1)[1] for x in h.log.read_text().splitlines() if x.startswith("can-hub stopped")),
                       "?") for h in hubs],
+        "runtime_connect_retries_logged": err.count("Failed to connect to server"),
         "listener": summary, "listener_stderr_tail": listener_err.strip().splitlines()[-1:] if listener_err else [],
         "runtime_summary": [x.strip() for x in out.splitlines() if x.strip()],
     }
