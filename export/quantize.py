@@ -191,8 +191,7 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
                 ops = None if v.static_ops is None else [o for o in v.static_ops if o in present]
                 stage = Path(td) / "static.onnx"
                 quantize_static(str(cur), str(stage), WindowReader(calib, input_name=model.graph.input[0].name),
-                                quant_format=QuantFormat.QOperator if v.qoperator else QuantFormat.QDQ,
-                                op_types_to_quantize=ops, per_channel=v.per_channel,
+                                quant_format=QuantFormat.QDQ, op_types_to_quantize=ops, per_channel=v.per_channel,
                                 activation_type=QuantType.QInt8 if v.activation == "int8" else QuantType.QUInt8,
                                 weight_type=QuantType.QInt8,
                                 calibrate_method=CalibrationMethod.MinMax,

@@ -26,7 +26,6 @@ class Variant:
     per_channel: bool = True                 #: per-channel weight scales (static)
     activation: str = "uint8"                #: static activations, "uint8" or "int8" (weights are int8)
     keep_fp32: Callable[[onnx.ModelProto], list[str]] | None = None  #: names of the nodes left fp32
-    qoperator: bool = False                  #: static ops as QOperator nodes (QLinearConv, ...) instead of QDQ pairs
 
     @property
     def static(self) -> bool:
