@@ -199,7 +199,7 @@ def calibrate_steps(val_step_probs: np.ndarray, y_val: np.ndarray, other: int) -
         temps[str(s)], thresholds[str(s)] = round(t, 4), thr
         rows.append({"steps": s, "temperature": round(t, 4), "min_confidence": thr,
                      "ece_raw": expected_calibration_error(p, y_val), "ece": expected_calibration_error(pc, y_val),
-                     "alert_precision": prec, "alerts": n,
+                     "alert_precision": prec if n else None, "alerts": n,  # JSON has no NaN
                      "alert_recall": float(np.mean((pc.argmax(1) != other) & (pc.max(1) >= thr) & (y_val != other))
                                            / max(np.mean(y_val != other), 1e-12))})
     return {"steps": list(range(1, len(val_step_probs) + 1)), "temperature_by_steps": temps,
