@@ -92,6 +92,34 @@ def steps_table(m: dict) -> list[str]:
     return lines + [""]
 
 
+def save_steps_png(m: dict, path: Path) -> Path:
+    """Macro-F1 (every capture, onset captures) and ECE of the ConvLSTM's decision after S sub-windows."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = m["steps"]
+    t = [r["steps"] * SUBWINDOW_S - PRE_TRIGGER_S for r in rows]
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=110)
+    ax.plot(t, [r["macro_f1"] for r in rows], "o-", label="macro-F1, every capture")
+    ax.plot(t, [r.get("onset_macro_f1") for r in rows], "s--", label="macro-F1, onset captures")
+    ax.plot(t, [r["ece"] for r in rows], "^:", label="ECE (temperature-scaled)")
+    ax.plot(t, [r["ece_raw"] for r in rows], "v:", alpha=0.6, label="ECE (raw)")
+    for r, x in zip(rows, t):
+        ax.annotate(f"S={r['steps']}", (x, r["macro_f1"]), textcoords="offset points", xytext=(0, 6), ha="center",
+                    fontsize=7)
+    ax.set_xlabel("time after the trigger when the decision can be made (s)")
+    ax.set_ylim(0, 1)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="center right")
+    ax.set_title(f"ConvLSTM early decisions, LOSO ({len(m.get('folds', []))} folds)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def onset_table(loso: dict[str, dict]) -> list[str]:
     lines = ["| Architecture | macro-F1, every capture | macro-F1, onset captures | macro-F1, repeat captures only "
              "(accuracy) |", "|---|---:|---:|---:|"]
@@ -213,6 +241,8 @@ def _run_archs(archs, train, test_ws, out_p: Path, *, epochs: int | None, seed: 
             a, train, test_ws, out_p / a / "loso", epochs=ep, seed=seed, jobs=jobs, progress=progress,
             recipe=recipe, calib=calib if a == "convlstm" else None, folds=folds, final_model=False)
         _add_repeat_only(loso[a], out_p / a / "loso", test_ws)
+        if loso[a].get("steps"):
+            save_steps_png(loso[a], out_p / a / "loso" / "steps.png")
         timing[a] = {"loso_s": round(time.time() - t0, 1)}
         if within:
             t0 = time.time()
@@ -253,7 +283,8 @@ def _markdown(loso: dict, wit: dict, detector: dict | None, *, command: str, see
         md += ["### Early decisions: the ConvLSTM after S of its 6 sub-windows", "",
                "One model (79,598 parameters, deep supervision over prefixes) decides on the first S sub-windows "
                "of the capture's preprocessing. Temperatures per step are fitted per fold on the selection cohort "
-               "(NLL), never on the held-out subject; ECE over 15 confidence bins.", "", *steps_table(conv)]
+               "(NLL), never on the held-out subject; ECE over 15 confidence bins.", "", *steps_table(conv),
+               "![ConvLSTM early decisions](convlstm/loso/steps.png)", ""]
     md += ["## Onset captures (one capture per detected event + false alarms)", "", *onset_table(loso),
            "The summary-statistics LDA (mean, sd, min, max per axis: 12 numbers) measures how much posture alone "
            "gives away on this simulator; it should stay well below the ConvLSTM.", "",
