@@ -230,10 +230,13 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
                  train_npz: str | None = None, test_npz: str | None = None, loso_dir: str | None = None,
                  variants: Sequence[str] | None = None, command: str | None = None, auto_loso: bool = True,
                  log: Callable[[str], None] = print, progress: bool = True, selection: str | Path | None = None,
-                 early_min_agreement: float = EARLY_MIN_AGREEMENT) -> dict:
+                 early_min_agreement: float = EARLY_MIN_AGREEMENT, checkpoint: str | Path | None = None) -> dict:
     """The module docstring's steps 1-6, one function each; returns the manifest written.
     ``selection``: the selection.json whose recipe trains the model and beside whose cohort the
-    early decisions are calibrated (default: reports/wearable/selection/selection.json)."""
+    early decisions are calibrated (default: reports/wearable/selection/selection.json).
+    ``checkpoint``: the model.pt an earlier run of this command wrote (``WORK/convlstm``) instead of
+    training again; training is deterministic, so for the same seed, data and training code it holds
+    the same weights (the manifest records that it was reused)."""
     from models.selection import load_recipe
     from models.train import STEP_LOSS_WEIGHTS
 
@@ -251,16 +254,20 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
     train_npz, test_npz, data_info = _cohort(train_npz, test_npz, subjects=subjects, seed=seed, minutes=minutes,
                                              work=work, log=log, progress=progress)
     train, test = _load_cohort(train_npz, test_npz, data_info)
-    model, train_s, n_windows = _train(train, test, recipe, epochs=epochs, seed=seed, work=work,
-                                       data={"train": str(train_npz), "test": str(test_npz)}, log=log,
-                                       progress=progress)
+    if checkpoint:
+        model, train_s, n_windows = _reuse(checkpoint, train, test, recipe, epochs=epochs, seed=seed, log=log)
+    else:
+        model, train_s, n_windows = _train(train, test, recipe, epochs=epochs, seed=seed, work=work,
+                                           data={"train": str(train_npz), "test": str(test_npz)}, log=log,
+                                           progress=progress)
     X_train, X_test = preprocess(train.X), preprocess(test.X)
     version, commit = f"{package_version()}+{ARCH}.seed{seed}", git_commit()
     # models are staged in the work directory and copied next to the manifest only when
     # everything passed: a failed build never leaves half-updated assets
     fp32_path, parity = _export_fp32(model, train, X_test, seed=seed, epochs=epochs, version=version,
                                      commit=commit, stage=work / "stage", log=log)
-    int8_path, quant = _quantise(fp32_path, X_train, train.y, X_test, test.y, seed=seed, variants=variants, log=log)
+    int8_path, quant = _quantise(fp32_path, X_train, train.y, X_test, test.y, seed=seed, variants=variants, log=log,
+                                 early_min_agreement=early_min_agreement)
     scores = _score(fp32_path, int8_path, X_test, test.y, list(train.classes), method=quant["method"],
                     loso_dir=_loso_dir(loso_dir, auto_loso), log=log)
     early = _early(fp32_path, int8_path, X_test, list(train.classes), seed=seed, selection=selection, log=log,
@@ -269,6 +276,7 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
     provenance = {"command": command, "seed": seed, "data": data_info,
                   "training": {"arch": ARCH, "epochs": epochs, "seed": seed, "windows": n_windows,
                                "recipe": recipe, "step_loss_weights": list(STEP_LOSS_WEIGHTS),
+                               **({"reused_checkpoint": str(checkpoint)} if checkpoint else {}),
                                "function": "models.train.fit", "threads": 1, "seconds": round(train_s, 1)},
                   "git_commit": commit, "versions": versions(), "opset": DEFAULT_OPSET,
                   "exporter": "torch.onnx.export(dynamo=False) via export.onnx_export.to_onnx"}
@@ -335,6 +343,22 @@ def _train(train, test, recipe: dict, *, epochs: int, seed: int, work: Path, dat
     return model, train_s, int(len(y))
 
 
+def _reuse(checkpoint, train, test, recipe: dict, *, epochs: int, seed: int, log: Callable[[str], None]):
+    """2. The checkpoint an earlier run trained, checked against this run's seed, epochs and classes."""
+    from models.selection import training_arrays
+    from models.train import load_checkpoint
+
+    model, meta = load_checkpoint(checkpoint)
+    if (meta.get("arch"), meta.get("seed"), meta.get("epochs"), list(meta.get("classes", []))) != (
+            ARCH, seed, epochs, list(train.classes)):
+        raise ExportError(f"{checkpoint}: field 'seed'/'epochs'/'classes': trained with seed {meta.get('seed')}, "
+                          f"{meta.get('epochs')} epochs, classes {meta.get('classes')}; this build wants seed {seed}, "
+                          f"{epochs} epochs, {list(train.classes)}")
+    n = len(training_arrays(train, test if recipe["captures"] else None, np.unique(train.subject))[1])
+    log(f"[2/5] reusing {checkpoint} ({ARCH}, seed {seed}, {epochs} epochs) instead of training again")
+    return model, 0.0, n
+
+
 def _export_fp32(model, train, X_test: np.ndarray, *, seed: int, epochs: int, version: str, commit: str | None,
                  stage: Path, log: Callable[[str], None]) -> tuple[Path, dict]:
     """3. ``stage/convlstm.fp32.onnx`` and its parity with torch on the test captures (raises when off)."""
@@ -351,13 +375,14 @@ def _export_fp32(model, train, X_test: np.ndarray, *, seed: int, epochs: int, ve
 
 
 def _quantise(fp32_path: Path, X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray, *,
-              seed: int, variants: Sequence[str] | None, log: Callable[[str], None]) -> tuple[Path, dict]:
+              seed: int, variants: Sequence[str] | None, log: Callable[[str], None],
+              early_min_agreement: float) -> tuple[Path, dict]:
     """4. The int8 model next to the fp32 one, calibrated on training windows, the variant chosen by
     :func:`export.quantize.choose` gated on the test captures; and its quantisation report."""
     log("[4/5] quantising: candidates timed with 1 thread, gated on the test captures")
     int8_path = fp32_path.with_name(f"{ARCH}.int8.onnx")
     quant = choose(fp32_path, int8_path, X_train[pick_windows(y_train, N_CALIB, seed)], eval_x=X_test, eval_y=y_test,
-                   variants=variants, log=log)
+                   variants=variants, log=log, early_min_agreement=early_min_agreement)
     quant["calibration"].update(source="training windows (ground-truth segments), stratified by class",
                                 seed=seed)
     log(f"      chose {quant['method']}: int8 operators {quant['int8_operators']}")
