@@ -169,6 +169,19 @@ def test_choose_measures_and_reports(toy_onnx, tmp_path):
         qz.choose(fp, tmp_path / "d.onnx", X[:8], eval_x=X, variants=["nope"])
 
 
+def test_choose_gates_on_early_decisions(toy_onnx, tmp_path):
+    """With an early gate, each candidate's agreement after 1..5 sub-windows is measured and must
+    reach it: an unreachable gate refuses every candidate."""
+    fp, X, y = toy_onnx
+    rep = qz.choose(fp, tmp_path / "e.onnx", X[:64], eval_x=X, eval_y=y, variants=["qdq_conv"], n_timing=50,
+                    early_min_agreement=0.5)
+    early = rep["selection"]["candidates"]["qdq_conv"]["early_agreement"]
+    assert 0.5 <= early <= 1.0 and "after every S = 1..5" in rep["selection"]["rule"]
+    with pytest.raises(qz.QuantizeError, match="no int8 variant"):
+        qz.choose(fp, tmp_path / "f.onnx", X[:64], eval_x=X, eval_y=y, variants=["qdq_conv"], n_timing=50,
+                  early_min_agreement=1.01)
+
+
 def test_fastest_breaks_near_ties_by_candidate_order():
     p50 = {"a": 100.0, "b": 98.0, "c": 90.0}
     assert qz.fastest(p50, ["a", "b", "c"]) == "c"
