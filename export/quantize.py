@@ -346,11 +346,11 @@ def probs_of(model: str | Path | ort.InferenceSession, x: np.ndarray, batch: int
 def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, eval_x: np.ndarray,
            eval_y: np.ndarray | None = None, variants: Sequence[str] | None = None, threads: int = 1,
            n_timing: int = 3000, log: Callable[[str], None] = lambda s: None,
-           early_min_agreement: float | None = None) -> dict:
+           early_min_agreement: float | None = None, early_steps: Sequence[int] = (1, 2, 3, 4, 5)) -> dict:
     """Build every candidate, time and check each, keep the fastest faithful one at ``out_path``.
     With ``early_min_agreement``, a candidate must also agree with fp32 on that share of the
-    early decisions, the first S = 1..5 of the 6 sub-windows of ``eval_x`` (the ConvLSTM's
-    dynamic-S input): a quantised LSTM state can drift most after few steps.
+    early decisions, the first S (``early_steps``) of the 6 sub-windows of ``eval_x`` (the
+    ConvLSTM's dynamic-S input): after few steps many decisions are near ties that int8 can flip.
 
     Returns the quantisation report (JSON-ready)."""
     fp32_path, out_path = Path(fp32_path), Path(out_path)
@@ -360,7 +360,7 @@ def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, ev
             raise QuantizeError(f"unknown quantisation variant {v!r}; choose from {', '.join(VARIANTS)}")
     eval_x = np.ascontiguousarray(eval_x, np.float32)
     early_refs = None if early_min_agreement is None else {
-        s: probs_of(fp32_path, np.ascontiguousarray(eval_x[:, :s])) for s in range(1, eval_x.shape[1])}
+        s: probs_of(fp32_path, np.ascontiguousarray(eval_x[:, :s])) for s in early_steps}
     with tempfile.TemporaryDirectory() as td:
         comp = compare_variants(fp32_path, [VARIANTS[n] for n in names], calib, td,
                                 score=_drift_from(probs_of(fp32_path, eval_x), eval_x, eval_y, early_refs),
@@ -374,7 +374,7 @@ def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, ev
         out_path.parent.mkdir(parents=True, exist_ok=True)
         out_path.write_bytes(comp.paths[chosen].read_bytes())
     return _choice_report(chosen, comp, n_calib=len(calib), n_eval=len(eval_x), labelled=eval_y is not None,
-                          threads=threads, early_min_agreement=early_min_agreement)
+                          threads=threads, early_min_agreement=early_min_agreement, early_steps=early_steps)
 
 
 def _drift_from(ref_probs: np.ndarray, eval_x: np.ndarray, eval_y: np.ndarray | None,
@@ -423,7 +423,7 @@ def _faithful(comp: Comparison, eval_y: np.ndarray | None, log: Callable[[str], 
 
 
 def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, labelled: bool, threads: int,
-                   early_min_agreement: float | None = None) -> dict:
+                   early_min_agreement: float | None = None, early_steps: Sequence[int] = ()) -> dict:
     """The quantisation report of :func:`choose` (the manifest's ``quantization``)."""
     c, v = comp.results[chosen], VARIANTS[chosen]
     return {
@@ -444,8 +444,8 @@ def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, 
         "agreement_with_fp32": c["agreement"],
         "selection": {"rule": f"fastest p50 at batch 1 with {threads} thread(s) among variants with argmax "
                               f"agreement >= {MIN_AGREEMENT}" + (f" and |dF1| <= {MAX_F1_DELTA}" if labelled else "")
-                              + (f" and argmax agreement >= {early_min_agreement} after every S = 1..5 "
-                                 "sub-windows" if early_min_agreement is not None else "")
+                              + (f" and argmax agreement >= {early_min_agreement} after every S in "
+                                 f"{list(early_steps)} sub-windows" if early_min_agreement is not None else "")
                               + f"; variants within {TIE:.0%} of the fastest are tied and the first in the "
                               "candidate order wins",
                       "eval_windows": int(n_eval), "threads": threads, "fp32": comp.latency["fp32"],

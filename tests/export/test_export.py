@@ -176,7 +176,7 @@ def test_choose_gates_on_early_decisions(toy_onnx, tmp_path):
     rep = qz.choose(fp, tmp_path / "e.onnx", X[:64], eval_x=X, eval_y=y, variants=["qdq_conv"], n_timing=50,
                     early_min_agreement=0.5)
     early = rep["selection"]["candidates"]["qdq_conv"]["early_agreement"]
-    assert 0.5 <= early <= 1.0 and "after every S = 1..5" in rep["selection"]["rule"]
+    assert 0.5 <= early <= 1.0 and "after every S in [1, 2, 3, 4, 5]" in rep["selection"]["rule"]
     with pytest.raises(qz.QuantizeError, match="no int8 variant"):
         qz.choose(fp, tmp_path / "f.onnx", X[:64], eval_x=X, eval_y=y, variants=["qdq_conv"], n_timing=50,
                   early_min_agreement=1.01)

@@ -53,6 +53,7 @@ def test_assets_build_writes_a_valid_manifest(small_assets):
         assert set(early["temperature_by_steps"]) == set(early["min_confidence_by_steps"]) == set("123456")
         assert all(0.05 <= t <= 20 for t in early["temperature_by_steps"].values())
         assert all(0.0 <= c <= 1.0 for c in early["min_confidence_by_steps"].values())
+        assert early["min_confidence_by_steps"]["1"] == 1.0 and early["alert_steps"] == [2, 3, 4, 5, 6]
         assert e["provenance"]["training"]["recipe"]["shift_fwd"] == 20
         prov = e["provenance"]
         assert prov["seed"] == 1 and prov["versions"]["onnxruntime"] and "command" in prov
