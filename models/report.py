@@ -172,8 +172,8 @@ def _selection_lines(loso: dict) -> list[str]:
             f"{'yes' if recipe.get('captures') else 'no'}; time shift up to {recipe.get('shift_fwd')} frames forward; "
             f"ConvLSTM epochs {recipe.get('epochs')} of a {recipe.get('schedule_epochs')}-epoch schedule): chosen on "
             f"{recipe.get('chosen_on', 'nothing (defaults)')} "
-            "([selection/selection.md](selection/selection.md)). CNN and LSTM take the same recipe with their "
-            "default epochs (not selected for them); the LDAs have nothing to choose.",
+            "([selection/selection.md](selection/selection.md)). CNN and LSTM take the same recipe, with the "
+            "epochs in the table above (not selected for them); the LDAs have nothing to choose.",
             "- **Temperatures per step** (ECE rows): per fold, on every capture of the selection cohort.",
             "- **Held-out subjects**: touched once, for the figures above."]
 
@@ -317,6 +317,7 @@ def _markdown(loso: dict, wit: dict, detector: dict | None, *, command: str, see
            "## Comparison with the dissertation (Tables 2.1-2.3; its counts, not the product figure)", "",
            *summary_table(loso, wit),
            "Dissertation (between-participant F1, onset-style counts): ConvLSTM 0.87, LSTM 0.85, CNN 0.76, LDA 0.38.", "",
+           *([] if wit else ["Within-subject (Table 2.1): not run in this report (`--no-within`).", ""]),
            "macro-F1 pools every fold's predictions and averages F1 over the classes (Other included); "
            "per-subject rows average over the classes present for that subject. 'Onset captures' leaves out "
            "the repeat captures (a second trigger inside a truth event that an earlier capture already "
