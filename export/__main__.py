@@ -45,7 +45,11 @@ def _parser() -> argparse.ArgumentParser:
     a = sub.add_parser("assets", help="rebuild edge_runtime/assets from a seed")
     a.add_argument("--seed", type=int, required=True)
     a.add_argument("--subjects", type=int, default=20)
-    a.add_argument("--epochs", type=int, default=None, help="default: models.train's default (40)")
+    a.add_argument("--epochs", type=int, default=None, help="default: the epochs chosen in selection.json")
+    a.add_argument("--checkpoint", default=None, help="reuse the model.pt an earlier run wrote (WORK/convlstm) "
+                                                      "instead of training again (deterministic: same weights)")
+    a.add_argument("--selection", default=None, help="the training recipe and calibration cohort "
+                                                     "(default: reports/wearable/selection/selection.json)")
     a.add_argument("--minutes", type=float, default=15.0, help="minutes per simulated trial")
     a.add_argument("--out", default=None, help="assets directory (default: edge_runtime/assets)")
     a.add_argument("--work", default=None, help="scratch directory (default: runs/assets-seed<S>)")
@@ -141,7 +145,7 @@ def cmd_assets(a) -> int:
     build_assets(seed=a.seed, subjects=a.subjects, epochs=a.epochs, minutes=a.minutes,
                  out=a.out or DEFAULT_ASSETS, work=a.work, train_npz=a.train, test_npz=a.test,
                  loso_dir=a.loso_dir, variants=_variants(a.variants), progress=not a.no_progress,
-                 auto_loso=not a.no_loso)
+                 auto_loso=not a.no_loso, selection=a.selection, checkpoint=a.checkpoint)
     return 0
 
 

@@ -4,8 +4,11 @@
 
 1. simulate the cohort (``models.dataset.build_cohort_datasets``: ground-truth
    training windows and detector-captured test windows of every subject);
-2. train the ConvLSTM on all subjects' ground-truth windows (``models.train.fit``,
-   deterministic for a seed);
+2. train the ConvLSTM on all subjects' ground-truth windows, plus their detector
+   captures when the recipe chosen on the selection cohort says so
+   (``reports/wearable/selection/selection.json``, :mod:`models.selection`: captures,
+   time shift, epochs), with deep supervision over the 6 sub-windows
+   (``models.train.fit``, deterministic for a seed);
 3. export fp32 ONNX (parity with torch < 1e-4 checked on the test captures);
 4. quantise to int8, calibrated on training windows, variant chosen by
    measured latency under an accuracy gate (``export.quantize.choose``);
@@ -14,7 +17,11 @@
    when ``python -m models report`` has written it), pooled over its folds
    (``compare_int8``: each fold's checkpoint exported and quantised with the
    chosen recipe, scored on the held-out subject's captures);
-6. write the models and ``manifest.json`` (entries for other models already in
+6. fit the early decisions' per-step temperatures and preliminary-alert thresholds on
+   the selection cohort's detector captures (none of its subjects is in training), per
+   model (fp32 and int8 each on its own outputs), check int8 against fp32 after every
+   S = 1..6 sub-windows on the test captures, and write the models and ``manifest.json``
+   (each ConvLSTM entry with an ``early`` object; entries for other models already in
    the manifest, e.g. a pose lifter, are kept).
 
 No timestamps go into the files: the same seed on the same commit rebuilds
@@ -46,7 +53,7 @@ from edge_runtime.core.manifest import (
 from edge_runtime.wearable.classifier import preprocess
 from export.onnx_export import (
     DEFAULT_OPSET,
-    INPUT_LAYOUT,
+    EARLY_INPUT_LAYOUT,
     INPUT_NAME,
     LOGITS,
     PROBS,
@@ -63,6 +70,12 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_ASSETS = REPO_ROOT / "edge_runtime" / "assets"
 ARCH = "convlstm"
 N_CALIB = 1000
+EARLY_MIN_AGREEMENT = 0.99
+"""int8 must give fp32's class after every S in ``ALERT_STEPS`` sub-windows on at least this share of test captures."""
+ALERT_STEPS = (2, 3, 4, 5, 6)
+"""The steps that may raise a preliminary alert. After 1 sub-window (0.16 s after the trigger) the
+decision is near chance (validation macro-F1 about 0.45) and most of them are near ties that int8
+flips (agreement 0.986 with every candidate of the first build): S = 1 gets min_confidence 1.0."""
 DEFAULT_LOSO = REPO_ROOT / "reports" / "wearable" / ARCH / "loso"  # where `python -m models report` puts it
 
 
@@ -87,9 +100,12 @@ def _metrics(y_true, probs, classes, subject=None) -> dict:
 
 
 def io_spec(k: int) -> tuple[list, list]:
-    inputs = [{"name": INPUT_NAME, "shape": ["N", 6, 33, 3], "dtype": "float32", "layout": INPUT_LAYOUT,
-               "units": "m/s^2", "preprocess": "edge_runtime.wearable.classifier.preprocess(capture (N, 700, 3) at 100 Hz)"}]
-    outputs = [{"name": PROBS, "shape": ["N", k], "dtype": "float32", "meaning": "softmax, classes order"},
+    inputs = [{"name": INPUT_NAME, "shape": ["N", "S", 33, 3], "dtype": "float32", "layout": EARLY_INPUT_LAYOUT,
+               "units": "m/s^2", "steps": {"min": 1, "max": 6, "full_capture": 6},
+               "preprocess": "edge_runtime.wearable.classifier.preprocess(capture (N, 700, 3) at 100 Hz)[:, :S]"}]
+    outputs = [{"name": PROBS, "shape": ["N", k], "dtype": "float32",
+                "meaning": "softmax, classes order: the decision after the S sub-windows given (before temperature "
+                           "scaling: divide log(probs) by early.temperature_by_steps[S] and re-normalise)"},
                {"name": LOGITS, "shape": ["N", k], "dtype": "float32", "meaning": "pre-softmax scores"}]
     return inputs, outputs
 
@@ -225,14 +241,22 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
                  out: str | Path = DEFAULT_ASSETS, work: str | Path | None = None,
                  train_npz: str | None = None, test_npz: str | None = None, loso_dir: str | None = None,
                  variants: Sequence[str] | None = None, command: str | None = None, auto_loso: bool = True,
-                 log: Callable[[str], None] = print, progress: bool = True) -> dict:
-    """The module docstring's steps 1-6, one function each; returns the manifest written."""
-    from models.train import DEFAULT_EPOCHS
+                 log: Callable[[str], None] = print, progress: bool = True, selection: str | Path | None = None,
+                 early_min_agreement: float = EARLY_MIN_AGREEMENT, checkpoint: str | Path | None = None) -> dict:
+    """The module docstring's steps 1-6, one function each; returns the manifest written.
+    ``selection``: the selection.json whose recipe trains the model and beside whose cohort the
+    early decisions are calibrated (default: reports/wearable/selection/selection.json).
+    ``checkpoint``: the model.pt an earlier run of this command wrote (``WORK/convlstm``) instead of
+    training again; training is deterministic, so for the same seed, data and training code it holds
+    the same weights (the manifest records that it was reused)."""
+    from models.selection import load_recipe
+    from models.train import STEP_LOSS_WEIGHTS
 
     t0 = time.time()
     out = Path(out)
     work = Path(work) if work else REPO_ROOT / "runs" / f"assets-seed{seed}"
-    epochs = DEFAULT_EPOCHS[ARCH] if epochs is None else epochs
+    recipe = load_recipe(selection)
+    epochs = recipe["epochs"] if epochs is None else epochs
     if epochs < 1:
         raise ExportError(f"--epochs: must be at least 1, got {epochs}")
     if subjects < 1:
@@ -242,25 +266,37 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
     train_npz, test_npz, data_info = _cohort(train_npz, test_npz, subjects=subjects, seed=seed, minutes=minutes,
                                              work=work, log=log, progress=progress)
     train, test = _load_cohort(train_npz, test_npz, data_info)
-    model, train_s = _train(train, epochs=epochs, seed=seed, work=work,
-                            data={"train": str(train_npz), "test": str(test_npz)}, log=log, progress=progress)
+    if checkpoint:
+        model, train_s, n_windows = _reuse(checkpoint, train, test, recipe, epochs=epochs, seed=seed, log=log)
+    else:
+        model, train_s, n_windows = _train(train, test, recipe, epochs=epochs, seed=seed, work=work,
+                                           data={"train": str(train_npz), "test": str(test_npz)}, log=log,
+                                           progress=progress)
     X_train, X_test = preprocess(train.X), preprocess(test.X)
     version, commit = f"{package_version()}+{ARCH}.seed{seed}", git_commit()
     # models are staged in the work directory and copied next to the manifest only when
     # everything passed: a failed build never leaves half-updated assets
     fp32_path, parity = _export_fp32(model, train, X_test, seed=seed, epochs=epochs, version=version,
                                      commit=commit, stage=work / "stage", log=log)
-    int8_path, quant = _quantise(fp32_path, X_train, train.y, X_test, test.y, seed=seed, variants=variants, log=log)
+    int8_path, quant = _quantise(fp32_path, X_train, train.y, X_test, test.y, seed=seed, variants=variants, log=log,
+                                 early_min_agreement=early_min_agreement)
     scores = _score(fp32_path, int8_path, X_test, test.y, list(train.classes), method=quant["method"],
                     loso_dir=_loso_dir(loso_dir, auto_loso), log=log)
+    early = _early(fp32_path, int8_path, X_test, list(train.classes), seed=seed, selection=selection, log=log,
+                   min_agreement=early_min_agreement)
 
     provenance = {"command": command, "seed": seed, "data": data_info,
-                  "training": {"arch": ARCH, "epochs": epochs, "seed": seed, "windows": len(train),
+                  "training": {"arch": ARCH, "epochs": epochs, "seed": seed, "windows": n_windows,
+                               "recipe": recipe, "step_loss_weights": list(STEP_LOSS_WEIGHTS),
+                               **({"reused_checkpoint": str(checkpoint)} if checkpoint else {}),
                                "function": "models.train.fit", "threads": 1, "seconds": round(train_s, 1)},
                   "git_commit": commit, "versions": versions(), "opset": DEFAULT_OPSET,
                   "exporter": "torch.onnx.export(dynamo=False) via export.onnx_export.to_onnx"}
     entries = _entries(fp32_path, int8_path, _common(model, list(train.classes), version, provenance),
                        parity, quant, scores)
+    for e in entries:
+        e["early"] = early[e["precision"]]
+    entries[1]["metrics"]["early_agreement_with_fp32_by_steps"] = early["agreement_by_steps"]
     manifest, path = _install(out, entries, (fp32_path, int8_path), command)
     log(f"wrote {out / fp32_path.name}, {out / int8_path.name}, {path} in {time.time() - t0:.0f} s")
     return manifest
@@ -298,18 +334,41 @@ def _load_cohort(train_npz: str, test_npz: str, data_info: dict):
     return train, test
 
 
-def _train(train, *, epochs: int, seed: int, work: Path, data: dict, log: Callable[[str], None], progress: bool):
-    """2. (the ConvLSTM trained on every ground-truth window, training seconds); checkpoint in ``work``."""
+def _train(train, test, recipe: dict, *, epochs: int, seed: int, work: Path, data: dict,
+           log: Callable[[str], None], progress: bool):
+    """2. (the ConvLSTM trained on every subject, training seconds, training windows); checkpoint in
+    ``work``. The recipe (models.selection) says whether the detector captures join the
+    ground-truth windows, how far the time shift reaches, and the schedule's length."""
+    from models.selection import training_arrays
     from models.train import fit, save_checkpoint
 
-    log(f"[2/5] training {ARCH} on {len(train)} ground-truth windows of all subjects ({epochs} epochs, seed {seed})")
+    subjects = np.unique(train.subject)
+    X, y = training_arrays(train, test if recipe["captures"] else None, subjects)
+    log(f"[2/5] training {ARCH} on {len(y)} windows of all subjects ({'ground truth + detector captures' if recipe['captures'] else 'ground truth'}; "
+        f"{epochs} epochs of a {recipe['schedule_epochs']}-epoch schedule, seed {seed})")
     t = time.time()
-    model = fit(ARCH, train.X, train.y, len(train.classes), epochs=epochs, seed=seed, progress=progress,
-                desc=f"{ARCH} assets")
+    model = fit(ARCH, X, y, len(train.classes), epochs=epochs, seed=seed, progress=progress,
+                desc=f"{ARCH} assets", shift_fwd=recipe["shift_fwd"], schedule_epochs=recipe["schedule_epochs"])
     train_s = time.time() - t
     save_checkpoint(work / ARCH, model, arch=ARCH, classes=list(train.classes), seed=seed, epochs=epochs, metrics={},
                     data=data)
-    return model, train_s
+    return model, train_s, int(len(y))
+
+
+def _reuse(checkpoint, train, test, recipe: dict, *, epochs: int, seed: int, log: Callable[[str], None]):
+    """2. The checkpoint an earlier run trained, checked against this run's seed, epochs and classes."""
+    from models.selection import training_arrays
+    from models.train import load_checkpoint
+
+    model, meta = load_checkpoint(checkpoint)
+    if (meta.get("arch"), meta.get("seed"), meta.get("epochs"), list(meta.get("classes", []))) != (
+            ARCH, seed, epochs, list(train.classes)):
+        raise ExportError(f"{checkpoint}: field 'seed'/'epochs'/'classes': trained with seed {meta.get('seed')}, "
+                          f"{meta.get('epochs')} epochs, classes {meta.get('classes')}; this build wants seed {seed}, "
+                          f"{epochs} epochs, {list(train.classes)}")
+    n = len(training_arrays(train, test if recipe["captures"] else None, np.unique(train.subject))[1])
+    log(f"[2/5] reusing {checkpoint} ({ARCH}, seed {seed}, {epochs} epochs) instead of training again")
+    return model, 0.0, n
 
 
 def _export_fp32(model, train, X_test: np.ndarray, *, seed: int, epochs: int, version: str, commit: str | None,
@@ -328,13 +387,15 @@ def _export_fp32(model, train, X_test: np.ndarray, *, seed: int, epochs: int, ve
 
 
 def _quantise(fp32_path: Path, X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray, *,
-              seed: int, variants: Sequence[str] | None, log: Callable[[str], None]) -> tuple[Path, dict]:
+              seed: int, variants: Sequence[str] | None, log: Callable[[str], None],
+              early_min_agreement: float) -> tuple[Path, dict]:
     """4. The int8 model next to the fp32 one, calibrated on training windows, the variant chosen by
     :func:`export.quantize.choose` gated on the test captures; and its quantisation report."""
     log("[4/5] quantising: candidates timed with 1 thread, gated on the test captures")
     int8_path = fp32_path.with_name(f"{ARCH}.int8.onnx")
     quant = choose(fp32_path, int8_path, calibration_windows(X_train, y_train, seed), eval_x=X_test, eval_y=y_test,
-                   variants=variants, log=log)
+                   variants=variants, log=log, early_min_agreement=early_min_agreement,
+                   early_steps=[s for s in ALERT_STEPS if s < 6])
     quant["calibration"].update(source="training windows (ground-truth segments), stratified by class",
                                 seed=seed)
     log(f"      chose {quant['method']}: int8 operators {quant['int8_operators']}")
@@ -372,6 +433,46 @@ def _score(fp32_path: Path, int8_path: Path, X_test: np.ndarray, y_test: np.ndar
         raise QuantizeError(f"{int8_path}: int8 macro-F1 differs from fp32 by {delta:+.4f} (> 0.01)")
     return {"fp32": m32, "int8": m8, "delta": delta, "agreement": float(np.mean(p32.argmax(1) == p8.argmax(1))),
             "loso": loso}
+
+
+def step_probs_of(model_path: Path, X: np.ndarray) -> np.ndarray:
+    """(6, N, K): the ONNX model's decision after the first S = 1..6 sub-windows of inputs (N, 6, 33, 3)."""
+    return np.stack([probs_of(model_path, np.ascontiguousarray(X[:, :s])) for s in range(1, 7)])
+
+
+def _early(fp32_path: Path, int8_path: Path, X_test: np.ndarray, classes: list[str], *, seed: int,
+           selection: str | Path | None, log: Callable[[str], None], min_agreement: float) -> dict:
+    """6. Per model, the manifest's ``early`` object (per-step temperatures and preliminary-alert
+    thresholds fitted on the selection cohort's captures); int8/fp32 agreement per step on the
+    test captures (must be >= ``min_agreement``)."""
+    from models.selection import calibrate_steps, ensure_selection_captures
+
+    sel, chosen_on = ensure_selection_captures(seed, selection, log=log)
+    if list(sel.classes) != classes:
+        raise ExportError(f"{sel.source}: field 'classes': {sel.classes} differ from {classes}")
+    X_sel = preprocess(sel.X)
+    out = {}
+    for name, path in (("fp32", fp32_path), ("int8", int8_path)):
+        c = calibrate_steps(step_probs_of(path, X_sel), sel.y, classes.index("Other"))
+        thresholds = {k: (v if int(k) in ALERT_STEPS else 1.0) for k, v in c["min_confidence_by_steps"].items()}
+        out[name] = {"steps": c["steps"], "temperature_by_steps": c["temperature_by_steps"],
+                     "min_confidence_by_steps": thresholds, "chosen_on": chosen_on, "alert_steps": list(ALERT_STEPS),
+                     "criterion": f"temperature: NLL on the validation captures, per step; min_confidence: the "
+                                  f"smallest calibrated confidence at which alerts (a class other than Other) "
+                                  f"are a distraction, not Other, in >= {c['alert_precision_target']:.0%} of "
+                                  f"validation captures; 1.0 = no preliminary alert at that step (always at "
+                                  f"S = 1: near-chance decisions that int8 does not reproduce reliably)",
+                     "validation": c["validation"]}
+    a32, a8 = step_probs_of(fp32_path, X_test), step_probs_of(int8_path, X_test)
+    agree = {str(s): float(np.mean(a32[s - 1].argmax(1) == a8[s - 1].argmax(1))) for s in range(1, 7)}
+    out["agreement_by_steps"] = agree
+    log(f"      early decisions: int8/fp32 agreement by steps {', '.join(f'{k}: {v:.4f}' for k, v in agree.items())}; "
+        f"temperatures {out['int8']['temperature_by_steps']}; min confidence {out['int8']['min_confidence_by_steps']}")
+    worst = min(agree[str(s)] for s in ALERT_STEPS)
+    if worst < min_agreement:
+        raise QuantizeError(f"{int8_path}: int8 agrees with fp32 on only {worst:.4f} of the decisions after "
+                            f"{list(ALERT_STEPS)} sub-windows (< {min_agreement})")
+    return out
 
 
 def _common(model, classes: list[str], version: str, provenance: dict) -> dict:
@@ -456,7 +557,7 @@ def requantize(*, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = No
     with tempfile.TemporaryDirectory() as td:
         fp32_path = Path(shutil.copyfile(out / fp32_entry["file"], Path(td) / fp32_entry["file"]))
         int8_path, quant = _quantise(fp32_path, X_train, train.y, X_test, test.y, seed=seed, variants=variants,
-                                     log=log)
+                                     log=log, early_min_agreement=EARLY_MIN_AGREEMENT)
         scores = _score(fp32_path, int8_path, X_test, test.y, list(train.classes), method=quant["method"],
                         loso_dir=loso_dir, log=log)
         shutil.copyfile(int8_path, out / int8_entry["file"])

@@ -3,7 +3,9 @@
 Graph contract (what ``edge_runtime.core.onnx`` and integrators rely on)
 ---------------------------------------------------------------------
 * input  ``imu``    float32 (N, 6, 33, 3): 6 subsequences x 33 frames x axis x/y/z, m/s^2
-  (``edge_runtime.wearable.classifier.preprocess`` of a 700-frame capture at 100 Hz);
+  (``edge_runtime.wearable.classifier.preprocess`` of a 700-frame capture at 100 Hz); for the
+  ConvLSTM (N, S, 33, 3) with S = 1..6 a dynamic axis: the first S sub-windows, and ``probs``
+  is the decision after them (S = 6: the full capture; issue 12's early decisions);
 * output ``probs``  float32 (N, K): softmax, appended in the graph;
 * output ``logits`` float32 (N, K): the pre-softmax scores (parity checks, calibration);
 * the batch axis N is dynamic; opset 17 by default;
@@ -53,6 +55,14 @@ DEFAULT_OPSET = 17
 PARITY_TOL = 1e-4
 INPUT_NAME, PROBS, LOGITS = "imu", "probs", "logits"
 INPUT_LAYOUT = "N,6,33,3 (subsequence, frame, axis x/y/z), m/s^2"
+EARLY_INPUT_LAYOUT = ("N,S,33,3 (the first S = 1..6 of the capture's 6 subsequences, frame, axis x/y/z), m/s^2; "
+                      "S is dynamic: S = 6 is the full-capture decision, fewer an early one")
+EARLY_ARCHS = ("convlstm",)
+"""Architectures whose input's subsequence axis is dynamic (a causal LSTM over sub-windows)."""
+
+
+def input_layout(arch: str) -> str:
+    return EARLY_INPUT_LAYOUT if arch in EARLY_ARCHS else INPUT_LAYOUT
 SAMPLE_RATE_HZ = 100
 RESAMPLED_RATE_HZ = SAMPLE_RATE_HZ * UP / DOWN  # 200/7
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -261,7 +271,7 @@ def model_metadata(model: nn.Module, classes: Sequence[str], *, arch: str | None
     meta = {
         "classes": json.dumps(list(classes)),
         "input_name": INPUT_NAME,
-        "input_layout": INPUT_LAYOUT,
+        "input_layout": input_layout(arch),
         "input_units": "m/s^2",
         "outputs": f"{PROBS}: softmax (N,K) in classes order; {LOGITS}: pre-softmax scores (N,K)",
         "sample_rate_hz": str(SAMPLE_RATE_HZ),
@@ -320,13 +330,15 @@ def to_onnx(model: nn.Module, classes: Sequence[str], *, opset: int = DEFAULT_OP
         raise ExportError(f"model has {out_features} outputs but {k} classes were given")
     wrapped = export_module(model)
     x = torch.from_numpy(example_input(2))
+    arch = arch_of(model)
+    in_axes = {0: "N", 1: "S"} if arch in EARLY_ARCHS else {0: "N"}
     buf = io.BytesIO()
     with warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter("ignore")
         torch.onnx.export(
             wrapped, (x,), buf, dynamo=False, opset_version=opset, do_constant_folding=True,
             input_names=[INPUT_NAME], output_names=[PROBS, LOGITS],
-            dynamic_axes={INPUT_NAME: {0: "N"}, PROBS: {0: "N"}, LOGITS: {0: "N"}},
+            dynamic_axes={INPUT_NAME: in_axes, PROBS: {0: "N"}, LOGITS: {0: "N"}},
         )
     model.eval()
     onx = onnx.load_from_string(buf.getvalue())
@@ -334,8 +346,8 @@ def to_onnx(model: nn.Module, classes: Sequence[str], *, opset: int = DEFAULT_OP
     _prune_dead(onx.graph)
     onx.producer_name = "edge-safety-export"
     onx.producer_version = package_version()
-    onx.doc_string = (f"{arch_of(model)} wearable distraction classifier: input {INPUT_NAME} "
-                      f"({INPUT_LAYOUT}); output {PROBS} softmax over {list(classes)}")
+    onx.doc_string = (f"{arch} wearable distraction classifier: input {INPUT_NAME} "
+                      f"({input_layout(arch)}); output {PROBS} softmax over {list(classes)}")
     set_metadata(onx, model_metadata(model, classes, model_version=model_version, commit=commit,
                                      extra=extra_meta))
     onnx.checker.check_model(onx)
@@ -368,6 +380,13 @@ def check_parity(model: nn.Module, onnx_model: onnx.ModelProto | str | Path, x: 
     # single-window path too (batch 1 takes other kernels)
     p1 = sess.run([PROBS], {INPUT_NAME: x[:1]})[0]
     d_probs = max(d_probs, float(np.abs(p1 - ref_probs[:1]).max()))
+    if arch_of(model) in EARLY_ARCHS:  # and every early decision: the first S sub-windows
+        for s in range(1, x.shape[1]):
+            ps, ls = sess.run([PROBS, LOGITS], {INPUT_NAME: np.ascontiguousarray(x[:, :s])})
+            with torch.no_grad():
+                ref = model(torch.from_numpy(np.ascontiguousarray(x[:, :s])))
+            d_logits = max(d_logits, float(np.abs(ls - ref.numpy()).max()))
+            d_probs = max(d_probs, float(np.abs(ps - torch.softmax(ref, dim=1).numpy()).max()))
     res = {"max_abs_logits": d_logits, "max_abs_probs": d_probs, "n": int(len(x)), "tol": tol,
            "ok": bool(max(d_logits, d_probs) < tol)}
     return res

@@ -347,8 +347,12 @@ def probs_of(model: str | Path | ort.InferenceSession, x: np.ndarray, batch: int
 
 def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, eval_x: np.ndarray,
            eval_y: np.ndarray | None = None, variants: Sequence[str] | None = None, threads: int = 1,
-           n_timing: int = 3000, log: Callable[[str], None] = lambda s: None) -> dict:
+           n_timing: int = 3000, log: Callable[[str], None] = lambda s: None,
+           early_min_agreement: float | None = None, early_steps: Sequence[int] = (1, 2, 3, 4, 5)) -> dict:
     """Build every candidate, time and check each, keep the fastest faithful one at ``out_path``.
+    With ``early_min_agreement``, a candidate must also agree with fp32 on that share of the
+    early decisions, the first S (``early_steps``) of the 6 sub-windows of ``eval_x`` (the
+    ConvLSTM's dynamic-S input): after few steps many decisions are near ties that int8 can flip.
 
     Returns the quantisation report (JSON-ready)."""
     fp32_path, out_path = Path(fp32_path), Path(out_path)
@@ -357,12 +361,14 @@ def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, ev
         if v not in VARIANTS:
             raise QuantizeError(f"unknown quantisation variant {v!r}; choose from {', '.join(VARIANTS)}")
     eval_x = np.ascontiguousarray(eval_x, np.float32)
+    early_refs = None if early_min_agreement is None else {
+        s: probs_of(fp32_path, np.ascontiguousarray(eval_x[:, :s])) for s in early_steps}
     with tempfile.TemporaryDirectory() as td:
         comp = compare_variants(fp32_path, [VARIANTS[n] for n in names], calib, td,
-                                score=_drift_from(probs_of(fp32_path, eval_x), eval_x, eval_y),
+                                score=_drift_from(probs_of(fp32_path, eval_x), eval_x, eval_y, early_refs),
                                 feed={INPUT_NAME: np.ascontiguousarray(eval_x[:1])}, outputs=[PROBS],
                                 threads=threads, n_timing=n_timing, warmup=200, log=log)
-        ok = _faithful(comp, eval_y, log)
+        ok = _faithful(comp, eval_y, log, early_min_agreement)
         if not ok:
             raise QuantizeError(f"{fp32_path}: no int8 variant keeps predictions within "
                                 f"agreement {MIN_AGREEMENT} / macro-F1 {MAX_F1_DELTA} of fp32")
@@ -370,13 +376,15 @@ def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, ev
         out_path.parent.mkdir(parents=True, exist_ok=True)
         out_path.write_bytes(comp.paths[chosen].read_bytes())
     return _choice_report(chosen, comp, n_calib=len(calib), n_eval=len(eval_x), labelled=eval_y is not None,
-                          threads=threads)
+                          threads=threads, early_min_agreement=early_min_agreement, early_steps=early_steps)
 
 
-def _drift_from(ref_probs: np.ndarray, eval_x: np.ndarray, eval_y: np.ndarray | None
-                ) -> Callable[[ort.InferenceSession], dict]:
+def _drift_from(ref_probs: np.ndarray, eval_x: np.ndarray, eval_y: np.ndarray | None,
+                early_refs: dict[int, np.ndarray] | None = None) -> Callable[[ort.InferenceSession], dict]:
     """The score of a variant: argmax agreement with fp32's ``ref_probs`` and the largest
-    probability change on ``eval_x``; with labels, macro-F1 and its change from fp32's."""
+    probability change on ``eval_x``; with labels, macro-F1 and its change from fp32's; with
+    ``early_refs`` (fp32's probabilities on the first S sub-windows, by S), the smallest
+    agreement over those prefixes."""
     ref_pred = ref_probs.argmax(1)
     f1_fp32 = _macro_f1(np.asarray(eval_y), ref_pred) if eval_y is not None else None
 
@@ -387,29 +395,37 @@ def _drift_from(ref_probs: np.ndarray, eval_x: np.ndarray, eval_y: np.ndarray | 
         if eval_y is not None:
             r["macro_f1"] = _macro_f1(np.asarray(eval_y), pred)
             r["macro_f1_delta"] = r["macro_f1"] - f1_fp32
+        if early_refs:
+            r["early_agreement"] = min(
+                float(np.mean(probs_of(session, np.ascontiguousarray(eval_x[:, :s])).argmax(1) == ref.argmax(1)))
+                for s, ref in early_refs.items())
         return r
 
     return score
 
 
-def _faithful(comp: Comparison, eval_y: np.ndarray | None, log: Callable[[str], None]) -> list[str]:
+def _faithful(comp: Comparison, eval_y: np.ndarray | None, log: Callable[[str], None],
+              early_min_agreement: float | None = None) -> list[str]:
     """The variants whose predictions stay with fp32's, in candidate order; each variant's
     result gains its latency and ``accepted``, and a log line."""
     ok = []
     for k in comp.paths:
         r = comp.results[k]
         r.update(comp.latency[k])
-        r["accepted"] = r["agreement"] >= MIN_AGREEMENT and (eval_y is None or abs(r["macro_f1_delta"]) <= MAX_F1_DELTA)
+        r["accepted"] = (r["agreement"] >= MIN_AGREEMENT
+                         and (eval_y is None or abs(r["macro_f1_delta"]) <= MAX_F1_DELTA)
+                         and (early_min_agreement is None or r["early_agreement"] >= early_min_agreement))
         if r["accepted"]:
             ok.append(k)
         log(f"  {k:18s} p50 {r['p50_us']:7.1f} us  agreement {r['agreement']:.4f}"
             + (f"  dF1 {r['macro_f1_delta']:+.4f}" if eval_y is not None else "")
+            + (f"  early {r['early_agreement']:.4f}" if "early_agreement" in r else "")
             + ("" if r["accepted"] else "  (refused)"))
     return ok
 
 
-def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, labelled: bool, threads: int
-                   ) -> dict:
+def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, labelled: bool, threads: int,
+                   early_min_agreement: float | None = None, early_steps: Sequence[int] = ()) -> dict:
     """The quantisation report of :func:`choose` (the manifest's ``quantization``)."""
     c, v = comp.results[chosen], VARIANTS[chosen]
     return {
@@ -430,6 +446,8 @@ def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, 
         "agreement_with_fp32": c["agreement"],
         "selection": {"rule": f"fastest p50 at batch 1 with {threads} thread(s) among variants with argmax "
                               f"agreement >= {MIN_AGREEMENT}" + (f" and |dF1| <= {MAX_F1_DELTA}" if labelled else "")
+                              + (f" and argmax agreement >= {early_min_agreement} after every S in "
+                                 f"{list(early_steps)} sub-windows" if early_min_agreement is not None else "")
                               + f"; variants within {TIE:.0%} of the fastest are tied and the first in the "
                               "candidate order wins",
                       "eval_windows": int(n_eval), "threads": threads, "fp32": comp.latency["fp32"],

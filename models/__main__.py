@@ -9,6 +9,8 @@
   evaluate  --checkpoint DIR/model.pt --data TEST.npz --out DIR2
   import    --csv REC.csv --events EVENTS.csv|truth.json --subject K --out OUT.npz [--split train|test]
             [--classes A,B,...] [--append]
+  select    --out reports/wearable/selection --seed 0 [--subjects 12] [--minutes 10] [--epochs 24] [--jobs 2]
+            -> the training recipe chosen on a separate simulated cohort (models/selection.py)
   report    --out reports/wearable --seed 0 [--subjects 20] [--epochs N] [--archs convlstm,cnn,lstm,lda]
             [--data TRAIN.npz --test TEST.npz] [--minutes 15] [--jobs 2] [--no-within] [--reuse]
 
@@ -23,7 +25,7 @@ from pathlib import Path
 
 from edge_runtime.cli import make_parser, run
 
-ARCH_CHOICES = ("convlstm", "cnn", "lstm", "lda")
+ARCH_CHOICES = ("convlstm", "cnn", "lstm", "lda", "lda_summary")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -59,6 +61,15 @@ def _parser() -> argparse.ArgumentParser:
     i.add_argument("--trial", default="", help="trial name stored per window (default: CSV file stem)")
     i.add_argument("--append", action="store_true", help="add to OUT if it exists")
 
+    c = sub.add_parser("select", help="choose the training recipe on a separate simulated cohort")
+    c.add_argument("--out", default="reports/wearable/selection")
+    c.add_argument("--seed", type=int, default=0, help="the reported cohort's seed (the selection cohort's is +1000)")
+    c.add_argument("--subjects", type=int, default=12)
+    c.add_argument("--minutes", type=float, default=10.0)
+    c.add_argument("--epochs", type=int, default=24, help="the longest candidate run (checkpoints every 3 epochs)")
+    c.add_argument("--train-subjects", type=int, default=8, help="selection subjects that train; the rest validate")
+    c.add_argument("--jobs", type=int, default=2)
+
     r = sub.add_parser("report", help="simulate the cohort, LOSO + within for every arch, tables")
     r.add_argument("--out", default="reports/wearable")
     r.add_argument("--seed", type=int, default=0)
@@ -70,6 +81,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--test", default=None)
     r.add_argument("--jobs", type=int, default=2)
     r.add_argument("--no-within", action="store_true")
+    r.add_argument("--folds", type=int, default=None, help="hold out only the first N subjects (default: all)")
+    r.add_argument("--selection", default=None, help="selection.json (default: reports/wearable/selection/)")
     r.add_argument("--reuse", action="store_true", help="read back archs whose results are already in --out "
                                                         "(delete an arch's directory to retrain it)")
     r.add_argument("--no-progress", action="store_true")
@@ -170,6 +183,20 @@ def cmd_import(a) -> int:
     return 0
 
 
+def cmd_select(a) -> int:
+    from models.dataset import DataError
+    from models.selection import run_selection
+
+    if a.subjects < 2 or not (1 <= a.train_subjects < a.subjects):
+        raise DataError(f"--train-subjects: must be between 1 and --subjects - 1 ({a.subjects - 1}), got {a.train_subjects}")
+    if a.epochs < 1:
+        raise DataError(f"--epochs: must be >= 1, got {a.epochs}")
+    run_selection(a.out, seed=a.seed, subjects=a.subjects, minutes=a.minutes, epochs=a.epochs,
+                  n_train=a.train_subjects, jobs=a.jobs)
+    print(f"wrote {Path(a.out) / 'selection.json'}")
+    return 0
+
+
 def cmd_report(a) -> int:
     from models.dataset import DataError
     from models.report import run_report
@@ -182,7 +209,7 @@ def cmd_report(a) -> int:
         raise DataError("--test: given without --data")
     s = run_report(a.out, seed=a.seed, subjects=a.subjects, epochs=a.epochs, archs=archs, data=a.data,
                    test=a.test, minutes=a.minutes, jobs=a.jobs, within=not a.no_within, reuse=a.reuse,
-                   progress=not a.no_progress)
+                   progress=not a.no_progress, folds=a.folds, selection=a.selection)
     for arch, m in s["loso"].items():
         print(f"{arch:>8} LOSO macro-F1 {m['macro_f1']:.3f}"
               + (f"  within {s['within'][arch]['macro_f1']:.3f}" if arch in s["within"] else ""))
@@ -196,7 +223,8 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from models.dataset import DataError
 
-    cmds = {"train": cmd_train, "evaluate": cmd_evaluate, "import": cmd_import, "report": cmd_report}
+    cmds = {"train": cmd_train, "evaluate": cmd_evaluate, "import": cmd_import, "select": cmd_select,
+            "report": cmd_report}
     # DataError names the file and field; OSError/ValueError: unreadable file, unwritable --out, ...
     return run(lambda: cmds[args.command](args), bad_input=(DataError, OSError, ValueError),
                what=f"models {args.command}", extra="train")

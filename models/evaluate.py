@@ -34,17 +34,33 @@ def predict(model, X700: np.ndarray, batch_size: int = 512) -> np.ndarray:
         return np.asarray(model.predict_proba(X700), dtype=np.float64)
     import torch
 
+    out = _torch_batches(model, X700, batch_size, lambda x: torch.softmax(model(x), dim=1))
+    return np.concatenate(out) if out else np.zeros((0, 0))
+
+
+def _torch_batches(model, X700: np.ndarray, batch_size: int, forward) -> list[np.ndarray]:
+    """``forward`` (a function of the model input) on preprocessed batches of X700, the model in
+    eval mode and without gradients; the model's training flag restored afterwards."""
+    import torch
+
     was_training = model.training
     model.eval()
     out = []
     with torch.no_grad():
         for i in range(0, len(X700), batch_size):
-            x = torch.from_numpy(preprocess(X700[i:i + batch_size]))
-            out.append(torch.softmax(model(x), dim=1).double().numpy())
+            out.append(forward(torch.from_numpy(preprocess(X700[i:i + batch_size]))).double().numpy())
     model.train(was_training)
-    if not out:
-        return np.zeros((0, 0))
-    return np.concatenate(out)
+    return out
+
+
+def predict_steps(model, X700: np.ndarray, batch_size: int = 512) -> np.ndarray:
+    """The ConvLSTM's class probabilities after every sub-window: (S = 6, N, K) for capture windows
+    (N, 700, 3) m/s^2; ``[s - 1]`` is the early decision on ``preprocess(capture)[:, :s]``."""
+    import torch
+
+    out = _torch_batches(model, np.asarray(X700, dtype=np.float32), batch_size,
+                         lambda x: torch.softmax(model(x, all_steps=True), dim=2))
+    return np.concatenate(out, axis=0).transpose(1, 0, 2) if out else np.zeros((6, 0, 0))
 
 
 def _prf(y_true, y_pred, labels, average):

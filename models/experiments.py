@@ -30,9 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
+from models.calibration import expected_calibration_error, temper
 from models.dataset import DataError, WindowSet, load_npz
-from models.evaluate import compute_metrics, predict, save_confusion_png
-from models.train import DEFAULT_EPOCHS, fit, is_main_process, preprocess_all, save_checkpoint
+from models.evaluate import compute_metrics, predict, predict_steps, save_confusion_png
+from models.train import DEFAULT_EPOCHS, LDA_FEATURES, SHIFT_FWD, fit, is_main_process, preprocess_all, save_checkpoint
 
 
 def _json(path: Path, obj) -> None:
@@ -47,22 +48,46 @@ def _check_compatible(train: WindowSet, test: WindowSet | None) -> None:
 
 
 def _finish(out: Path, arch: str, classes, y_true, y_pred, probs, subject, extra: dict, title: str,
-            repeat=None) -> dict:
+            repeat=None, step_probs=None) -> dict:
+    """Metrics (every capture; onset captures; per step when ``step_probs`` (S, N, K) holds the
+    early decisions, raw and temperature-scaled), metrics.json, confusion.png, predictions.npz."""
     m = compute_metrics(y_true, y_pred, classes, subject)
     m.update(arch=arch, **extra)
+    y_true = np.asarray(y_true)
+    if len(y_true) and np.asarray(probs).shape[1:] == (len(classes),):
+        m["ece"] = expected_calibration_error(probs, y_true)
+    on = None
     if repeat is not None and np.any(repeat):
         on = np.asarray(repeat) == 0  # one capture per truth event (+ false alarms): the dissertation's count
-        m["onset_only"] = compute_metrics(np.asarray(y_true)[on], np.asarray(y_pred)[on], classes,
-                                          np.asarray(subject)[on])
+        m["onset_only"] = compute_metrics(y_true[on], np.asarray(y_pred)[on], classes, np.asarray(subject)[on])
         m["repeat_captures"] = int((~on).sum())
+    if step_probs is not None:
+        m["steps"] = _step_rows(step_probs, y_true, classes, on)
     if is_main_process():
         _json(out / "metrics.json", m)
         save_confusion_png(m["confusion"], classes, out / "confusion.png",
                            title=f"{title}: macro-F1 {m['macro_f1']:.3f}, acc {m['accuracy']:.3f}")
-        np.savez_compressed(out / "predictions.npz", y_true=np.asarray(y_true), y_pred=np.asarray(y_pred),
+        extra_arrays = {} if step_probs is None else {
+            "step_probs_raw": np.asarray(step_probs["raw"], np.float32),
+            "step_probs": np.asarray(step_probs["calibrated"], np.float32)}
+        np.savez_compressed(out / "predictions.npz", y_true=y_true, y_pred=np.asarray(y_pred),
                             probs=np.asarray(probs, dtype=np.float32), subject=np.asarray(subject),
-                            classes=np.asarray(classes, dtype=str))
+                            classes=np.asarray(classes, dtype=str), **extra_arrays)
     return m
+
+
+def _step_rows(step_probs: dict, y_true: np.ndarray, classes, onset: np.ndarray | None) -> list[dict]:
+    """Per step S = 1..6: accuracy, macro-F1 and ECE over every capture (raw and with the fold's
+    temperatures), and macro-F1 over onset captures."""
+    rows = []
+    for s, (raw, cal) in enumerate(zip(step_probs["raw"], step_probs["calibrated"]), start=1):
+        mm = compute_metrics(y_true, cal.argmax(1), classes)
+        row = {"steps": s, "accuracy": mm["accuracy"], "macro_f1": mm["macro_f1"],
+               "ece_raw": expected_calibration_error(raw, y_true), "ece": expected_calibration_error(cal, y_true)}
+        if onset is not None:
+            row["onset_macro_f1"] = compute_metrics(y_true[onset], cal.argmax(1)[onset], classes)["macro_f1"]
+        rows.append(row)
+    return rows
 
 
 def run_train_test(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, epochs: int | None = None,
@@ -110,29 +135,77 @@ def _cached(ws_or_path):
 
 def _inputs(key, arch):
     ws, pre = _CACHE[key]
-    if pre is None and arch != "lda":
+    if pre is None and arch not in LDA_FEATURES:
         pre = preprocess_all(ws.X).numpy()
         _CACHE[key] = (ws, pre)
-    return ws.X if arch == "lda" else pre
+    return ws.X if arch in LDA_FEATURES else pre
+
+
+def _load_test(test):
+    """A test WindowSet (loaded once per worker when given as a path) and its preprocessed inputs."""
+    if not isinstance(test, str):
+        return test
+    if _TEST_CACHE.get("path") != test:
+        _TEST_CACHE.clear()
+        _TEST_CACHE.update(path=test, ws=load_npz(test))
+    return _TEST_CACHE["ws"]
+
+
+def _training_set(job: dict, train: WindowSet, key, test: WindowSet | None) -> tuple[np.ndarray, np.ndarray]:
+    """The fold's training inputs: the other subjects' ground-truth windows, plus their detector
+    captures when the recipe says so (``job["recipe"]["captures"]``)."""
+    X, y = _inputs(key, job["arch"])[job["train_idx"]], train.y[job["train_idx"]]
+    if not (job["recipe"].get("captures") and test is not None):
+        return X, y
+    c = np.flatnonzero(np.isin(test.subject, np.unique(train.subject[job["train_idx"]])))
+    Xc = test.X[c] if job["arch"] in LDA_FEATURES else preprocess_all(test.X[c]).numpy()
+    return np.concatenate([X, Xc]), np.concatenate([y, test.y[c]])
+
+
+def _calibrated_steps(model, ev: WindowSet, calib) -> dict:
+    """The ConvLSTM's decisions after 1..6 sub-windows on ``ev`` (S, N, K), raw and scaled by
+    temperatures fitted on ``calib`` (the selection cohort's captures, never the held-out subject)."""
+    from models.selection import calibrate_steps
+
+    raw = predict_steps(model, ev.X)
+    if calib is None:
+        return {"raw": raw, "calibrated": raw, "calibration": None}
+    cal_ws = _load_calib(calib)
+    other = list(cal_ws.classes).index("Other")
+    c = calibrate_steps(predict_steps(model, cal_ws.X), cal_ws.y, other)
+    scaled = np.stack([temper(p, c["temperature_by_steps"][str(s)]) for s, p in enumerate(raw, start=1)])
+    return {"raw": raw, "calibrated": scaled, "calibration": c}
+
+
+_CALIB_CACHE: dict = {}
+
+
+def _load_calib(calib):
+    if isinstance(calib, WindowSet):
+        return calib
+    if _CALIB_CACHE.get("path") != calib:
+        _CALIB_CACHE.update(path=calib, ws=load_npz(calib))
+    return _CALIB_CACHE["ws"]
 
 
 def _fold(job: dict) -> dict:
     """Train one fold and score it (runs in a worker process or inline)."""
-    test = job.get("test")
-    if isinstance(test, str):
-        if _TEST_CACHE.get("path") != test:
-            _TEST_CACHE.update(path=test, ws=load_npz(test))
-        test = _TEST_CACHE["ws"]
+    test = _load_test(job.get("test"))
     train, _ = _cached(job["train"])
     key = job["train"] if isinstance(job["train"], str) else id(job["train"])
     ev = (test if job["eval_from"] == "test" else train).subset(job["eval_idx"])
-    model = fit(job["arch"], _inputs(key, job["arch"])[job["train_idx"]], train.y[job["train_idx"]],
-                len(train.classes), epochs=job["epochs"], seed=job["seed"], progress=job["progress"],
-                threads=job["threads"], desc=job["desc"])
+    job.setdefault("recipe", {})
+    X, y = _training_set(job, train, key, test)
+    model = fit(job["arch"], X, y, len(train.classes), epochs=job["epochs"], seed=job["seed"],
+                progress=job["progress"], threads=job["threads"], desc=job["desc"],
+                shift_fwd=job["recipe"].get("shift_fwd", SHIFT_FWD),
+                schedule_epochs=job["recipe"].get("schedule_epochs"))
     probs = predict(model, ev.X) if len(ev) else np.zeros((0, len(train.classes)))
     res = {"name": job["name"], "y_true": ev.y, "y_pred": probs.argmax(1) if len(ev) else ev.y[:0],
            "probs": probs, "subject": ev.subject,
            "repeat": ev.repeat if ev.repeat is not None else np.zeros(len(ev), np.int8)}
+    if job["arch"] == "convlstm" and len(ev):
+        res["steps"] = _calibrated_steps(model, ev, job.get("calib"))
     if job.get("ckpt_dir") and is_main_process():
         fm = compute_metrics(ev.y, res["y_pred"], train.classes) if len(ev) else {}
         save_checkpoint(job["ckpt_dir"], model, arch=job["arch"], classes=train.classes, seed=job["seed"],
@@ -166,8 +239,14 @@ def _job_data(ws: WindowSet | None, n_workers: int):
 # --------------------------------------------------------------------------- LOSO
 
 def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, epochs: int | None = None,
-             seed: int = 0, jobs: int = 1, progress: bool = True, final_model: bool = True) -> dict:
+             seed: int = 0, jobs: int = 1, progress: bool = True, final_model: bool = True,
+             recipe: dict | None = None, calib: WindowSet | None = None, folds: int | None = None) -> dict:
+    """One fold per subject (the first ``folds`` subjects only, when given). ``recipe``: the
+    selection's choices (``captures``: the training subjects' detector captures join the training
+    set; ``shift_fwd``; ``schedule_epochs``). ``calib``: validation captures (the selection cohort's)
+    on which each ConvLSTM fold fits its per-step temperatures."""
     _check_compatible(train, test)
+    recipe = dict(recipe or {})
     epochs = DEFAULT_EPOCHS[arch] if epochs is None else epochs
     out = Path(out_dir)
     subjects = np.unique(train.subject)
@@ -178,7 +257,7 @@ def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, ep
     distributed = dist_info()[0]
     n_workers = 1 if distributed else max(1, jobs)
     job_list = []
-    for s in subjects:
+    for s in subjects[:folds]:
         ev_idx = (np.flatnonzero(test.subject == s) if test is not None else np.flatnonzero(train.subject == s))
         job_list.append(dict(
             name=f"s{int(s)}", arch=arch, epochs=epochs, seed=seed, threads=1,
@@ -186,19 +265,29 @@ def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, ep
             train_idx=np.flatnonzero(train.subject != s), eval_idx=ev_idx,
             eval_from="test" if test is not None else "train",
             ckpt_dir=str(out / "folds" / f"s{int(s)}"), desc=f"{arch} LOSO s{int(s)}",
-            progress=progress and n_workers == 1, progress_folds=progress))
+            progress=progress and n_workers == 1, progress_folds=progress, recipe=recipe,
+            calib=_job_data(calib, n_workers)))
     results = _run_jobs(job_list, n_workers)
     cat = lambda key: np.concatenate([r[key] for r in results])  # noqa: E731
+    with_steps = all("steps" in r for r in results) and results
+    steps = None if not with_steps else {
+        k: np.concatenate([r["steps"][k] for r in results], axis=1) for k in ("raw", "calibrated")}
     m = _finish(out, arch, train.classes, cat("y_true"), cat("y_pred"), cat("probs"), cat("subject"),
                 {"protocol": "leave-one-subject-out", "evaluated_on": "test captures" if test is not None
                  else "held-out training windows", "folds": [r["name"] for r in results],
+                 "all_folds": len(job_list) == len(subjects),
                  "epochs": epochs, "seed": seed, "train": train.source,
-                 "test": test.source if test is not None else None},
-                f"{arch} LOSO", repeat=cat("repeat"))
+                 "test": test.source if test is not None else None,
+                 "recipe": recipe, **({"calibration_per_fold": {r["name"]: r["steps"]["calibration"]
+                                                                for r in results}} if with_steps else {})},
+                f"{arch} LOSO", repeat=cat("repeat"), step_probs=steps)
     if final_model:
         _cached(train)
-        model = fit(arch, _inputs(id(train), arch), train.y, len(train.classes), epochs=epochs, seed=seed,
-                    progress=progress, desc=f"{arch} final")
+        job = {"arch": arch, "train_idx": np.arange(len(train)), "recipe": recipe}
+        X, y = _training_set(job, train, id(train), test)
+        model = fit(arch, X, y, len(train.classes), epochs=epochs, seed=seed, progress=progress,
+                    desc=f"{arch} final", shift_fwd=recipe.get("shift_fwd", SHIFT_FWD),
+                    schedule_epochs=recipe.get("schedule_epochs"))
         if is_main_process():
             save_checkpoint(out, model, arch=arch, classes=train.classes, seed=seed, epochs=epochs,
                             metrics=_summary(m) | {"per_subject_mean": m.get("per_subject_mean")},

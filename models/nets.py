@@ -2,7 +2,9 @@
 
 All three take the detector's capture after preprocessing
 (``edge_runtime.wearable.classifier.preprocess``): a float32 tensor (N, 6, 33, 3) in
-m/s^2 (6 subsequences x 33 frames x x/y/z) and return logits (N, n_classes).
+m/s^2 (6 subsequences x 33 frames x x/y/z) and return logits (N, n_classes). The
+ConvLSTM also takes the first S of the 6 subsequences (N, S, 33, 3), the early
+decision after S x 1.16 s of the capture (issue 12).
 Softmax is applied by the caller (the ONNX graph appends it; see export/).
 
 Reading of the dissertation's ConvLSTM (section 2.2.3, Figure 2.4/2.5)
@@ -71,10 +73,14 @@ class ConvLSTM(nn.Module):
         self.dropout = nn.Dropout(0.4)
         self.head = nn.Linear(hidden, n_classes)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        f = self.features(x).amax(dim=3)  # global max-pool over time: (N, 6, 64)
-        _, (h, _) = self.lstm(f)
-        return self.head(self.dropout(h[-1]))
+    def forward(self, x: torch.Tensor, all_steps: bool = False) -> torch.Tensor:
+        """(N, S, 33, 3) -> logits (N, K) after the last of the S sub-windows (S = 6 is the whole
+        capture; fewer is an early decision), or (N, S, K) after every step with ``all_steps``.
+        The conv stack works on each sub-window alone and the LSTM is causal, so step s of
+        ``all_steps`` is exactly the decision on the prefix ``x[:, :s]``."""
+        f = self.features(x).amax(dim=3)  # global max-pool over time: (N, S, 64)
+        out, (h, _) = self.lstm(f)
+        return self.head(self.dropout(out if all_steps else h[-1]))
 
 
 class CNN(nn.Module):

@@ -23,8 +23,12 @@ from models.dataset import build_cohort_datasets, load_npz
 from models.experiments import run_loso, run_within
 from models.train import DEFAULT_EPOCHS
 
-ARCH_ORDER = ("convlstm", "cnn", "lstm", "lda")
-NAMES = {"convlstm": "ConvLSTM", "cnn": "CNN", "lstm": "LSTM", "lda": "LDA"}
+SUBWINDOW_S = 33 * 7 / 200
+"""One sub-window: 33 resampled frames at 200/7 Hz = 1.155 s of the capture."""
+PRE_TRIGGER_S = 1.0
+"""A capture starts 1 s before its trigger (frames T-100 ... T+599)."""
+ARCH_ORDER = ("convlstm", "cnn", "lstm", "lda", "lda_summary")
+NAMES = {"convlstm": "ConvLSTM", "cnn": "CNN", "lstm": "LSTM", "lda": "LDA", "lda_summary": "LDA (12 summary stats)"}
 
 
 def _f(x) -> str:
@@ -62,17 +66,131 @@ def class_table(results: dict[str, dict], title: str) -> list[str]:
     return lines
 
 
+def _folds(m: dict) -> str:
+    n = len(m.get("folds") or [])
+    return f"{n}" + ("" if m.get("all_folds", True) else " (subset)")
+
+
+def headline_table(loso: dict[str, dict]) -> list[str]:
+    """Every capture the box classifies (onsets, repeats, false alarms), all architectures."""
+    lines = ["| Architecture | LOSO folds | macro-F1, every capture | accuracy | macro-F1, 5 distractions | "
+             "ECE (no temperature) | epochs |", "|---|---:|---:|---:|---:|---:|---:|"]
+    for a, m in loso.items():
+        lines.append(f"| {NAMES[a]} | {_folds(m)} | **{_f(m['macro_f1'])}** | {_f(m['accuracy'])} | "
+                     f"{_f(m.get('macro_f1_distractions'))} | {_f(m.get('ece'))} | {m.get('epochs')} |")
+    return lines + [""]
+
+
+def steps_table(m: dict) -> list[str]:
+    """The ConvLSTM's decision after S = 1..6 sub-windows (every capture; onset captures)."""
+    lines = ["| S sub-windows | capture seen (s) | time after the trigger (s) | accuracy | macro-F1, every capture | "
+             "ECE raw | ECE, temperature-scaled | macro-F1, onset captures |", "|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in m.get("steps", []):
+        seen = r["steps"] * SUBWINDOW_S
+        lines.append(f"| {r['steps']} | {seen:.2f} | {seen - PRE_TRIGGER_S:+.2f} | {_f(r['accuracy'])} | "
+                     f"**{_f(r['macro_f1'])}** | {_f(r['ece_raw'])} | {_f(r['ece'])} | {_f(r.get('onset_macro_f1'))} |")
+    return lines + [""]
+
+
+def save_steps_png(m: dict, path: Path) -> Path:
+    """Macro-F1 (every capture, onset captures) and ECE of the ConvLSTM's decision after S sub-windows."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = m["steps"]
+    t = [r["steps"] * SUBWINDOW_S - PRE_TRIGGER_S for r in rows]
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=110)
+    ax.plot(t, [r["macro_f1"] for r in rows], "o-", label="macro-F1, every capture")
+    ax.plot(t, [r.get("onset_macro_f1") for r in rows], "s--", label="macro-F1, onset captures")
+    ax.plot(t, [r["ece"] for r in rows], "^:", label="ECE (temperature-scaled)")
+    ax.plot(t, [r["ece_raw"] for r in rows], "v:", alpha=0.6, label="ECE (raw)")
+    for r, x in zip(rows, t):
+        ax.annotate(f"S={r['steps']}", (x, r["macro_f1"]), textcoords="offset points", xytext=(0, 6), ha="center",
+                    fontsize=7)
+    ax.set_xlabel("time after the trigger when the decision can be made (s)")
+    ax.set_ylim(0, 1)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="center right")
+    ax.set_title(f"ConvLSTM early decisions, LOSO ({len(m.get('folds', []))} folds)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def same_folds_table(loso: dict[str, dict], out_p: Path, test_ws) -> list[str]:
+    """Every arch scored on the subjects every arch held out (the smallest fold set), so that
+    architectures run on different numbers of folds compare on the same captures."""
+    from models.evaluate import compute_metrics
+
+    common = set.intersection(*(set(m.get("folds", [])) for m in loso.values())) if loso else set()
+    if test_ws is None or test_ws.repeat is None or not common or all(m.get("all_folds", True) for m in loso.values()):
+        return []
+    subjects = sorted(int(f.lstrip("s")) for f in common)
+    lines = [f"On the same held-out subjects ({', '.join(map(str, subjects))}):", "",
+             "| Architecture | macro-F1, every capture | macro-F1, onset captures | accuracy, repeat captures |",
+             "|---|---:|---:|---:|"]
+    for a, m in loso.items():
+        with np.load(out_p / a / "loso" / "predictions.npz") as z:
+            y, yp, subj, classes = z["y_true"], z["y_pred"], z["subject"], list(z["classes"])
+        rep = np.concatenate([test_ws.repeat[test_ws.subject == int(f.lstrip("s"))] for f in m["folds"]])
+        keep = np.isin(subj, subjects)
+        on, again = keep & (rep == 0), keep & (rep == 1)
+        lines.append(f"| {NAMES[a]} | {_f(compute_metrics(y[keep], yp[keep], classes)['macro_f1'])} | "
+                     f"{_f(compute_metrics(y[on], yp[on], classes)['macro_f1'])} | "
+                     f"{_f(float(np.mean(y[again] == yp[again])) if again.any() else None)} |")
+    return lines + [""]
+
+
+def onset_table(loso: dict[str, dict]) -> list[str]:
+    lines = ["| Architecture | macro-F1, every capture | macro-F1, onset captures | accuracy, repeat captures |",
+             "|---|---:|---:|---:|"]
+    for a, m in loso.items():
+        rep = m.get("repeat_only") or {}
+        lines.append(f"| {NAMES[a]} | {_f(m['macro_f1'])} | {_f(m.get('onset_only', {}).get('macro_f1'))} | "
+                     f"{_f(rep.get('accuracy'))} |")
+    return lines + [""]
+
+
 def summary_table(loso: dict[str, dict], within: dict[str, dict]) -> list[str]:
-    lines = ["| Architecture | LOSO macro-F1 | LOSO macro-F1, onset captures | LOSO macro-F1 (5 distractions) | "
-             "LOSO accuracy | LOSO mean per-subject F1 | within-subject macro-F1 | epochs |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| Architecture | LOSO macro-F1, onset captures | LOSO macro-F1 (5 distractions) | "
+             "LOSO mean per-subject F1 | within-subject macro-F1 |",
+             "|---|---:|---:|---:|---:|"]
     for a, m in loso.items():
         w = within.get(a, {})
-        lines.append(f"| {NAMES[a]} | {_f(m['macro_f1'])} | {_f(m.get('onset_only', {}).get('macro_f1'))} | "
-                     f"{_f(m.get('macro_f1_distractions'))} | "
-                     f"{_f(m['accuracy'])} | {_f(m.get('per_subject_mean', {}).get('f1'))} | "
-                     f"{_f(w.get('macro_f1'))} | {m.get('epochs')} |")
+        lines.append(f"| {NAMES[a]} | {_f(m.get('onset_only', {}).get('macro_f1'))} | "
+                     f"{_f(m.get('macro_f1_distractions'))} | {_f(m.get('per_subject_mean', {}).get('f1'))} | "
+                     f"{_f(w.get('macro_f1'))} |")
     return lines + [""]
+
+
+def _selection_lines(loso: dict) -> list[str]:
+    recipe = next((m.get("recipe") for m in loso.values() if m.get("recipe")), None) or {}
+    return [f"- **Training recipe** (detector captures of the training subjects in training: "
+            f"{'yes' if recipe.get('captures') else 'no'}; time shift up to {recipe.get('shift_fwd')} frames forward; "
+            f"ConvLSTM epochs {recipe.get('epochs')} of a {recipe.get('schedule_epochs')}-epoch schedule): chosen on "
+            f"{recipe.get('chosen_on', 'nothing (defaults)')} "
+            "([selection/selection.md](selection/selection.md)). CNN and LSTM take the same recipe, with the "
+            "epochs in the table above (not selected for them); the LDAs have nothing to choose.",
+            "- **Temperatures per step** (ECE rows): per fold, on every capture of the selection cohort.",
+            "- **Held-out subjects**: touched once, for the figures above."]
+
+
+def _add_repeat_only(m: dict, run_dir: Path, test_ws) -> None:
+    """``m["repeat_only"]``: accuracy on the repeat captures, from predictions.npz (pooled in fold order:
+    each fold's held-out subject's captures in file order)."""
+    f = run_dir / "predictions.npz"
+    if test_ws is None or test_ws.repeat is None or not f.exists():
+        return
+    folds = [int(name.lstrip("s")) for name in m.get("folds", [])]
+    repeat = np.concatenate([test_ws.repeat[test_ws.subject == s] for s in folds])
+    with np.load(f) as z:
+        y_true, y_pred = z["y_true"], z["y_pred"]
+    if len(repeat) == len(y_true) and repeat.any():
+        r = repeat == 1
+        m["repeat_only"] = {"n": int(r.sum()), "accuracy": float(np.mean(y_true[r] == y_pred[r]))}
 
 
 def _cached(run_dir: Path, reuse: bool) -> dict | None:
@@ -83,7 +201,7 @@ def _cached(run_dir: Path, reuse: bool) -> dict | None:
 def run_report(out: str, *, seed: int = 0, subjects: int = 20, epochs: int | None = None,
                archs=ARCH_ORDER, data: str | None = None, test: str | None = None, minutes: float = 15.0,
                jobs: int = 2, within: bool = True, progress: bool = True, command: str | None = None,
-               reuse: bool = False) -> dict:
+               reuse: bool = False, folds: int | None = None, selection: str | None = None) -> dict:
     """LOSO (and within-subject) for every arch; with ``reuse``, an arch whose
     metrics.json is already under ``out`` is read back instead of retrained
     (delete its directory to retrain just that one)."""
@@ -94,16 +212,20 @@ def run_report(out: str, *, seed: int = 0, subjects: int = 20, epochs: int | Non
                                    progress=progress)
     train = load_npz(data)
     test_ws = load_npz(test) if test else None
+    from models.selection import load_recipe, selection_captures
+
+    recipe, calib = load_recipe(selection), selection_captures(selection)
     loso, wit, timing = _run_archs(archs, train, test_ws, out_p, epochs=epochs, seed=seed, jobs=jobs, within=within,
-                                   progress=progress, reuse=reuse, t_start=t_start)
+                                   progress=progress, reuse=reuse, t_start=t_start, recipe=recipe, calib=calib,
+                                   folds=folds)
     command = command or "python -m models " + " ".join(shlex.quote(x) for x in sys.argv[1:])
     md = _markdown(loso, wit, detector, command=command, seed=seed, data=data, test=test, train=train,
-                   test_ws=test_ws, wall_s=time.time() - t_start)
+                   test_ws=test_ws, wall_s=time.time() - t_start, out_dir=out_p)
     (out_p / "report.md").write_text("\n".join(md))
     summary = {"command": command, "seed": seed, "train": data, "test": test, "detector": detector,
                "timing_s": timing, "wall_s": round(time.time() - t_start, 1),
                "loso": {a: {k: m.get(k) for k in ("accuracy", "macro_f1", "macro_f1_distractions", "per_class",
-                                                  "onset_only",
+                                                  "onset_only", "repeat_only", "steps", "ece", "folds", "recipe",
                                                   "confusion", "per_subject", "per_subject_mean", "epochs")}
                         for a, m in loso.items()},
                "within": {a: {k: m.get(k) for k in ("accuracy", "macro_f1", "macro_f1_distractions", "per_class",
@@ -125,14 +247,26 @@ def _cohort(out_p: Path, data: str | None, test: str | None, *, seed: int, subje
 
 
 def _run_archs(archs, train, test_ws, out_p: Path, *, epochs: int | None, seed: int, jobs: int, within: bool,
-               progress: bool, reuse: bool, t_start: float) -> tuple[dict, dict, dict]:
-    """(LOSO metrics, within-subject metrics, seconds) per arch, each run (or read back) in turn."""
+               progress: bool, reuse: bool, t_start: float, recipe: dict, calib, folds: int | None
+               ) -> tuple[dict, dict, dict]:
+    """(LOSO metrics, within-subject metrics, seconds) per arch, each run (or read back) in turn.
+    Every arch trains with the selection's recipe (captures, time shift); the ConvLSTM also with its
+    chosen epochs, and its per-step temperatures are fitted on the selection cohort (``calib``)."""
     loso, wit, timing = {}, {}, {}
     for a in archs:
         t0 = time.time()
-        ep = DEFAULT_EPOCHS[a] if epochs is None else (0 if a == "lda" else epochs)
+        if a.startswith("lda"):
+            ep = 0
+        elif epochs is not None:
+            ep = epochs
+        else:
+            ep = recipe["epochs"] if a == "convlstm" else DEFAULT_EPOCHS[a]
         loso[a] = _cached(out_p / a / "loso", reuse) or run_loso(
-            a, train, test_ws, out_p / a / "loso", epochs=ep, seed=seed, jobs=jobs, progress=progress)
+            a, train, test_ws, out_p / a / "loso", epochs=ep, seed=seed, jobs=jobs, progress=progress,
+            recipe=recipe, calib=calib if a == "convlstm" else None, folds=folds, final_model=False)
+        _add_repeat_only(loso[a], out_p / a / "loso", test_ws)
+        if loso[a].get("steps"):
+            save_steps_png(loso[a], out_p / a / "loso" / "steps.png")
         timing[a] = {"loso_s": round(time.time() - t0, 1)}
         if within:
             t0 = time.time()
@@ -147,7 +281,7 @@ def _run_archs(archs, train, test_ws, out_p: Path, *, epochs: int | None, seed: 
 
 
 def _markdown(loso: dict, wit: dict, detector: dict | None, *, command: str, seed: int, data: str, test: str | None,
-              train, test_ws, wall_s: float) -> list[str]:
+              train, test_ws, wall_s: float, out_dir: Path) -> list[str]:
     """report.md's lines: data, detector, summary, the chapter's tables, confusion matrices."""
     md = ["# Wearable distraction classifiers: chapter-2 style report", "",
           f"Command: `{command}`", "",
@@ -163,14 +297,33 @@ def _markdown(loso: dict, wit: dict, detector: dict | None, *, command: str, see
                f"incl. Other motions); counted per event as in the dissertation (detected / (detected + false alarms)) "
                f"precision is {_f(detector.get('precision_per_event'))}; {detector.get('repeat_captures')} repeat "
                f"captures. Dissertation: recall 0.97, precision 0.86.", ""]
-    md += ["## Summary", "", *summary_table(loso, wit),
-           "Dissertation (between-participant F1): ConvLSTM 0.87, LSTM 0.85, CNN 0.76, LDA 0.38.", "",
+    conv = loso.get("convlstm")
+    md += ["## What the box gets: every capture it classifies (leave-one-subject-out)", "",
+           "Every detector capture of the held-out subject: onset captures, repeat captures (the hand returning "
+           "during a long distraction) and false alarms (Other motions, driving), each labelled by the truth event "
+           "its trigger falls in. No choice was made on these subjects (see 'What chose what').", "",
+           *headline_table(loso)]
+    if conv and conv.get("steps"):
+        md += ["### Early decisions: the ConvLSTM after S of its 6 sub-windows", "",
+               "One model (79,598 parameters, deep supervision over prefixes) decides on the first S sub-windows "
+               "of the capture's preprocessing. Temperatures per step are fitted per fold on the selection cohort "
+               "(NLL), never on the held-out subject; ECE over 15 confidence bins.", "", *steps_table(conv),
+               "![ConvLSTM early decisions](convlstm/loso/steps.png)", ""]
+    md += ["## Onset captures (one capture per detected event + false alarms)", "", *onset_table(loso),
+           *same_folds_table(loso, out_dir, test_ws),
+           "The summary-statistics LDA (mean, sd, min, max per axis: 12 numbers) measures how much posture alone "
+           "gives away on this simulator; it should stay well below the ConvLSTM.", "",
+           "## What chose what", "", *_selection_lines(loso), "",
+           "## Comparison with the dissertation (Tables 2.1-2.3; its counts, not the product figure)", "",
+           *summary_table(loso, wit),
+           "Dissertation (between-participant F1, onset-style counts): ConvLSTM 0.87, LSTM 0.85, CNN 0.76, LDA 0.38.", "",
+           *([] if wit else ["Within-subject (Table 2.1): not run in this report (`--no-within`).", ""]),
            "macro-F1 pools every fold's predictions and averages F1 over the classes (Other included); "
            "per-subject rows average over the classes present for that subject. 'Onset captures' leaves out "
            "the repeat captures (a second trigger inside a truth event that an earlier capture already "
            "caught, e.g. the return to the wheel after a long phone call): one capture per detected "
            "distraction plus the false alarms, the dissertation's count.", "",
-           "## Between-participant (leave-one-subject-out)", "",
+           "### Between-participant (leave-one-subject-out), every capture", "",
            *subject_table(loso, "Table 2.2: per subject (recall, precision, F1)"),
            *class_table(loso, "Table 2.3: per class")]
     if wit:

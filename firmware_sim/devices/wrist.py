@@ -87,7 +87,12 @@ Activities (times for movement-time factor 1; subject, style and road scale them
   with little forearm rotation.
 * Other (non-coupled): scratch face / head, touch or rub the left arm, hand
   to the right knee, shift gear, adjust the mirror. Hand-to-knee and
-  shift-gear are short, low-rotation reaches like Marker.
+  shift-gear are short, low-rotation reaches like Marker. Three more hold the
+  hand where a distraction does: wipe the mouth (straight from the wheel,
+  no cup), scratch the ear (no phone picked up first), turn a vent knob on
+  the centre stack (a knob, no taps), grab something from the passenger seat
+  (straight back, no cup holder) and rest the hand in the lap, so posture
+  alone does not separate Other from the distractions.
 
 Personal style: per subject, body-landmark offsets N(0, 3 cm), thumb directions
 perturbed (sd 0.25), swivel offsets N(0, 8 deg), dwell-time factors per
@@ -133,8 +138,11 @@ Trials
 "baseline": regular driving with Other motions only. "exp1".."exp5": the
 five distractions in random order, each five times, one cue about every 30 s
 (27-33 s apart; the hand leaves the wheel 0.8-2.5 s after the cue; a cue
-that comes while the hand is still busy waits), plus Other motions kept
-clear of the distractions. "drive" (:func:`simulate_drive`): the same with
+that comes while the hand is still busy waits), plus Other motions: most on
+their own (at least 9 s before and 20 s after a distraction's cue), and, per
+distraction with probability ``OTHER_NEXT_TO_DISTRACTION_PROB`` each, one
+right before it (the distraction then starts 1-3 s after the hand is back)
+and one right after it (0.5-2.5 s after the hand is back). "drive" (:func:`simulate_drive`): the same with
 the distractions in random order for as long as the drive lasts.
 Events: start_s = the hand leaves the wheel, end_s = the hand is back.
 Seeds: every trial draws from SeedSequence([seed, subject_id, trial]), so a
@@ -170,7 +178,14 @@ SENSOR_OFFSET_M = 0.03
 """Sensor centre above the forearm axis, along the sensor z axis (back of the wrist)."""
 
 TRIALS = ("baseline", "exp1", "exp2", "exp3", "exp4", "exp5")
-OTHER_KINDS = ("scratch_face", "scratch_head", "touch_arm", "hand_to_knee", "shift_gear", "adjust_mirror")
+OTHER_KINDS = ("scratch_face", "scratch_head", "touch_arm", "hand_to_knee", "shift_gear", "adjust_mirror",
+               "wipe_mouth", "scratch_ear", "adjust_vent", "grab_from_seat", "hand_to_lap")
+OTHER_KIND_PROB = (0.1, 0.05, 0.07, 0.1, 0.1, 0.05, 0.11, 0.11, 0.1, 0.1, 0.11)
+"""How often each Other kind is drawn. The last five hold the hand where a distraction does (mouth as
+in Drink, ear as in Phone, centre stack as in TouchScreen, passenger seat as in Marker, lap as a phone
+spot), so a posture alone does not tell Other from a distraction; the path there and the micro-motion do."""
+OTHER_NEXT_TO_DISTRACTION_PROB = 0.1
+"""Per distraction, the chance of an Other motion right before it, and (independently) right after it."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -641,6 +656,17 @@ def _plan(kind: str, body: _Body, subj: Subject, rng: np.random.Generator, slow:
         v[1] = _Via(stroke, v[0].thumb, v[0].swivel, v[1].move_s, v[1].dwell_s, keep_roll_sd=0.2)
     elif kind == "adjust_mirror":
         v = [_Via(P("mirror", 0.02), T("mirror", 0.2), S("mirror"), mv(1.0), dw(0.8, 2.0), "adjust"), back]
+    elif kind == "wipe_mouth":  # straight from the wheel to the mouth: no cup holder on the way
+        v = [_Via(P("mouth", 0.03), T("cheek", 0.3), S("mouth"), mv(0.8), dw(0.5, 2.0), "rub"), back]
+    elif kind == "scratch_ear":  # at the ear like a call, but no phone picked up first
+        v = [_Via(P("ear", 0.03), T("ear", 0.3), S("ear"), mv(0.85), dw(0.6, 2.2), "scratch"), back]
+    elif kind == "adjust_vent":  # the centre stack like TouchScreen, a knob turned instead of taps
+        v = [_Via(P("console", 0.03), T("screen", 0.3), S("console"), mv(0.95), dw(0.6, 2.5), "adjust"), back]
+    elif kind == "grab_from_seat":  # the passenger seat like Marker, but straight back to the wheel
+        v = [_Via(P("passenger_seat", 0.05), T("marker", 0.3), S("passenger_seat"), mv(0.95), dw(0.3, 1.2),
+                  "grasp", keep_roll_sd=0.2), back]
+    elif kind == "hand_to_lap":  # where some drivers keep the phone, but nothing is picked up
+        v = [_Via(P("lap", 0.04), T("knee", 0.3), S("lap"), mv(0.8), dw(0.8, 3.0), "sway"), back]
     else:
         raise ValueError(f"unknown activity {kind!r}")
     # soften a few transitions: a movement may start before the previous one has stopped
@@ -850,9 +876,12 @@ def _drive(rng: np.random.Generator, n: int, subj: Subject, fs: float = SAMPLE_R
 # ----------------------------------------------------------------------------------------------
 # schedules
 
-def _schedule(rng: np.random.Generator, subj: Subject, trial: str, dur_s: float) -> list[tuple[float, str, str]]:
-    """(start time, label, kind) of every activity, non-overlapping."""
-    acts: list[tuple[float, str, str]] = []
+def _schedule(rng: np.random.Generator, subj: Subject, trial: str, dur_s: float) -> list[tuple[float, str, str, bool]]:
+    """(start time, label, kind, follows) of every activity, in time order. ``follows``: the activity
+    starts right after the one before it ends (an Other motion just after a distraction), so
+    its start is only known once the one before has been simulated."""
+    acts: list[tuple[float, str, str, bool]] = []
+    draw_other = lambda: str(rng.choice(OTHER_KINDS, p=OTHER_KIND_PROB))  # noqa: E731
     if trial != "baseline":
         cues = []
         c = float(rng.uniform(20, 28))
@@ -866,17 +895,25 @@ def _schedule(rng: np.random.Generator, subj: Subject, trial: str, dur_s: float)
             rng.shuffle(block)
             labels += block
         for c, lab in zip(cues[:n_d], labels[:n_d]):
-            acts.append((c + float(rng.uniform(0.8, 2.5)), lab, lab))
+            a = c + float(rng.uniform(0.8, 2.5))
+            # an Other motion right before: the distraction then waits until the hand is free
+            # (see _simulate), so it starts 1-3 s after the Other motion ends
+            if rng.random() < OTHER_NEXT_TO_DISTRACTION_PROB and a > 12.0:
+                acts.append((a - float(rng.uniform(3.0, 6.0)), OTHER, draw_other(), False))
+            acts.append((a, lab, lab, False))
+            if rng.random() < OTHER_NEXT_TO_DISTRACTION_PROB:  # and right after the hand is back
+                acts.append((a + 1e-3, OTHER, draw_other(), True))
     rate = subj.other_rate * (1.6 if trial == "baseline" else 1.0)
     n_o = int(rng.poisson(rate * dur_s / 900.0))
+    dis = [a for a, lab, _, _ in acts if lab != OTHER]
     for _ in range(n_o):
         for _try in range(20):
             ts = float(rng.uniform(5, dur_s - 15))
-            # keep Other motions clear of distractions: their capture must not reach into one
-            if all(ts + 9.0 < a or ts > a + 20.0 for a, _, _ in acts):
-                acts.append((ts, OTHER, str(rng.choice(OTHER_KINDS, p=[0.22, 0.12, 0.14, 0.2, 0.2, 0.12]))))
+            # these come on their own, clear of distractions (the ones next to a distraction are above)
+            if all(ts + 9.0 < a or ts > a + 20.0 for a in dis):
+                acts.append((ts, OTHER, draw_other(), False))
                 break
-    acts.sort()
+    acts.sort(key=lambda a: a[0])
     return acts
 
 
@@ -911,8 +948,10 @@ def _simulate(subj: Subject, trial: str, rng: np.random.Generator, minutes: floa
 
     events: list[Event] = []
     last_end = -1.0
-    for ts, label, kind in _schedule(rng, subj, trial, n / fs):
-        if ts < last_end + 1.0:  # still busy with the previous activity
+    for ts, label, kind, follows in _schedule(rng, subj, trial, n / fs):
+        if follows:  # right after the hand is back on the wheel
+            ts = last_end + float(rng.uniform(0.5, 2.5))
+        elif ts < last_end + 1.0:  # still busy with the previous activity
             if label == OTHER:
                 continue
             ts = last_end + float(rng.uniform(1.0, 3.0))  # the cued task waits until the hand is free

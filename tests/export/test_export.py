@@ -59,8 +59,33 @@ def test_convlstm_graph_keeps_a_real_lstm_node():
     inp = onx.graph.input[0]
     assert inp.name == "imu" and inp.type.tensor_type.elem_type == onnx.TensorProto.FLOAT
     dims = [d.dim_param or d.dim_value for d in inp.type.tensor_type.shape.dim]
-    assert dims == ["N", 6, 33, 3]
+    assert dims == ["N", "S", 33, 3]  # S sub-windows: the early decisions (issue 12)
     assert [o.name for o in onx.graph.output] == ["probs", "logits"]
+    cnn_in = ox.to_onnx(_scaled_model("cnn"), CLASSES, commit="").graph.input[0]
+    assert [d.dim_param or d.dim_value for d in cnn_in.type.tensor_type.shape.dim] == ["N", 6, 33, 3]
+
+
+def test_convlstm_onnx_decides_after_every_prefix(toy, toy_onnx, tmp_path):
+    """fp32 and int8 run the first S = 1..6 sub-windows; fp32 is torch's decision after S steps, and
+    int8 agrees with fp32 on it."""
+    from models.evaluate import predict_steps
+    from models.toy import toy_windows
+
+    fp, X, _ = toy_onnx
+    q = qz.build_variant(fp, tmp_path / "m.int8.onnx", "qdq_conv", X[:64])
+    ws = toy_windows(n_per_class=10, n_classes=len(CLASSES), n_subjects=1, seed=3, classes=list(CLASSES))
+    x = preprocess(ws.X)
+    ref = predict_steps(toy[0], ws.X)
+    s32, s8 = open_session(fp), open_session(q)
+    agree = []
+    for s in range(1, 7):
+        prefix = np.ascontiguousarray(x[:, :s])
+        p32 = s32.run(["probs"], {"imu": prefix})[0]
+        p8 = s8.run(["probs"], {"imu": prefix})[0]
+        assert p32.shape == p8.shape == (len(x), len(CLASSES))
+        np.testing.assert_allclose(p32, ref[s - 1], atol=1e-4)
+        agree.append(np.mean(p32.argmax(1) == p8.argmax(1)))
+    assert min(agree) >= 0.9
 
 
 @pytest.mark.parametrize("arch", ["convlstm", "cnn", "lstm"])
@@ -85,7 +110,7 @@ def test_metadata_round_trips():
     onx = ox.to_onnx(m, CLASSES, model_version="9.9.9+test", commit="abc123")
     meta = ox.get_metadata(onnx.load_from_string(onx.SerializeToString()))
     assert json.loads(meta["classes"]) == list(CLASSES)
-    assert meta["input_layout"] == "N,6,33,3 (subsequence, frame, axis x/y/z), m/s^2"
+    assert meta["input_layout"].startswith("N,S,33,3 (the first S = 1..6") and "dynamic" in meta["input_layout"]
     assert meta["sample_rate_hz"] == "100"
     assert float(meta["resampled_rate_hz"]) == pytest.approx(200 / 7)
     assert meta["model_version"] == "9.9.9+test" and meta["arch"] == "convlstm"
@@ -142,6 +167,19 @@ def test_choose_measures_and_reports(toy_onnx, tmp_path):
     assert rep["int8_operators"] and (tmp_path / "c.onnx").exists()
     with pytest.raises(qz.QuantizeError):
         qz.choose(fp, tmp_path / "d.onnx", X[:8], eval_x=X, variants=["nope"])
+
+
+def test_choose_gates_on_early_decisions(toy_onnx, tmp_path):
+    """With an early gate, each candidate's agreement after 1..5 sub-windows is measured and must
+    reach it: an unreachable gate refuses every candidate."""
+    fp, X, y = toy_onnx
+    rep = qz.choose(fp, tmp_path / "e.onnx", X[:64], eval_x=X, eval_y=y, variants=["qdq_conv"], n_timing=50,
+                    early_min_agreement=0.5)
+    early = rep["selection"]["candidates"]["qdq_conv"]["early_agreement"]
+    assert 0.5 <= early <= 1.0 and "after every S in [1, 2, 3, 4, 5]" in rep["selection"]["rule"]
+    with pytest.raises(qz.QuantizeError, match="no int8 variant"):
+        qz.choose(fp, tmp_path / "f.onnx", X[:64], eval_x=X, eval_y=y, variants=["qdq_conv"], n_timing=50,
+                  early_min_agreement=1.01)
 
 
 def test_fastest_breaks_near_ties_by_candidate_order():

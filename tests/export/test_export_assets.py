@@ -17,8 +17,24 @@ def small_assets(tmp_path_factory):
     work = tmp_path_factory.mktemp("work")
     (out / "vehicle_alerts.dbc").write_text("VERSION \"\"\n")  # other assets must survive a rebuild
     build_assets(seed=1, subjects=2, epochs=2, minutes=2.0, out=out, work=work,
-                 variants=["qdq_conv", "qdq_conv+dyn_lstm"], command="test", log=lambda s: None, progress=False, auto_loso=False)
+                 variants=["qdq_conv", "qdq_conv+dyn_lstm"], command="test", log=lambda s: None, progress=False,
+                 auto_loso=False, selection=_tiny_selection(work), early_min_agreement=TOY_AGREEMENT)
     return out, work
+
+
+TOY_AGREEMENT = 0.95
+"""A 2-epoch model on 2 subjects leaves many captures near a class boundary, where int8 may flip
+them; the shipped build gates at 0.99 (export.assets.EARLY_MIN_AGREEMENT)."""
+
+
+def _tiny_selection(work):
+    """A selection.json of 2 simulated subjects (its captures are simulated on first use)."""
+    p = work / "selection" / "selection.json"
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps({"selection_seed": 1001, "subjects": 2, "minutes_per_trial": 2.0,
+                             "recipe": {"captures": True, "shift_fwd": 20, "epochs": 2, "schedule_epochs": 3,
+                                        "chosen_on": "test"}}))
+    return p
 
 
 @pytest.mark.slow
@@ -31,7 +47,14 @@ def test_assets_build_writes_a_valid_manifest(small_assets):
     for e in by.values():
         assert e["arch"] == "convlstm" and e["classes"] == list(CLASSES)
         assert e["parameters"] == {"torch": 79998, "keras": 79598}
-        assert e["inputs"][0]["name"] == "imu" and e["inputs"][0]["shape"] == ["N", 6, 33, 3]
+        assert e["inputs"][0]["name"] == "imu" and e["inputs"][0]["shape"] == ["N", "S", 33, 3]
+        early = e["early"]
+        assert early["steps"] == [1, 2, 3, 4, 5, 6] and "selection cohort" in early["chosen_on"]
+        assert set(early["temperature_by_steps"]) == set(early["min_confidence_by_steps"]) == set("123456")
+        assert all(0.05 <= t <= 20 for t in early["temperature_by_steps"].values())
+        assert all(0.0 <= c <= 1.0 for c in early["min_confidence_by_steps"].values())
+        assert early["min_confidence_by_steps"]["1"] == 1.0 and early["alert_steps"] == [2, 3, 4, 5, 6]
+        assert e["provenance"]["training"]["recipe"]["shift_fwd"] == 20
         prov = e["provenance"]
         assert prov["seed"] == 1 and prov["versions"]["onnxruntime"] and "command" in prov
         assert "macro_f1" in e["metrics"]["test_captures"]
@@ -39,8 +62,10 @@ def test_assets_build_writes_a_valid_manifest(small_assets):
     assert q["method"] in ("qdq_conv", "qdq_conv+dyn_lstm") and q["int8_operators"]["Conv"] == 2
     assert abs(by["int8"]["metrics"]["macro_f1_delta_vs_fp32"]) <= 0.01
     assert by["fp32"]["metrics"]["parity_vs_torch"]["ok"]
+    assert min(by["int8"]["metrics"]["early_agreement_with_fp32_by_steps"].values()) >= TOY_AGREEMENT
     eng = Engine.from_manifest(out, "int8")
-    assert eng.classify(np.zeros((6, 33, 3), np.float32)).shape == (len(CLASSES),)
+    for s in range(1, 7):  # the early decisions: the first S sub-windows
+        assert eng.classify(np.zeros((s, 33, 3), np.float32)).shape == (len(CLASSES),)
 
 
 @pytest.mark.slow
@@ -59,7 +84,8 @@ def test_rebuild_keeps_entries_of_other_models(small_assets, tmp_path):
     m["models"].append(extra)
     write_manifest(dst, m)
     build_assets(seed=1, subjects=2, epochs=2, minutes=2.0, out=dst, work=work, variants=["qdq_conv"],
-                 command="test", log=lambda s: None, progress=False, auto_loso=False)
+                 command="test", log=lambda s: None, progress=False, auto_loso=False,
+                 selection=work / "selection" / "selection.json", early_min_agreement=TOY_AGREEMENT)
     names = [e["name"] for e in load_manifest(dst)["models"]]
     assert sorted(names) == ["convlstm-fp32", "convlstm-int8", "lifter-fp32"]
     # same seed, same data, same commit -> the same fp32 model bytes

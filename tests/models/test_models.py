@@ -29,6 +29,19 @@ def test_forward_shapes_any_class_count(arch):
         assert out.shape == (4, k)
 
 
+def test_convlstm_step_decisions_are_the_prefix_decisions():
+    """Step s of all_steps is the decision on the first s sub-windows (the runtime's early path)."""
+    torch.manual_seed(0)
+    m = build("convlstm", 6).eval()
+    x = torch.randn(5, 6, 33, 3) * 3.0
+    with torch.no_grad():
+        steps = m(x, all_steps=True)
+        assert steps.shape == (5, 6, 6)
+        for s in range(1, 7):
+            torch.testing.assert_close(steps[:, s - 1], m(x[:, :s]), rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(steps[:, -1], m(x))
+
+
 # --------------------------------------------------------------------------- training
 
 @pytest.fixture(scope="module")
@@ -52,6 +65,35 @@ def test_lda_learns_separable_toy(toy):
     summary = LDAClassifier(4, features="summary").fit(toy.X, toy.y)
     assert np.mean(summary.predict(test.X) == test.y) >= 0.5
     assert predict(lda, test.X).shape == (len(test.y), 4)
+
+
+def test_deep_supervision_teaches_early_steps(toy):
+    """Trained with a loss on every step, the decision after 3 of 6 sub-windows already separates the
+    toy classes (their waveforms start in the first second)."""
+    from models.evaluate import predict_steps
+
+    test = toy_windows(n_per_class=10, n_classes=4, n_subjects=1, seed=2)
+    model = fit("convlstm", toy.X, toy.y, 4, epochs=30, seed=0, progress=False, batch_size=32, lr=3e-3)
+    steps = predict_steps(model, test.X)
+    assert steps.shape == (6, len(test.y), 4)
+    np.testing.assert_allclose(steps[-1], predict(model, test.X), atol=1e-6)
+    assert np.mean(steps[2].argmax(1) == test.y) >= 0.8
+
+
+def test_loso_with_captures_recipe_and_calibration(tmp_path, toy):
+    """A recipe that adds the training subjects' captures, and per-step temperatures fitted on a
+    separate calibration set: the per-step rows and the per-fold calibration are reported."""
+    calib = toy_windows(n_per_class=8, n_classes=4, n_subjects=2, seed=5, classes=["A", "B", "C", "Other"])
+    data = WindowSet(toy.X, toy.y, toy.subject, ["A", "B", "C", "Other"])
+    m = run_loso("convlstm", data, data, tmp_path, epochs=2, seed=0, progress=False, final_model=False,
+                 recipe={"captures": True, "shift_fwd": 10, "schedule_epochs": 4}, calib=calib, folds=2)
+    assert m["folds"] == ["s0", "s1"] and m["all_folds"] is False and m["recipe"]["captures"] is True
+    assert [r["steps"] for r in m["steps"]] == [1, 2, 3, 4, 5, 6]
+    assert all(0.0 <= r["ece"] <= 1.0 for r in m["steps"])
+    cal = m["calibration_per_fold"]["s0"]
+    assert set(cal["temperature_by_steps"]) == {"1", "2", "3", "4", "5", "6"}
+    z = np.load(tmp_path / "predictions.npz")
+    assert z["step_probs"].shape == (6, m["n"], 4)
 
 
 def test_lda_unseen_class_gets_zero_probability(toy):

@@ -121,13 +121,16 @@ def test_bad_arguments_exit_2(tmp_path, data):
 
 def test_report_on_given_data(tmp_path, data):
     out = tmp_path / "rep"
-    r = run("report", "--out", out, "--data", data / "train.npz", "--test", data / "test.npz", "--archs", "lda",
-            "--jobs", "1", "--no-progress")
+    r = run("report", "--out", out, "--data", data / "train.npz", "--test", data / "test.npz", "--archs",
+            "lda,lda_summary", "--jobs", "1", "--no-progress", "--folds", "2")
     assert r.returncode == 0, r.stderr
     rep = json.loads((out / "report.json").read_text())
-    assert set(rep["loso"]) == {"lda"} and set(rep["loso"]["lda"]["per_subject"]) == {"0", "1", "2"}
+    assert set(rep["loso"]) == {"lda", "lda_summary"} and set(rep["loso"]["lda"]["per_subject"]) == {"0", "1"}
     assert "lda" in rep["within"]
     md = (out / "report.md").read_text()
+    # the product figure leads; the dissertation's tables follow as the comparison
+    assert md.index("every capture it classifies") < md.index("Onset captures") < md.index("Comparison with")
+    assert "| LDA (12 summary stats) | 2 (subset) |" in md
     assert "Table 2.2" in md and "Table 2.3" in md and "Table 2.1" in md and "python -m models report" in md
     assert (out / "lda" / "loso" / "confusion.png").exists()
     assert_one_line_error(run("report", "--out", out, "--archs", "svm"), "--archs")
