@@ -528,7 +528,8 @@ def cohort_of(entry: dict, work: str | Path | None = None, *, log: Callable[[str
 
 def requantize(*, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = None, train_npz: str | None = None,
                test_npz: str | None = None, variants: Sequence[str] | None = None, loso_dir: str | None = None,
-               command: str | None = None, log: Callable[[str], None] = print) -> dict:
+               command: str | None = None, early_min_agreement: float = EARLY_MIN_AGREEMENT,
+               log: Callable[[str], None] = print) -> dict:
     """``python -m export int8``: the shipped fp32 ConvLSTM quantised again, without training.
 
     Calibration and test windows are the fp32 entry's own (its cohort simulated again, or
@@ -557,7 +558,7 @@ def requantize(*, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = No
     with tempfile.TemporaryDirectory() as td:
         fp32_path = Path(shutil.copyfile(out / fp32_entry["file"], Path(td) / fp32_entry["file"]))
         int8_path, quant = _quantise(fp32_path, X_train, train.y, X_test, test.y, seed=seed, variants=variants,
-                                     log=log, early_min_agreement=EARLY_MIN_AGREEMENT)
+                                     log=log, early_min_agreement=early_min_agreement)
         scores = _score(fp32_path, int8_path, X_test, test.y, list(train.classes), method=quant["method"],
                         loso_dir=loso_dir, log=log)
         shutil.copyfile(int8_path, out / int8_entry["file"])

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from edge_runtime.core.manifest import load_manifest, verify_all
+from edge_runtime.core.manifest import load_manifest, select_model, verify_all
 from edge_runtime.wearable.classifier import Engine
 from edge_runtime.wearable.labels import CLASSES
 
@@ -128,22 +128,24 @@ def test_int8_requantises_the_shipped_fp32_without_training(small_assets, tmp_pa
     dst = tmp_path / "assets"
     shutil.copytree(out, dst)
     fp32_before = (dst / "convlstm.fp32.onnx").read_bytes()
-    m = requantize(out=dst, work=work, variants=["qdq_conv+dyn_lstm"], command="test", log=lambda s: None)
+    method = select_model(verify_all(dst), "convlstm-int8")["quantization"]["method"]  # what the toy build chose
+    m = requantize(out=dst, work=work, variants=[method], command="test", early_min_agreement=TOY_AGREEMENT,
+                   log=lambda s: None)
     by = {e["precision"]: e for e in m["models"]}
-    assert by["int8"]["quantization"]["method"] == "qdq_conv+dyn_lstm"
+    assert by["int8"]["quantization"]["method"] == method
     assert by["int8"]["quantization"]["command"] == "test"
-    assert by["int8"]["quantization"]["runtime_op_types"].get("DynamicQuantizeLSTM") == 1
+    assert by["int8"]["quantization"]["runtime_op_types"].get("QLinearConv", 0) >= 1
     assert (dst / "convlstm.fp32.onnx").read_bytes() == fp32_before
     verify_all(dst)  # the manifest's sha256 is the new file's
     train, _ = cohort_of(by["fp32"], work, log=lambda s: None)
-    again = build_variant(dst / "convlstm.fp32.onnx", tmp_path / "again.onnx", "qdq_conv+dyn_lstm",
+    again = build_variant(dst / "convlstm.fp32.onnx", tmp_path / "again.onnx", method,
                           calibration_windows(preprocess(train.X), train.y, seed=1))
     assert again.read_bytes() == (dst / "convlstm.int8.onnx").read_bytes()
 
 
 @pytest.mark.slow  # simulates the 20-subject cohort the shipped model was calibrated on (about a minute)
 def test_requantising_the_shipped_fp32_gives_the_shipped_int8_bytes(tmp_path):
-    from edge_runtime.core.manifest import ASSETS_DIR, select_model
+    from edge_runtime.core.manifest import ASSETS_DIR
     from edge_runtime.wearable.classifier import preprocess
     from export.assets import calibration_windows, cohort_of
     from export.quantize import build_variant

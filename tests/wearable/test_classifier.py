@@ -307,7 +307,7 @@ def test_a_fixed_s_model_decides_on_the_full_window_only_whatever_the_manifest_s
     assert early_engine(dynamic=False, early={"steps": [1, 2, 3]}).early_steps == (6,)
     assert early_engine(dynamic=True).early_steps == (1, 2, 3, 4, 5, 6)  # dynamic S, no manifest 'early'
     shipped = Engine.from_manifest(ASSETS_DIR, "int8")
-    assert shipped.early_steps == (6,)  # today's model: fixed S = 6
+    assert shipped.early_steps == (1, 2, 3, 4, 5, 6)  # the shipped model: S dynamic, every step in its manifest
 
 
 @pytest.mark.parametrize("early", [{"steps": [0, 2]}, {"temperature_by_steps": {"2": 0}}, {"steps": "x"},
