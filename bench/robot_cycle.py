@@ -113,7 +113,7 @@ class _TimedLink(LinkInterface):
         self.last_call_s = time.perf_counter()
         return self.calls  # the command's sequence number
 
-    move_to = retract = stop = resume = set_alarm = heartbeat = _done
+    move_to = retract = stop = resume = set_alarm = set_speed = heartbeat = _done
 
     def poll(self) -> None:
         return None

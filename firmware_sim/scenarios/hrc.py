@@ -61,6 +61,7 @@ from firmware_sim.scenarios.hrc_world import (
     WorldParams,
     box_config,
     dissertation_scenarios,
+    hard_scenarios,
     lifter_available,
     percentiles,
     random_scenarios,
@@ -70,6 +71,11 @@ from firmware_sim.scenarios.hrc_world import (
 LINKS = ("can", "mavlink")
 PERCEPTIONS = ("auto", "truth", "lifter")
 SPEED_LIMITS_MPS = (0.5, 2.0)
+
+PROTECTIONS = {"head": {"separation": "head"},
+               "stop_only": {"separation": "whole_body", "speed_scaling": False},
+               "speed_scaled": {"separation": "whole_body", "speed_scaling": True}}
+"""``--protection``: the [zones] fields each way of protecting the worker sets."""
 
 SAFETY_SECTIONS = ("zones", "tracker", "robot_loop", "calibration", "lifter")
 """The box sections the closed loop's collision figures depend on; their hash (``safety_sha256``)
@@ -99,21 +105,25 @@ def parse_scenario(text: str) -> tuple[str, int | None]:
     """``NAME``, ``dissertation`` or ``random:N`` -> (kind, N)."""
     if text in DISSERTATION or text == "dissertation":
         return text, None
-    if text.startswith("random:"):
+    kind = text.split(":", 1)[0]
+    if kind in ("random", "hard") and ":" in text:
         try:
             n = int(text.split(":", 1)[1])
         except ValueError:
             n = 0
         if n < 1:
-            raise CliError(f"--scenario {text!r}: random:N needs a whole number N >= 1")
-        return "random", n
-    raise CliError(f"--scenario {text!r}: expected one of {', '.join(DISSERTATION)}, dissertation or random:N")
+            raise CliError(f"--scenario {text!r}: {kind}:N needs a whole number N >= 1")
+        return kind, n
+    raise CliError(f"--scenario {text!r}: expected one of {', '.join(DISSERTATION)}, dissertation, random:N "
+                   "or hard:N")
 
 
 def scenarios_for(text: str, seed: int, max_speed_mps: float = 2.0):
     kind, n = parse_scenario(text)
     if kind == "random":
         return random_scenarios(n, seed, max_speed_mps)
+    if kind == "hard":
+        return hard_scenarios(n, seed)
     all3 = dissertation_scenarios(seed)
     return all3 if kind == "dissertation" else [s for s in all3 if s.name == kind]
 
@@ -124,6 +134,13 @@ def resolve_perception(perception: str) -> str:
     if perception == "lifter" and not lifter_available():
         raise CliError("--perception lifter: edge_runtime/assets/manifest.json lists no lifter (arch 'lifter')")
     return perception
+
+
+def protection_name(zones) -> str:
+    """The PROTECTIONS name of a [zones] configuration."""
+    if zones.separation == "head":
+        return "head"
+    return "speed_scaled" if zones.speed_scaling else "stop_only"
 
 
 def _run_one(job) -> RunResult:
@@ -204,7 +221,33 @@ def summarize(results: list[RunResult], settings: dict) -> dict:
         "runtime_cpu_share": _stats([d.get("runtime_cpu_share") for d in det]),
         "head_error_m": percentiles([e for r in results for e in r.head_error_m], 1.0, (50, 95)),
         "frames": sum(d["frames"] for d in det),
+        **productivity(ran),
         "details": det,
+    }
+
+
+def productivity(ran: list[dict]) -> dict:
+    """The cell's work and its false stops over the scenarios that ran: ``productive_time_share``
+    (time the arm did its task, at full or reduced speed, over scenario time), ``false_stops``
+    (stops and retractions with nobody within the protective distance plus the false-alarm margin,
+    hrc_world's rule), and ``false_stops_per_worker_hour`` over walk-by traffic: the scenarios in
+    which no worker ever came within the protective distance at full speed, per hour of workers
+    in view there (``walkby_worker_h``): there every halt of the task (a stop, a retraction, or a
+    fault stop: an invalid or stale pose) is a stop with nobody within the protective distance."""
+    scenario_s = sum(d["scenario_s"] for d in ran)
+    walkby = [d for d in ran if not d["came_within_protective"]]
+    walkby_h = sum(d["worker_s"] for d in walkby) / 3600.0
+    walkby_stops = sum(d["halts"] for d in walkby)
+    kinds: dict[str, int] = {}
+    for d in ran:
+        for w in d.get("worker_specs") or [{"kind": d["kind"]}]:
+            kinds[w["kind"]] = kinds.get(w["kind"], 0) + 1
+    return {
+        "productive_time_share": round(sum(d["productive_s"] for d in ran) / scenario_s, 4) if scenario_s else None,
+        "false_stops": sum(d["false_alarms"] for d in ran),
+        "halts": sum(d["halts"] for d in ran), "walkby_scenarios": len(walkby), "walkby_worker_h": round(walkby_h, 4), "walkby_stops": walkby_stops,
+        "false_stops_per_worker_hour": round(walkby_stops / walkby_h, 2) if walkby_h else None,
+        "worker_kinds": kinds, "speed_changes": sum(d.get("speed_changes", 0) for d in ran),
     }
 
 
@@ -229,7 +272,9 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
         "scenario": scenario, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
         "camera_hz": camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1), "max_speed_mps": max_speed_mps,
         "collision_m": world.collision_m,
+        "protection": protection_name(zones),
         "zones": {"r1_m": round(zones.r1_m, 3), "r2_m": round(zones.r2_m, 3), "sizing": zones.sizing,
+                  "separation": zones.separation, "speed_scaling": zones.speed_scaling,
                   "retract_time_s": zones.retract_time_s, "predict_s": zones.predict_s,
                   "worker_speed_mps": zones.worker_speed_mps},
         "zone_params": asdict(zones), "loop_params": {k: v for k, v in asdict(box.robot_loop).items()
@@ -242,7 +287,8 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
 
 
 VALIDATED_KEYS = ("scenario", "link", "seed", "perception", "camera_hz", "max_speed_mps", "scenarios",
-                  "collisions", "not_run", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms")
+                  "collisions", "not_run", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms",
+                  "protection", "productive_time_share", "false_stops_per_worker_hour")
 
 
 def record_validation(out: dict, path: str | Path, command: str) -> dict:
@@ -257,7 +303,8 @@ def record_validation(out: dict, path: str | Path, command: str) -> dict:
     if rec.get("safety_sha256") != out["safety_sha256"]:
         rec = {"safety_sha256": out["safety_sha256"], "safety_config": {k: out["config"][k] for k in SAFETY_SECTIONS},
                "runs": {}}
-    key = f"{out['scenario']} {out['link']} {out['max_speed_mps']:g}mps {out['perception']} {out['camera_hz']:g}hz"
+    key = (f"{out['scenario']} {out['link']} {out['max_speed_mps']:g}mps {out['perception']} {out['camera_hz']:g}hz"
+           f" {out['protection']}")
     rec["runs"][key] = {**{k: out[k] for k in VALIDATED_KEYS}, "command": command}
     p.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
     return rec
@@ -292,6 +339,8 @@ def format_table(result: dict) -> str:
     react = "n/a" if r["median"] is None else f"median {r['median']:.3f} ms, p99 {r['p99']:.3f} ms"
     for name, why in result.get("not_run", {}).items():
         lines.append(f"{name}: {why}")
+    lines.append(f"protection {result['protection']}: productive time share {result['productive_time_share']}, "
+                 f"false stops {result['false_stops']}, per walk-by worker-hour {result['false_stops_per_worker_hour']}")
     lines.append(f"collisions {result['collisions']}/{result['scenarios']}"
                  + (f" (without the runtime {result['baseline']['collisions']}/{result['scenarios']})" if base else "")
                  + f"; reaction (keypoints in -> command on the link) {react}")
@@ -330,6 +379,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--retract-time", type=positive_float, default=None, metavar="S",
                    help="override [zones] retract_time_s, T_retract of Eq. 4 (s; the dissertation's 1.0 gives "
                         "R2 = 1 m, R1 = 3 m)")
+    p.add_argument("--protection", choices=tuple(PROTECTIONS), default=None,
+                   help="override [zones] separation / speed_scaling: head (the dissertation's head-to-effector "
+                        "zones), stop_only or speed_scaled (whole-body separation; default: the box's)")
     p.add_argument("--zone", action="append", metavar="KEY=VALUE",
                    help="override a ZoneParams number field of the runtime (repeatable), e.g. --zone predict_s=0.7")
     p.add_argument("--loop", action="append", metavar="KEY=VALUE",
@@ -355,6 +407,8 @@ def cmd(args) -> int:
     _check_writable(args.validated, "--validated")
     box = load_box(args.config)
     zones = box.zones if args.retract_time is None else replace(box.zones, retract_time_s=args.retract_time)
+    if args.protection is not None:
+        zones = replace(zones, **PROTECTIONS[args.protection])
     box = replace(box, zones=overrides(zones, args.zone, "--zone"),
                   robot_loop=overrides(box.robot_loop, args.loop, "--loop"))
     common = dict(link=args.link, seed=args.seed, camera_hz=args.camera_hz, max_speed_mps=args.max_speed,
@@ -383,7 +437,8 @@ def _one_line(out: dict) -> str:
             f"{out['collisions']}, not run {len(out['not_run'])}, min separation {out['min_separation_m']} m, "
             f"stops {out['stops']}, "
             f"retracts {out['retracts']}, false alarms {out['false_alarms']}, reaction median {r['median']} ms "
-            f"p99 {r['p99']} ms")
+            f"p99 {r['p99']} ms; protection {out['protection']}: productive share {out['productive_time_share']}, "
+            f"false stops per walk-by worker-hour {out['false_stops_per_worker_hour']}")
 
 
 BAD_INPUT = (CliError, config.ConfigError)

@@ -22,7 +22,7 @@ from edge_runtime.robot.hazard import (
     tool_yaw_toward_base,
 )
 
-DISSERTATION = ZoneParams(retract_time_s=1.0)
+DISSERTATION = ZoneParams(retract_time_s=1.0, separation="head")  # the dissertation's head-to-effector zones
 """The dissertation's zones (T_retract = 1 s: R2 = 1 m, R1 = 3 m), which these tests' geometry uses;
 the shipped default is the simulated Sawyer's 2 s (tests/sim/test_hrc.py validates it)."""
 

@@ -16,6 +16,9 @@ from edge_runtime.robot.loop import LoopParams, RobotLoop
 from firmware_sim.devices.camera import Camera
 
 HEAD_Y = 0.75
+HEAD_ZONES = ZoneParams(separation="head")
+"""The dissertation's head-to-effector zones, which most of these tests' geometry uses (the
+shipped default is whole-body separation: the tests at the end)."""
 
 
 class Clock:
@@ -63,7 +66,7 @@ class Path:
 
 def make(**kw):
     clock, link = Clock(), FakeLink()
-    loop = RobotLoop(link, clock=clock, **kw)
+    loop = RobotLoop(link, clock=clock, **{"zones": HEAD_ZONES, **kw})
     return loop, link, clock
 
 
@@ -189,7 +192,7 @@ def test_no_person_from_the_lifter_is_an_empty_scene_not_a_fault():
 
 def test_a_worker_the_camera_cannot_see_holds_the_arm():
     loop, link, clock = make()
-    z = ZoneParams()
+    z = HEAD_ZONES
     # far away, then 2 m from the effector, then gone from view (None: nobody detected)
     path = Path(lambda t: worker(0.0, 6.0) if t < 2.0 else worker(0.0, 2.8) if t < 3.0 else None,
                 3.0 + z.lost_hold_s - 0.2)
@@ -248,7 +251,7 @@ def test_camera_frame_joints_go_through_the_calibration():
             return np.asarray(p) + [0.0, 0.0, -10.0]
 
     clock, link = Clock(), FakeLink()
-    loop = RobotLoop(link, calibration=Shift(), clock=clock)
+    loop = RobotLoop(link, calibration=Shift(), zones=HEAD_ZONES, clock=clock)
     frames = drive(loop, link, clock, Path(lambda t: worker(0.0, 13.8), 2.0))  # 3 m in the robot frame
     assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(3.0, abs=0.05)
 
@@ -267,7 +270,7 @@ def test_the_robot_loop_anchors_camera_frame_joints_when_the_calibration_says_so
 
 # ------------------------------------------------------------------ against the simulated Sawyer
 
-def sim_run(kind, path, duration_s, zones=ZoneParams(), params=LoopParams(), fps=30.0):
+def sim_run(kind, path, duration_s, zones=HEAD_ZONES, params=LoopParams(), fps=30.0):
     """The loop against firmware_sim's controller over a real link (CAN on a virtual bus,
     or signed MAVLink on a socket pair), all on one simulated clock."""
     from firmware_sim.robot.controller import SimulatedRobot
