@@ -339,8 +339,10 @@ def format_table(result: dict) -> str:
     react = "n/a" if r["median"] is None else f"median {r['median']:.3f} ms, p99 {r['p99']:.3f} ms"
     for name, why in result.get("not_run", {}).items():
         lines.append(f"{name}: {why}")
-    lines.append(f"protection {result['protection']}: productive time share {result['productive_time_share']}, "
-                 f"false stops {result['false_stops']}, per walk-by worker-hour {result['false_stops_per_worker_hour']}")
+    if "protection" in result:
+        lines.append(f"protection {result['protection']}: productive time share {result['productive_time_share']}, "
+                     f"false stops {result['false_stops']}, per walk-by worker-hour "
+                     f"{result['false_stops_per_worker_hour']}")
     lines.append(f"collisions {result['collisions']}/{result['scenarios']}"
                  + (f" (without the runtime {result['baseline']['collisions']}/{result['scenarios']})" if base else "")
                  + f"; reaction (keypoints in -> command on the link) {react}")
