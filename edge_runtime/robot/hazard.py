@@ -1,7 +1,30 @@
-"""Head tracking, prediction and the two-level hazard zones of dissertation chapter 3.
+"""Head tracking, prediction, the hazard zones of dissertation chapter 3, whole-body speed and
+separation monitoring (ISO/TS 15066) and the retraction (Eq. 6).
 
 All positions are in the robot frame of :mod:`edge_runtime.core.skeleton` (metres, ``y``
 up, origin on top of the Sawyer base). "Ground-projected" distances drop ``y``.
+
+Sections, in file order: configuration (``TrackerParams``, ``ZoneParams``); tracking
+(``HeadTracker``); the state machine (``HazardMonitor``, with the head zones and the
+whole-body separation as its two ways of sizing a person's distance); whole-body geometry
+(the arm's capsules, the body's spheres); the retraction's pure functions.
+
+Two ways to protect people (``[zones] separation``):
+
+* **"whole_body"** (shipped): every lifted joint of every worker, as a sphere of its body
+  part's radius (``BODY_RADII_M``; limb midpoints too), against the arm's links as capsules
+  along the Sawyer's chain (``SAWYER_JOINT_ORIGINS``, from the joint angles the arm reports;
+  the end effector alone until it has reported any). A person's separation is the smaller of
+  now and ``predict_s`` ahead (his whole body moved with his head's velocity). ISO/TS 15066
+  speed and separation monitoring: the protective separation distance at robot speed v_r is
+  ``S_p = v_h (T_r + T_s) + v_r (T_r + T_s / 2) + C + Z_d + Z_r`` (v_h: his tracked speed,
+  at least ISO 13855's 1.6 m/s), so a separation allows the robot speed that inverts it.
+  NORMAL works at that speed (``speed_scale``, in steps of ``speed_step``; stop-only:
+  full speed or nothing), LEVEL1 stops below the protective distance at the slowest useful
+  speed, LEVEL2 retracts when a person keeps coming (toward the arm faster than
+  ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
+  ``retract_lead_s``.
+* **"head"**: the dissertation's zones around the end effector, below.
 
 * **Tracking and prediction (Eq. 3).** ``HeadTracker`` fits a straight line to the
   head positions of the last ``window_s`` seconds (least squares, per axis). Its slope
@@ -72,6 +95,9 @@ def ground(v) -> np.ndarray:
     v = np.asarray(v, dtype=float)
     return v[..., GROUND_AXES]
 
+
+# ----------------------------------------------------------------------------------------------
+# Configuration
 
 @config.section("tracker")
 @dataclass(frozen=True)
@@ -242,6 +268,9 @@ class Alarm:
     tone_db: float = 0.0
 
 
+# ----------------------------------------------------------------------------------------------
+# Tracking (Eq. 3)
+
 @dataclass(frozen=True)
 class HeadEstimate:
     """One worker's head: filtered position, velocity and the Eq. 3 prediction (robot frame)."""
@@ -302,6 +331,9 @@ def distance_to_effector(est: HeadEstimate, effector_m) -> float:
     e = ground(effector_m)
     return float(min(np.linalg.norm(ground(est.predicted_m) - e), np.linalg.norm(ground(est.position_m) - e)))
 
+
+# ----------------------------------------------------------------------------------------------
+# The state machine: head zones (Eq. 4-5) or whole-body speed and separation monitoring
 
 @dataclass
 class Decision:

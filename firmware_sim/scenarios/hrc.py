@@ -4,7 +4,8 @@
                                --json OUT.json [--plot OUT.png] [--max-speed M] [--camera-hz HZ]
                                [--perception auto|truth|lifter] [--no-runtime] [--with-baseline]
                                [--config BOX.toml] [--retract-time S] [--zone KEY=VALUE ...]
-                               [--loop KEY=VALUE ...] [--validated FILE] [--jobs N]
+                               [--loop KEY=VALUE ...] [--validated FILE] [--jobs N] [--only NAME]
+                               [--protection head|stop_only|speed_scaled]
 
 Runs the robot-side runtime (``edge_runtime.robot.loop.RobotLoop``) against the simulated
 Sawyer on a real link (CAN or signed MAVLink), a simulated worker and a simulated camera,
@@ -13,6 +14,8 @@ collision, a false alarm and the reaction time). Scenarios:
 
 * ``left_to_right``, ``right_to_left``, ``front``: the dissertation's three validation walks
   (``dissertation`` runs all three);
+* ``hard:N``: N scenarios of the hard suite (1-3 workers, curves, stop-and-go, running bursts,
+  reaching toward the tool, occlusion, a real detector's noise: :mod:`firmware_sim.scenarios.hrc_hard`);
 * ``random:N``: N random approaches from the work side (speed 0.5..``--max-speed`` m/s, start
   3-6 m out, camera 3-8 m away and 1-3 m high, detector noise x0.5-2, a worker who walks past
   or stops short); paths closer than 1.1 m to the base's axis are redrawn: nothing can avoid a
@@ -118,7 +121,17 @@ def parse_scenario(text: str) -> tuple[str, int | None]:
                    "or hard:N")
 
 
-def scenarios_for(text: str, seed: int, max_speed_mps: float = 2.0):
+def scenarios_for(text: str, seed: int, max_speed_mps: float = 2.0, only: str | None = None):
+    scs = _scenario_set(text, seed, max_speed_mps)
+    if only is None:
+        return scs
+    picked = [s for s in scs if s.name == only]
+    if not picked:
+        raise CliError(f"--only {only!r}: no such scenario in {text} (names: {scs[0].name} .. {scs[-1].name})")
+    return picked
+
+
+def _scenario_set(text: str, seed: int, max_speed_mps: float):
     kind, n = parse_scenario(text)
     if kind == "random":
         return random_scenarios(n, seed, max_speed_mps)
@@ -254,7 +267,7 @@ def productivity(ran: list[dict]) -> dict:
 def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtime: bool = True,
         perception: str = "auto", camera_hz: float = 30.0, max_speed_mps: float = 2.0,
         latency_ms: float | None = None, box=None, jobs: int = 1, progress: bool = False,
-        keep_results: bool = False):
+        keep_results: bool = False, only: str | None = None):
     """Run scenarios with the box configuration ``box`` (default: the shipped one) and return the
     contract JSON (and the per-scenario results with ``keep_results``, for plots)."""
     box = box or box_config()
@@ -266,10 +279,10 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
                        f"{SPEED_LIMITS_MPS[1]} m/s only")
     percept = resolve_perception(perception) if runtime else "none"
     world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0)
-    scs = scenarios_for(scenario, seed, max_speed_mps)
+    scs = scenarios_for(scenario, seed, max_speed_mps, only)
     results = _map([(sc, link, runtime, percept, world, box) for sc in scs], jobs, progress)
     settings = {
-        "scenario": scenario, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
+        "scenario": scenario, "only": only, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
         "camera_hz": camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1), "max_speed_mps": max_speed_mps,
         "collision_m": world.collision_m,
         "protection": protection_name(zones),
@@ -381,6 +394,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--retract-time", type=positive_float, default=None, metavar="S",
                    help="override [zones] retract_time_s, T_retract of Eq. 4 (s; the dissertation's 1.0 gives "
                         "R2 = 1 m, R1 = 3 m)")
+    p.add_argument("--only", default=None, metavar="NAME",
+                   help="run only this scenario of the set (e.g. --scenario hard:10 --only hard_002)")
     p.add_argument("--protection", choices=tuple(PROTECTIONS), default=None,
                    help="override [zones] separation / speed_scaling: head (the dissertation's head-to-effector "
                         "zones), stop_only or speed_scaled (whole-body separation; default: the box's)")
@@ -414,7 +429,7 @@ def cmd(args) -> int:
     box = replace(box, zones=overrides(zones, args.zone, "--zone"),
                   robot_loop=overrides(box.robot_loop, args.loop, "--loop"))
     common = dict(link=args.link, seed=args.seed, camera_hz=args.camera_hz, max_speed_mps=args.max_speed,
-                  latency_ms=args.latency_ms, box=box, jobs=args.jobs, progress=not args.quiet)
+                  latency_ms=args.latency_ms, box=box, jobs=args.jobs, progress=not args.quiet, only=args.only)
     out, results = run(args.scenario, runtime=not args.no_runtime, perception=args.perception, keep_results=True,
                        **common)
     if args.with_baseline and not args.no_runtime:

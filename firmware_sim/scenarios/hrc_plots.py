@@ -53,6 +53,10 @@ def _panel(ax, res, zones: dict) -> None:
 def _speed(ax, res) -> None:
     """The hand's true speed and its speed limit while the arm works (0: held), over time."""
     if len(res.speed_mps):
+        top = max(0.65, float(np.max(res.speed_mps)) * 1.05)
+        for k, colour in STATE_COLOURS.items():  # the runtime's state behind the curves, as in the panel above
+            if k:
+                ax.fill_between(res.t_s, 0, top, where=res.state == k, color=colour, alpha=0.15, lw=0)
         ax.plot(res.t_s, res.speed_mps, "k-", lw=1.0, label="hand speed")
         ax.plot(res.t_s, res.limit_mps, color="tab:green", lw=1.0, ls="--", label="speed limit at work (0: held)")
         ax.legend(fontsize=6, loc="upper right")
@@ -90,7 +94,7 @@ def plot_runs(results, out: dict, path) -> Path:
 
     zones = out["zones"]
     if len(results) <= MAX_PANELS:
-        fig, axes = plt.subplots(2, len(results), figsize=(4.6 * len(results), 6.6), squeeze=False,
+        fig, axes = plt.subplots(2, len(results), figsize=(max(4.6 * len(results), 8.0), 6.6), squeeze=False,
                                  gridspec_kw={"height_ratios": [3, 1]})
         for ax, sp, res in zip(axes[0], axes[1], results):
             _panel(ax, res, zones)
