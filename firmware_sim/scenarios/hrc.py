@@ -338,8 +338,11 @@ def format_table(result: dict) -> str:
             f"{'min sep m':>9} {'collision':>9}")
     if base:
         head += f" | {'no runtime: min sep m':>21} {'collision':>9}"
+    z = result["zones"]
+    sizing = (f"whole-body separation ({result.get('protection')})" if z.get("separation") == "whole_body"
+              else f"R1 {z['r1_m']:.1f} m, R2 {z['r2_m']:.1f} m")
     lines = [f"hrc: {result['link']} link, camera {result['camera_hz']:g} Hz, perception {result['perception']}, "
-             f"R1 {result['zones']['r1_m']:.1f} m, R2 {result['zones']['r2_m']:.1f} m", head, "-" * len(head)]
+             f"{sizing}", head, "-" * len(head)]
     for d in result["details"]:
         sep = "not run" if d["min_separation_m"] is None else f"{d['min_separation_m']:.3f}"
         row = (f"{d['name']:<14} {d['speed_mps']:>5.2f} {d['max_state']:<9} {d['stops']:>5} {d['retracts']:>4} "
