@@ -267,7 +267,7 @@ def productivity(ran: list[dict]) -> dict:
 def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtime: bool = True,
         perception: str = "auto", camera_hz: float = 30.0, max_speed_mps: float = 2.0,
         latency_ms: float | None = None, box=None, jobs: int = 1, progress: bool = False,
-        keep_results: bool = False, only: str | None = None):
+        keep_results: bool = False, only: str | None = None, labelled_calibration: bool = True):
     """Run scenarios with the box configuration ``box`` (default: the shipped one) and return the
     contract JSON (and the per-scenario results with ``keep_results``, for plots)."""
     box = box or box_config()
@@ -278,11 +278,12 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
         raise CliError(f"--max-speed {max_speed_mps:g}: walking speeds of {SPEED_LIMITS_MPS[0]}-"
                        f"{SPEED_LIMITS_MPS[1]} m/s only")
     percept = resolve_perception(perception) if runtime else "none"
-    world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0)
+    world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0,
+                        labelled_calibration=labelled_calibration)
     scs = scenarios_for(scenario, seed, max_speed_mps, only)
     results = _map([(sc, link, runtime, percept, world, box) for sc in scs], jobs, progress)
     settings = {
-        "scenario": scenario, "only": only, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
+        "scenario": scenario, "only": only, "labelled_calibration": labelled_calibration, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
         "camera_hz": camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1), "max_speed_mps": max_speed_mps,
         "collision_m": world.collision_m,
         "protection": protection_name(zones),
@@ -397,6 +398,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--retract-time", type=positive_float, default=None, metavar="S",
                    help="override [zones] retract_time_s, T_retract of Eq. 4 (s; the dissertation's 1.0 gives "
                         "R2 = 1 m, R1 = 3 m)")
+    p.add_argument("--unlabelled-calibration", action="store_true",
+                   help="lifter perception: calibrate through the runtime's own stand detection, without the "
+                        "simulator's marker labels")
     p.add_argument("--only", default=None, metavar="NAME",
                    help="run only this scenario of the set (e.g. --scenario hard:10 --only hard_002)")
     p.add_argument("--protection", choices=tuple(PROTECTIONS), default=None,
@@ -432,7 +436,8 @@ def cmd(args) -> int:
     box = replace(box, zones=overrides(zones, args.zone, "--zone"),
                   robot_loop=overrides(box.robot_loop, args.loop, "--loop"))
     common = dict(link=args.link, seed=args.seed, camera_hz=args.camera_hz, max_speed_mps=args.max_speed,
-                  latency_ms=args.latency_ms, box=box, jobs=args.jobs, progress=not args.quiet, only=args.only)
+                  latency_ms=args.latency_ms, box=box, jobs=args.jobs, progress=not args.quiet, only=args.only,
+                  labelled_calibration=not args.unlabelled_calibration)
     out, results = run(args.scenario, runtime=not args.no_runtime, perception=args.perception, keep_results=True,
                        **common)
     if args.with_baseline and not args.no_runtime:

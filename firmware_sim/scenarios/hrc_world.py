@@ -116,6 +116,9 @@ class WorldParams:
     """``truth`` perception: keypoints scored below this are missed (as the lifter does)."""
     trace_every: int = 2
     """Keep every n-th step in the trace (for plots)."""
+    labelled_calibration: bool = True
+    """``lifter`` perception: the calibration is handed the simulator's marker labels (True), or the
+    runtime's own stand detection must find the stands (False: ``hrc --unlabelled-calibration``)."""
 
     @property
     def frame_latency_s(self) -> float:
@@ -458,7 +461,8 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
         from edge_runtime.robot.calibration import CalibrationError
 
         try:
-            calibration, _, _ = calibrate(camera, rng, noise, box=box, real_noise=sc.hard)
+            calibration, _, _ = calibrate(camera, rng, noise, box=box, real_noise=sc.hard,
+                                          labelled=world.labelled_calibration)
         except CalibrationError as e:  # the box would refuse to run: the arm never moves
             return _not_run(sc, link, world, f"calibration failed: {e}")
         percepts = [LifterPerception(make_lifter(box), kp[w]) for w in range(W)]
