@@ -249,6 +249,8 @@ def test_the_shipped_safety_defaults_are_the_validated_ones():
     runs = rec["runs"].values()
     for need in ("random:200 can", "random:200 mavlink", "dissertation can", "dissertation mavlink"):
         assert any(f"{r['scenario']} {r['link']}" == need for r in runs), need
+    for link in ("can", "mavlink"):  # the hard suite too (issue 13)
+        assert any(r["scenario"].startswith("hard:") and r["link"] == link for r in runs), f"hard:N {link}"
     for r in runs:
         assert r["collisions"] == 0 and not r["not_run"] and r["perception"] == "lifter", r["command"]
         assert r["max_speed_mps"] == 2.0 or r["scenario"] == "dissertation", r["command"]
