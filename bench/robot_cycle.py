@@ -95,16 +95,28 @@ class _KnownTransform:
         return np.asarray(joints_cam_m, float) @ CAMERA_FROM_ROBOT + np.asarray(CAMERA_POSITION_M)
 
 
+ARM_POSTURE_RAD = (0.0, -0.6, 0.0, 1.2, 0.0, 0.5, 0.0)
+"""The joint angles the timed link reports: an arm at work, so that every frame's whole-body
+separation measures against the arm's links (not the end effector alone)."""
+
+
 class _TimedLink(LinkInterface):
     """A robot link that accepts every command and records when the last call returned.
-    No controller state; every command is acknowledged at once (so the loop never re-sends
-    one as unacknowledged), and the loop sends the heartbeats."""
+    Its state is one fixed arm posture; every command is acknowledged at once (so the loop
+    never re-sends one as unacknowledged), and the loop sends the heartbeats."""
 
     state = None
     link_ok = True
     heartbeats_itself = False
 
     def __init__(self):
+        from dataclasses import replace
+
+        from edge_runtime.robot.hazard import arm_points_m
+        from edge_runtime.robot.link.protocol import blank_state
+
+        q = np.array(ARM_POSTURE_RAD)
+        self.state = replace(blank_state(), joint_positions_rad=q, ee_position_m=arm_points_m(q)[-2])
         self.last_call_s = 0.0
         self.calls = 0
 
@@ -113,7 +125,7 @@ class _TimedLink(LinkInterface):
         self.last_call_s = time.perf_counter()
         return self.calls  # the command's sequence number
 
-    move_to = retract = stop = resume = set_alarm = heartbeat = _done
+    move_to = retract = stop = resume = set_alarm = set_speed = heartbeat = _done
 
     def poll(self) -> None:
         return None

@@ -1,7 +1,30 @@
-"""Head tracking, prediction and the two-level hazard zones of dissertation chapter 3.
+"""Head tracking, prediction, the hazard zones of dissertation chapter 3, whole-body speed and
+separation monitoring (ISO/TS 15066) and the retraction (Eq. 6).
 
 All positions are in the robot frame of :mod:`edge_runtime.core.skeleton` (metres, ``y``
 up, origin on top of the Sawyer base). "Ground-projected" distances drop ``y``.
+
+Sections, in file order: configuration (``TrackerParams``, ``ZoneParams``); tracking
+(``HeadTracker``); the state machine (``HazardMonitor``, with the head zones and the
+whole-body separation as its two ways of sizing a person's distance); whole-body geometry
+(the arm's capsules, the body's spheres); the retraction's pure functions.
+
+Two ways to protect people (``[zones] separation``):
+
+* **"whole_body"** (shipped): every lifted joint of every worker, as a sphere of its body
+  part's radius (``BODY_RADII_M``; limb midpoints too), against the arm's links as capsules
+  along the Sawyer's chain (``SAWYER_JOINT_ORIGINS``, from the joint angles the arm reports;
+  the end effector alone until it has reported any). A person's separation is the smaller of
+  now and ``predict_s`` ahead (his whole body moved with his head's velocity). ISO/TS 15066
+  speed and separation monitoring: the protective separation distance at robot speed v_r is
+  ``S_p = v_h (T_r + T_s) + v_r (T_r + T_s / 2) + C + Z_d + Z_r`` (v_h: his tracked speed,
+  at least ISO 13855's 1.6 m/s), so a separation allows the robot speed that inverts it.
+  NORMAL works at that speed (``speed_scale``, in steps of ``speed_step``; stop-only:
+  full speed or nothing), LEVEL1 stops below the protective distance at the slowest useful
+  speed, LEVEL2 retracts when a person keeps coming (toward the arm faster than
+  ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
+  ``retract_lead_s``.
+* **"head"**: the dissertation's zones around the end effector, below.
 
 * **Tracking and prediction (Eq. 3).** ``HeadTracker`` fits a straight line to the
   head positions of the last ``window_s`` seconds (least squares, per axis). Its slope
@@ -62,6 +85,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from edge_runtime import config
+from edge_runtime.core.skeleton import HEAD as HEAD_JOINT
 
 GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
 
@@ -71,6 +95,9 @@ def ground(v) -> np.ndarray:
     v = np.asarray(v, dtype=float)
     return v[..., GROUND_AXES]
 
+
+# ----------------------------------------------------------------------------------------------
+# Configuration
 
 @config.section("tracker")
 @dataclass(frozen=True)
@@ -128,6 +155,38 @@ class ZoneParams:
     """Z_d: uncertainty of the worker's position (m; calibrated head error)."""
     iso_robot_uncertainty_m: float = config.setting(0.01, config.NON_NEGATIVE)
     """Z_r: uncertainty of the robot's position (m)."""
+    separation: str = config.setting("whole_body", config.one_of("whole_body", "head"))
+    """"whole_body": every lifted joint (with a radius per body part) against the arm's links
+    (capsules along the Sawyer's chain, from the joint angles the arm reports), with ISO/TS 15066
+    speed and separation monitoring; "head": the dissertation's head-to-end-effector zones
+    (Eq. 3-5, ``sizing``)."""
+    speed_scaling: bool = True
+    """whole_body: the arm slows continuously as people come closer (True), or works at full
+    speed until it must stop (False: stop-only, for comparison)."""
+    body_intrusion_m: float = config.setting(0.1, config.NON_NEGATIVE)
+    """whole_body: ISO/TS 15066's C (m). Every joint is tracked and a wrist's radius holds the
+    hand, so only what reaches beyond them (fingers, a held tool) is left; 0.85 m is for a
+    head-only sensor."""
+    body_sensing_uncertainty_m: float = config.setting(0.3, config.NON_NEGATIVE)
+    """whole_body: ISO/TS 15066's Z_d (m): the error of a lifted joint in the robot frame (the
+    head's after calibration: median 0.29 m, reports/robot/head_error.md)."""
+    body_retract_distance_m: float = config.setting(0.6, config.POSITIVE)
+    """whole_body: a person who keeps coming (faster than ``approach_speed_mps`` toward the arm)
+    makes it retract (Eq. 6) once his separation is below this (m) plus his approach speed times
+    ``retract_lead_s``: 1.9 m at 1.4 m/s, 2.4 m at 2.0 m/s, 1.1 m at 0.5 m/s."""
+    retract_lead_s: float = config.setting(0.9, config.NON_NEGATIVE)
+    """whole_body: how long before he would reach ``body_retract_distance_m`` the retraction
+    starts (s). The Sawyer needs about 2 s to finish a retraction but moves its hand half of the
+    way in the first second, at up to 0.6 m/s; a slower walker lets the arm work longer."""
+    approach_speed_mps: float = config.setting(0.3, config.NON_NEGATIVE)
+    """whole_body: a person "keeps coming" when his head moves toward the end effector faster
+    than this (m/s; above the tracker's 0.1 m/s of velocity noise)."""
+    min_speed_fraction: float = config.setting(0.1, config.within(0, 1))
+    """whole_body with speed scaling: below this share of full speed the arm stops instead
+    (a crawl gets no work done and still needs the stop's distance)."""
+    speed_step: float = config.setting(0.1, ("a number in (0, 1]", lambda v: 0 < v <= 1))
+    """whole_body with speed scaling: speed overrides are multiples of this share of full speed,
+    so keypoint noise does not send a new command every frame."""
     hysteresis_m: float = config.setting(0.2, config.NON_NEGATIVE)
     """Exit radii are the entry radii plus this (m)."""
     dwell_s: float = config.setting(1.0, config.NON_NEGATIVE)
@@ -150,6 +209,25 @@ class ZoneParams:
     def __post_init__(self):
         if self.sizing not in ("eq45", "iso15066"):
             raise ValueError(f"sizing: must be eq45 or iso15066, got {self.sizing!r}")
+        if self.separation not in ("whole_body", "head"):
+            raise ValueError(f"separation: must be whole_body or head, got {self.separation!r}")
+
+    def body_protective_distance_m(self, robot_speed_mps: float, human_speed_mps: float | None = None) -> float:
+        """whole_body: ISO/TS 15066's S_p (m) at robot speed v_r:
+        ``v_h (T_r + T_s) + v_r T_r + v_r T_s / 2 + C + Z_d + Z_r``, with the stopping distance
+        ``S_s = v_r T_s / 2`` of a constant deceleration and v_h at least ``iso_human_speed_mps``."""
+        v_h = max(self.iso_human_speed_mps, human_speed_mps or 0.0)
+        return (v_h * (self.iso_reaction_time_s + self.iso_stop_time_s)
+                + robot_speed_mps * (self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s)
+                + self.body_intrusion_m + self.body_sensing_uncertainty_m + self.iso_robot_uncertainty_m)
+
+    def allowed_speed_mps(self, separation_m: float, human_speed_mps: float | None = None) -> float:
+        """whole_body: the fastest robot speed (m/s, 0..``iso_robot_speed_mps``) whose S_p is
+        within ``separation_m`` (S_p is linear in v_r, so this inverts it)."""
+        slack = separation_m - self.body_protective_distance_m(0.0, human_speed_mps)
+        per_mps = self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s
+        v = slack / per_mps if per_mps > 0 else (math.inf if slack >= 0 else 0.0)
+        return float(min(max(v, 0.0), self.iso_robot_speed_mps))
 
     @property
     def r2_m(self) -> float:
@@ -189,6 +267,9 @@ class Alarm:
     tone_hz: float = 0.0
     tone_db: float = 0.0
 
+
+# ----------------------------------------------------------------------------------------------
+# Tracking (Eq. 3)
 
 @dataclass(frozen=True)
 class HeadEstimate:
@@ -251,6 +332,9 @@ def distance_to_effector(est: HeadEstimate, effector_m) -> float:
     return float(min(np.linalg.norm(ground(est.predicted_m) - e), np.linalg.norm(ground(est.position_m) - e)))
 
 
+# ----------------------------------------------------------------------------------------------
+# The state machine: head zones (Eq. 4-5) or whole-body speed and separation monitoring
+
 @dataclass
 class Decision:
     """What the arm should do now, and why."""
@@ -258,9 +342,14 @@ class Decision:
     state: State
     reason: str
     distance_m: float = math.inf
+    """The nearest worker's distance: ground head-to-effector (``separation = "head"``) or the
+    whole-body separation (m)."""
     worker: int | None = None
     head: HeadEstimate | None = None
     changed: bool = False
+    speed_scale: float = 1.0
+    """Share of full speed the arm may work at in NORMAL (whole-body speed and separation
+    monitoring; 1.0 otherwise)."""
 
 
 def alarms(params: ZoneParams) -> dict[State, Alarm]:
@@ -293,10 +382,11 @@ class _Hold:
 class HazardMonitor:
     """The zone state machine over every tracked worker (see the module docstring).
 
-    Call ``observe(t_s, heads, effector_m)`` once per pose frame, with ``heads`` a
-    mapping worker id -> head position (robot frame, metres) of the workers seen in it
-    (empty: nobody seen), ``invalid(t_s, reason)`` for a frame the lifter marked
-    invalid, and ``check(t_s)`` at every control cycle (staleness)."""
+    Call ``observe(t_s, people, effector_m, arm_q_rad)`` once per pose frame, with ``people``
+    a mapping worker id -> his skeleton (17, 3) or head (3,) (robot frame, metres) for the
+    workers seen in it (empty: nobody seen) and ``arm_q_rad`` the arm's reported joint angles
+    (None: not known yet, the end effector stands for the arm), ``invalid(t_s, reason)`` for a
+    frame the lifter marked invalid, and ``check(t_s)`` at every control cycle (staleness)."""
 
     zones: ZoneParams = field(default_factory=ZoneParams)
     tracker: TrackerParams = field(default_factory=TrackerParams)
@@ -314,29 +404,105 @@ class HazardMonitor:
         self._fault_clear = _Hold()
         self._below = {State.LEVEL2: _Hold(), State.LEVEL1: _Hold()}
         self._lost_since_s: float | None = None
+        self._scale = 1.0
+        self._seen_s: float | None = None  # when a worker was last seen (whole-body speed scaling)
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
         """How often the pose stream went stale."""
 
     # -- inputs ---------------------------------------------------------------------------
 
-    def observe(self, t_s: float, heads: dict[int, np.ndarray], effector_m) -> Decision:
+    def observe(self, t_s: float, people: dict[int, np.ndarray], effector_m, arm_q_rad=None) -> Decision:
         """A valid pose frame: update the trackers and the zone level."""
         self._last_pose_s = t_s
-        self.estimates = {}
-        for wid in [w for w in self._trackers if w not in heads]:
+        for wid in [w for w in self._trackers if w not in people]:
             del self._trackers[wid]
-        nearest = (math.inf, None, None)
-        for wid, head in heads.items():
-            est = self._trackers.setdefault(wid, HeadTracker(self.tracker, self.zones.predict_s)).update(t_s, head)
-            self.estimates[wid] = est
-            d = distance_to_effector(est, effector_m)
-            if d < nearest[0]:
-                nearest = (d, wid, est)
-        self._update_level(t_s, *nearest)
+        ests = {}
+        for wid, person in people.items():
+            person = np.asarray(person, float)
+            head = person if person.shape == (3,) else person[HEAD_JOINT]
+            ests[wid] = self._trackers.setdefault(wid, HeadTracker(self.tracker, self.zones.predict_s)).update(
+                t_s, head)
+        self.estimates = ests  # each person's head estimate, for the per-person log
+        if self.zones.separation == "head":
+            entry, exit_r, nearest = self._head_zones(ests, effector_m)
+        else:
+            entry, exit_r, nearest = self._speed_and_separation(t_s, people, ests, effector_m, arm_q_rad)
+        self._update_level(t_s, entry, nearest[0], nearest[2], exit_r)
         if self._fault is not None and self._fault_clear.clear_for(t_s, True) >= self.zones.dwell_s:
             self._fault = None
         return self._decide(t_s, *nearest)
+
+    def _head_zones(self, ests: dict[int, HeadEstimate], effector_m):
+        """The dissertation's zones: the nearest predicted or current head to the end effector
+        (ground distance) against R1 and R2. (entry level, exit radii, nearest (d, id, head))."""
+        z = self.zones
+        nearest = (math.inf, None, None)
+        for wid, est in ests.items():
+            d = distance_to_effector(est, effector_m)
+            if d < nearest[0]:
+                nearest = (d, wid, est)
+        d = nearest[0]
+        entry = State.LEVEL2 if d <= z.r2_m else State.LEVEL1 if d <= z.r1_m else State.NORMAL
+        self._scale = 1.0
+        return entry, {State.LEVEL2: z.r2_m + z.hysteresis_m, State.LEVEL1: z.r1_m + z.hysteresis_m}, nearest
+
+    def _speed_and_separation(self, t_s: float, people, ests: dict[int, HeadEstimate], effector_m, arm_q_rad):
+        """Whole-body speed and separation monitoring (ISO/TS 15066). Per person: the smallest
+        separation of his body now and predicted ``predict_s`` ahead (every joint moved with his
+        head's velocity) from the arm's capsules; the robot speed that separation allows; and
+        whether he keeps coming. LEVEL2 (retract) for one closer than ``body_retract_distance_m``
+        who keeps coming, LEVEL1 (stop) below the protective distance at the slowest useful
+        speed (stop-only: at full speed), else NORMAL at the speed the nearest one allows."""
+        z = self.zones
+        caps = arm_capsules(arm_q_rad) if arm_q_rad is not None else effector_capsule(effector_m)
+        eff_g = ground(effector_m)
+        v_full = z.iso_robot_speed_mps
+        v_stop = z.min_speed_fraction * v_full if z.speed_scaling else v_full
+        entry, nearest, worst = State.NORMAL, (math.inf, None, None), (v_full, None)
+        for wid, est in ests.items():
+            centres, radii = body_spheres(people[wid])
+            ahead = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]) * z.predict_s
+            # now and ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost here
+            d = separation_m(np.concatenate([centres, centres + ahead]), np.concatenate([radii, radii]), caps)
+            v_g = ground(est.velocity_mps)
+            speed = float(np.linalg.norm(v_g))
+            toward = eff_g - ground(est.position_m)
+            approach = float(v_g @ toward) / max(float(np.linalg.norm(toward)), 1e-9)
+            allowed = z.allowed_speed_mps(d, speed)
+            if approach > z.approach_speed_mps and d <= z.body_retract_distance_m + approach * z.retract_lead_s:
+                level = State.LEVEL2
+            elif allowed < v_stop - 1e-9:
+                level = State.LEVEL1
+            else:
+                level = State.NORMAL
+            entry = max(entry, level)
+            if d < nearest[0]:
+                nearest = (d, wid, est)
+            if allowed < worst[0] or worst[1] is None:
+                worst = (allowed, speed)
+        human_speed = worst[1]
+        exit_r = {State.LEVEL2: z.body_retract_distance_m + z.hysteresis_m,
+                  State.LEVEL1: z.body_protective_distance_m(v_stop, human_speed) + z.hysteresis_m}
+        if ests:
+            self._scale, self._seen_s = self._speed_scale(nearest[0], human_speed), t_s
+        elif self._seen_s is None or t_s - self._seen_s >= z.lost_hold_s:
+            self._scale = 1.0  # nobody for lost_hold_s: a worker who vanished near the arm may be hidden
+        return entry, exit_r, nearest
+
+    def _speed_scale(self, d: float, human_speed_mps: float | None) -> float:
+        """The share of full speed at separation ``d``: down to a multiple of ``speed_step`` at
+        once, up again only when ``hysteresis_m`` more separation allows it (no chatter)."""
+        z = self.zones
+        if not z.speed_scaling:
+            return 1.0
+        step, full = z.speed_step, z.iso_robot_speed_mps
+
+        def quantised(sep: float) -> float:
+            return min(1.0, math.floor(z.allowed_speed_mps(sep, human_speed_mps) / full / step + 1e-9) * step)
+
+        now = quantised(d)
+        return now if now <= self._scale else max(self._scale, quantised(d - z.hysteresis_m))
 
     def invalid(self, t_s: float, reason: str) -> Decision:
         """A frame the lifter (or the input) marked invalid: stop."""
@@ -363,14 +529,8 @@ class HazardMonitor:
         self._fault_clear.clear_for(t_s, False)
         self._trackers.clear()  # velocities across a gap are meaningless
 
-    def _update_level(self, t_s: float, d: float, wid, est) -> None:
+    def _update_level(self, t_s: float, entry: State, d: float, est, exit_r: dict) -> None:
         z = self.zones
-        if d <= z.r2_m:
-            entry = State.LEVEL2
-        elif d <= z.r1_m:
-            entry = State.LEVEL1
-        else:
-            entry = State.NORMAL
         if est is None and self.level >= State.LEVEL1:
             # nobody seen: a worker last seen inside R1 may be hidden, not gone
             if self._lost_since_s is None:
@@ -385,7 +545,6 @@ class HazardMonitor:
                 hold.clear_for(t_s, False)
             return
         # de-escalate one level at a time, each after dwell_s beyond its exit radius
-        exit_r = {State.LEVEL2: z.r2_m + z.hysteresis_m, State.LEVEL1: z.r1_m + z.hysteresis_m}
         while self.level > entry:
             level = State.LEVEL2 if self.level == State.LEVEL2 else State.LEVEL1
             if self._below[level].clear_for(t_s, d > exit_r[level]) < z.dwell_s:
@@ -404,12 +563,116 @@ class HazardMonitor:
             state, reason = self.level, ("level2_retract" if self.level == State.LEVEL2 else "level1_stop")
         if self._fault is not None and state == State.LEVEL2:
             reason = f"level2_retract ({self._fault})"
-        dec = Decision(state, reason, d, wid, est, changed=(state, reason) != (self.last.state, self.last.reason))
+        scale = self._scale if state == State.NORMAL else 1.0
+        dec = Decision(state, reason, d, wid, est, changed=(state, reason) != (self.last.state, self.last.reason),
+                       speed_scale=scale)
         self.state, self.reason, self.last = state, reason, dec
         return dec
 
     def alarm(self, state: State) -> Alarm:
         return self._alarms[state]
+
+
+# ----------------------------------------------------------------------------------------------
+# Whole-body separation: the arm's links as capsules, the people's joints as spheres
+
+SAWYER_JOINT_ORIGINS: tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...] = (
+    # (xyz m, rpy rad) of right_j0 .. right_j6 in their parent link, then the fixed hand: the
+    # public Sawyer description (sawyer_description/urdf/sawyer_base.urdf.xacro). The runtime
+    # carries its own copy because the box never installs the simulator;
+    # tests/robot/test_hazard.py pins it to firmware_sim/robot/sawyer.py's kinematics.
+    ((0.0, 0.0, 0.08), (0.0, 0.0, 0.0)),
+    ((0.081, 0.05, 0.237), (-math.pi / 2, math.pi / 2, 0.0)),
+    ((0.0, -0.14, 0.1425), (math.pi / 2, 0.0, 0.0)),
+    ((0.0, -0.042, 0.26), (-math.pi / 2, 0.0, 0.0)),
+    ((0.0, -0.125, -0.1265), (math.pi / 2, 0.0, 0.0)),
+    ((0.0, 0.031, 0.275), (-math.pi / 2, 0.0, 0.0)),
+    ((0.0, -0.11, 0.1053), (-math.pi / 2, -math.radians(10.0), math.pi)),
+    ((0.0, 0.0, 0.0245), (0.0, 0.0, math.pi / 2)),
+)
+ARM_LINK_RADII_M = (0.08, 0.07, 0.06, 0.06, 0.055, 0.05, 0.045, 0.035, 0.035)
+"""Capsule radius (m) of each segment base-j0, j0-j1, ..., j6-hand, hand-tool tip: the
+description's collision geometry, as thick as the simulator's collision spheres."""
+TOOL_LENGTH_M = 0.10
+"""The gripper or tool beyond the hand, along the tool axis (m)."""
+_URDF_TO_ROBOT = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+"""Robot frame (x, y, z) = URDF base frame (y, z, x) (edge_runtime/core/skeleton.py)."""
+
+BODY_RADII_M = np.array([0.15, 0.10, 0.08, 0.08, 0.10, 0.08, 0.08,   # pelvis, right/left hip, knee, ankle
+                         0.15, 0.15, 0.08, 0.12,                     # spine, thorax, neck, head
+                         0.08, 0.06, 0.12, 0.08, 0.06, 0.12])        # shoulders, elbows, wrists
+"""Radius (m) of the body around each H36M joint: the trunk's half depth, a limb's half
+thickness, the head, and at the wrist the hand beyond it (10-12 cm)."""
+LIMBS = ((1, 2), (2, 3), (4, 5), (5, 6), (11, 12), (12, 13), (14, 15), (15, 16))
+"""Thigh, shank (right, left), upper arm, forearm (left, right): their midpoints are checked
+too, so an arm link passing between two joints of a 0.4 m bone is not missed."""
+
+
+def _rpy_transform(xyz, rpy) -> np.ndarray:
+    """4x4 transform of a URDF origin: translation, then Rz(yaw) Ry(pitch) Rx(roll)."""
+    (cr, sr), (cp, sp), (cy, sy) = ((math.cos(a), math.sin(a)) for a in rpy)
+    t = np.eye(4)
+    t[:3, :3] = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                 [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                 [-sp, cp * sr, cp * cr]]
+    t[:3, 3] = xyz
+    return t
+
+
+_ORIGIN_TRANSFORMS = tuple(_rpy_transform(xyz, rpy) for xyz, rpy in SAWYER_JOINT_ORIGINS)
+
+
+def arm_points_m(q_rad) -> np.ndarray:
+    """(10, 3) robot-frame points along the arm for joint angles ``q_rad`` (7,): the base top,
+    joints j0..j6, the hand and the tool tip."""
+    q = np.asarray(q_rad, float).reshape(7)
+    t = np.eye(4)
+    pts = [np.zeros(3)]
+    for k, origin in enumerate(_ORIGIN_TRANSFORMS):
+        t = t @ origin
+        if k < 7:  # every arm joint turns about its own z axis
+            c, s_ = math.cos(q[k]), math.sin(q[k])
+            t = t @ np.array([[c, -s_, 0, 0], [s_, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        pts.append(t[:3, 3].copy())
+    pts.append(t[:3, 3] + TOOL_LENGTH_M * t[:3, 2])
+    return np.asarray(pts) @ _URDF_TO_ROBOT.T
+
+
+def arm_capsules(q_rad) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arm as capsules: segment starts (9, 3), ends (9, 3) and radii (9,), robot frame (m)."""
+    p = arm_points_m(q_rad)
+    return p[:-1], p[1:], np.asarray(ARM_LINK_RADII_M)
+
+
+def effector_capsule(effector_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The end effector alone, as a tool-sized sphere: what is known of the arm before it has
+    reported its joint angles."""
+    e = np.asarray(effector_m, float).reshape(1, 3)
+    return e, e, np.array([TOOL_LENGTH_M])
+
+
+def body_spheres(person_m) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (N, 3) and radii (N,) covering a person: the 17 joints and the limb midpoints;
+    a lone head position (3,) is one head-sized sphere."""
+    p = np.asarray(person_m, float)
+    if p.shape == (3,):
+        return p[None], BODY_RADII_M[HEAD_JOINT:HEAD_JOINT + 1]
+    a, b = np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS])
+    centres = np.concatenate([p, 0.5 * (p[a] + p[b])])
+    return centres, np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[a] + BODY_RADII_M[b])])
+
+
+def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
+    """Smallest surface-to-surface distance (m) between spheres (``centres_m`` (N, 3),
+    ``radii_m`` (N,)) and capsules (starts (K, 3), ends (K, 3), radii (K,)); negative when
+    they overlap."""
+    a, b, r = capsules
+    ab = b - a                                                     # (K, 3)
+    ap = centres_m[:, None, :] - a[None]                           # (N, K, 3)
+    den = np.maximum((ab * ab).sum(-1), 1e-12)
+    t = np.clip((ap * ab[None]).sum(-1) / den, 0.0, 1.0)
+    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1)
+    return float((d - r[None] - radii_m[:, None]).min())
 
 
 # ----------------------------------------------------------------------------------------------

@@ -220,6 +220,8 @@ class LoopCounters:
     """Motion commands with no acknowledgement within ``ack_timeout_s``."""
     retries: int = 0
     """Motion commands sent again (unacknowledged, or a stop refused)."""
+    speed_changes: int = 0
+    """Speed overrides sent (whole-body speed scaling)."""
 
 
 @dataclass
@@ -285,6 +287,9 @@ class RobotLoop:
         self._next_retry_s = -math.inf
         self._last_watchdog_fix_s = -math.inf
         self._last_effector: np.ndarray | None = None
+        self._last_q: np.ndarray | None = None  # the arm's joint angles as last reported (whole-body separation)
+        self._sent_speed: float | None = None  # the speed override the arm acknowledged or was last sent (m/s)
+        self._speed_pending: PendingCommand | None = None
         self._last_yaw: float | None = None
         self._pending: PendingCommand | None = None
         self._unconfirmed = 0  # motion commands in a row the arm did not acknowledge
@@ -322,15 +327,16 @@ class RobotLoop:
             # a stand-in calibration may take the joints only: pass the mask when there is one
             persons = (self.calibration.to_robot(persons) if observed is None
                        else self.calibration.to_robot(persons, observed))
-        heads = persons[:, HEAD, :] if shaped and len(persons) else np.empty((0, 3))
-        keys = list(range(len(heads))) if ids is None else list(ids)
+        keys = list(range(len(persons))) if ids is None else list(ids)
         people = []
-        if not valid or not shaped or not np.isfinite(heads).all():
+        # whole-body separation needs every joint; the head zones only the head
+        needed = persons if self.zones.separation == "whole_body" else persons[:, HEAD, :] if shaped else persons
+        if not valid or not shaped or not np.isfinite(needed).all():
             self.counters.invalid += 1
             why = reason if not valid else "non-finite joints" if shaped else f"joints of shape {persons.shape}"
             decision = self.monitor.invalid(t_in, why)
         else:
-            decision = self.monitor.observe(t_in, dict(zip(keys, heads)), self.effector_m())
+            decision = self.monitor.observe(t_in, dict(zip(keys, persons)), self.effector_m(), self._last_q)
             people = self._people(keys, persons)
         return self._act(t_in, decision, record=True, people=people)
 
@@ -428,6 +434,8 @@ class RobotLoop:
         pos = np.asarray(state.ee_position_m, float)
         if np.isfinite(pos).all():
             self._last_effector = pos.reshape(3)
+        q = np.asarray(state.joint_positions_rad, float)
+        self._last_q = q.reshape(7) if q.size == 7 and np.isfinite(q).all() else None
         self._last_yaw = float(state.yaw_rad) if math.isfinite(state.yaw_rad) else None
         now = self.clock()
         if state.watchdog and self._sent_motion is not None and self._sent_motion.kind is MotionKind.MOVE \
@@ -435,6 +443,7 @@ class RobotLoop:
             self._last_watchdog_fix_s = now  # the controller latched a stop: send everything again
             self._sent_motion = self._sent_alarm = None
         self._check_ack(now)
+        self._check_speed_ack(now)
         if self._retract_seq is not None and self._refused(self._retract_seq):
             self._retract_refused()
         if self._move_seq is not None and self._refused(self._move_seq):
@@ -487,6 +496,25 @@ class RobotLoop:
             self._sent_motion = None  # _act sends the motion again, as a retry
             self._resending, self._retry_of = True, p
 
+    def _check_speed_ack(self, now: float) -> None:
+        """The last speed override: acknowledged, or (no answer within ``ack_timeout_s``, or
+        refused) counted, alarmed and sent again like a motion command."""
+        p = self._speed_pending
+        if p is None or self.link_state != "ok":
+            return
+        result = self.link.result(p.seq)
+        if result == "ok":
+            self.counters.acked += 1
+            self._speed_pending = None
+            return
+        if result is None and now - p.sent_s < self.params.ack_timeout_s:
+            return
+        self._speed_pending, self._sent_speed = None, None  # _act sends it again
+        self.counters.unacked += result is None
+        self.counters.refused += result is not None
+        self.counters.retries += 1
+        self.command_alarm = f"speed (seq {p.seq}) " + ("not acknowledged" if result is None else f"answered {result!r}")
+
     def _check_link_up(self) -> None:
         """No state from the arm ``link_up_timeout_s`` after the start: the link never came up."""
         if self.link_state == "connecting" and not self.fault \
@@ -509,7 +537,7 @@ class RobotLoop:
         ok = self.link.link_ok
         if ok and self.link_state != "ok":
             self.link_state, self.link_error = "ok", ""
-            self._sent_motion = self._sent_alarm = None  # (re)connected: send the current commands
+            self._sent_motion = self._sent_alarm = self._sent_speed = None  # (re)connected: send the current commands
         elif not ok:
             if self.link_state == "ok":
                 self.counters.link_errors += 1
@@ -605,6 +633,10 @@ class RobotLoop:
                 and self._call(self.link.set_alarm, alarm.light, alarm.tone_hz, alarm.tone_db) is not None:
             self._sent_alarm = alarm
             t_cmd, sent = self.clock(), "alarm"
+        # the speed before the motion: a retraction must not crawl at the approach's slow speed
+        speed = self._desired_speed(state, decision)
+        if speed is not None and speed != self._sent_speed and not self._raised and self._send_speed(speed):
+            t_cmd, sent = self.clock(), "speed"
         if motion != self._sent_motion and not self._raised and self._send_motion(motion):
             t_cmd, sent = self.clock(), motion.kind.value
         self._report_runtime_state(state)
@@ -615,6 +647,27 @@ class RobotLoop:
         if self.on_record:
             self.on_record(rec)
         return rec
+
+    def _desired_speed(self, state: State, decision: Decision) -> float | None:
+        """The hand's speed limit (m/s) to command, or None to leave it: only with whole-body
+        speed scaling; NORMAL at the decision's share of full speed, a retraction at full speed,
+        and a stop leaves the limit where it is (the arm is held anyway)."""
+        z = self.zones
+        if z.separation != "whole_body" or not z.speed_scaling:
+            return None
+        if state == State.NORMAL:
+            return round(decision.speed_scale * z.iso_robot_speed_mps, 4)
+        return z.iso_robot_speed_mps if state == State.LEVEL2 else None
+
+    def _send_speed(self, limit_mps: float) -> bool:
+        seq = self._call(self.link.set_speed, limit_mps)
+        if seq is None or seq is INVALID:
+            return False
+        self.counters.speed_changes += 1
+        self._sent_speed = limit_mps
+        if isinstance(seq, int) and seq > 0:
+            self._speed_pending = PendingCommand("speed", seq, self.clock())
+        return True
 
     def _send_motion(self, motion: Motion) -> bool:
         c = self.counters

@@ -37,6 +37,8 @@ class NoArm(LinkInterface):
     def __init__(self, clock, start_m=(0.45, 0.14, 0.55), speed_mps: float = 0.5):
         self.clock = clock
         self.speed_mps = speed_mps
+        self.limit_mps = speed_mps
+        """The speed override the loop set last (speed and separation monitoring)."""
         self._seq = 0
         self._target: np.ndarray | None = None
         self._t = clock()
@@ -74,6 +76,10 @@ class NoArm(LinkInterface):
         self._state = replace(self._state, light=light, tone_hz=float(tone_hz), tone_db=float(tone_db))
         return self._command("alarm")
 
+    def set_speed(self, limit_mps: float) -> int:
+        self.limit_mps = float(limit_mps)
+        return self._command("speed")
+
     def heartbeat(self) -> bool:
         return True
 
@@ -86,7 +92,7 @@ class NoArm(LinkInterface):
         if self._target is not None and now > self._t:
             step = self._target - pos
             dist = float(np.linalg.norm(step))
-            reach = self.speed_mps * (now - self._t)
+            reach = min(self.speed_mps, self.limit_mps) * (now - self._t)
             pos = self._target.copy() if dist <= reach else pos + step * (reach / dist)
         self._t = now
         self._state = replace(self._state, t_s=now, ee_position_m=pos)

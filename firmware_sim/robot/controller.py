@@ -62,6 +62,7 @@ from edge_runtime.robot.link.protocol import (
     MAV_CMD_ALARM,
     MAV_CMD_MOVE_ACK,
     MAV_CMD_RETRACT,
+    MAV_CMD_SPEED,
     MAV_CMD_STOP_RESUME,
     RESULT_TO_MAV,
     ROBOT_COMPID,
@@ -73,6 +74,7 @@ from edge_runtime.robot.link.protocol import (
     SerialStream,
     SocketStream,
     check_alarm,
+    check_speed,
     check_target,
     light_name,
     make_mavlink,
@@ -121,8 +123,10 @@ class Command:
     """One runtime command, decoded by a port."""
 
     kind: str
-    """"move", "retract", "stop", "resume", "alarm" or "heartbeat"."""
+    """"move", "retract", "stop", "resume", "alarm", "speed" or "heartbeat"."""
     seq: int = 0
+    speed_mps: float = 0.0
+    """A speed override's hand speed limit (m/s)."""
     position_m: np.ndarray | None = None
     pitch_rad: float = 0.0
     yaw_rad: float = 0.0
@@ -209,6 +213,8 @@ class CanControllerPort:
             light = str(sig["Light"])
             return Command("alarm", seq=int(sig["Seq"]), light=light, tone_hz=float(sig["ToneFreq"]),
                            tone_db=float(sig["ToneLevel"]), invalid="" if light in LIGHTS else f"unknown light {light}")
+        if name == "ROBOT_SPEED_CMD":
+            return Command("speed", seq=int(sig["Seq"]), speed_mps=float(sig["SpeedLimit"]) / 1000.0)
         if name == "ROBOT_TARGET_ORIENT":
             self._pending = (sig, now)
             return None
@@ -345,6 +351,10 @@ class MavlinkControllerPort:
         if m.command == MAV_CMD_RETRACT:
             return Command("retract", seq=seq, position_m=mav_to_robot(m.param1, m.param2, m.param3),
                            pitch_rad=float(m.param4), yaw_rad=-float(m.param5), reply_to=reply)
+        if m.command == MAV_CMD_SPEED:  # param1 1 (ground speed), param3 -1 (throttle unchanged) only
+            ok = m.param1 == 1.0 and m.param3 == -1.0
+            return Command("speed", seq=seq, speed_mps=float(m.param2), reply_to=reply,
+                           invalid="" if ok else f"change-speed param1 {m.param1!r} / param3 {m.param3!r}")
         if m.command == MAV_CMD_ALARM:
             light = light_name(m.param1)
             return Command("alarm", seq=seq, light=light, tone_hz=float(m.param2), tone_db=float(m.param3),
@@ -434,7 +444,7 @@ class SawyerController:
         if cmd.kind == "heartbeat":
             return "ok"
         result = self._execute(cmd)
-        self.last_command = cmd.kind if cmd.kind in ("move", "retract", "stop", "resume", "alarm") else "none"
+        self.last_command = cmd.kind if cmd.kind in ("move", "retract", "stop", "resume", "alarm", "speed") else "none"
         self.last_seq, self.last_result = cmd.seq, result
         _count(self.counters, "commands")
         if result != "ok":
@@ -454,6 +464,9 @@ class SawyerController:
         try:
             if cmd.kind == "alarm":
                 self.light, self.tone_hz, self.tone_db = check_alarm(cmd.light, cmd.tone_hz, cmd.tone_db)
+                return "ok"
+            if cmd.kind == "speed":  # a speed limit applies in every mode: slowing down is always allowed
+                self.arm.set_speed_limit(check_speed(cmd.speed_mps))
                 return "ok"
             if cmd.kind in ("move", "retract"):
                 position, pitch, yaw = check_target(cmd.position_m, cmd.pitch_rad, cmd.yaw_rad)

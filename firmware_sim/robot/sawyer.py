@@ -246,7 +246,10 @@ class SawyerArm:
         c = self.config
         self.q_rad = np.asarray(self.q_rad, float).copy()
         self.qd_radps = np.asarray(self.qd_radps, float).copy()
-        self._vmax = np.asarray(c.max_vel_radps, float) * c.joint_speed_ratio
+        self._vmax_full = np.asarray(c.max_vel_radps, float) * c.joint_speed_ratio
+        self._vmax = self._vmax_full
+        self.speed_limit_mps = c.max_cartesian_speed_mps
+        """The hand's speed limit now (m/s): the configured one, or lower after a speed override."""
         self._amax = np.asarray(c.max_acc_radps2, float)
         self._lo = LOWER_RAD + c.limit_margin_rad
         self._hi = UPPER_RAD - c.limit_margin_rad
@@ -341,6 +344,15 @@ class SawyerArm:
         """Forget the goal: the arm decelerates to rest within its limits and holds there."""
         self.goal_rad = None
 
+    def set_speed_limit(self, limit_mps: float) -> None:
+        """Speed override (ISO/TS 15066 speed and separation monitoring): the hand's speed limit
+        becomes ``limit_mps`` (never above the configured one) and every joint's speed limit is
+        scaled by the same factor, so a motion in joint space slows down as much as the hand.
+        The arm decelerates to the new limit within its acceleration limits."""
+        top = self.config.max_cartesian_speed_mps
+        self.speed_limit_mps = min(max(float(limit_mps), 0.0), top)
+        self._vmax = self._vmax_full * (self.speed_limit_mps / top)
+
     # -- motion --------------------------------------------------------------------------
     def step(self, dt_s: float) -> StepRecord:
         """Advance ``dt_s`` seconds toward the goal (or to rest) within every limit."""
@@ -376,13 +388,15 @@ class SawyerArm:
         u = e / dist
         au = np.abs(u)
         nz = au > 1e-12
+        if self.speed_limit_mps <= 0.0:  # held still by a zero speed override
+            return np.zeros(N_JOINTS)
         s_vel = float(np.min(self._vmax[nz] / au[nz]))
         a_s = float(np.min(self._amax[nz] / au[nz]))
         s = min(s_vel, _braking_speed(dist, a_s, dt_s))
         _, jp, _ = jacobian(self.q_rad)
         c = float(np.linalg.norm(jp @ u))  # m of hand travel per rad along u
         if c > 1e-9:
-            s = min(s, self.config.max_cartesian_speed_mps / c)
+            s = min(s, self.speed_limit_mps / c)
         return s * u
 
     def _cartesian_cap(self, v: np.ndarray, v_new: np.ndarray, dt_s: float) -> np.ndarray:
@@ -391,7 +405,7 @@ class SawyerArm:
         The goal velocity already respects the limit; this catches the transients when the
         accelerations lag it (a new target in another direction, a posture whose lever grows).
         """
-        limit = self.config.max_cartesian_speed_mps
+        limit = max(self.speed_limit_mps, 1e-6)
         # smallest alpha with |alpha * v_new - v| <= amax * dt on every joint (alpha = 1 is feasible)
         moving = np.abs(v_new) > 1e-12
         lower = (np.sign(v_new[moving]) * v[moving] - self._amax[moving] * dt_s) / np.abs(v_new[moving])

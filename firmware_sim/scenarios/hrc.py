@@ -4,7 +4,8 @@
                                --json OUT.json [--plot OUT.png] [--max-speed M] [--camera-hz HZ]
                                [--perception auto|truth|lifter] [--no-runtime] [--with-baseline]
                                [--config BOX.toml] [--retract-time S] [--zone KEY=VALUE ...]
-                               [--loop KEY=VALUE ...] [--validated FILE] [--jobs N]
+                               [--loop KEY=VALUE ...] [--validated FILE] [--jobs N] [--only NAME]
+                               [--protection head|stop_only|speed_scaled]
 
 Runs the robot-side runtime (``edge_runtime.robot.loop.RobotLoop``) against the simulated
 Sawyer on a real link (CAN or signed MAVLink), a simulated worker and a simulated camera,
@@ -13,6 +14,8 @@ collision, a false alarm and the reaction time). Scenarios:
 
 * ``left_to_right``, ``right_to_left``, ``front``: the dissertation's three validation walks
   (``dissertation`` runs all three);
+* ``hard:N``: N scenarios of the hard suite (1-3 workers, curves, stop-and-go, running bursts,
+  reaching toward the tool, occlusion, a real detector's noise: :mod:`firmware_sim.scenarios.hrc_hard`);
 * ``random:N``: N random approaches from the work side (speed 0.5..``--max-speed`` m/s, start
   3-6 m out, camera 3-8 m away and 1-3 m high, detector noise x0.5-2, a worker who walks past
   or stops short); paths closer than 1.1 m to the base's axis are redrawn: nothing can avoid a
@@ -61,6 +64,7 @@ from firmware_sim.scenarios.hrc_world import (
     WorldParams,
     box_config,
     dissertation_scenarios,
+    hard_scenarios,
     lifter_available,
     percentiles,
     random_scenarios,
@@ -70,6 +74,11 @@ from firmware_sim.scenarios.hrc_world import (
 LINKS = ("can", "mavlink")
 PERCEPTIONS = ("auto", "truth", "lifter")
 SPEED_LIMITS_MPS = (0.5, 2.0)
+
+PROTECTIONS = {"head": {"separation": "head"},
+               "stop_only": {"separation": "whole_body", "speed_scaling": False},
+               "speed_scaled": {"separation": "whole_body", "speed_scaling": True}}
+"""``--protection``: the [zones] fields each way of protecting the worker sets."""
 
 SAFETY_SECTIONS = ("zones", "tracker", "robot_loop", "calibration", "lifter")
 """The box sections the closed loop's collision figures depend on; their hash (``safety_sha256``)
@@ -99,21 +108,35 @@ def parse_scenario(text: str) -> tuple[str, int | None]:
     """``NAME``, ``dissertation`` or ``random:N`` -> (kind, N)."""
     if text in DISSERTATION or text == "dissertation":
         return text, None
-    if text.startswith("random:"):
+    kind = text.split(":", 1)[0]
+    if kind in ("random", "hard") and ":" in text:
         try:
             n = int(text.split(":", 1)[1])
         except ValueError:
             n = 0
         if n < 1:
-            raise CliError(f"--scenario {text!r}: random:N needs a whole number N >= 1")
-        return "random", n
-    raise CliError(f"--scenario {text!r}: expected one of {', '.join(DISSERTATION)}, dissertation or random:N")
+            raise CliError(f"--scenario {text!r}: {kind}:N needs a whole number N >= 1")
+        return kind, n
+    raise CliError(f"--scenario {text!r}: expected one of {', '.join(DISSERTATION)}, dissertation, random:N "
+                   "or hard:N")
 
 
-def scenarios_for(text: str, seed: int, max_speed_mps: float = 2.0):
+def scenarios_for(text: str, seed: int, max_speed_mps: float = 2.0, only: str | None = None):
+    scs = _scenario_set(text, seed, max_speed_mps)
+    if only is None:
+        return scs
+    picked = [s for s in scs if s.name == only]
+    if not picked:
+        raise CliError(f"--only {only!r}: no such scenario in {text} (names: {scs[0].name} .. {scs[-1].name})")
+    return picked
+
+
+def _scenario_set(text: str, seed: int, max_speed_mps: float):
     kind, n = parse_scenario(text)
     if kind == "random":
         return random_scenarios(n, seed, max_speed_mps)
+    if kind == "hard":
+        return hard_scenarios(n, seed)
     all3 = dissertation_scenarios(seed)
     return all3 if kind == "dissertation" else [s for s in all3 if s.name == kind]
 
@@ -124,6 +147,13 @@ def resolve_perception(perception: str) -> str:
     if perception == "lifter" and not lifter_available():
         raise CliError("--perception lifter: edge_runtime/assets/manifest.json lists no lifter (arch 'lifter')")
     return perception
+
+
+def protection_name(zones) -> str:
+    """The PROTECTIONS name of a [zones] configuration."""
+    if zones.separation == "head":
+        return "head"
+    return "speed_scaled" if zones.speed_scaling else "stop_only"
 
 
 def _run_one(job) -> RunResult:
@@ -204,14 +234,40 @@ def summarize(results: list[RunResult], settings: dict) -> dict:
         "runtime_cpu_share": _stats([d.get("runtime_cpu_share") for d in det]),
         "head_error_m": percentiles([e for r in results for e in r.head_error_m], 1.0, (50, 95)),
         "frames": sum(d["frames"] for d in det),
+        **productivity(ran),
         "details": det,
+    }
+
+
+def productivity(ran: list[dict]) -> dict:
+    """The cell's work and its false stops over the scenarios that ran: ``productive_time_share``
+    (time the arm did its task, at full or reduced speed, over scenario time), ``false_stops``
+    (stops and retractions with nobody within the protective distance plus the false-alarm margin,
+    hrc_world's rule), and ``false_stops_per_worker_hour`` over walk-by traffic: the scenarios in
+    which no worker ever came within the protective distance at full speed, per hour of workers
+    in view there (``walkby_worker_h``): there every halt of the task (a stop, a retraction, or a
+    fault stop: an invalid or stale pose) is a stop with nobody within the protective distance."""
+    scenario_s = sum(d["scenario_s"] for d in ran)
+    walkby = [d for d in ran if not d["came_within_protective"]]
+    walkby_h = sum(d["worker_s"] for d in walkby) / 3600.0
+    walkby_stops = sum(d["halts"] for d in walkby)
+    kinds: dict[str, int] = {}
+    for d in ran:
+        for w in d.get("worker_specs") or [{"kind": d["kind"]}]:
+            kinds[w["kind"]] = kinds.get(w["kind"], 0) + 1
+    return {
+        "productive_time_share": round(sum(d["productive_s"] for d in ran) / scenario_s, 4) if scenario_s else None,
+        "false_stops": sum(d["false_alarms"] for d in ran),
+        "halts": sum(d["halts"] for d in ran), "walkby_scenarios": len(walkby), "walkby_worker_h": round(walkby_h, 4), "walkby_stops": walkby_stops,
+        "false_stops_per_worker_hour": round(walkby_stops / walkby_h, 2) if walkby_h else None,
+        "worker_kinds": kinds, "speed_changes": sum(d.get("speed_changes", 0) for d in ran),
     }
 
 
 def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtime: bool = True,
         perception: str = "auto", camera_hz: float = 30.0, max_speed_mps: float = 2.0,
         latency_ms: float | None = None, box=None, jobs: int = 1, progress: bool = False,
-        keep_results: bool = False):
+        keep_results: bool = False, only: str | None = None, labelled_calibration: bool = True):
     """Run scenarios with the box configuration ``box`` (default: the shipped one) and return the
     contract JSON (and the per-scenario results with ``keep_results``, for plots)."""
     box = box or box_config()
@@ -222,14 +278,17 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
         raise CliError(f"--max-speed {max_speed_mps:g}: walking speeds of {SPEED_LIMITS_MPS[0]}-"
                        f"{SPEED_LIMITS_MPS[1]} m/s only")
     percept = resolve_perception(perception) if runtime else "none"
-    world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0)
-    scs = scenarios_for(scenario, seed, max_speed_mps)
+    world = WorldParams(camera_hz=camera_hz, latency_s=None if latency_ms is None else latency_ms / 1000.0,
+                        labelled_calibration=labelled_calibration)
+    scs = scenarios_for(scenario, seed, max_speed_mps, only)
     results = _map([(sc, link, runtime, percept, world, box) for sc in scs], jobs, progress)
     settings = {
-        "scenario": scenario, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
+        "scenario": scenario, "only": only, "labelled_calibration": labelled_calibration, "link": link, "seed": seed, "runtime": runtime, "perception": percept,
         "camera_hz": camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1), "max_speed_mps": max_speed_mps,
         "collision_m": world.collision_m,
+        "protection": protection_name(zones),
         "zones": {"r1_m": round(zones.r1_m, 3), "r2_m": round(zones.r2_m, 3), "sizing": zones.sizing,
+                  "separation": zones.separation, "speed_scaling": zones.speed_scaling,
                   "retract_time_s": zones.retract_time_s, "predict_s": zones.predict_s,
                   "worker_speed_mps": zones.worker_speed_mps},
         "zone_params": asdict(zones), "loop_params": {k: v for k, v in asdict(box.robot_loop).items()
@@ -242,7 +301,8 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
 
 
 VALIDATED_KEYS = ("scenario", "link", "seed", "perception", "camera_hz", "max_speed_mps", "scenarios",
-                  "collisions", "not_run", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms")
+                  "collisions", "not_run", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms",
+                  "protection", "productive_time_share", "false_stops_per_worker_hour")
 
 
 def record_validation(out: dict, path: str | Path, command: str) -> dict:
@@ -257,7 +317,8 @@ def record_validation(out: dict, path: str | Path, command: str) -> dict:
     if rec.get("safety_sha256") != out["safety_sha256"]:
         rec = {"safety_sha256": out["safety_sha256"], "safety_config": {k: out["config"][k] for k in SAFETY_SECTIONS},
                "runs": {}}
-    key = f"{out['scenario']} {out['link']} {out['max_speed_mps']:g}mps {out['perception']} {out['camera_hz']:g}hz"
+    key = (f"{out['scenario']} {out['link']} {out['max_speed_mps']:g}mps {out['perception']} {out['camera_hz']:g}hz"
+           f" {out['protection']}")
     rec["runs"][key] = {**{k: out[k] for k in VALIDATED_KEYS}, "command": command}
     p.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
     return rec
@@ -278,8 +339,11 @@ def format_table(result: dict) -> str:
             f"{'min sep m':>9} {'collision':>9}")
     if base:
         head += f" | {'no runtime: min sep m':>21} {'collision':>9}"
+    z = result["zones"]
+    sizing = (f"whole-body separation ({result.get('protection')})" if z.get("separation") == "whole_body"
+              else f"R1 {z['r1_m']:.1f} m, R2 {z['r2_m']:.1f} m")
     lines = [f"hrc: {result['link']} link, camera {result['camera_hz']:g} Hz, perception {result['perception']}, "
-             f"R1 {result['zones']['r1_m']:.1f} m, R2 {result['zones']['r2_m']:.1f} m", head, "-" * len(head)]
+             f"{sizing}", head, "-" * len(head)]
     for d in result["details"]:
         sep = "not run" if d["min_separation_m"] is None else f"{d['min_separation_m']:.3f}"
         row = (f"{d['name']:<14} {d['speed_mps']:>5.2f} {d['max_state']:<9} {d['stops']:>5} {d['retracts']:>4} "
@@ -292,6 +356,10 @@ def format_table(result: dict) -> str:
     react = "n/a" if r["median"] is None else f"median {r['median']:.3f} ms, p99 {r['p99']:.3f} ms"
     for name, why in result.get("not_run", {}).items():
         lines.append(f"{name}: {why}")
+    if "protection" in result:
+        lines.append(f"protection {result['protection']}: productive time share {result['productive_time_share']}, "
+                     f"false stops {result['false_stops']}, per walk-by worker-hour "
+                     f"{result['false_stops_per_worker_hour']}")
     lines.append(f"collisions {result['collisions']}/{result['scenarios']}"
                  + (f" (without the runtime {result['baseline']['collisions']}/{result['scenarios']})" if base else "")
                  + f"; reaction (keypoints in -> command on the link) {react}")
@@ -330,6 +398,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--retract-time", type=positive_float, default=None, metavar="S",
                    help="override [zones] retract_time_s, T_retract of Eq. 4 (s; the dissertation's 1.0 gives "
                         "R2 = 1 m, R1 = 3 m)")
+    p.add_argument("--unlabelled-calibration", action="store_true",
+                   help="lifter perception: calibrate through the runtime's own stand detection, without the "
+                        "simulator's marker labels")
+    p.add_argument("--only", default=None, metavar="NAME",
+                   help="run only this scenario of the set (e.g. --scenario hard:10 --only hard_002)")
+    p.add_argument("--protection", choices=tuple(PROTECTIONS), default=None,
+                   help="override [zones] separation / speed_scaling: head (the dissertation's head-to-effector "
+                        "zones), stop_only or speed_scaled (whole-body separation; default: the box's)")
     p.add_argument("--zone", action="append", metavar="KEY=VALUE",
                    help="override a ZoneParams number field of the runtime (repeatable), e.g. --zone predict_s=0.7")
     p.add_argument("--loop", action="append", metavar="KEY=VALUE",
@@ -355,10 +431,13 @@ def cmd(args) -> int:
     _check_writable(args.validated, "--validated")
     box = load_box(args.config)
     zones = box.zones if args.retract_time is None else replace(box.zones, retract_time_s=args.retract_time)
+    if args.protection is not None:
+        zones = replace(zones, **PROTECTIONS[args.protection])
     box = replace(box, zones=overrides(zones, args.zone, "--zone"),
                   robot_loop=overrides(box.robot_loop, args.loop, "--loop"))
     common = dict(link=args.link, seed=args.seed, camera_hz=args.camera_hz, max_speed_mps=args.max_speed,
-                  latency_ms=args.latency_ms, box=box, jobs=args.jobs, progress=not args.quiet)
+                  latency_ms=args.latency_ms, box=box, jobs=args.jobs, progress=not args.quiet, only=args.only,
+                  labelled_calibration=not args.unlabelled_calibration)
     out, results = run(args.scenario, runtime=not args.no_runtime, perception=args.perception, keep_results=True,
                        **common)
     if args.with_baseline and not args.no_runtime:
@@ -383,7 +462,8 @@ def _one_line(out: dict) -> str:
             f"{out['collisions']}, not run {len(out['not_run'])}, min separation {out['min_separation_m']} m, "
             f"stops {out['stops']}, "
             f"retracts {out['retracts']}, false alarms {out['false_alarms']}, reaction median {r['median']} ms "
-            f"p99 {r['p99']} ms")
+            f"p99 {r['p99']} ms; protection {out['protection']}: productive share {out['productive_time_share']}, "
+            f"false stops per walk-by worker-hour {out['false_stops_per_worker_hour']}")
 
 
 BAD_INPUT = (CliError, config.ConfigError)

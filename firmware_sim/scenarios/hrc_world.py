@@ -70,8 +70,8 @@ from pathlib import Path
 
 import numpy as np
 
-from edge_runtime.core.skeleton import HEAD
-from edge_runtime.robot.hazard import State, ground
+from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD
+from edge_runtime.robot.hazard import State, arm_capsules, body_spheres, ground, separation_m
 from edge_runtime.robot.lifter import MISSING_JOINTS, NO_PERSON, LiftedPose
 from edge_runtime.robot.loop import RobotLoop
 from firmware_sim.devices.camera import CANONICAL, Camera, DetectorNoise, detect, resample
@@ -79,6 +79,7 @@ from firmware_sim.people import motions
 from firmware_sim.people.human import Body, heading_towards
 from firmware_sim.robot.controller import SimClock, SimulatedRobot
 from firmware_sim.robot.sawyer import SawyerArm
+from firmware_sim.scenarios.hrc_hard import HardNoise, coco_noise, occlude
 
 HRC_TASK_M: tuple[tuple[float, float, float], ...] = (
     (0.55, 0.14, 0.75), (0.0, 0.14, 1.0), (-0.55, 0.14, 0.75))
@@ -115,6 +116,9 @@ class WorldParams:
     """``truth`` perception: keypoints scored below this are missed (as the lifter does)."""
     trace_every: int = 2
     """Keep every n-th step in the trace (for plots)."""
+    labelled_calibration: bool = True
+    """``lifter`` perception: the calibration is handed the simulator's marker labels (True), or the
+    runtime's own stand detection must find the stands (False: ``hrc --unlabelled-calibration``)."""
 
     @property
     def frame_latency_s(self) -> float:
@@ -122,8 +126,31 @@ class WorldParams:
 
 
 @dataclass(frozen=True)
+class WorkerSpec:
+    """One worker of a scenario: his path and how he walks it (he never reacts to the arm)."""
+
+    waypoints_xz_m: tuple[tuple[float, float], ...]
+    speeds_mps: tuple[float, ...]
+    """Walking speed per leg of the path (m/s)."""
+    height_m: float = 1.75
+    stand_s: float = 1.0
+    """Standing at the start, seen by the camera, before walking (s)."""
+    linger_s: float = 1.0
+    """Standing at the end of the path (s)."""
+    start_s: float = 0.0
+    """He enters the scene this long after the scenario starts (s; absent before)."""
+    pause: tuple[int, float] | None = None
+    """Stop-and-go: (waypoint index, seconds) he stands at that inner waypoint."""
+    corner_radius_m: float = 0.0
+    reach_s: float = 0.0
+    """At the end of his path he reaches both arms toward the tool for this long (s)."""
+    kind: str = "pass"
+    seed: int = 0
+
+
+@dataclass(frozen=True)
 class Scenario:
-    """One worker, one path, one camera."""
+    """One or more workers, their paths, one camera."""
 
     name: str
     waypoints_xz_m: tuple[tuple[float, float], ...]
@@ -145,16 +172,37 @@ class Scenario:
     """The arm's task during this scenario (``LoopParams.task_waypoints_m``)."""
     min_base_distance_m: float = float("nan")
     """Closest ground distance of the path to the base's axis (m; filled in by the builders)."""
+    first_worker: WorkerSpec | None = None
+    """The first worker in full (the hard suite: speeds per leg, a pause, a reach); None: the
+    fields above describe him."""
+    extra_workers: tuple[WorkerSpec, ...] = ()
+    """Further workers (the hard suite)."""
+    hard: bool = False
+    """The hard suite's world: a real detector's noise and offsets, occlusion, and a calibration
+    from an unlabelled calibration walk (:mod:`firmware_sim.scenarios.hrc_hard`)."""
+
+    def workers(self) -> list[WorkerSpec]:
+        """Every worker: the scenario's own first, then ``extra_workers``."""
+        first = self.first_worker or WorkerSpec(self.waypoints_xz_m, (self.speed_mps,) * (len(self.waypoints_xz_m) - 1),
+                                                self.height_m, self.stand_s, self.linger_s, kind=self.kind,
+                                                seed=self.seed)
+        return [first, *self.extra_workers]
 
     def camera(self, rate_hz: float) -> Camera:
         return Camera.look_at(self.camera_eye_m, self.camera_target_m, CANONICAL, 0.0, rate_hz)
 
     def describe(self) -> dict:
-        return {"name": self.name, "kind": self.kind, "speed_mps": round(self.speed_mps, 3),
-                "height_m": round(self.height_m, 3), "noise_scale": round(self.noise_scale, 3),
-                "path_xz_m": [[round(a, 3), round(b, 3)] for a, b in self.waypoints_xz_m],
-                "min_base_distance_m": round(self.min_base_distance_m, 3),
-                "camera_eye_m": [round(v, 3) for v in self.camera_eye_m]}
+        out = {"name": self.name, "kind": self.kind, "speed_mps": round(self.speed_mps, 3),
+               "height_m": round(self.height_m, 3), "noise_scale": round(self.noise_scale, 3),
+               "path_xz_m": [[round(a, 3), round(b, 3)] for a, b in self.waypoints_xz_m],
+               "min_base_distance_m": round(self.min_base_distance_m, 3),
+               "camera_eye_m": [round(v, 3) for v in self.camera_eye_m], "workers": 1 + len(self.extra_workers)}
+        if self.extra_workers or self.hard:
+            out["worker_specs"] = [{"kind": w.kind, "speeds_mps": [round(v, 2) for v in w.speeds_mps],
+                                    "path_xz_m": [[round(a, 3), round(b, 3)] for a, b in w.waypoints_xz_m],
+                                    "start_s": round(w.start_s, 2), "pause": w.pause, "reach_s": w.reach_s,
+                                    "height_m": round(w.height_m, 3)} for w in self.workers()]
+        return out
 
 
 def path_base_distance(waypoints_xz_m) -> float:
@@ -168,17 +216,44 @@ def path_base_distance(waypoints_xz_m) -> float:
     return best
 
 
-def worker_motion(sc: Scenario, rate_hz: float) -> motions.Motion:
-    """The worker's true motion at ``rate_hz``: stand at the start, walk the path, stand."""
-    body = Body.from_height(sc.height_m)
-    pts = np.asarray(sc.waypoints_xz_m, float)
-    rng = np.random.default_rng(sc.seed)
+def worker_motion(w: WorkerSpec | Scenario, rate_hz: float) -> motions.Motion:
+    """A worker's true motion at ``rate_hz``: stand at the start, walk the path (standing at
+    ``pause``), then stand, or reach toward the tool (``reach_s``), at the end."""
+    if isinstance(w, Scenario):
+        w = w.workers()[0]
+    body = Body.from_height(w.height_m)
+    pts = np.asarray(w.waypoints_xz_m, float)
+    rng = np.random.default_rng(w.seed)
     h0 = heading_towards(pts[0], pts[1])
-    walk = motions.walk(body, pts, sc.speed_mps, rate_hz, rng=rng)
-    start = motions.stand(body, pts[0], h0, sc.stand_s, rate_hz, rng=rng)
-    end_xz, end_h = walk.end
-    end = motions.stand(body, end_xz, end_h, sc.linger_s, rate_hz, rng=rng)
-    return motions.concat([start, walk, end], blend_s=0.2)
+    legs = [(pts, w.speeds_mps)]
+    if w.pause is not None and 0 < w.pause[0] < len(pts) - 1:
+        i = w.pause[0]
+        legs = [(pts[:i + 1], w.speeds_mps[:i]), (pts[i:], w.speeds_mps[i:])]
+    parts = [motions.stand(body, pts[0], h0, w.stand_s, rate_hz, rng=rng)]
+    for n, (leg, speeds) in enumerate(legs):
+        walk = motions.walk(body, leg, speeds, rate_hz, corner_radius_m=w.corner_radius_m, rng=rng)
+        parts.append(walk)
+        end_xz, end_h = walk.end
+        if n < len(legs) - 1:
+            parts.append(motions.stand(body, end_xz, end_h, w.pause[1], rate_hz, rng=rng))
+    if w.reach_s > 0:  # both arms out toward the tool at its height, as far as they go
+        parts.append(motions.work_at(body, end_xz, end_h, w.reach_s, work_height_m=BASE_HEIGHT_M + 0.14,
+                                     reach_m=0.75, rate_hz=rate_hz, rng=rng, label="reach"))
+    parts.append(motions.stand(body, end_xz, end_h, w.linger_s, rate_hz, rng=rng))
+    return motions.concat(parts, blend_s=0.2)
+
+
+def scene_joints(sc: Scenario, rate_hz: float) -> np.ndarray:
+    """(W, T, 17, 3) true joints of every worker at ``rate_hz``: NaN before he enters; after
+    his motion ends he stays where it left him."""
+    mots = [worker_motion(w, rate_hz) for w in sc.workers()]
+    starts = [int(round(w.start_s * rate_hz)) for w in sc.workers()]
+    T = max(s0 + len(m) for s0, m in zip(starts, mots))
+    out = np.full((len(mots), T, 17, 3), np.nan)
+    for i, (s0, m) in enumerate(zip(starts, mots)):
+        out[i, s0:s0 + len(m)] = m.joints_m
+        out[i, s0 + len(m):] = m.joints_m[-1]
+    return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -272,12 +347,16 @@ def make_lifter(box=None):
 
 
 def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, height_m: float = 1.75,
-              stand_s: float | None = None, box=None):
+              stand_s: float | None = None, box=None, labelled: bool = True, real_noise: bool = False):
     """The dissertation's calibration for one camera placement: a simulated worker stands ``stand_s``
     (default: 4 s, or 80 camera frames when that is longer: at 5.8 Hz the lifter's warm-up takes
     about 2 s and every detector miss burst resets it) on each floor marker (Eq. 1-2's (0, 1), (1, 1), (0, 2)), walking between them; his keypoints go through
     the lifter (frames still warming up are not used) and :func:`edge_runtime.robot.calibration.from_recording`
-    fits camera -> robot. Raises ``edge_runtime.robot.calibration.CalibrationError`` when the fit refuses."""
+    fits camera -> robot. ``real_noise`` (the hard suite): the detector has a real one's noise
+    (:func:`firmware_sim.scenarios.hrc_hard.coco_noise`); ``labelled=False``: the runtime's procedure
+    finds the three stands in the recording itself, without the simulator's labels (at a real
+    detector's noise it does not: reports/hrc/report.md). Raises
+    ``edge_runtime.robot.calibration.CalibrationError`` when the fit refuses."""
     from edge_runtime.robot.calibration import from_recording
 
     box = box or box_config()
@@ -296,6 +375,8 @@ def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, he
         labels.append(np.full(len(s), i + 1))
     mot = motions.concat(parts, blend_s=0.2)
     kp = detect(camera, mot.joints_m, rng, noise)
+    if real_noise:
+        kp = coco_noise(camera, mot.joints_m, kp, height_m, rng)
     lifter = make_lifter(box)
     t = np.arange(len(kp)) / rate
     joints = np.full((len(kp), 17, 3), np.nan)
@@ -303,7 +384,7 @@ def calibrate(camera: Camera, rng: np.random.Generator, noise: DetectorNoise, he
         out = lifter.push(t[k], kp[k] if np.isfinite(kp[k, :, :2]).any() else None)
         if out.valid and not out.warming_up:
             joints[k] = out.joints_cam_m
-    cal = from_recording(t, joints, box.calibration, marker=np.concatenate(labels))
+    cal = from_recording(t, joints, box.calibration, marker=np.concatenate(labels) if labelled else None)
     return cal, mot, lifter
 
 
@@ -338,10 +419,15 @@ class RunResult:
     summary: dict
     t_s: np.ndarray
     head_xz_m: np.ndarray
+    """(n, W, 2) every worker's head on the ground (NaN while absent)."""
     ee_xz_m: np.ndarray
     state: np.ndarray
     reaction_s: list = field(default_factory=list)
     head_error_m: list = field(default_factory=list)
+    speed_mps: np.ndarray = field(default_factory=lambda: np.empty(0))
+    """The hand's true speed (m/s) at each traced step."""
+    limit_mps: np.ndarray = field(default_factory=lambda: np.empty(0))
+    """The hand's speed limit while the arm works (0 while it is held: stopped, retracting, fault)."""
 
 
 def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, perception: str = "truth",
@@ -355,34 +441,40 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     rate = round(1.0 / dt)
     rng = np.random.default_rng([sc.seed, 7])
     lp = replace(box.robot_loop, task_waypoints_m=sc.task_m)
-    mot = worker_motion(sc, rate)
-    J = mot.joints_m
+    J = scene_joints(sc, rate)                          # (W, T, 17, 3) at the physics rate
+    W = len(J)
+    present = np.isfinite(J[..., 0, 0])                 # (W, T)
     n_pre = int(round(world.pre_roll_s / dt))
-    n_total = n_pre + len(J)
+    n_total = n_pre + J.shape[1]
     camera = sc.camera(world.camera_hz)
     noise = DetectorNoise().scaled(sc.noise_scale)
-    Jc = resample(J, rate, world.camera_hz)            # (Tc, 17, 3) at the camera's frames
-    t_cap = n_pre * dt + np.arange(len(Jc)) / world.camera_hz
-    kp = detect(camera, Jc, rng, noise)
+    Jc = np.stack([resample(j, rate, world.camera_hz) for j in J])      # (W, Tc, 17, 3) at the camera's frames
+    t_cap = n_pre * dt + np.arange(Jc.shape[1]) / world.camera_hz
+    heights = [w.height_m for w in sc.workers()]
+    kp = np.stack([detect(camera, Jc[w], rng, noise) for w in range(W)])
+    if sc.hard:
+        kp = np.stack([coco_noise(camera, Jc[w], kp[w], heights[w], rng) for w in range(W)])
     calibration = None
     if not runtime:
-        percept = None
+        percepts = None
     elif perception == "lifter":
         from edge_runtime.robot.calibration import CalibrationError
 
         try:
-            calibration, _, _ = calibrate(camera, rng, noise, box=box)
+            calibration, _, _ = calibrate(camera, rng, noise, box=box, real_noise=sc.hard,
+                                          labelled=world.labelled_calibration)
         except CalibrationError as e:  # the box would refuse to run: the arm never moves
             return _not_run(sc, link, world, f"calibration failed: {e}")
-        percept = LifterPerception(make_lifter(box), kp)
+        percepts = [LifterPerception(make_lifter(box), kp[w]) for w in range(W)]
     else:
-        percept = TruthPerception(camera, Jc, kp, world, sc.noise_scale, rng)
-    # the truth: head, its ground velocity and Eq. 3's prediction, at the physics rate
-    head = J[:, HEAD]
-    v = np.gradient(head, dt, axis=0)
+        percepts = [TruthPerception(camera, Jc[w], kp[w], world, sc.noise_scale, rng) for w in range(W)]
+    # the truth: heads, their ground velocity and Eq. 3's prediction, at the physics rate
+    head = J[:, :, HEAD]                                                # (W, T, 3)
+    v = np.gradient(np.nan_to_num(head), dt, axis=1)
     k_smooth = max(1, int(0.2 / dt))
-    v = np.apply_along_axis(lambda c: np.convolve(c, np.ones(k_smooth) / k_smooth, "same"), 0, v)
+    v = np.apply_along_axis(lambda c: np.convolve(c, np.ones(k_smooth) / k_smooth, "same"), 1, v)
     pred = head + zones.predict_s * v
+    whole_body = zones.separation == "whole_body"
 
     clock = SimClock()
     sim = SimulatedRobot(link, clock=clock, q0_rad=task_start_posture(lp.task_waypoints_m[0], lp.task_pitch_rad,
@@ -398,9 +490,10 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     counters0 = None
     prev_level = State.NORMAL
     max_state = State.NORMAL
-    trace_t, trace_head, trace_ee, trace_state = [], [], [], []
+    trace_t, trace_head, trace_ee, trace_state, trace_speed, trace_limit = [], [], [], [], [], []
     frame_s = tick_s = 0.0  # wall-clock time inside the runtime (per-frame calls, ticks)
     head_err = []
+    productive_steps, came_within, halts, prev_state = 0, False, 0, State.NORMAL
     try:
         for step in range(n_total):
             now = clock()
@@ -408,21 +501,24 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
             if k == 0:
                 counters0 = dict(vars(loop.counters))
             # 1. camera frames due now
-            if k < 0 or percept is None:
+            if k < 0 or percepts is None:
                 if now + 1e-9 >= empty_next:  # an empty scene (or an arm unaware of the worker)
                     loop.feed_joints(None)
                     empty_next += 1.0 / world.camera_hz
             else:
                 while frame_i < len(deliver) and deliver[frame_i] <= now + 1e-9:
+                    if sc.hard:  # the world hides what the camera cannot see (not the runtime's time)
+                        _occlude(percepts, frame_i, camera, Jc, sim.controller.arm)
                     w0 = time.perf_counter()
-                    out = percept.push(frame_i, t_cap[frame_i])
-                    rec = loop.feed_lifted(out)
+                    outs = [p.push(frame_i, t_cap[frame_i]) for p in percepts]
+                    rec = _feed(loop, outs)
                     w1 = time.perf_counter()
                     frame_s += w1 - w0
-                    if out.valid:  # the head the runtime saw, in the robot frame, against the truth
-                        seen = out.joints_cam_m[HEAD] if calibration is None else calibration.to_robot(
-                            out.joints_cam_m)[HEAD]  # what the loop sees: floor-anchored when configured
-                        head_err.append(float(np.linalg.norm(seen - Jc[frame_i, HEAD])))
+                    for w, out in enumerate(outs):  # the head the runtime saw, robot frame, against the truth
+                        if out.valid and np.isfinite(Jc[w, frame_i, HEAD]).all():
+                            seen = out.joints_cam_m[HEAD] if calibration is None else calibration.to_robot(
+                                out.joints_cam_m)[HEAD]  # what the loop sees: floor-anchored when configured
+                            head_err.append(float(np.linalg.norm(seen - Jc[w, frame_i, HEAD])))
                     if rec.command is not None:
                         reaction.append(w1 - w0)
                     frame_i += 1
@@ -434,11 +530,14 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
             arm = sim.controller.arm
             ee = arm.pose().position_m
             if k >= 0:
+                here = present[:, k]
                 c = math.inf
-                far = float(np.min(np.hypot(J[k, :, 0], J[k, :, 2]))) - ARM_FOOTPRINT_M
-                if far < FAR_CHECK_M or k % FAR_CHECK_EVERY == 0:  # far from any reach: every 10th step
-                    centres, r = arm.collision_spheres()
-                    c = clearance_m(J[k], centres, r, ee)
+                if here.any():
+                    Jk = J[here, k].reshape(-1, 3)
+                    far = float(np.min(np.hypot(Jk[:, 0], Jk[:, 2]))) - ARM_FOOTPRINT_M
+                    if far < FAR_CHECK_M or k % FAR_CHECK_EVERY == 0:  # far from any reach: every 10th step
+                        centres, r = arm.collision_spheres()
+                        c = clearance_m(Jk, centres, r, ee)
                 if c < min_clear:
                     min_clear = c
                 if c < world.collision_m:
@@ -446,37 +545,58 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
                     if first_collision is None:
                         first_collision = round(k * dt, 3)
                 e = ground(ee)
-                true_d = min(np.linalg.norm(ground(pred[k]) - e), np.linalg.norm(ground(head[k]) - e))
-                for lvl, rad in radii.items():
-                    if true_enter[lvl] is None and true_d <= rad:
-                        true_enter[lvl] = now
                 level = loop.monitor.level
-                if level > prev_level and level in radii:
-                    false = bool(true_d > radii[level] + world.false_alarm_margin_m)
+                judge_now = level > prev_level and level in radii
+                if whole_body:
+                    judge_radii = {State.LEVEL1: zones.body_protective_distance_m(arm.speed_limit_mps),
+                                   State.LEVEL2: zones.body_retract_distance_m
+                                   + zones.retract_lead_s * zones.iso_human_speed_mps}
+                    if judge_now or k % 5 == 0:
+                        true_d = _true_separation(J[:, k], v[:, k], here, arm.q_rad, zones.predict_s)
+                        came_within |= true_d <= zones.body_protective_distance_m(zones.iso_robot_speed_mps)
+                else:
+                    judge_radii = radii
+                    true_d = min((min(np.linalg.norm(ground(pred[w, k]) - e), np.linalg.norm(ground(head[w, k]) - e))
+                                  for w in range(W) if here[w]), default=math.inf)
+                    came_within |= true_d <= radii[State.LEVEL1]
+                if not whole_body or judge_now or k % 5 == 0:
+                    for lvl, rad in judge_radii.items():
+                        if true_enter[lvl] is None and true_d <= rad:
+                            true_enter[lvl] = now
+                if judge_now:
+                    false = bool(true_d > judge_radii[level] + world.false_alarm_margin_m)
                     entries.append({"t_s": round(k * dt, 3), "level": level.name, "true_distance_m": round(
                         float(true_d), 3), "false_alarm": false})
                     false_alarms.append(false)
                 prev_level = level
                 st = loop.monitor.state
+                productive_steps += st == State.NORMAL
+                halts += st != State.NORMAL and prev_state == State.NORMAL
+                prev_state = st
                 max_state = max(max_state, st) if st != State.FAULT else max_state
                 for lvl in radii:
                     if act_at[lvl] is None and st == lvl:  # its command went out in the call that changed state
                         act_at[lvl] = now
                 if k % world.trace_every == 0:
                     trace_t.append(k * dt)
-                    trace_head.append(ground(head[k]))
+                    trace_head.append(ground(head[:, k]))
                     trace_ee.append(e)
                     trace_state.append(int(st))
+                    trace_speed.append(float(np.linalg.norm(arm.ee_velocity_mps())))
+                    trace_limit.append(arm.speed_limit_mps if st == State.NORMAL else 0.0)
             # 4. the arm
             sim.step(dt)
     finally:
         sim.close()
     c1 = vars(loop.counters)
-    diff = {key: c1[key] - (counters0 or {}).get(key, 0) for key in ("stops", "retracts", "unreachable", "invalid")}
+    diff = {key: c1[key] - (counters0 or {}).get(key, 0)
+            for key in ("stops", "retracts", "unreachable", "invalid", "speed_changes")}
     delays = {lvl.name: (None if true_enter[lvl] is None or act_at[lvl] is None
                          else round(act_at[lvl] - true_enter[lvl], 3)) for lvl in radii}
+    scenario_s = (n_total - n_pre) * dt
+    worker_s = float(present.sum() * dt)
     summary = {
-        **sc.describe(), "link": link, "runtime": runtime, "perception": percept.name if percept else "none",
+        **sc.describe(), "link": link, "runtime": runtime, "perception": percepts[0].name if percepts else "none",
         "camera_hz": world.camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1),
         "collision": collision_steps > 0, "collision_steps": collision_steps, "first_collision_s": first_collision,
         "min_separation_m": round(min_clear, 4), **diff,
@@ -486,9 +606,51 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
         "head_error_m": percentiles(head_err, 1.0, (50, 95)),
         "runtime_cpu_share": round((frame_s + tick_s) / max(n_total * dt, 1e-9), 5),
         "calibration_scale": None if calibration is None else round(calibration.scale, 4),
+        "scenario_s": round(scenario_s, 3), "worker_s": round(worker_s, 3),
+        "productive_s": round(productive_steps * dt, 3), "productive_time_share": round(productive_steps * dt
+                                                                                       / scenario_s, 4),
+        "came_within_protective": bool(came_within), "halts": halts,
     }
     return RunResult(summary, np.array(trace_t), np.array(trace_head), np.array(trace_ee), np.array(trace_state),
-                     reaction, head_err)
+                     reaction, head_err, np.array(trace_speed), np.array(trace_limit))
+
+
+def _true_separation(joints_m: np.ndarray, head_velocity_mps: np.ndarray, here: np.ndarray, q_rad,
+                     predict_s: float) -> float:
+    """The judge's whole-body separation (m): the runtime's rule (hazard.separation_m, body radii,
+    the arm's capsules) on the TRUE joints and the TRUE arm, now and ``predict_s`` ahead."""
+    caps = arm_capsules(q_rad)
+    best = math.inf
+    for w in np.flatnonzero(here):
+        centres, r = body_spheres(joints_m[w])
+        ahead = np.array([head_velocity_mps[w, 0], 0.0, head_velocity_mps[w, 2]]) * predict_s
+        best = min(best, separation_m(centres, r, caps), separation_m(centres + ahead, r, caps))
+    return best
+
+
+def _occlude(percepts, k: int, camera: Camera, Jc: np.ndarray, arm) -> None:
+    """The hard suite: every worker's keypoints of camera frame ``k`` are missed where another
+    worker or the arm (where it is now) blocks the view, and scored low where his own trunk does
+    (a detector guesses those)."""
+    here = np.isfinite(Jc[:, k, 0, 0])
+    hidden, behind = occlude(camera.position_m, Jc[:, k], here, arm.collision_spheres())
+    for w, p in enumerate(percepts):
+        kp = p.keypoints[k]
+        kp[hidden[w]] = [np.nan, np.nan, 0.0]
+        kp[behind[w], 2] = np.minimum(kp[behind[w], 2], HardNoise().self_occluded_score)
+
+
+def _feed(loop: RobotLoop, outs: list):
+    """One camera frame of every worker's perception into the loop: the valid ones together (with
+    their worker index as id), nobody for workers not detected, and an invalid frame when any
+    worker's is (the arm stops: one worker the runtime cannot see properly is enough)."""
+    bad = [o for o in outs if not o.valid and str(o.reason or "").split(":", 1)[0] != NO_PERSON]
+    if bad:
+        return loop.feed_lifted(bad[0])
+    seen = [(w, o) for w, o in enumerate(outs) if o.valid]
+    if not seen:
+        return loop.feed_joints(None)
+    return loop.feed_joints(np.stack([o.joints_cam_m for _, o in seen]), ids=[w for w, _ in seen])
 
 
 def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult:
@@ -498,9 +660,10 @@ def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult
                "collision_steps": 0, "first_collision_s": None, "min_separation_m": None, "stops": 0, "retracts": 0,
                "unreachable": 0, "invalid": 0, "false_alarms": 0, "zone_entries": [], "max_state": "NORMAL",
                "command_delay_s": {"LEVEL1": None, "LEVEL2": None}, "reaction_ms": percentiles([]), "frames": 0,
-               "head_error_m": percentiles([], 1.0, (50, 95)), "runtime_cpu_share": None, "calibration_scale": None}
-    empty = np.empty((0, 2))
-    return RunResult(summary, np.empty(0), empty, empty, np.empty(0, int))
+               "head_error_m": percentiles([], 1.0, (50, 95)), "runtime_cpu_share": None, "calibration_scale": None,
+               "speed_changes": 0, "scenario_s": 0.0, "worker_s": 0.0, "productive_s": 0.0,
+               "productive_time_share": None, "came_within_protective": False, "halts": 0}
+    return RunResult(summary, np.empty(0), np.empty((0, 1, 2)), np.empty((0, 2)), np.empty(0, int))
 
 
 def percentiles(samples, scale: float = 1000.0, q=(50, 99)) -> dict:
@@ -627,3 +790,97 @@ def random_scenarios(n: int, seed: int, max_speed_mps: float = 2.0, params: Rand
     rng = np.random.default_rng(seed)
     return [random_scenario(rng, i, seed, p) for i in range(n)]
 
+
+
+@dataclass(frozen=True)
+class HardParams:
+    """How the hard suite's scenarios are drawn (:func:`hard_scenario`; the module docstring of
+    :mod:`firmware_sim.scenarios.hrc_hard` describes the suite)."""
+
+    speed_mps: tuple[float, float] = (0.5, 2.0)
+    """Speed of each leg (m/s): running bursts up to 2.0."""
+    workers: tuple[int, ...] = (1, 2, 2, 3)
+    """Drawn from for the number of workers."""
+    kinds: tuple[str, ...] = ("approach", "pass", "pass", "walkby")
+    """Drawn from for each worker's kind."""
+    p_pause: float = 0.4
+    """Share of workers who stop and go (a pause of ``pause_s`` at an inner waypoint)."""
+    pause_s: tuple[float, float] = (0.5, 2.0)
+    p_reach: float = 0.5
+    """Share of approaching workers who reach toward the tool at the end."""
+    reach_s: tuple[float, float] = (1.5, 3.0)
+    start_s: tuple[float, float] = (0.0, 3.0)
+    """A second or third worker enters this long after the scenario starts (s)."""
+    start_distance_m: tuple[float, float] = (3.0, 6.0)
+    approach_short_m: tuple[float, float] = (0.4, 0.9)
+    """An approaching worker's pelvis stops this far short of the task's outermost point (m)."""
+    pass_distance_m: tuple[float, float] = (1.1, 2.0)
+    walkby_distance_m: tuple[float, float] = (2.5, 4.5)
+    """Background traffic passes this far from the base's axis (m)."""
+    min_base_distance_m: float = 1.1
+    """As for random approaches: closer paths cannot be avoided by any arm (RandomParams)."""
+    height_m: tuple[float, float] = (1.55, 1.95)
+    corner_radius_m: tuple[float, float] = (0.3, 1.0)
+    bend_m: tuple[float, float] = (0.3, 1.2)
+    """A curved path's inner waypoints are pushed this far sideways from the straight line (m)."""
+
+
+def _curved(rng: np.random.Generator, a: np.ndarray, b: np.ndarray, p: HardParams) -> np.ndarray:
+    """A path from ``a`` to ``b`` with one or two inner waypoints pushed sideways (a curve with turns)."""
+    n_inner = int(rng.integers(1, 3))
+    d = b - a
+    side = np.array([-d[1], d[0]]) / max(float(np.linalg.norm(d)), 1e-9)
+    inner = [a + f * d + rng.choice([-1.0, 1.0]) * rng.uniform(*p.bend_m) * side
+             for f in np.sort(rng.uniform(0.25, 0.75, n_inner))]
+    return np.array([a, *inner, b])
+
+
+def _hard_worker(rng: np.random.Generator, kind: str, index: int, seed: int, p: HardParams) -> WorkerSpec:
+    cell = np.asarray(CELL_POINT_XZ_M, float)
+    while True:
+        come_from = rng.uniform(-0.45 * math.pi, 0.45 * math.pi)
+        u = np.array([math.sin(come_from), math.cos(come_from)])
+        dist = rng.uniform(*p.start_distance_m)
+        if kind == "approach":
+            a, b = cell + dist * u, cell + rng.uniform(*p.approach_short_m) * u
+        else:
+            phi = math.radians(rng.uniform(-60.0, 60.0))
+            radial = np.array([math.sin(phi), math.cos(phi)])
+            tangent = np.array([radial[1], -radial[0]]) * (1.0 if rng.random() < 0.5 else -1.0)
+            near = rng.uniform(*(p.walkby_distance_m if kind == "walkby" else p.pass_distance_m)) * radial
+            a, b = near - dist * tangent, near + 2.0 * tangent
+        pts = _curved(rng, a, b, p) if kind != "approach" or rng.random() < 0.7 else np.array([a, b])
+        floor = p.walkby_distance_m[0] if kind == "walkby" else p.min_base_distance_m
+        if path_base_distance(pts) >= floor:
+            break
+    legs = len(pts) - 1
+    pause = (int(rng.integers(1, legs)), float(rng.uniform(*p.pause_s))) if legs > 1 and rng.random() < p.p_pause \
+        else None
+    reach = float(rng.uniform(*p.reach_s)) if kind == "approach" and rng.random() < p.p_reach else 0.0
+    return WorkerSpec(tuple(tuple(float(v) for v in q) for q in pts),
+                      tuple(float(v) for v in rng.uniform(*p.speed_mps, legs)), float(rng.uniform(*p.height_m)),
+                      stand_s=1.0, linger_s=1.0, start_s=0.0 if index == 0 else float(rng.uniform(*p.start_s)),
+                      pause=pause, corner_radius_m=float(rng.uniform(*p.corner_radius_m)), reach_s=reach, kind=kind,
+                      seed=int(seed * 100003 + index))
+
+
+def hard_scenario(rng: np.random.Generator, index: int, seed: int, params: HardParams = HardParams()) -> Scenario:
+    """One scenario of the hard suite: 1-3 workers of random kinds, a random camera, the hard
+    world's detector and calibration (see :mod:`firmware_sim.scenarios.hrc_hard`)."""
+    from firmware_sim.devices.camera import random_placement
+
+    p = params
+    n = int(rng.choice(p.workers))
+    specs = [_hard_worker(rng, str(rng.choice(p.kinds)), w, seed * 1000 + index, p) for w in range(n)]
+    cam = random_placement(rng, distance_m=(3.0, 8.0), height_m=(1.0, 3.0))
+    first = specs[0]
+    return Scenario(
+        f"hard_{index:03d}", first.waypoints_xz_m, max(first.speeds_mps), first.kind, first.height_m,
+        tuple(float(v) for v in cam.position_m), (0.0, 0.086, 0.9), 1.0, seed=first.seed,
+        min_base_distance_m=min(path_base_distance(w.waypoints_xz_m) for w in specs),
+        first_worker=first, extra_workers=tuple(specs[1:]), hard=True)
+
+
+def hard_scenarios(n: int, seed: int, params: HardParams = HardParams()) -> list[Scenario]:
+    rng = np.random.default_rng([seed, 13])
+    return [hard_scenario(rng, i, seed, params) for i in range(n)]

@@ -103,8 +103,8 @@ def test_calibrate_then_replay_camera_frame_joints_against_the_link(tmp_path, fa
     walk = approach(tmp_path / "walk.jsonl", frame="camera", seconds=2.7, start_z=5.0)
     log = tmp_path / "log.jsonl"
     box = tmp_path / "box.toml"
-    # a shorter start-up hold and the dissertation's smaller zones (R1 3 m) keep the test short
-    box.write_text("[zones]\ndwell_s = 0.3\nretract_time_s = 1.0\n")
+    # a shorter start-up hold and the dissertation's head zones, smaller (R1 3 m) keep the test short
+    box.write_text("[zones]\ndwell_s = 0.3\nretract_time_s = 1.0\nseparation = \"head\"\n")
     assert main(["robot", "--config", str(box), "--joints", str(walk), "--calibration", str(cal), "--log", str(log),
                  "--quiet"]) == 0
     lines = [json.loads(x) for x in log.read_text().splitlines()]
@@ -199,7 +199,7 @@ def test_against_the_simulated_sawyer_process_over_signed_mavlink(tmp_path):
     key = bytes(range(32))
     walk = approach(tmp_path / "walk.jsonl", frame="robot", seconds=3.2, start_z=5.5)
     box = tmp_path / "box.toml"
-    box.write_text("[zones]\ndwell_s = 0.3\nretract_time_s = 1.0\n")  # the dissertation's zones
+    box.write_text("[zones]\ndwell_s = 0.3\nretract_time_s = 1.0\nseparation = \"head\"\n")  # the dissertation's zones
     log = tmp_path / "log.jsonl"
     with SawyerProcess("mavlink", signing_key=key, json_path=tmp_path / "sawyer.json") as proc:
         r = _cli("--config", str(box), "--link", "mavlink", "--serial", f"serial:{proc.endpoint}?key={key.hex()}",

@@ -1,5 +1,6 @@
-"""Head tracking, the two-level zones of Eq. 4-5, the state machine and the retraction (Eq. 6, its
-radius and height limits, the fallback toward the base and the tool's turn) of edge_runtime.robot.hazard."""
+"""Head tracking, the two-level zones of Eq. 4-5, the state machine, the retraction (Eq. 6, its
+radius and height limits, the fallback toward the base and the tool's turn), and whole-body
+separation with speed and separation monitoring of edge_runtime.robot.hazard."""
 import math
 
 import numpy as np
@@ -7,6 +8,7 @@ import pytest
 from support.robot import EFF, FPS, HEAD_Y, head_at
 
 from edge_runtime.robot.hazard import (
+    ARM_LINK_RADII_M,
     HazardMonitor,
     HeadEstimate,
     HeadTracker,
@@ -14,15 +16,20 @@ from edge_runtime.robot.hazard import (
     State,
     TrackerParams,
     ZoneParams,
+    arm_capsules,
+    arm_points_m,
+    body_spheres,
+    effector_capsule,
     eq6_retraction,
     limit_turn,
     radial_retraction,
     retract_direction,
+    separation_m,
     step_outside_radius,
     tool_yaw_toward_base,
 )
 
-DISSERTATION = ZoneParams(retract_time_s=1.0)
+DISSERTATION = ZoneParams(retract_time_s=1.0, separation="head")  # the dissertation's head-to-effector zones
 """The dissertation's zones (T_retract = 1 s: R2 = 1 m, R1 = 3 m), which these tests' geometry uses;
 the shipped default is the simulated Sawyer's 2 s (tests/sim/test_hrc.py validates it)."""
 
@@ -277,3 +284,121 @@ def test_the_fallback_goes_straight_toward_the_base_but_not_inside_the_min_radiu
     np.testing.assert_allclose(mid.position_m, [0.0, 0.2, 0.2], atol=1e-9)          # 0.7 - 0.5 = 0.2 m out
     on_axis = radial_retraction([0.0, 0.2, 0.0], ZoneParams(), limits, None)
     np.testing.assert_allclose(on_axis.position_m, [0.0, 0.2, 0.0])
+
+
+# -- whole-body separation and speed and separation monitoring --------------------------------
+
+WHOLE_BODY = ZoneParams()
+"""The shipped default: whole-body separation with speed scaling."""
+
+
+def test_the_runtimes_arm_table_is_the_simulators_kinematics():
+    from firmware_sim.robot import sawyer
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        q = rng.uniform(sawyer.LOWER_RAD, sawyer.UPPER_RAD)
+        frames = sawyer.forward_kinematics(q)
+        hand = frames[-1]
+        sim = np.array([np.zeros(3), *(f[:3, 3] for f in frames), hand[:3, 3] + 0.10 * hand[:3, 2]])
+        assert np.abs(arm_points_m(q) - sim @ sawyer.URDF_TO_ROBOT.T).max() < 1e-4  # the URDF's 4-digit angles
+        # every collision sphere the simulator judges with lies inside one of the runtime's capsules
+        centres, radii = sawyer.collision_spheres(q)
+        a, b, r = arm_capsules(q)
+        inside = [separation_m(c[None], np.zeros(1), (a, b, r - rad)) for c, rad in zip(centres, radii)]
+        assert max(inside) <= 1e-4
+
+
+def test_separation_is_measured_between_surfaces():
+    caps = (np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 1.0]]), np.array([0.05]))
+    assert separation_m(np.array([[0.5, 0.0, 0.5]]), np.array([0.1]), caps) == pytest.approx(0.35)
+    assert separation_m(np.array([[0.0, 0.0, 1.5]]), np.array([0.1]), caps) == pytest.approx(0.35)  # past the end
+    centres, radii = body_spheres(np.zeros((17, 3)))
+    assert len(centres) == 17 + 8 and radii.max() == pytest.approx(0.15)
+    assert separation_m(centres + [0.0, 0.0, -1.0], radii, caps) == pytest.approx(1.0 - 0.05 - 0.15)
+
+
+def test_allowed_speed_inverts_the_protective_distance():
+    z = WHOLE_BODY
+    for v in (0.0, 0.2, z.iso_robot_speed_mps):
+        assert z.allowed_speed_mps(z.body_protective_distance_m(v)) == pytest.approx(v)
+    assert z.allowed_speed_mps(0.0) == 0.0 and z.allowed_speed_mps(50.0) == z.iso_robot_speed_mps
+    # S_p = v_h (T_r + T_s) + v_r (T_r + T_s / 2) + C + Z_d + Z_r, and a faster human needs more
+    sp = 1.6 * 0.45 + 0.6 * 0.3 + 0.1 + 0.3 + 0.01
+    assert z.body_protective_distance_m(0.6) == pytest.approx(sp)
+    assert z.body_protective_distance_m(0.6, 2.0) == pytest.approx(sp + 0.4 * 0.45)
+
+
+def body_facing_arm(sep_z_m, reach=False):
+    """A standing worker's robot-frame joints on the +z side of the effector EFF, his body about
+    ``sep_z_m`` beyond it; ``reach``: his right wrist held out 0.6 m toward the arm."""
+    from firmware_sim.people import human
+
+    j = human.joints(human.Body.from_height(1.75), human.Posture(), pelvis_xz_m=(EFF[0], EFF[2] + sep_z_m),
+                     heading_rad=math.pi)
+    if reach:
+        j[16] = j[14] + [0.0, 0.0, -0.6]
+    return j
+
+
+def ready_body(zones, sep_z_m=8.0):
+    mon = HazardMonitor(zones)
+    for i in range(int((zones.dwell_s + 0.2) * FPS)):
+        mon.observe(-10.0 + i / FPS, {0: body_facing_arm(sep_z_m)}, EFF)
+    assert mon.state == State.NORMAL
+    return mon
+
+
+def settle(mon, body, t0=0.0, seconds=1.0):
+    for i in range(int(seconds * FPS)):
+        d = mon.observe(t0 + i / FPS, {0: body}, EFF)
+    return d
+
+
+def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops():
+    z = WHOLE_BODY
+    scales, states = [], []
+    for sep in (4.0, 1.55, 1.45, 1.35, 1.2, 1.0):
+        d = settle(ready_body(z), body_facing_arm(sep))
+        scales.append(d.speed_scale)
+        states.append(d.state)
+    assert scales[0] == 1.0 and states[0] == State.NORMAL
+    working = [s for s, st in zip(scales, states) if st == State.NORMAL]
+    assert all(a > b for a, b in zip(working, working[1:])) and len(working) >= 3   # slower as he is closer
+    assert 0.0 < working[-1] < 0.5
+    assert states[-1] == State.LEVEL1                                  # within S_p of the slowest speed
+    assert State.LEVEL2 not in states                                  # standing: nobody to retract from
+    only = ZoneParams(speed_scaling=False)
+    d = settle(ready_body(only), body_facing_arm(1.45))
+    assert d.state == State.LEVEL1 and d.speed_scale == 1.0            # where the scaled arm still works
+
+
+def test_a_worker_who_keeps_coming_makes_the_arm_retract():
+    z = WHOLE_BODY
+    mon = ready_body(z)
+    decisions = [mon.observe(i / FPS, {0: body_facing_arm(6.0 - 1.4 * i / FPS)}, EFF)    # 1.4 m/s from 6 m out
+                 for i in range(int(4.0 * FPS))]
+    states = [d.state for d in decisions]
+    first = states.index(State.LEVEL2)
+    assert first > 0 and State.LEVEL1 not in states[:first]           # he keeps coming: no stop first
+    # 0.6 m + 1.4 m/s x 0.9 s of his whole-body separation (predicted 0.5 s ahead)
+    assert decisions[first].distance_m == pytest.approx(z.body_retract_distance_m + 1.4 * z.retract_lead_s, abs=0.1)
+
+
+def test_whole_body_sees_a_hand_the_head_zones_miss():
+    far_head = body_facing_arm(1.9, reach=True)                        # his head 1.9 m out, a hand 0.6 m closer
+    d = settle(ready_body(WHOLE_BODY), far_head)
+    assert d.state == State.NORMAL and d.speed_scale < 1.0             # slowed for the hand
+    head = ZoneParams(separation="head", sizing="iso15066", iso_intrusion_m=0.0)
+    assert settle(ready(head), far_head).speed_scale == 1.0
+
+
+def test_the_arm_links_count_not_just_the_effector():
+    # a hand beside the arm's elbow (joint j3), 0.45 m from it but 0.7 m from the end effector
+    q = np.array([0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+    pts = arm_points_m(q)
+    hand = pts[4] + [0.45, 0.0, 0.0]
+    caps = arm_capsules(q)
+    one = (hand[None], np.zeros(1))
+    assert separation_m(*one, caps) == pytest.approx(0.45 - ARM_LINK_RADII_M[3], abs=0.03)
+    assert separation_m(*one, effector_capsule(pts[-2])) > separation_m(*one, caps) + 0.15

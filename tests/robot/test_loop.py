@@ -16,6 +16,9 @@ from edge_runtime.robot.loop import LoopParams, RobotLoop
 from firmware_sim.devices.camera import Camera
 
 HEAD_Y = 0.75
+HEAD_ZONES = ZoneParams(separation="head")
+"""The dissertation's head-to-effector zones, which most of these tests' geometry uses (the
+shipped default is whole-body separation: the tests at the end)."""
 
 
 class Clock:
@@ -63,7 +66,7 @@ class Path:
 
 def make(**kw):
     clock, link = Clock(), FakeLink()
-    loop = RobotLoop(link, clock=clock, **kw)
+    loop = RobotLoop(link, clock=clock, **{"zones": HEAD_ZONES, **kw})
     return loop, link, clock
 
 
@@ -189,7 +192,7 @@ def test_no_person_from_the_lifter_is_an_empty_scene_not_a_fault():
 
 def test_a_worker_the_camera_cannot_see_holds_the_arm():
     loop, link, clock = make()
-    z = ZoneParams()
+    z = HEAD_ZONES
     # far away, then 2 m from the effector, then gone from view (None: nobody detected)
     path = Path(lambda t: worker(0.0, 6.0) if t < 2.0 else worker(0.0, 2.8) if t < 3.0 else None,
                 3.0 + z.lost_hold_s - 0.2)
@@ -248,7 +251,7 @@ def test_camera_frame_joints_go_through_the_calibration():
             return np.asarray(p) + [0.0, 0.0, -10.0]
 
     clock, link = Clock(), FakeLink()
-    loop = RobotLoop(link, calibration=Shift(), clock=clock)
+    loop = RobotLoop(link, calibration=Shift(), zones=HEAD_ZONES, clock=clock)
     frames = drive(loop, link, clock, Path(lambda t: worker(0.0, 13.8), 2.0))  # 3 m in the robot frame
     assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(3.0, abs=0.05)
 
@@ -267,7 +270,7 @@ def test_the_robot_loop_anchors_camera_frame_joints_when_the_calibration_says_so
 
 # ------------------------------------------------------------------ against the simulated Sawyer
 
-def sim_run(kind, path, duration_s, zones=ZoneParams(), params=LoopParams(), fps=30.0):
+def sim_run(kind, path, duration_s, zones=HEAD_ZONES, params=LoopParams(), fps=30.0):
     """The loop against firmware_sim's controller over a real link (CAN on a virtual bus,
     or signed MAVLink on a socket pair), all on one simulated clock."""
     from firmware_sim.robot.controller import SimulatedRobot
@@ -415,3 +418,69 @@ def test_an_arm_refusing_every_move_is_a_fault_too():
     drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), clock.t + 1.0))
     s = loop.status()
     assert s["fault"].startswith("the arm did not confirm move: answered 'refused'") and s["refused"] >= 4
+
+
+# ------------------------------------------------------------------ whole-body speed and separation
+
+def make_whole_body(**zones):
+    """A loop with the shipped whole-body separation; the fake arm reports no joint angles, so its
+    end effector stands for it (a tool-sized sphere)."""
+    from dataclasses import replace
+
+    loop, link, clock = make(zones=ZoneParams(**zones), params=LoopParams(task_waypoints_m=((0.0, 0.14, 0.8),)))
+    link._state = replace(link._state, joint_positions_rad=np.full(7, np.nan))
+    return loop, link, clock
+
+
+def at_tool_height(z):
+    """(17, 3) joints all at the effector's height, ``z`` out on the +z side (one point, whose
+    largest body radius, the pelvis's 0.15 m, decides)."""
+    j = np.zeros((17, 3))
+    j[:] = (0.0, 0.14, z)
+    return j
+
+
+def speeds(link):
+    return [c[1] for c in link.calls if c[0] == "set_speed"]
+
+
+def test_whole_body_the_arm_slows_as_a_worker_comes_closer_and_speeds_up_when_he_leaves():
+    loop, link, clock = make_whole_body()
+    # from 2.5 m out he edges closer at 0.25 m/s (slower than "keeps coming") to 1.55 m, stays, then leaves
+    where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else max(1.55, 2.5 - 0.25 * (t - 2)) if t < 8 else 8.0))  # noqa: E731
+    frames = drive(loop, link, clock, Path(where, 11.0))
+    sent = speeds(link)
+    assert sent[0] == pytest.approx(0.6)                                  # full speed at work
+    k = sent.index(min(sent))
+    assert 0.0 < sent[k] < 0.3 and frames[int(7.9 * 30)].state == "NORMAL"  # much slower, still working
+    assert sent[:k + 1] == sorted(sent[:k + 1], reverse=True)             # only slower while he comes
+    assert sent[-1] == pytest.approx(0.6) and frames[-1].state == "NORMAL"  # full speed once he left
+    s = loop.status()
+    assert s["speed_changes"] == len(sent) and s["command_alarm"] == "" and s["unacked"] == 0
+
+
+def test_stop_only_never_scales_the_speed():
+    loop, link, clock = make_whole_body(speed_scaling=False)
+    frames = drive(loop, link, clock, Path(lambda t: at_tool_height(0.8 + (6.0 if t < 2 else 1.5)), 4.0))
+    assert speeds(link) == [] and frames[-1].state == "LEVEL1"
+
+
+def test_a_retraction_goes_at_full_speed():
+    loop, link, clock = make_whole_body()
+    # he stands 1.5 m out (the arm slows down), then walks at the arm
+    where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else 1.5 if t < 3.5 else max(0.5, 1.5 - 1.2 * (t - 3.5))))  # noqa: E731
+    drive(loop, link, clock, Path(where, 5.0))
+    names = link.names()
+    assert "retract" in names
+    before = [c for c in link.calls[:names.index("retract")] if c[0] == "set_speed"]
+    assert min(c[1] for c in before) < 0.6 and before[-1][1] == pytest.approx(0.6)
+
+
+def test_an_unacknowledged_speed_override_is_counted_and_sent_again():
+    loop, link, clock = make_whole_body()
+    drive(loop, link, clock, Path(lambda t: at_tool_height(6.8), 2.0))
+    link.answer = None                                                   # the arm stops answering
+    drive(loop, link, clock, Path(lambda t: at_tool_height(2.3), 2.6))  # 1.5 m out: slower
+    s = loop.status()
+    assert s["unacked"] >= 1 and s["retries"] >= 1 and s["command_alarm"].startswith("speed")
+    assert len(set(speeds(link)[1:])) == 1 and len(speeds(link)) >= 3   # the same limit, sent again

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,14 +12,17 @@ import pytest
 from edge_runtime.robot.hazard import ZoneParams
 from edge_runtime.robot.loop import LoopParams
 from firmware_sim.scenarios import hrc
+from firmware_sim.scenarios.hrc_hard import COCO_SIGMAS_H36M, PERSON_SCALE_OF_HEIGHT, HardNoise, coco_noise, occlude
 from firmware_sim.scenarios.hrc_world import (
     CAMERA_6M,
+    HardParams,
     RandomParams,
     Scenario,
     TruthPerception,
     WorldParams,
     clearance_m,
     dissertation_scenarios,
+    hard_scenarios,
     path_base_distance,
     random_scenarios,
     run_scenario,
@@ -48,9 +52,13 @@ def test_without_the_runtime_the_worker_walks_into_the_tool(baseline_front):
     assert baseline_front["max_state"] == "NORMAL"
 
 
+HEAD_BOX = replace(hrc.load_box(), zones=replace(ZoneParams(), separation="head"))
+"""The dissertation's head-to-effector zones (``--protection head``)."""
+
+
 @pytest.mark.parametrize("link", ["can", "mavlink"])
 def test_the_runtime_stops_and_retracts_in_time_on_both_links(front, baseline_front, link):
-    s = run_scenario(front, link, runtime=True, perception="truth").summary
+    s = run_scenario(front, link, runtime=True, perception="truth", box=HEAD_BOX).summary
     assert not s["collision"], s
     assert s["min_separation_m"] > 0.10
     assert s["min_separation_m"] > baseline_front["min_separation_m"] + 0.2
@@ -62,6 +70,16 @@ def test_the_runtime_stops_and_retracts_in_time_on_both_links(front, baseline_fr
     assert s["reaction_ms"]["n"] >= 2 and s["reaction_ms"]["median"] > 0
     # the head the runtime saw (detector noise at the true depth) is within centimetres of the truth
     assert 0.005 < s["head_error_m"]["median"] < 0.1
+
+
+def test_whole_body_speed_scaling_keeps_the_arm_clear_and_working_longer(front, baseline_front):
+    scaled = run_scenario(front, "can", runtime=True, perception="truth").summary
+    head = run_scenario(front, "can", runtime=True, perception="truth", box=HEAD_BOX).summary
+    assert not scaled["collision"] and scaled["min_separation_m"] > baseline_front["min_separation_m"] + 0.2
+    assert scaled["retracts"] >= 1                                    # he walks at the tool: it retracts
+    assert scaled["productive_time_share"] > head["productive_time_share"] > 0.0
+    assert 0 < scaled["productive_s"] < scaled["scenario_s"] and scaled["worker_s"] == pytest.approx(
+        scaled["scenario_s"], abs=0.05)
 
 
 def test_clearance_measures_to_sphere_surfaces_and_the_end_effector():
@@ -152,6 +170,8 @@ def test_format_table_lists_every_scenario_and_the_baseline():
 
 @pytest.mark.parametrize("argv, needle", [
     (["--scenario", "random:0"], "random:N"),
+    (["--scenario", "hard:x"], "hard:N"),
+    (["--protection", "fast"], "--protection"),
     (["--scenario", "sideways"], "--scenario"),
     (["--max-speed", "3"], "--max-speed"),
     (["--link", "usb"], "--link"),
@@ -207,13 +227,14 @@ def test_a_validation_record_is_kept_per_safety_configuration(tmp_path):
     shipped = hrc.load_box()
     out = {k: 0 for k in hrc.VALIDATED_KEYS} | {"scenario": "front", "link": "can", "max_speed_mps": 2.0,
                                                 "perception": "lifter", "camera_hz": 30.0,
+                                                "protection": "speed_scaled",
                                                 "config": hrc.config_dict(shipped),
                                                 "safety_sha256": hrc.config_sha256(shipped, hrc.SAFETY_SECTIONS)}
     hrc.record_validation(out, rec_path, "cmd a")
     rec = hrc.record_validation({**out, "link": "mavlink"}, rec_path, "cmd b")
     assert len(rec["runs"]) == 2
     other = hrc.record_validation({**out, "safety_sha256": "0" * 64}, rec_path, "cmd c")
-    assert list(other["runs"]) == ["front can 2mps lifter 30hz"]   # the old figures do not carry over
+    assert list(other["runs"]) == ["front can 2mps lifter 30hz speed_scaled"]   # the old figures do not carry over
 
 
 def test_the_shipped_safety_defaults_are_the_validated_ones():
@@ -228,6 +249,8 @@ def test_the_shipped_safety_defaults_are_the_validated_ones():
     runs = rec["runs"].values()
     for need in ("random:200 can", "random:200 mavlink", "dissertation can", "dissertation mavlink"):
         assert any(f"{r['scenario']} {r['link']}" == need for r in runs), need
+    for link in ("can", "mavlink"):  # the hard suite too (issue 13)
+        assert any(r["scenario"].startswith("hard:") and r["link"] == link for r in runs), f"hard:N {link}"
     for r in runs:
         assert r["collisions"] == 0 and not r["not_run"] and r["perception"] == "lifter", r["command"]
         assert r["max_speed_mps"] == 2.0 or r["scenario"] == "dissertation", r["command"]
@@ -258,3 +281,74 @@ def test_a_refused_calibration_is_reported_not_hidden(front, monkeypatch):
     assert out["not_run"] == {"front": res.summary["not_run"]}
     assert out["collisions"] == 0 and out["min_separation_m"] is None
     assert "calibration failed" in hrc.format_table(out)
+
+
+# -- the hard suite ------------------------------------------------------------------------------
+
+def test_hard_scenarios_are_reproducible_and_hold_what_the_suite_promises():
+    a, b = hard_scenarios(40, seed=1), hard_scenarios(40, seed=1)
+    assert [s.describe() for s in a] == [s.describe() for s in b] and hard_scenarios(40, 2)[0] != a[0]
+    assert hard_scenarios(10, seed=1) == a[:10]                   # a prefix: hard:40 runs hard:10's first
+    workers = [w for s in a for w in s.workers()]
+    assert {len(s.workers()) for s in a} == {1, 2, 3} and all(s.hard for s in a)
+    assert {w.kind for w in workers} == {"approach", "pass", "walkby"}
+    speeds = [v for w in workers for v in w.speeds_mps]
+    assert 0.5 <= min(speeds) and max(speeds) <= 2.0 and sum(v > 1.6 for v in speeds) >= 10   # running bursts
+    assert sum(len(w.waypoints_xz_m) >= 3 for w in workers) >= len(workers) // 2               # curves, turns
+    assert sum(w.pause is not None for w in workers) >= 5 and sum(w.reach_s > 0 for w in workers) >= 3
+    assert any(w.start_s > 0.5 for w in workers)                                                # later entries
+    for w in workers:
+        floor = HardParams().walkby_distance_m[0] if w.kind == "walkby" else HardParams().min_base_distance_m
+        assert path_base_distance(w.waypoints_xz_m) >= floor - 1e-9
+    for s in a:
+        eye = np.asarray(s.camera_eye_m)
+        assert 1.0 - 0.914 - 1e-6 <= eye[1] <= 3.0 - 0.914 + 1e-6
+        assert 3.0 - 1e-6 <= np.hypot(eye[0], eye[2] - 0.9) <= 8.0 + 0.5
+
+
+def test_coco_noise_is_the_joints_sigma_times_the_persons_pixel_size():
+    from firmware_sim.devices.camera import PERFECT, Camera, detect
+    from firmware_sim.people import human
+
+    j = human.joints(human.Body.from_height(1.75), human.Posture(), pelvis_xz_m=(0.0, 1.0))
+    J = np.repeat(j[None], 600, axis=0)
+    sds = []
+    for dist in (3.0, 6.0):
+        cam = Camera.look_at((0.0, 0.6, 1.0 + dist), (0.0, 0.0, 1.0))
+        clean = detect(cam, J, np.random.default_rng(0), PERFECT)
+        noisy = coco_noise(cam, J, clean, 1.75, np.random.default_rng(1), HardNoise(offset_scale=0.0))
+        err = noisy[..., :2] - clean[..., :2]
+        s_px = cam.intrinsics.fx_px * PERSON_SCALE_OF_HEIGHT * 1.75 / cam.to_camera(j)[0, 2]
+        sds.append(err[:, :, 0].std(axis=0) / s_px)
+    assert sds[0] == pytest.approx(COCO_SIGMAS_H36M, rel=0.25)       # per axis: sigma x the person's scale
+    assert sds[1] == pytest.approx(COCO_SIGMAS_H36M, rel=0.25)       # in pixels: half as large twice as far
+
+
+def test_occlusion_hides_joints_behind_another_worker_the_arm_or_his_own_trunk():
+    from firmware_sim.people import human
+
+    body = human.Body.from_height(1.75)
+    near = human.joints(body, human.Posture(), pelvis_xz_m=(0.0, 3.0), heading_rad=0.0)
+    far = human.joints(body, human.Posture(), pelvis_xz_m=(0.0, 2.0), heading_rad=0.0)
+    eye = np.array([0.0, 0.4, 6.0])                                  # looking at the cell along -z
+    hidden, behind = occlude(eye, np.stack([near, far]), np.array([True, True]))
+    assert hidden[1].sum() >= 10 and hidden[0].sum() == 0           # the far one is behind the near one
+    alone, _ = occlude(eye, np.stack([near, far]), np.array([False, True]))
+    assert alone[1].sum() == 0                                       # nobody in front of him: all seen
+    arm = (np.array([[0.0, 0.0, 2.5]]), np.array([0.3]))
+    by_arm, _ = occlude(eye, far[None], np.array([True]), arm)
+    assert by_arm[0].any()
+    side = human.joints(body, human.Posture(), pelvis_xz_m=(0.0, 2.0), heading_rad=np.pi / 2)
+    _, own = occlude(np.array([0.0, 0.0, 6.0]), side[None], np.array([True]))      # seen from his side
+    assert own[0].any() and not own[0][[0, 7, 8]].any()             # far-side limbs, never the trunk itself
+
+
+def test_productivity_counts_work_and_the_stops_of_walk_by_traffic():
+    d = [{"scenario_s": 10.0, "productive_s": 6.0, "false_alarms": 1, "came_within_protective": True, "halts": 2,
+          "worker_s": 10.0, "kind": "stop"},
+         {"scenario_s": 10.0, "productive_s": 9.0, "false_alarms": 0, "came_within_protective": False, "halts": 1,
+          "worker_s": 20.0, "kind": "pass", "worker_specs": [{"kind": "walkby"}, {"kind": "walkby"}]}]
+    p = hrc.productivity(d)
+    assert p["productive_time_share"] == pytest.approx(0.75) and p["false_stops"] == 1
+    assert p["walkby_scenarios"] == 1 and p["false_stops_per_worker_hour"] == pytest.approx(1 / (20 / 3600), rel=1e-3)
+    assert p["worker_kinds"] == {"stop": 1, "walkby": 2}

@@ -190,3 +190,19 @@ def test_collision_spheres_cover_the_chain_and_follow_the_joints():
     q2 = arm.q_rad + np.array([0.5, 0, 0, 0, 0, 0, 0])
     c2, _ = collision_spheres(q2)
     assert np.linalg.norm(c2[-1] - centres[-1]) > 0.05
+
+
+def test_a_speed_limit_slows_every_motion_and_zero_holds_the_arm():
+    arm = SawyerArm()
+    arm.set_speed_limit(0.15)
+    arm.set_target((0.3, 0.2, 0.7), 0.0, 0.0)
+    recs = run_to_rest(arm)
+    assert arm.at_goal and max(r.ee_speed_mps for r in recs) <= 0.15 * (1 + 1e-6)
+    assert len(recs) * DT > np.linalg.norm(np.subtract((0.3, 0.2, 0.7), end_effector_pose(HOME_RAD).position_m)) / 0.15
+    arm.set_speed_limit(5.0)                                   # never above the arm's own limit
+    assert arm.speed_limit_mps == arm.config.max_cartesian_speed_mps
+    arm.set_speed_limit(0.0)
+    q = arm.q_rad.copy()
+    arm.set_target((0.0, 0.3, 0.6), 0.0, 0.0)
+    run_to_rest(arm, 100)
+    assert np.allclose(arm.q_rad, q)

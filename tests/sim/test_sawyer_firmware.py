@@ -159,3 +159,34 @@ def test_a_short_can_frame_is_counted_and_the_controller_keeps_running():
         ok = sim.link.resume()
         sim.step(0.05)
         assert sim.link.result(ok) == "ok"
+
+
+@pytest.mark.parametrize("kind", ["can", "mavlink"])
+def test_a_speed_override_is_acknowledged_and_slows_the_hand(kind):
+    with SimulatedRobot(kind) as sim:
+        sim.step(0.05)
+        seq = sim.link.set_speed(0.2)
+        sim.step(0.05)
+        assert sim.link.result(seq) == "ok" and sim.controller.arm.speed_limit_mps == pytest.approx(0.2, abs=1e-3)
+        assert sim.link.state.last_command == "speed"
+        sim.link.resume()
+        sim.step(0.05)
+        sim.link.move_to((0.3, 0.2, 0.6), 0.0, 0.0)
+        fastest = 0.0
+        for _ in range(150):
+            sim.step(0.01)
+            fastest = max(fastest, sim.controller.snapshot().ee_speed_mps)
+        assert 0.1 < fastest <= 0.2 * 1.01
+        seq = sim.link.set_speed(0.6)                          # back to full speed, in any mode
+        sim.step(0.05)
+        assert sim.link.result(seq) == "ok" and sim.controller.arm.speed_limit_mps == pytest.approx(0.6)
+
+
+def test_a_malformed_mavlink_speed_override_is_refused():
+    from edge_runtime.robot.link.protocol import MAV_CMD_SPEED
+
+    with SimulatedRobot("mavlink") as sim:
+        sim.step(0.05)
+        sim.link._command_long(MAV_CMD_SPEED, 901, 0.0, 0.1, 50.0)  # airspeed and a throttle: not ours
+        sim.step(0.05)
+        assert sim.link.result(901) == "invalid" and sim.controller.arm.speed_limit_mps == pytest.approx(0.6)

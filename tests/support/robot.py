@@ -105,6 +105,11 @@ class FakeLink(LinkInterface):
     def set_alarm(self, light, tone_hz, tone_db):
         return self._log("set_alarm", light, tone_hz, tone_db)
 
+    def set_speed(self, limit_mps):
+        """The speed override: recorded (``speed_limit_mps``); this arm's own motion ignores it."""
+        self.speed_limit_mps = limit_mps
+        return self._log("set_speed", limit_mps)
+
     def heartbeat(self):
         self._log("heartbeat")
         return True

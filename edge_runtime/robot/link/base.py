@@ -38,6 +38,7 @@ from edge_runtime.robot.link.protocol import (
     RUNTIME_STATES,
     RobotState,
     check_alarm,
+    check_speed,
     check_state,
     check_target,
     next_seq,
@@ -133,6 +134,11 @@ class LinkInterface(ABC):
         """Warning light ("off", "green", "yellow", "red") and tone (Hz, 0 = silent; dB)."""
 
     @abstractmethod
+    def set_speed(self, limit_mps: float) -> int:
+        """Speed override: the hand's speed limit (m/s) from now on, in every mode (speed and
+        separation monitoring); 0 holds the arm still. Acknowledged like a motion command."""
+
+    @abstractmethod
     def heartbeat(self) -> bool:
         """Send the runtime heartbeat now. True if it was handed to the transport."""
 
@@ -172,7 +178,7 @@ class RobotLink(LinkInterface):
     """The runtime's end of a robot link (template methods, like python-can's BusABC).
 
     Subclasses implement the transport: ``_open_transport``, ``_close_transport``, ``_send_target``,
-    ``_send_mode``, ``_send_alarm``, ``_send_heartbeat`` and ``_receive``. This class does
+    ``_send_mode``, ``_send_speed``, ``_send_alarm``, ``_send_heartbeat`` and ``_receive``. This class does
     the sequence numbers, input checks, heartbeat timing, link supervision, reconnection
     with backoff and the statistics. Thread-safe (one lock); it never sleeps.
     """
@@ -220,6 +226,10 @@ class RobotLink(LinkInterface):
     def set_alarm(self, light: str, tone_hz: float, tone_db: float) -> int:
         light, tone_hz, tone_db = check_alarm(light, tone_hz, tone_db)
         return self._command(lambda seq: self._send_alarm(seq, light, tone_hz, tone_db))
+
+    def set_speed(self, limit_mps: float) -> int:
+        limit_mps = check_speed(limit_mps)
+        return self._command(lambda seq: self._send_speed(seq, limit_mps))
 
     def heartbeat(self) -> bool:
         """Also sent by poll() when it is due (config.heartbeat_period_s)."""
@@ -308,6 +318,10 @@ class RobotLink(LinkInterface):
     @abstractmethod
     def _send_mode(self, seq: int, command: str) -> None:
         """``command``: "stop" or "resume"."""
+
+    @abstractmethod
+    def _send_speed(self, seq: int, limit_mps: float) -> None:
+        """Put a speed override on the transport."""
 
     @abstractmethod
     def _send_alarm(self, seq: int, light: str, tone_hz: float, tone_db: float) -> None:

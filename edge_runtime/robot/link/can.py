@@ -53,6 +53,9 @@ class CanRobotLink(RobotLink):
     def _send_mode(self, seq, command) -> None:
         self._put(self.codec.mode_frame(seq, command))
 
+    def _send_speed(self, seq, limit_mps) -> None:
+        self._put(self.codec.speed_frame(seq, limit_mps))
+
     def _send_alarm(self, seq, light, tone_hz, tone_db) -> None:
         self._put(self.codec.alarm_frame(seq, light, tone_hz, tone_db))
 

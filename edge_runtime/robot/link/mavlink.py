@@ -15,6 +15,7 @@ from edge_runtime.robot.link.protocol import (
     LIGHTS,
     MAV_CMD_ALARM,
     MAV_CMD_RETRACT,
+    MAV_CMD_SPEED,
     MAV_CMD_STOP_RESUME,
     MAV_TO_RESULT,
     N_JOINTS,
@@ -97,6 +98,9 @@ class MavlinkRobotLink(RobotLink):
 
     def _send_mode(self, seq, command) -> None:
         self._command_long(MAV_CMD_STOP_RESUME, seq, 0.0 if command == "stop" else 1.0)
+
+    def _send_speed(self, seq, limit_mps) -> None:
+        self._command_long(MAV_CMD_SPEED, seq, 1.0, limit_mps, -1.0)
 
     def _send_alarm(self, seq, light, tone_hz, tone_db) -> None:
         self._command_long(MAV_CMD_ALARM, seq, float(LIGHTS.index(light)), tone_hz, tone_db)

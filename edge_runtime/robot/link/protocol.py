@@ -43,7 +43,9 @@ COMMAND_LONG                runtime→robot  param7 = sequence number. MAV_CMD_D
                                            param1-3 x, y, z (m), param4 pitch, param5 yaw (rad,
                                            MAVLink convention). MAV_CMD_USER_2 (alarm): param1
                                            light (0 off, 1 green, 2 yellow, 3 red), param2 tone
-                                           Hz, param3 tone dB
+                                           Hz, param3 tone dB. MAV_CMD_DO_CHANGE_SPEED (speed
+                                           override): param1 1, param2 the hand's speed limit
+                                           (m/s), param3 -1
 COMMAND_ACK                 robot→runtime  every command, ``result_param2`` = sequence number;
                                            moves are acknowledged as MAV_CMD_USER_3. ACCEPTED ok,
                                            FAILED unreachable, TEMPORARILY_REJECTED refused,
@@ -87,13 +89,15 @@ DBC_PATH = ASSETS_DIR / "robot_link.dbc"
 
 LIGHTS = ("off", "green", "yellow", "red")
 MODES = ("stopped", "run", "retract")
-COMMANDS = ("none", "move", "retract", "stop", "resume", "alarm")
+COMMANDS = ("none", "move", "retract", "stop", "resume", "alarm", "speed")
 RESULTS = ("none", "ok", "unreachable", "refused", "invalid")
 REFUSALS = ("unreachable", "refused", "invalid")
 N_JOINTS = 7
 SEQ_MAX = 65535
 MAX_TONE_HZ = 20000.0
 MAX_TONE_DB = 127.5
+MAX_SPEED_LIMIT_MPS = 1.5
+"""A speed override above this is not a Sawyer's (its rated maximum hand speed is 1.5 m/s)."""
 LINK_ERRORS = (OSError, can.CanError, serial.SerialException, CanLinkError)
 """Transport faults: the link is reported down and reopened, never raised to the caller."""
 RUNTIME_STATES = ("starting", "running", "degraded", "fault")
@@ -203,6 +207,14 @@ def light_name(code: float) -> str:
     if math.isfinite(code) and code == int(code) and 0 <= code < len(LIGHTS):
         return LIGHTS[int(code)]
     return f"code {code}"
+
+
+def check_speed(limit_mps: float) -> float:
+    """A validated hand speed limit (m/s, 0..MAX_SPEED_LIMIT_MPS); ValueError names the field."""
+    if not (isinstance(limit_mps, (int, float)) and math.isfinite(limit_mps)
+            and 0.0 <= limit_mps <= MAX_SPEED_LIMIT_MPS):
+        raise ValueError(f"speed limit must lie in [0, {MAX_SPEED_LIMIT_MPS:g}] m/s, got {limit_mps!r}")
+    return float(limit_mps)
 
 
 def check_alarm(light: str, tone_hz: float, tone_db: float) -> tuple[str, float, float]:
@@ -335,6 +347,9 @@ class RobotCanCodec:
         return self.encode("ROBOT_ALARM_CMD", Light=light, Seq=seq, ToneFreq=round(tone_hz),
                            ToneLevel=round(tone_db * 2) / 2)
 
+    def speed_frame(self, seq: int, limit_mps: float) -> can.Message:
+        return self.encode("ROBOT_SPEED_CMD", Seq=seq, SpeedLimit=round(limit_mps * 10000.0) / 10.0)
+
     def heartbeat_frame(self, state: str, uptime_s: float) -> can.Message:
         return self.encode("RUNTIME_HEARTBEAT", State=state, Uptime_s=int(min(max(uptime_s, 0), 65535)))
 
@@ -422,6 +437,9 @@ class CanStateAssembler:
 MAV_CMD_STOP_RESUME = mavlink2.MAV_CMD_DO_PAUSE_CONTINUE
 MAV_CMD_RETRACT = mavlink2.MAV_CMD_USER_1
 MAV_CMD_ALARM = mavlink2.MAV_CMD_USER_2
+MAV_CMD_SPEED = mavlink2.MAV_CMD_DO_CHANGE_SPEED
+"""The speed override: param1 1 (ground speed), param2 the hand's speed limit (m/s), param3 -1 (throttle
+unchanged)."""
 MAV_CMD_MOVE_ACK = mavlink2.MAV_CMD_USER_3
 """The command id under which a move (SET_ATTITUDE_TARGET + SET_POSITION_TARGET_LOCAL_NED) is acknowledged."""
 RESULT_TO_MAV = {"ok": mavlink2.MAV_RESULT_ACCEPTED, "unreachable": mavlink2.MAV_RESULT_FAILED,

@@ -15,6 +15,7 @@ from edge_runtime.robot.link.protocol import (
     RobotCanCodec,
     blank_state,
     check_alarm,
+    check_speed,
     check_state,
     check_target,
     mav_to_robot,
@@ -75,6 +76,15 @@ def test_targets_and_alarms_are_checked_field_by_field():
                         (("red", 0.0, -1.0), "tone_db")):
         with pytest.raises(ValueError, match=field):
             check_alarm(*args)
+
+
+def test_a_speed_override_is_checked_and_round_trips_through_the_dbc():
+    assert check_speed(0.25) == 0.25 and check_speed(0) == 0.0
+    for bad in (-0.01, 1.6, math.nan, math.inf):
+        with pytest.raises(ValueError, match="speed limit"):
+            check_speed(bad)
+    status, name, sig = RobotCanCodec().decode(RobotCanCodec().speed_frame(77, 0.3456))
+    assert name == "ROBOT_SPEED_CMD" and sig["Seq"] == 77 and sig["SpeedLimit"] == pytest.approx(345.6)
 
 
 def test_a_short_frame_with_a_valid_crc_is_refused_before_decoding():
