@@ -39,6 +39,7 @@ from typing import Callable
 import numpy as np
 
 from bench.timing import peak_rss_mb, rss_mb, time_calls
+from edge_runtime.core.manifest import example_shape
 
 RUNTIMES = ("onnxruntime", "openvino", "torch-eager")
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -69,11 +70,12 @@ class CannotRebuild(Exception):
 
 
 def example_inputs(entry: dict, seed: int = 0) -> dict[str, np.ndarray]:
-    """One batch-1 array per manifest input: symbolic dimensions set to 1."""
+    """One batch-1 array per manifest input (:func:`edge_runtime.core.manifest.example_shape`: the
+    ConvLSTM's sub-window count at the full window, other symbolic dimensions 1)."""
     rng = np.random.default_rng(seed)
     feed = {}
     for spec in entry["inputs"]:
-        shape = tuple(d if isinstance(d, int) else 1 for d in spec.get("shape", []))
+        shape = example_shape(spec, 1)
         dtype = np.dtype(spec.get("dtype", "float32"))
         if entry.get("arch") in NETS_ARCHS:
             x = rng.normal(0.0, 3.0, size=shape) + np.array([0.0, 0.0, 9.80665])[: shape[-1]]

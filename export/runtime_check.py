@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from edge_runtime.core.manifest import example_shape
+
 # The child: numpy and onnxruntime only. argv: assets dir, inputs .npz, outputs .npz, timed calls.
 CHILD = r"""
 import json, sys, time, numpy as np, onnxruntime as ort
@@ -54,12 +56,13 @@ may round differently on another instruction set, by a quantisation step at most
 
 
 def fixed_inputs(manifest: dict, n: int = 4, seed: int = 0) -> dict[str, np.ndarray]:
-    """Per model input, ``n`` seeded examples of the manifest's shape (symbolic axes 1, batch n)."""
+    """Per model input, ``n`` seeded examples of the manifest's shape (batch n, see
+    :func:`edge_runtime.core.manifest.example_shape` for the other symbolic axes)."""
     rng = np.random.default_rng(seed)
     feed = {}
     for e in manifest["models"]:
         for spec in e["inputs"]:
-            shape = [n] + [d if isinstance(d, int) else 1 for d in spec["shape"][1:]]
+            shape = example_shape(spec, n)
             scale = 3.0 if e["classes"] else 0.3  # m/s^2 around gravity for classifiers; normalised pixels
             x = rng.normal(0.0, scale, shape)
             if e["classes"]:

@@ -132,6 +132,15 @@ def _short(value: Any) -> str:
     return r if len(r) <= 40 else r[:37] + "..."
 
 
+def example_shape(spec: dict, batch: int = 1) -> tuple[int, ...]:
+    """A concrete shape for a manifest input ``spec``: the batch axis ``batch``, an axis named in
+    ``spec["steps"]`` (the ConvLSTM's dynamic sub-window count ``S``) its ``full_capture`` value, so
+    a timing or comparison runs the full-window decision, and any other symbolic axis 1."""
+    full = spec.get("steps", {}).get("full_capture", 1) if isinstance(spec.get("steps"), dict) else 1
+    dims = spec.get("shape", [])
+    return tuple([batch] + [d if isinstance(d, int) else full if d == "S" else 1 for d in dims[1:]]) if dims else ()
+
+
 def load_manifest(assets_dir: str | os.PathLike) -> dict:
     """Read and validate ``assets_dir/manifest.json`` (or a manifest path itself): every
     field the runtime reads is checked for its type, in one line naming the field."""

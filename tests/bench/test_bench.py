@@ -106,8 +106,9 @@ def test_loops(quick):
     assert w["peak_rss_mb"] > 0
     d = loops["detector"]
     assert d["samples"] == d["n"] == DRIVE_SAMPLES and d["triggers"] >= 1
-    # every completed capture of the drive is timed (the last trigger's may still be filling); alerted ones are a subset
-    assert d["triggers"] - 1 <= loops["decision_latency"]["n"] <= d["triggers"]
+    # every completed capture of the drive is decided at least once (the last trigger's may still be filling), and
+    # with early decisions at most once per sub-window (6); alerted ones are a subset
+    assert d["triggers"] - 1 <= loops["decision_latency"]["n"] <= 6 * d["triggers"]
     assert loops["alert_latency"]["n"] <= loops["decision_latency"]["n"]
     r = loops["robot_30hz"]
     assert r.get("available") is False and r["note"] or (r["frames"] == r["n"] == 30 and r["cpu_share_pct"] > 0)
@@ -172,9 +173,10 @@ def test_unknown_arch_is_timed_on_onnxruntime_and_skipped_on_torch(tmp_path):
     rep = json.loads(out.read_text())
     assert [(r["model"], r["runtime"]) for r in rep["results"]] == [("mystery", "onnxruntime")] + (
         [("mystery", "openvino")] if _openvino_importable() else [])
+    skipped = {s["runtime"]: s for s in rep["skipped"] if s["model"] == "mystery"}
+    assert ("openvino" in skipped) != _openvino_importable()  # an uninstalled peer is skipped, named
     if _torch_importable():
-        assert [(s["model"], s["runtime"]) for s in rep["skipped"]] == [("mystery", "torch-eager")]
-        assert "mystery" in rep["skipped"][0]["note"]
+        assert "mystery" in skipped["torch-eager"]["note"]
 
 
 @pytest.mark.slow

@@ -15,8 +15,10 @@ pytestmark = pytest.mark.slow  # every test here starts a process
 
 def _wearable(csv, tmp_path, name, extra=()):
     alerts = tmp_path / f"{name}.jsonl"
+    # one message per alert (the full-window decision), so alerts pair up one to one with the listener's lines;
+    # early decisions' updates across processes: tests/e2e/test_integrator_listener.py
     r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(csv), "--alerts", str(alerts),
-                        "--quiet", *extra], capture_output=True, text=True, timeout=60)
+                        "--quiet", "--decision", "full_window", *extra], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     return [json.loads(x) for x in alerts.read_text().splitlines()], r.stdout
 

@@ -144,9 +144,11 @@ def measure(workdir: Path, minutes: float, seed: int, speed: float, outages: lis
     try:
         if not _wait_for(heard, "connected 1", listener, 60):
             raise RuntimeError(f"listener did not start: {heard.read_text()[-300:]}")
+        # full-window decisions: one message per alert, so decided alerts and the listener's AlertSeqs
+        # pair up one to one (an early alert's updates share its AlertSeq and would need their own count)
         rt = subprocess.Popen([sys.executable, "-m", "edge_runtime", "wearable", "--imu",
                                f"sim?csv={workdir / 'imu.csv'}&speed={speed:g}", "--config", str(box), "--alerts",
-                               str(alerts), "--quiet"], stdout=rt_out.open("w"), stderr=rt_err.open("w"), text=True)
+                               str(alerts), "--decision", "full_window", "--quiet"], stdout=rt_out.open("w"), stderr=rt_err.open("w"), text=True)
         if not _wait_for(heard, "WEARABLE_STATUS", rt, 60):
             raise RuntimeError("no heartbeat from the runtime reached the listener")
         t0 = time.monotonic()
