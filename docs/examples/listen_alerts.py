@@ -8,9 +8,10 @@ what an ECU-side integration looks like, given our DBC (edge_runtime/assets/vehi
 
 On a real box: ``--interface socketcan --channel can0``, or ``--interface slcan --channel /dev/ttyACM0``.
 It prints one line per alert and per heartbeat state change, warns when the
-heartbeat is missing for more than 300 ms, and on exit (SIGINT/SIGTERM or
+heartbeat is missing for more than 300 ms, reopens its bus then and after 1 s without any
+frame (an adapter unplugged, a hub restarted), and on exit (SIGINT/SIGTERM or
 --duration) prints a JSON summary: alerts, their updates (withdrawn among them), expired
-preliminary alerts, alert copies skipped, heartbeats, E2E errors, largest heartbeat gap.
+preliminary alerts, alert copies skipped, heartbeats, E2E errors, largest heartbeat gap, how often the bus was opened.
 
 Each message comes as several DISTRACTION_ALERT frames (the DBC's GenMsgNrOfRepetition copies,
 GenMsgCycleTimeFast ms apart, all alike), so a lost frame costs nothing but the wait for the
@@ -22,6 +23,7 @@ accepted within the last COPY_WINDOW_S is a copy; an alert counts once, each upd
 import argparse
 import json
 import signal
+import socket
 import sys
 import time
 
@@ -136,6 +138,58 @@ class AlertListener:
         return counts
 
 
+def open_bus(a):
+    """The bus, or None while it cannot be opened. For socketcand the server is checked first:
+    python-can retries a refused connect for 10 s on one socket, which then never succeeds."""
+    extra = {}
+    if a.interface == "socketcand":
+        try:
+            socket.create_connection((a.host, a.port), timeout=0.5).close()
+        except OSError:
+            return None
+        extra = {"host": a.host, "port": a.port}
+    try:
+        return can.Bus(interface=a.interface, channel=a.channel, **extra)
+    except (can.CanError, OSError):
+        return None
+
+
+def run(a, listener, stop):
+    """Receive until ``stop["now"]`` or --duration; returns how many times the bus was opened.
+
+    The bus is reopened when the heartbeat goes missing, or nothing at all arrived for
+    --reconnect-after seconds since the bus was opened: a CAN adapter unplugged or a socketcand hub
+    restarted shows up as silence (a closed socketcand socket just reads nothing), and a receive
+    error is the same case."""
+    t_end = None if a.duration is None else time.monotonic() + a.duration
+    bus, connects, last_rx = None, 0, 0.0
+    while not stop["now"] and (t_end is None or time.monotonic() < t_end):
+        if bus is None:
+            bus = open_bus(a)
+            if bus is None:
+                time.sleep(a.retry_after)
+                continue
+            connects += 1
+            listener.last_beat, last_rx = None, time.monotonic()  # the gap while away is not the wearable's
+            print(f"connected {connects}", flush=True)
+        try:
+            msg = bus.recv(0.05)
+        except (can.CanError, OSError):
+            msg, last_rx = None, float("-inf")
+        now = time.monotonic()
+        listener.tick(now)
+        if msg is not None:
+            listener.frame(msg, now)
+            last_rx = now
+        if listener.state == "missing" or now - last_rx > a.reconnect_after:
+            bus.shutdown()
+            bus = None
+            listener.state = None  # a new bus: report the first heartbeat's state again
+    if bus is not None:
+        bus.shutdown()
+    return connects
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dbc", required=True)
@@ -145,27 +199,20 @@ def main(argv=None):
     ap.add_argument("--port", type=int, default=29536)
     ap.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     ap.add_argument("--json", action="store_true", help="print alerts as JSON lines")
+    ap.add_argument("--reconnect-after", type=float, default=1.0,
+                    help="reopen the bus after this many seconds without any frame (default 1.0)")
+    ap.add_argument("--retry-after", type=float, default=0.1,
+                    help="seconds between attempts to open the bus (default 0.1)")
     a = ap.parse_args(argv)
 
     listener = AlertListener(cantools.database.load_file(a.dbc), json_lines=a.json)
-    extra = {"host": a.host, "port": a.port} if a.interface == "socketcand" else {}
-    bus = can.Bus(interface=a.interface, channel=a.channel, **extra)
     stop = {"now": False}
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.update(now=True))
     print("listening", flush=True)
-
-    t_end = None if a.duration is None else time.monotonic() + a.duration
-    while not stop["now"] and (t_end is None or time.monotonic() < t_end):
-        msg = bus.recv(0.05)
-        now = time.monotonic()
-        listener.tick(now)
-        if msg is not None:
-            listener.frame(msg, now)
-    bus.shutdown()
-    print("summary " + json.dumps(listener.summary()), flush=True)
+    connects = run(a, listener, stop)
+    print("summary " + json.dumps({**listener.summary(), "connects": connects}), flush=True)
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

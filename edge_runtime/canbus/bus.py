@@ -3,8 +3,10 @@ and one-line errors. The vehicle alerts and the robot link both open their bus h
 from __future__ import annotations
 
 import socket
+import threading
 
 import can
+import can.interfaces.socketcand.socketcand as _socketcand
 
 from edge_runtime.errors import LinkError
 
@@ -58,7 +60,43 @@ def open_bus(interface: str, channel: str | None = None, bitrate: int | None = N
     if bitrate is not None and interface not in ("socketcand", "virtual"):
         args["bitrate"] = bitrate
     try:
+        if interface == "socketcand":
+            return _socketcand_bus(channel, args)
         return can.Bus(interface=interface, channel=channel, **args)
     except Exception as exc:  # noqa: BLE001 - whatever the interface raises becomes one line
         where = f"{interface}:{channel}" + (f" at {host}:{port}" if host is not None else "")
         raise CanLinkError(f"cannot open CAN bus {where}: {type(exc).__name__}: {exc}".replace("\n", " ")) from exc
+
+
+_CONNECT_LOCK = threading.Lock()
+
+
+def _socketcand_bus(channel: str | None, args: dict) -> can.BusABC:
+    """python-can's socketcand bus with one bounded connection attempt.
+
+    Its ``connect_to_server`` retries a refused connect for 10 s in a loop without a pause,
+    logging every try, and its handshake waits for replies without a timeout: a hub that dies
+    between :func:`probe_socketcand` and here would stall the caller (a heartbeat thread) for 10 s
+    and flood the log. For the length of this call the module's connect is one attempt bounded by
+    SOCKETCAND_PROBE_S, which also bounds the handshake; the socket is blocking again afterwards,
+    as python-can expects. The lock keeps two threads from swapping the function at once."""
+    opened: list[socket.socket] = []
+
+    def connect_once(sock: socket.socket, host: str, port: int) -> None:
+        opened.append(sock)
+        sock.settimeout(SOCKETCAND_PROBE_S)
+        sock.connect((host, port))
+
+    with _CONNECT_LOCK:
+        retrying_connect, _socketcand.connect_to_server = _socketcand.connect_to_server, connect_once
+        try:
+            bus = can.Bus(interface="socketcand", channel=channel, **args)
+        except BaseException:
+            for sock in opened:
+                sock.close()  # python-can leaves a failed socket open
+            raise
+        finally:
+            _socketcand.connect_to_server = retrying_connect
+    for sock in opened:
+        sock.settimeout(None)
+    return bus

@@ -72,51 +72,16 @@ class _Hub:
 
 
 def listen(port: int, dbc: str) -> int:
-    """The stock listener's logic (docs/examples/listen_alerts.py's ``AlertListener``, loaded from
-    that file) on a bus that is reopened whenever the heartbeat has been missing (the hub went
-    away), retried every 5 ms, so that it is back on a restarted hub before the runtime is (the
-    runtime retries every 100 ms): the stock script itself never reopens its bus. Prints what the
-    stock script prints, plus ``connected`` lines; the summary on SIGTERM."""
+    """The stock listener (docs/examples/listen_alerts.py, loaded from that file) with JSON lines,
+    retrying every 5 ms so that it is back on a restarted hub before the runtime is (the runtime
+    retries every 100 ms). It prints ``connected N`` each time it opens the bus."""
     import importlib.util
-
-    import can
-    import cantools
 
     spec = importlib.util.spec_from_file_location("listen_alerts", LISTENER)
     stock = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(stock)
-    listener = stock.AlertListener(cantools.database.load_file(dbc), json_lines=True)
-    stop = {"now": False}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.update(now=True))
-    print("listening", flush=True)
-    bus, connects, last_rx = None, 0, 0.0
-    while not stop["now"]:
-        if bus is None:
-            try:  # python-can's socketcand retries a refused connect on one socket, which never succeeds
-                socket.create_connection(("127.0.0.1", port), timeout=0.5).close()  # so: is the hub up?
-                bus = can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="vcan0")
-                connects += 1
-                listener.last_beat, last_rx = None, time.monotonic()  # the gap since the old one is not the wearable's
-                print(f"connected {connects}", flush=True)
-            except Exception:  # noqa: BLE001 - the hub is not back yet
-                time.sleep(0.005)
-                continue
-        msg = bus.recv(0.05)
-        now = time.monotonic()
-        listener.tick(now)
-        if msg is not None:
-            listener.frame(msg, now)
-            last_rx = now
-        # the hub is gone (a closed socketcand socket just reads nothing): reopen, also when nothing
-        # at all came since the last reopening
-        if listener.state == "missing" or now - last_rx > RECONNECT_AFTER_S:
-            bus.shutdown()
-            bus, listener.state = None, None
-    if bus is not None:
-        bus.shutdown()
-    print("summary " + json.dumps({**listener.summary(), "connects": connects}), flush=True)
-    return 0
+    return stock.main(["--dbc", dbc, "--port", str(port), "--json", "--retry-after", "0.005",
+                       "--reconnect-after", str(RECONNECT_AFTER_S)])
 
 
 def measure(workdir: Path, minutes: float, seed: int, speed: float, outages: list[tuple[float, float]]) -> dict:
