@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed
 $(STAMP): setup.cfg pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[robot,serial-imu,train,export,sim,bench,dev]'
+	$(PY) -m pip install --quiet -e '.[robot,serial-imu,signed-models,train,export,sim,bench,dev]'
 	touch $(STAMP)
 
 venv: $(STAMP)

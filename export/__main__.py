@@ -11,6 +11,8 @@
                 the shipped fp32 ConvLSTM quantised again (no training): recipe chosen and gated as `assets` does
   opsets        [--assets DIR]
                 every shipped model declares only the opset domains its nodes use; manifest sha256 updated
+  sign          --keygen DIR | --key PRIVATE.pem [--assets DIR]
+                an Ed25519 signature of manifest.json (manifest.json.sig), or a new key pair
   compare-int8  --loso-dir DIR [--method NAME] [--train TRAIN.npz] [--test TEST.npz] [--json OUT.json]
                 per LOSO fold (DIR/folds/*/model.pt): fp32 vs int8 on the held-out subject; pooled macro-F1
 
@@ -87,6 +89,7 @@ def _parser() -> argparse.ArgumentParser:
 _MODULE_COMMANDS = (
     ("lifter", "lifter_assets", "train, export and quantise the pose lifter into edge_runtime/assets"),
     ("bundle", "bundle", "build what goes onto a box: runtime wheel, assets, default config, checksums"),
+    ("sign", "sign", "sign the manifest with Ed25519 (or make a key pair): a box then refuses other models"),
 )
 
 

@@ -70,7 +70,7 @@ the platform tags it is given exactly, so :func:`platform_tags` lists every many
 (with only ``manylinux_2_28``, pymavlink fell back to an old pure-Python wheel of 165 MiB)."""
 PRODUCTS = {"wearable": ("wearable",), "robot": ("robot",), "all": ("wearable", "serial-imu", "robot")}
 """Each product's extras of the runtime wheel (setup.cfg); ``wearable`` is the base install."""
-PRODUCT_EXTRAS = ("wearable", "serial-imu", "robot")
+PRODUCT_EXTRAS = ("wearable", "serial-imu", "robot", "signed-models")
 """setup.cfg extras the runtime wheel carries: what a box may add (``--with serial-imu``)."""
 FORBIDDEN_REQUIREMENTS = ("torch", "torchvision", "onnx", "onnxscript", "tensorflow")
 SUMS_NAME = "SHA256SUMS"

@@ -32,6 +32,14 @@ Schema (``SCHEMA_VERSION`` 1; ``python -m export assets`` writes it)::
 :func:`load_manifest` validates the structure; :func:`verify_file` checks a
 model file against its sha256. Any problem raises :class:`ManifestError` or
 :class:`ModelIntegrityError` (both one-line, both naming the file).
+
+The sha256 proves integrity, not origin: whoever replaces a model can replace its hash too.
+A box configured with a public key (``[model] manifest_public_key`` / ``[lifter]
+manifest_public_key``) also requires ``manifest.json.sig``, an Ed25519 signature of the
+manifest's bytes made by ``python -m export sign`` with the builder's private key, and refuses
+a manifest it does not verify; the models are then bound to the builder through their hashes.
+The check needs the ``signed-models`` extra (``cryptography``); without a key configured
+nothing changes.
 """
 from __future__ import annotations
 
@@ -46,6 +54,8 @@ from edge_runtime.errors import ManifestError, ModelIntegrityError
 
 SCHEMA_VERSION = 1
 MANIFEST_NAME = "manifest.json"
+SIGNATURE_SUFFIX = ".sig"
+"""The manifest's detached Ed25519 signature: ``manifest.json.sig`` (64 raw bytes)."""
 ASSETS_DIR = Path(__file__).resolve().parents[1] / "assets"
 """The shipped models, their manifest and the DBCs (edge_runtime/assets)."""
 PRECISIONS = ("fp32", "int8")
@@ -141,9 +151,59 @@ def example_shape(spec: dict, batch: int = 1) -> tuple[int, ...]:
     return tuple([batch] + [d if isinstance(d, int) else full if d == "S" else 1 for d in dims[1:]]) if dims else ()
 
 
-def load_manifest(assets_dir: str | os.PathLike) -> dict:
+def signature_path(manifest_file: str | os.PathLike) -> Path:
+    p = Path(manifest_file)
+    return p.with_name(p.name + SIGNATURE_SUFFIX)
+
+
+def _ed25519():
+    """cryptography's Ed25519 pieces, or a one-line ManifestError naming the extra."""
+    try:
+        from cryptography.exceptions import InvalidSignature
+        from cryptography.hazmat.primitives import serialization
+        from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PublicKey
+    except ModuleNotFoundError:
+        raise ManifestError("checking a signed manifest needs cryptography: "
+                            "pip install 'edge-safety[signed-models]'") from None
+    return serialization, Ed25519PublicKey, InvalidSignature
+
+
+def load_public_key(key_file: str | os.PathLike):
+    """The Ed25519 public key in ``key_file`` (PEM, as ``python -m export sign --keygen`` writes it)."""
+    serialization, Ed25519PublicKey, _ = _ed25519()
+    try:
+        key = serialization.load_pem_public_key(Path(key_file).read_bytes())
+    except OSError as e:
+        raise ManifestError(f"{key_file}: cannot read the manifest public key ({e.strerror or e})") from None
+    except ValueError:
+        raise ManifestError(f"{key_file}: not a PEM public key") from None
+    if not isinstance(key, Ed25519PublicKey):
+        raise ManifestError(f"{key_file}: not an Ed25519 public key")
+    return key
+
+
+def verify_signature(manifest_file: Path, raw: bytes, public_key_file: str | os.PathLike) -> None:
+    """ManifestError unless ``manifest_file.sig`` is the Ed25519 signature of ``raw`` (the very
+    bytes that are then parsed) by the key in ``public_key_file``."""
+    key = load_public_key(public_key_file)
+    *_, invalid_signature = _ed25519()
+    sig_file = signature_path(manifest_file)
+    try:
+        signature = sig_file.read_bytes()
+    except OSError as e:
+        raise ManifestError(f"{sig_file}: the box requires a signed manifest and cannot read its "
+                            f"signature ({e.strerror or e})") from None
+    try:
+        key.verify(signature, raw)
+    except invalid_signature:
+        raise ManifestError(f"{sig_file}: the manifest's signature does not verify with "
+                            f"{public_key_file}: refusing its models") from None
+
+
+def load_manifest(assets_dir: str | os.PathLike, public_key_file: str | os.PathLike | None = None) -> dict:
     """Read and validate ``assets_dir/manifest.json`` (or a manifest path itself): every
-    field the runtime reads is checked for its type, in one line naming the field."""
+    field the runtime reads is checked for its type, in one line naming the field. With
+    ``public_key_file``, the manifest's signature is checked first (see the module docstring)."""
     path = manifest_path(assets_dir)
     if not path.is_file():
         raise ManifestError(f"{path}: manifest not found (rebuild with `python -m export assets --seed 0`)")
@@ -151,6 +211,8 @@ def load_manifest(assets_dir: str | os.PathLike) -> dict:
         raw = path.read_bytes()
     except OSError as e:
         raise ManifestError(f"{path}: cannot read ({e.strerror or e})") from None
+    if public_key_file:
+        verify_signature(path, raw, public_key_file)
     data = strict_json.loads(raw, str(path), ManifestError)
     if not isinstance(data, dict):
         raise ManifestError(f"{path}: expected a JSON object at the top level")
@@ -213,11 +275,13 @@ def read_verified(assets_dir: str | os.PathLike, entry: dict) -> bytes:
 
 
 def load_verified(assets_dir: str | os.PathLike, name_or_precision: str = "int8",
-                  arch: str | tuple[str, ...] | None = None) -> tuple[dict, bytes, Path]:
+                  arch: str | tuple[str, ...] | None = None,
+                  public_key_file: str | os.PathLike | None = None) -> tuple[dict, bytes, Path]:
     """(manifest entry, hash-checked model bytes, model path) for ``name_or_precision``
-    (a name or a precision), optionally among the entries of one ``arch``."""
+    (a name or a precision), optionally among the entries of one ``arch``; with
+    ``public_key_file``, from a manifest whose signature verifies."""
     mpath = manifest_path(assets_dir)
-    entry = select_model(load_manifest(assets_dir), name_or_precision, str(mpath), arch=arch)
+    entry = select_model(load_manifest(assets_dir, public_key_file), name_or_precision, str(mpath), arch=arch)
     return entry, read_verified(mpath.parent, entry), mpath.parent / entry["file"]
 
 

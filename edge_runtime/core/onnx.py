@@ -56,9 +56,11 @@ def open_session(model: bytes | str | os.PathLike, threads: int = 1, source: str
 
 
 def session_from_manifest(assets_dir: str | os.PathLike = ASSETS_DIR, name_or_precision: str = "int8",
-                          arch: str | tuple[str, ...] | None = None, threads: int = 1
+                          arch: str | tuple[str, ...] | None = None, threads: int = 1,
+                          public_key_file: str | os.PathLike | None = None
                           ) -> tuple[ort.InferenceSession, dict, str]:
     """(session, manifest entry, model path) for the entry ``name_or_precision`` of ``arch``,
-    loaded from the bytes whose sha256 was checked against the manifest."""
-    entry, data, path = load_verified(assets_dir, name_or_precision, arch=arch)
+    loaded from the bytes whose sha256 was checked against the manifest (itself signature-checked
+    with ``public_key_file``)."""
+    entry, data, path = load_verified(assets_dir, name_or_precision, arch=arch, public_key_file=public_key_file)
     return open_session(data, threads, str(path)), entry, str(path)

@@ -134,6 +134,9 @@ class LifterParams:
     """Which shipped lifter to run: "int8" or "fp32" (manifest entry lifter-<precision>)."""
     threads: int = 1
     """onnxruntime intra-op threads (the box has 2 cores; 1 leaves one for the rest)."""
+    manifest_public_key: str = ""
+    """PEM file of the Ed25519 key the manifest must be signed with (manifest.json.sig); empty =
+    the sha256 hashes only. Needs the signed-models extra."""
     min_score: float = 0.3
     """A keypoint whose detector score is below this is treated as missing."""
     hold_frames: int = 3
@@ -283,7 +286,8 @@ class StreamingLifter:
         """The shipped lifter of ``params.precision`` (manifest entry of arch "lifter"),
         hash-checked, with ``params.threads`` intra-op threads."""
         session, entry, path = session_from_manifest(assets_dir, params.precision, arch=LIFTER_ARCH,
-                                                     threads=params.threads)
+                                                     threads=params.threads,
+                                                     public_key_file=params.manifest_public_key or None)
         return cls(session, entry, params=params, camera=camera, keypoint_format=keypoint_format, source=path)
 
     # ------------------------------------------------------------------ state

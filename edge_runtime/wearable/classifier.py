@@ -239,6 +239,9 @@ class ModelParams:
     """Manifest entry: a model name, or a precision (int8, fp32)."""
     threads: int = config.setting(1, config.AT_LEAST_1)
     """onnxruntime intra-op threads."""
+    manifest_public_key: str = ""
+    """PEM file of the Ed25519 key the manifest must be signed with (manifest.json.sig); empty =
+    the sha256 hashes only. Needs the signed-models extra."""
 
 
 class Engine:
@@ -286,11 +289,13 @@ class Engine:
 
     @classmethod
     def from_manifest(cls, assets_dir: str | os.PathLike = ASSETS_DIR, name_or_precision: str = "int8",
-                      threads: int = 1, arch: str | tuple[str, ...] | None = CLASSIFIER_ARCHS) -> "Engine":
+                      threads: int = 1, arch: str | tuple[str, ...] | None = CLASSIFIER_ARCHS,
+                      public_key_file: str | os.PathLike | None = None) -> "Engine":
         """The manifest entry named ``name_or_precision`` (or the first of that precision)
-        among the ``arch`` entries (default: the classifiers; None: any), hash-checked, on
-        onnxruntime with ``threads`` intra-op threads."""
-        entry, data, path = load_verified(assets_dir, name_or_precision, arch=arch)
+        among the ``arch`` entries (default: the classifiers; None: any), hash-checked (and the
+        manifest signature-checked with ``public_key_file``), on onnxruntime with ``threads``
+        intra-op threads."""
+        entry, data, path = load_verified(assets_dir, name_or_precision, arch=arch, public_key_file=public_key_file)
         return cls(data, classes=entry["classes"], name=entry["name"], precision=entry["precision"],
                    threads=threads, entry=entry, source=str(path))
 

@@ -191,7 +191,8 @@ def _load_classifier(cfg) -> Engine:
     from edge_runtime.config import ConfigError
     from edge_runtime.wearable.classifier import Engine
 
-    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
+    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads,
+                                  public_key_file=cfg.model.manifest_public_key or None)
     unknown = sorted(set(cfg.alerts.never_alert) - set(engine.classes))
     if unknown:
         raise ConfigError(f"[alerts] never_alert: {unknown} are not classes of {engine.name} ({', '.join(engine.classes)})")
