@@ -64,6 +64,8 @@ ONNXRUNTIME_TESTED = {
     "aarch64": "1.22.1 (pinned; under qemu-aarch64 7.2: python -m export.aarch64, make aarch64-check)",
 }
 """What INSTALL.md states each bundle's onnxruntime range was tested with (docs/install.md)."""
+BUILD_HINTS = {"aarch64": "; autosar-e2e for aarch64: python -m export.aarch64 --e2e-wheel DIR"}
+"""Where the wheels PyPI lacks for a platform come from (export/aarch64.py cross-compiles it)."""
 GLIBC_MINOR = 36
 """The box's glibc is 2.36 (Debian 12): a wheel may need any glibc up to it. pip download matches
 the platform tags it is given exactly, so :func:`platform_tags` lists every manylinux tag up to it
@@ -232,7 +234,8 @@ def download_wheelhouse(wheels: Path, requirements: tuple[str, ...], platform_na
     for link in find_links:
         args += ["--find-links", link]
     _pip([*args, *requirements], f"pip download for {platform_name} Python {python_version} (a package with no "
-         f"binary wheel for it can be built on such a machine and given with --find-links DIR)")
+         f"binary wheel for it can be built on such a machine and given with --find-links DIR"
+         f"{BUILD_HINTS.get(platform_name, '')})")
     return sorted(wheels.glob("*.whl"))
 
 
