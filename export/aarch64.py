@@ -36,6 +36,7 @@ import base64
 import hashlib
 import json
 import platform
+import re
 import shutil
 import statistics
 import subprocess
@@ -74,6 +75,9 @@ CONFIDENCE_TOL = 1e-3
 CAN_MEASURED = ("TimeSinceTrigger", "E2E_CRC")
 """Alert signals that may differ between machines: TimeSinceTrigger adds the measured inference
 time (emulation is ~1000x slower), and the CRC covers it."""
+ONNXRUNTIME_ALSO = ("1.22.1", "1.28.0", "1.32.0")
+"""onnxruntime versions whose aarch64 wheels also run the shipped models under emulation, beside the
+bundle's pinned one: the range INSTALL.md states (export.bundle.ONNXRUNTIME_TESTED) comes from here."""
 MODELS = ("int8", "fp32")
 DECISIONS = ("early", "full_window")
 EMU_ENV = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": "/tmp", "LANG": "C.UTF-8"}
@@ -329,8 +333,6 @@ def e2e_probe(python: list[str], env: dict | None = None) -> dict:
 
 def _version(cmd: list[str]) -> str:
     """``program X.Y.Z`` from a tool's version output (proot's comes under a banner)."""
-    import re
-
     try:
         r = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
     except (OSError, subprocess.TimeoutExpired):
@@ -339,7 +341,38 @@ def _version(cmd: list[str]) -> str:
     return f"{cmd[0]} {m.group(0) if m else '(version unknown)'}"
 
 
-def check(work: Path, minutes: float = 5.0, seed: int = 2027, log=print) -> dict:
+def other_onnxruntime(version: str, work: Path, python: list[str], assets: Path, feed: dict, ref: dict,
+                      manifest: dict) -> dict:
+    """The shipped models under emulation with onnxruntime ``version``'s aarch64 wheel (put ahead of
+    the installed one on PYTHONPATH; its dependencies are the bundle's) against x86's outputs."""
+    from export.bundle import PYTHON_VERSION, platform_tags
+    from export.runtime_check import compare as compare_models
+    from export.runtime_check import run_outputs
+
+    target = work / "onnxruntime" / version
+    if not (target / "onnxruntime").is_dir():
+        shutil.rmtree(target, ignore_errors=True)
+        _run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--only-binary=:all:", "--target",
+              str(target), "--python-version", PYTHON_VERSION, "--implementation", "cp",
+              *(a for tag in platform_tags("aarch64") for a in ("--platform", tag)), f"onnxruntime=={version}"],
+             f"pip install onnxruntime=={version} for aarch64", timeout=900)
+    try:
+        out = run_outputs(python, assets, feed, env=EMU_ENV | {"PYTHONPATH": str(target)}, timed_calls=0)
+    except RuntimeError as e:  # an import that crashes under qemu: the reason a pin exists
+        return {"ok": False, "error": re.sub(r"pid \d+: ", "", str(e).split(": ", 1)[-1])[:200]}
+    if str(out["__version__"]) != version:
+        raise Aarch64Error(f"onnxruntime {version} under emulation imported {out['__version__']} instead")
+    models = compare_models(manifest, ref, out)
+    return {"ok": all(m["ok"] for m in models.values()), "models": models}
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the checkout when inside it (reports name no machine's directories)."""
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
+def check(work: Path, minutes: float = 5.0, seed: int = 2027, also: tuple[str, ...] = ONNXRUNTIME_ALSO,
+          log=print) -> dict:
     from edge_runtime.canbus.dbc import load_dbc
     from export.runtime_check import compare as compare_models
     from export.runtime_check import fixed_inputs, run_outputs
@@ -400,10 +433,13 @@ def check(work: Path, minutes: float = 5.0, seed: int = 2027, log=print) -> dict
     ref = run_outputs(ref_python, _installed_assets(box["x86_64"]), feed)
     arm = run_outputs(arm_python, _installed_assets(box["aarch64"]), feed, env=EMU_ENV)
     models = compare_models(manifest, ref, arm)
+    onnxruntime_range = {v: other_onnxruntime(v, work, arm_python, _installed_assets(box["aarch64"]), feed, ref,
+                                              manifest) for v in also if v != str(arm["__version__"])}
     log("[7/7] autosar-e2e's CRCs under emulation against x86")
     e2e_ref, e2e_arm = e2e_probe(ref_python), e2e_probe(arm_python, EMU_ENV)
     report = {
-        "command": f"python -m export.aarch64 --work {work} --minutes {minutes:g} --seed {seed}",
+        "command": f"python -m export.aarch64 --work {_shown(work)} --minutes {minutes:g} --seed {seed}"
+                   + "".join(f" --onnxruntime {v}" for v in also),
         "machine": platform.machine(),
         "emulator": _version([QEMU, "--version"]), "proot": _version(["proot", "-V"]),
         "root": {"suite": SUITE, "packages": list(PACKAGES)},
@@ -415,6 +451,7 @@ def check(work: Path, minutes: float = 5.0, seed: int = 2027, log=print) -> dict
         "replays": replays,
         "int8_fp32_class_agreement_aarch64": agreement,
         "models": models,
+        "onnxruntime_also_aarch64": onnxruntime_range,
         "model_p50_us_batch1": {arch: {k.split("/")[0]: round(float(v), 1) for k, v in out.items()
                                        if k.endswith("/__p50_us__")} for arch, out in (("x86_64", ref),
                                                                                        ("aarch64_emulated", arm))},
@@ -469,6 +506,12 @@ def markdown(r: dict) -> str:
     for name, m in r["models"].items():
         lines.append(f"| {name} | {m['loaded']} | {m.get('max_abs', float('nan')):.1e} | "
                      f"{m.get('argmax_agree', '–')} | {yes[m['ok']]} |")
+    lines += ["", f"The same models with other onnxruntime versions' aarch64 wheels (bundle: "
+              f"{r['onnxruntime']['aarch64']}; not part of the overall verdict):", ""]
+    for version, o in r["onnxruntime_also_aarch64"].items():
+        what = (f"every model within tolerance: {yes[o['ok']]}" if "models" in o
+                else f"**fails**: {o['error']}")
+        lines.append(f"- onnxruntime {version}: {what}")
     lines += ["", f"autosar-e2e CRCs of fixed bytes, aarch64 against x86: {yes[r['e2e_crc']['ok']]} "
               f"({len(r['e2e_crc']['aarch64'])} functions).", "",
               "## Time per inference under emulation: NOT a speed claim", "",
@@ -480,7 +523,7 @@ def markdown(r: dict) -> str:
         lines.append(f"| {name}: p50, batch 1, 1 thread (µs) | {p50['x86_64'][name]} | "
                      f"{p50['aarch64_emulated'].get(name, '–')} |")
     for key, rep in r["replays"].items():
-        lines.append(f"| replay {key}: median compute_us per decision | {rep['compute_us_median']['x86_64']} | "
+        lines.append(f"| replay {key}: median classifier call per decision, µs (compute_us: preprocessing + inference) | {rep['compute_us_median']['x86_64']} | "
                      f"{rep['compute_us_median']['aarch64']} |")
         lines.append(f"| replay {key}: wall time of the command (s) | {rep['wall_s']['x86_64']} | "
                      f"{rep['wall_s']['aarch64']} |")
@@ -502,6 +545,9 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=2027)
     p.add_argument("--report-dir", default=str(ROOT / "reports" / "box"),
                    help="where aarch64.json and aarch64.md go (default reports/box)")
+    p.add_argument("--onnxruntime", action="append", default=None, metavar="VERSION",
+                   help="also run the models with this onnxruntime's aarch64 wheel (repeatable; default "
+                        + ", ".join(ONNXRUNTIME_ALSO) + ")")
     p.add_argument("--e2e-wheel", metavar="DIR", default=None,
                    help="only build autosar-e2e's aarch64 wheel into DIR (for export bundle --find-links DIR)")
     a = p.parse_args(argv)
@@ -516,7 +562,7 @@ def main(argv=None) -> int:
                 raise Aarch64Error(f"missing tools: apt-get install {' '.join(need)}")
             print(e2e_wheel(build_root(Path(a.work).resolve() / "root"), Path(a.e2e_wheel).resolve()))
             return 0
-        r = check(Path(a.work), a.minutes, a.seed)
+        r = check(Path(a.work), a.minutes, a.seed, tuple(a.onnxruntime or ONNXRUNTIME_ALSO))
         js, md = write_report(r, Path(a.report_dir))
         print(markdown(r))
         print(f"written: {js}, {md}")

@@ -124,6 +124,8 @@ def _report(ok_replay: bool) -> dict:
             "replays": {"int8_early": rep},
             "int8_fp32_class_agreement_aarch64": {"early": {"last": class_agreement([_d(1.0)], [_d(1.0)])}},
             "models": {"convlstm-int8": {"loaded": True, "max_abs": 1e-7, "argmax_agree": 1.0, "ok": True}},
+            "onnxruntime_also_aarch64": {"1.22.1": {"ok": True, "models": {}},
+                                         "1.32.0": {"ok": False, "error": "exit 255: terminated with signal 11"}},
             "model_p50_us_batch1": {"x86_64": {"convlstm-int8": 40.0}, "aarch64_emulated": {"convlstm-int8": 3e4}},
             "e2e_crc": {"x86_64": {"calculate_crc8": 1}, "aarch64": {"calculate_crc8": 1}, "ok": True}}
 
@@ -134,6 +136,8 @@ def test_the_markdown_report_says_which_replay_disagrees_and_that_emulated_time_
     row = next(line for line in md.splitlines() if line.startswith("| int8_early |"))
     assert "**DISAGREE**" in md and row.endswith("**NO** |")
     assert "NOT a speed claim" in md and "1/1 (100.0 %)" in md
+    assert "- onnxruntime 1.32.0: **fails**: exit 255: terminated with signal 11" in md
+    assert "- onnxruntime 1.22.1: every model within tolerance: **yes**" in md
 
 
 def test_missing_tools_are_one_line_naming_the_debian_packages(monkeypatch, tmp_path, capsys):
