@@ -556,6 +556,12 @@ def main(argv=None) -> int:
     def go() -> int:
         if a.minutes <= 0:
             raise Aarch64Error(f"--minutes: {a.minutes:g}, expected more than 0")
+        for flag, d in (("--work", a.work), ("--report-dir", a.report_dir), ("--e2e-wheel", a.e2e_wheel)):
+            if d and Path(d).exists() and not Path(d).is_dir():
+                raise Aarch64Error(f"{flag} {d}: not a directory")
+        bad = [v for v in a.onnxruntime or () if not re.fullmatch(r"\d+(\.\d+)*", v)]
+        if bad:
+            raise Aarch64Error(f"--onnxruntime {bad[0]}: expected a version such as 1.22.1")
         if a.e2e_wheel:
             need = sorted({TOOLS["mmdebstrap"], TOOLS[CROSS_CC]} & set(missing_tools()))
             if need:

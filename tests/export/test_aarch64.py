@@ -150,6 +150,11 @@ def test_missing_tools_are_one_line_naming_the_debian_packages(monkeypatch, tmp_
     assert not any(tmp_path.iterdir())
 
 
-def test_a_non_positive_drive_length_is_refused_in_one_line(tmp_path, capsys):
-    assert aarch64.main(["--work", str(tmp_path), "--minutes", "0"]) == 2
-    assert "--minutes" in capsys.readouterr().err
+@pytest.mark.parametrize("args, named", [(["--minutes", "0"], "--minutes"), (["--onnxruntime", "latest"], "--onnxruntime"),
+                                         (["--report-dir", "FILE"], "--report-dir"), (["--work", "FILE"], "--work")])
+def test_bad_arguments_are_refused_in_one_line_before_any_work(tmp_path, capsys, args, named):
+    (tmp_path / "FILE").write_text("")
+    args = [str(tmp_path / "FILE") if a == "FILE" else a for a in args]
+    assert aarch64.main(["--work", str(tmp_path / "w"), *args] if "--work" not in args else args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and named in err and not (tmp_path / "w").exists()
