@@ -62,7 +62,7 @@ qemu-aarch64 7.2 (make aarch64-check runs 1.28.0 and 1.32.0 too, and shows it)."
 ONNXRUNTIME_TESTED = {
     "x86_64": "1.16.3, 1.22.1 and 1.32.0 (python -m export.runtime_check: the same outputs as the "
               "wheelhouse's onnxruntime; the runtime itself asks for >=1.17)",
-    "aarch64": "1.22.1 to 1.27.0, 1.27.0 pinned (under qemu-aarch64 7.2, make aarch64-check: the same alerts "
+    "aarch64": "1.22.1 and 1.27.0, 1.27.0 pinned (under qemu-aarch64 7.2, make aarch64-check: the same alerts "
                "as x86 with 1.27.0, every model's outputs with 1.22.1 and 1.27.0; 1.28.0 and newer "
                "crash at import under that qemu, untested on aarch64 hardware)",
 }
