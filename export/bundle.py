@@ -57,14 +57,14 @@ PYTHON_VERSION = "3.11"
 PLATFORMS = ("x86_64", "aarch64")
 ONNXRUNTIME_PINS = {"aarch64": "onnxruntime==1.27.0"}
 """The onnxruntime a platform's wheelhouse takes instead of the newest: the newest aarch64 wheel
-that can be proven here. From 1.28.0 on, the aarch64 wheels die at import under Debian 12's
-qemu-aarch64 7.2 (make aarch64-check runs 1.28.0 and 1.32.0 too, and shows it)."""
+that can be proven here. The aarch64 wheels of 1.28.0 and 1.32.0 die at import under Debian 12's
+qemu-aarch64 7.2 (make aarch64-check runs them too, and shows it; reports/box/aarch64.md)."""
 ONNXRUNTIME_TESTED = {
     "x86_64": "1.16.3, 1.22.1 and 1.32.0 (python -m export.runtime_check: the same outputs as the "
               "wheelhouse's onnxruntime; the runtime itself asks for >=1.17)",
     "aarch64": "1.22.1 and 1.27.0, 1.27.0 pinned (under qemu-aarch64 7.2, make aarch64-check: the same alerts "
-               "as x86 with 1.27.0, every model's outputs with 1.22.1 and 1.27.0; 1.28.0 and newer "
-               "crash at import under that qemu, untested on aarch64 hardware)",
+               "as x86 with 1.27.0, every model's outputs with 1.22.1 and 1.27.0; 1.28.0 and 1.32.0 "
+               "crash at import under that qemu; untested on aarch64 hardware)",
 }
 """What INSTALL.md states each bundle's onnxruntime range was tested with (docs/install.md)."""
 BUILD_HINTS = {"aarch64": "; autosar-e2e for aarch64: python -m export.aarch64 --e2e-wheel DIR"}

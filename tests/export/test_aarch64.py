@@ -158,3 +158,18 @@ def test_bad_arguments_are_refused_in_one_line_before_any_work(tmp_path, capsys,
     assert aarch64.main(["--work", str(tmp_path / "w"), *args] if "--work" not in args else args) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and named in err and not (tmp_path / "w").exists()
+
+
+def test_the_committed_aarch64_report_is_of_the_pinned_onnxruntime_and_agrees():
+    """The pin (and INSTALL.md's tested versions) changes only with a new make aarch64-check run."""
+    import json
+
+    from support import REPO_ROOT
+
+    from export.bundle import ONNXRUNTIME_PINS, ONNXRUNTIME_TESTED
+
+    report = json.loads((REPO_ROOT / "reports" / "box" / "aarch64.json").read_text())
+    pinned = ONNXRUNTIME_PINS["aarch64"].split("==")[1]
+    assert report["ok"] and report["onnxruntime"]["aarch64"] == pinned
+    assert set(report["onnxruntime_also_aarch64"]) == set(aarch64.ONNXRUNTIME_ALSO) - {pinned}
+    assert all(v in ONNXRUNTIME_TESTED["aarch64"] for v in [pinned, *report["onnxruntime_also_aarch64"]])
