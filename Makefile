@@ -50,10 +50,11 @@ bundle: $(STAMP)
 fuzz: $(STAMP)
 	$(PY) -m fuzz --inputs 100000 --seed 0 --timeout-s 60 --json reports/fuzz/fuzz.json --md reports/fuzz/fuzz.md
 
-## make aarch64-check: the aarch64 wearable bundle on an emulated arm64 Debian 12 (qemu-user-static,
-## mmdebstrap, gcc-aarch64-linux-gnu), the same recording's alerts as x86 (export/aarch64.py); not in make test
+## make aarch64-check: the aarch64 wearable bundle installed by its install.sh on an emulated arm64
+## Debian 12 (qemu-user-static, proot, mmdebstrap, gcc-aarch64-linux-gnu), the same recording's alerts
+## and CAN frames as the x86 bundle's (export/aarch64.py); writes reports/box/aarch64.{json,md}; not in make test
 aarch64-check: $(STAMP)
-	$(PY) -m export.aarch64 --work runs/aarch64
+	$(PY) -m export.aarch64 --work runs/aarch64 --report-dir reports/box
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache

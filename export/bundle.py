@@ -55,15 +55,20 @@ REQUIRES_PYTHON = ">=3.11"
 PYTHON_VERSION = "3.11"
 """The box's Python (Debian 12's python3.11): the wheelhouse is built for it."""
 PLATFORMS = ("x86_64", "aarch64")
-ONNXRUNTIME_PINS = {"aarch64": "onnxruntime==1.22.1"}
-"""The onnxruntime a platform's wheelhouse takes instead of the newest: 1.32's aarch64 wheel dies
-at import under Debian 12's qemu 7.2, where 1.22.1 runs the shipped models (make aarch64-check)."""
+ONNXRUNTIME_PINS = {"aarch64": "onnxruntime==1.27.0"}
+"""The onnxruntime a platform's wheelhouse takes instead of the newest: the newest aarch64 wheel
+that can be proven here. The aarch64 wheels of 1.28.0 and 1.32.0 die at import under Debian 12's
+qemu-aarch64 7.2 (make aarch64-check runs them too, and shows it; reports/box/aarch64.md)."""
 ONNXRUNTIME_TESTED = {
     "x86_64": "1.16.3, 1.22.1 and 1.32.0 (python -m export.runtime_check: the same outputs as the "
               "wheelhouse's onnxruntime; the runtime itself asks for >=1.17)",
-    "aarch64": "1.22.1 (pinned; under qemu-aarch64 7.2: python -m export.aarch64, make aarch64-check)",
+    "aarch64": "1.22.1 and 1.27.0, 1.27.0 pinned (under qemu-aarch64 7.2, make aarch64-check: the same alerts "
+               "as x86 with 1.27.0, every model's outputs with 1.22.1 and 1.27.0; 1.28.0 and 1.32.0 "
+               "crash at import under that qemu; untested on aarch64 hardware)",
 }
 """What INSTALL.md states each bundle's onnxruntime range was tested with (docs/install.md)."""
+BUILD_HINTS = {"aarch64": "; autosar-e2e for aarch64: python -m export.aarch64 --e2e-wheel DIR"}
+"""Where the wheels PyPI lacks for a platform come from (export/aarch64.py cross-compiles it)."""
 GLIBC_MINOR = 36
 """The box's glibc is 2.36 (Debian 12): a wheel may need any glibc up to it. pip download matches
 the platform tags it is given exactly, so :func:`platform_tags` lists every manylinux tag up to it
@@ -232,7 +237,8 @@ def download_wheelhouse(wheels: Path, requirements: tuple[str, ...], platform_na
     for link in find_links:
         args += ["--find-links", link]
     _pip([*args, *requirements], f"pip download for {platform_name} Python {python_version} (a package with no "
-         f"binary wheel for it can be built on such a machine and given with --find-links DIR)")
+         f"binary wheel for it can be built on such a machine and given with --find-links DIR"
+         f"{BUILD_HINTS.get(platform_name, '')})")
     return sorted(wheels.glob("*.whl"))
 
 

@@ -210,3 +210,23 @@ def test_an_aarch64_bundle_pins_the_onnxruntime_that_runs_there_and_says_what_wa
     x86 = build_bundle(tmp_path / "x86", product="wearable", platform_name="x86_64", wheelhouse=False)
     assert "onnxruntime>=1.17" in x86.requirements
     assert ONNXRUNTIME_TESTED["x86_64"] in (x86.out / "INSTALL.md").read_text()
+
+
+@pytest.mark.slow  # pip download, with no index: only the wheel given with --find-links can be found
+def test_an_aarch64_wheelhouse_takes_the_built_autosar_e2e_wheel_and_without_it_names_the_command(
+        tmp_path, monkeypatch):
+    from export.aarch64 import E2E_TAG, E2E_VERSION, write_wheel
+    from export.bundle import download_wheelhouse
+
+    monkeypatch.setenv("PIP_NO_INDEX", "1")
+    built = tmp_path / "built"
+    built.mkdir()
+    info = f"autosar_e2e-{E2E_VERSION}.dist-info"
+    write_wheel(built / f"autosar_e2e-{E2E_VERSION}-{E2E_TAG}.whl",
+                {"e2e/__init__.py": b"", f"{info}/METADATA": f"Metadata-Version: 2.1\nName: autosar-e2e\n"
+                                                             f"Version: {E2E_VERSION}\n".encode(),
+                 f"{info}/WHEEL": f"Wheel-Version: 1.0\nRoot-Is-Purelib: false\nTag: {E2E_TAG}\n".encode()}, info)
+    wheels = download_wheelhouse(tmp_path / "wheels", ("autosar-e2e",), "aarch64", find_links=(str(built),))
+    assert [w.name for w in wheels] == [f"autosar_e2e-{E2E_VERSION}-{E2E_TAG}.whl"]
+    with pytest.raises(BundleError, match="python -m export.aarch64 --e2e-wheel DIR"):
+        download_wheelhouse(tmp_path / "none", ("autosar-e2e",), "aarch64")
