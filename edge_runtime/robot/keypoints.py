@@ -522,9 +522,18 @@ class PersonTracker:
 
     def _cost(self, tr: _Track, kp: np.ndarray, t_s: float) -> float:
         """Median distance of the detection's keypoints from the track's prediction, in track
-        sizes; inf beyond the gate or without common joints. (Apparent size is no cue: at a real
-        detector's noise it varies 13 % from frame to frame, as much as between two people
-        crossing, and weighing it mixed more people up in ``firmware_sim crossings``.)"""
+        sizes, as a fraction of the track's gate (which grows while it is unseen); inf beyond
+        the gate or without common joints.
+
+        Dividing by the gate weighs a miss by how sure the prediction is: a person seen a frame
+        ago is predicted to a few pixels, one hidden for a second anywhere in a wide gate. So
+        when a hidden walker reappears beside the one who hid him, the detection nearest the
+        visible walker's sharp prediction keeps his id and the vague track takes the other
+        (in ``firmware_sim crossings`` on development seed 5, 300 crossings: right id kept
+        91.0 % -> 93.2 %). (Apparent size is no cue: at a real detector's noise it varies 13 %
+        from frame to frame, as much as between two people crossing; a smoothed size weighed in
+        mixed more people up. Matching recently seen tracks first, DeepSORT's cascade, lost
+        22 points there: a half-hidden walker's sliver then takes the visible one's id.)"""
         p = self.params
         if len(tr.xy) != len(kp):
             return math.inf
@@ -534,9 +543,8 @@ class PersonTracker:
             return math.inf
         # the median: a swinging limb or one gross keypoint error must not decide who is who
         d = float(np.median(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
-        if d > p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0):
-            return math.inf
-        return d
+        gate = p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0)
+        return d / gate if d <= gate else math.inf
 
     def _follow(self, tr: _Track, kp: np.ndarray, t_s: float) -> None:
         p = self.params
