@@ -65,6 +65,12 @@ class E2EProtector:
                 self._payloads.popitem(last=False)
         return data
 
+    def skip(self, message, n: int) -> None:
+        """``n`` frames of ``message`` that were not sent: its alive counter moves on as if they had been."""
+        with self._lock:
+            counter = self._counters.get(message.frame_id, 0)
+            self._counters[message.frame_id] = (counter + n) % (COUNTER_MAX + 1)
+
     def protect(self, message, signals: dict) -> can.Message:
         with self._lock:
             counter = self._counters.get(message.frame_id, 0)

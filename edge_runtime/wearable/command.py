@@ -283,12 +283,23 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
 
 
 def _data_clock_steps(loop: WearableLoop, block: ImuBlock) -> Iterator[ImuBlock]:
-    """A recorded block in pieces of one heartbeat period, the publisher's data clock moved to
-    the start of each: every heartbeat goes out at its data time and reports the samples fed
-    by then (a recording is one block: fed whole, every heartbeat would count all of it)."""
+    """A recorded block as the loop is fed it, the publisher's data clock moved to its start:
+    every heartbeat goes out at its data time and reports the samples fed by then.
+
+    A block of finite samples is fed whole: within it only the sample count grows, and a
+    heartbeat reads that only to tell "starting" (nothing fed yet), so each heartbeat says what
+    it said when the block went in pieces, at a fraction of the calls (the loop's decisions do
+    not depend on how a stream is split). A block with non-finite samples goes in pieces of one
+    heartbeat period, so the heartbeat after a bad sample, and only that one, says degraded."""
+    import numpy as np
+
     from edge_runtime.wearable.sources import ImuBlock
 
     pub = loop.publisher
+    if np.isfinite(block.acc_mps2).all():
+        pub.advance_to(block.t0_s)
+        yield block
+        return
     step = max(1, round(pub.period * loop.rate_hz))
     for i in range(0, len(block.acc_mps2), step):
         t0_s = block.t0_s + i / loop.rate_hz
@@ -324,7 +335,9 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
     )
     c = loop.publisher.summary()
     print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']} "
-          f"+ copies {c['alert_copies_sent']}, heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, "
+          f"+ copies {c['alert_copies_sent']}, heartbeats {c['heartbeats_sent']}"
+          + (f", of them {c['heartbeats_unheard']} not encoded: nobody on the bus to hear them" if c["heartbeats_unheard"]
+             else "") + f"), send errors {c['send_errors']}, "
           f"reconnects {c['reconnects']}"
           + (f"; logged to {can_log}" if can_log else ""))
     if c["alerts_held"] or c["alerts_lost"]:
