@@ -172,12 +172,19 @@ def preprocess_prefix(x_prefix: np.ndarray, steps: int) -> np.ndarray:
     if x.ndim != 2 or len(x) < need or len(x) > CAPTURE_FRAMES:
         raise ValueError(f"a prefix for {steps} sub-windows needs {need}..{CAPTURE_FRAMES} frames "
                          f"of (n, 3), got {x.shape}")
-    n_rows = steps * SUBSEQ_FRAMES
-    if len(x) < CAPTURE_FRAMES:
-        x = np.concatenate([x, np.repeat(x[-1:], CAPTURE_FRAMES - len(x), axis=0)])
-    mean = x.mean(axis=0, keepdims=True)
-    y = np.matmul(resample_matrix()[:n_rows], x - mean) + mean
+    padded = x if len(x) == CAPTURE_FRAMES else np.concatenate([x, np.repeat(x[-1:], CAPTURE_FRAMES - len(x), axis=0)])
+    mean = padded.mean(axis=0, keepdims=True)
+    y = np.matmul(_prefix_matrix(steps), x[:need] - mean) + mean
     return y.astype(np.float32).reshape(steps, SUBSEQ_FRAMES, x.shape[-1])
+
+
+@lru_cache(maxsize=None)
+def _prefix_matrix(steps: int) -> np.ndarray:
+    """The rows of :func:`resample_matrix` of the first ``steps`` sub-windows, without the columns
+    of frames they do not read (all zero): the prefix's product costs what its frames need, not 700."""
+    mat = np.ascontiguousarray(resample_matrix()[: steps * SUBSEQ_FRAMES, : needed_frames(steps)])
+    mat.setflags(write=False)
+    return mat
 
 
 def calibrate(probs: np.ndarray, temperature: float) -> np.ndarray:
