@@ -173,7 +173,7 @@ def preprocess_prefix(x_prefix: np.ndarray, steps: int) -> np.ndarray:
         raise ValueError(f"a prefix for {steps} sub-windows needs {need}..{CAPTURE_FRAMES} frames "
                          f"of (n, 3), got {x.shape}")
     padded = x if len(x) == CAPTURE_FRAMES else np.concatenate([x, np.repeat(x[-1:], CAPTURE_FRAMES - len(x), axis=0)])
-    mean = padded.mean(axis=0, keepdims=True)
+    mean = np.add.reduce(padded, axis=0, keepdims=True) / CAPTURE_FRAMES  # ndarray.mean's sum and division, without its Python
     y = np.matmul(_prefix_matrix(steps), x[:need] - mean) + mean
     return y.astype(np.float32).reshape(steps, SUBSEQ_FRAMES, x.shape[-1])
 
@@ -192,9 +192,11 @@ def calibrate(probs: np.ndarray, temperature: float) -> np.ndarray:
     p = np.asarray(probs, dtype=np.float64)
     if temperature == 1.0:
         return p.astype(np.float32)
-    logp = np.log(np.clip(p, 1e-12, 1.0)) / temperature
-    q = np.exp(logp - logp.max(axis=-1, keepdims=True))
-    return (q / q.sum(axis=-1, keepdims=True)).astype(np.float32)
+    # the ufuncs np.clip, ndarray.max and .sum call, called directly: the same values without their Python
+    # layers, which cost more than the arithmetic on K numbers (the replay calibrates 22,000 times a day)
+    logp = np.log(np.minimum(np.maximum(p, 1e-12), 1.0)) / temperature
+    q = np.exp(logp - np.maximum.reduce(logp, axis=-1, keepdims=True))
+    return (q / np.add.reduce(q, axis=-1, keepdims=True)).astype(np.float32)
 
 
 @dataclass(frozen=True)
