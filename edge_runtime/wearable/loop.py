@@ -286,11 +286,13 @@ class WearableLoop:
         if not block.continuous or self.detector.n_seen == 0:  # nothing fed yet, or a gap
             self._restart(block.t0_s)
         self._rx = block.rx_monotonic_s
-        if len(acc) == 1:  # the live 100 Hz loop: one sample, checked as three floats (no ufunc machinery)
-            fine = all(map(math.isfinite, acc[0].tolist()))
-        else:
-            fine = bool(np.isfinite(acc).all())
-        if fine:  # the common case
+        if len(acc) == 1:  # the live 100 Hz loop: one sample as three floats, no numpy call per sample
+            sample = acc[0].tolist()
+            if all(map(math.isfinite, sample)):
+                self.status.count_samples(1)
+                cap = self.detector.push_sample(*sample)
+                return (self._steps_of(cap.trigger_index, cap.data) if cap is not None else []) + self._early_due()
+        elif np.isfinite(acc).all():  # the common case
             self.status.count_samples(len(acc))
             return self._push(acc)
         bad = ~np.isfinite(acc).all(axis=1)
@@ -315,10 +317,14 @@ class WearableLoop:
         out: list[Decision] = []
         for cap in self.detector.push(acc):  # completed in this block: every step still due, in order
             out += self._steps_of(cap.trigger_index, cap.data)
+        return out + self._early_due()
+
+    def _early_due(self) -> list[Decision]:
+        """The early steps the capture still filling now holds the frames for."""
         if self._early and self.detector.capturing and self.detector.filled >= self._next_frames:
             trigger, so_far = self.detector.filling
-            out += self._steps_of(trigger, so_far)
-        return out
+            return self._steps_of(trigger, so_far)
+        return []
 
     # ------------------------------------------------------------------ decisions
 
