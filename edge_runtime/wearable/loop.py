@@ -91,7 +91,8 @@ class AlertPolicy:
                              lambda v: len(v) == N_SUBSEQ and all(p <= 1.0 for p in v)))
     """Threshold of a decision after S = 1..6 sub-windows (a preliminary alert or a revision for S < 6,
     the full window's for S = 6); a negative entry: the model manifest's min_confidence_by_steps for
-    that S (chosen on validation data), else 0.9 for S < 6 and min_confidence for S = 6."""
+    that S (chosen on validation data), else 0.9 for S < 6 and min_confidence for S = 6. 1 for an
+    S < 6: no decision after S sub-windows (the step is not computed)."""
     event_hold_s: float = config.setting(5.0, config.within(0.0, 120.0, "s"))
     """An alert event stays active until this long after the end of its last capture: a capture
     triggered meanwhile continues it and raises no new alert. 0: every capture is its own event.
@@ -246,14 +247,18 @@ class WearableLoop:
         self._seg_index0 = 0  # detector index of the current continuous stretch ...
         self._seg_t0 = 0.0  # ... and its stream time
         self._rx: float | None = None  # arrival time of the block being fed
-        offered = tuple(getattr(classifier, "early_steps", (N_SUBSEQ,)))
-        self._early_steps = offered if policy.decision == "early" else (N_SUBSEQ,)
-        self._early = self._early_steps != (N_SUBSEQ,)
-        self.decision_mode = "early decisions after S = " + ",".join(map(str, self._early_steps)) if self._early \
-            else "full-window decisions" + (" (the model takes S = 6 only)" if policy.decision == "early" else "")
-        self._prefix = getattr(classifier, "classify_prefix", None)
         early = getattr(classifier, "early", None)
         self._manifest_thresholds: dict[int, float] = dict(getattr(early, "min_confidence_by_steps", {}) or {})
+        offered = tuple(getattr(classifier, "early_steps", (N_SUBSEQ,)))
+        # A threshold of 1 before the full window means no decision at that step (the manifest gives S = 1
+        # one: near-chance, and outside int8's agreement gate), so the loop does not compute it at all.
+        self._early_steps = tuple(s for s in offered if s == N_SUBSEQ or self.policy.threshold(
+            s, self._manifest_thresholds) < 1.0) if policy.decision == "early" else (N_SUBSEQ,)
+        self._early = self._early_steps != (N_SUBSEQ,)
+        self.decision_mode = "early decisions after S = " + ",".join(map(str, self._early_steps)) if self._early \
+            else "full-window decisions" + (" (the model takes S = 6 only)" if offered == (N_SUBSEQ,) else
+                                            " (every S < 6 has threshold 1)" if policy.decision == "early" else "")
+        self._prefix = getattr(classifier, "classify_prefix", None)
         self._capture: _CaptureState | None = None  # the capture being decided
         self._first_frames = needed_frames(self._early_steps[0])
         self._next_frames = self._first_frames  # frames the next early step needs
