@@ -100,3 +100,11 @@ def test_a_file_without_the_magic_is_read_as_csv(tmp_path):
     csv = _csv(tmp_path / "x.csv", np.tile([0.0, 0.0, 9.81], (300, 1)))
     assert not recording.is_recording(csv) and recording.is_recording(_file(tmp_path))
     assert sum(len(b.acc_mps2) for b in open_replay(csv)) == 300
+
+
+def test_a_record_path_that_cannot_be_written_is_one_line_and_exit_2(tmp_path, capsys):
+    csv = _csv(tmp_path / "x.csv", np.tile([0.0, 0.0, 9.81], (300, 1)))
+    assert table.main(["wearable", "--replay", str(csv), "--record", str(tmp_path / "no" / "such" / "r.imu"),
+                       "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--record" in err and "cannot write" in err and "Traceback" not in err
