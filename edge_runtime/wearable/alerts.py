@@ -359,7 +359,7 @@ class AlertPublisher:
         self.alerts_sent = 0
         self.alert_copies_sent = 0
         self.heartbeats_sent = 0
-        self.heartbeats_unheard = 0  # of them, not encoded: nobody could hear them (data clock)
+        self.frames_unheard = 0  # of the frames sent, those not encoded: nobody could hear them (data clock)
         self.send_errors = 0
         self.reconnects = 0
         self.last_error: str | None = None
@@ -502,6 +502,7 @@ class AlertPublisher:
         if self.clock is Clock.DATA and not self._heard():
             self.encoder.skip_alert(1)
             self.frames_sent += 1
+            self.frames_unheard += 1
             return True
         return self.send(self.encoder.encode_alert(alert, seq, delay_s), stamp_s=self._stamp(t_s))
 
@@ -564,7 +565,7 @@ class AlertPublisher:
         self.status.skip_heartbeats(n)
         self.encoder.skip_status(n)
         self.heartbeats_sent += n
-        self.heartbeats_unheard += n
+        self.frames_unheard += n
         self.frames_sent += n
         self._next_beat_s = t0 + (last + 1) * period
 
@@ -632,6 +633,6 @@ class AlertPublisher:
         return {"frames_sent": self.frames_sent, "alerts_sent": self.alerts_sent,
                 "alert_copies_sent": self.alert_copies_sent, "alerts_held": b.held,
                 "alerts_sent_late": b.sent_late, "alerts_lost": b.lost + b.pending,
-                "heartbeats_sent": self.heartbeats_sent, "heartbeats_unheard": self.heartbeats_unheard,
+                "heartbeats_sent": self.heartbeats_sent, "frames_unheard": self.frames_unheard,
                 "send_errors": self.send_errors,
                 "reconnects": self.reconnects}

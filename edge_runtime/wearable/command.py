@@ -356,7 +356,7 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
     c = loop.publisher.summary()
     print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']} "
           f"+ copies {c['alert_copies_sent']}, heartbeats {c['heartbeats_sent']}"
-          + (f", of them {c['heartbeats_unheard']} not encoded: nobody on the bus to hear them" if c["heartbeats_unheard"]
+          + (f"; {c['frames_unheard']} of them not encoded: nobody on the bus to hear them" if c["frames_unheard"]
              else "") + f"), send errors {c['send_errors']}, "
           f"reconnects {c['reconnects']}"
           + (f"; logged to {can_log}" if can_log else ""))
