@@ -136,14 +136,21 @@ def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float) -> dict
                     "heartbeat thread running"}
 
 
-def _detector(acc: np.ndarray) -> dict:
+def _detector(acc: np.ndarray) -> list[dict]:
+    """The detector per sample: ``push`` of a one-sample block, and ``push_sample`` of three floats
+    (what the 100 Hz loop calls for a finite sample)."""
+    blocks, floats = [acc[i : i + 1] for i in range(len(acc))], acc.tolist()
+    return [_detector_row("detector", "push", lambda det, k: det.push(blocks[k]), len(acc)),
+            _detector_row("detector_sample", "push_sample", lambda det, k: det.push_sample(*floats[k]), len(acc))]
+
+
+def _detector_row(name: str, call: str, push, n: int) -> dict:
     from edge_runtime.wearable.detector import StreamingDetector
 
-    det = StreamingDetector()
-    rows = iter([acc[i : i + 1] for i in range(len(acc))])
-    times = time_calls(lambda: det.push(next(rows)), len(acc), 0)
-    return {"name": "detector", "rate_hz": SAMPLE_RATE_HZ, "samples": len(acc), "triggers": len(det.triggers),
-            **summarize(times), "what": "StreamingDetector.push, one sample per call"}
+    det, k = StreamingDetector(), iter(range(n))
+    times = time_calls(lambda: push(det, next(k)), n, 0)
+    return {"name": name, "rate_hz": SAMPLE_RATE_HZ, "samples": n, "triggers": len(det.triggers),
+            **summarize(times), "what": f"StreamingDetector.{call}, one sample per call"}
 
 
 def _latency(w: _Wearable, acc: np.ndarray) -> list[dict]:
@@ -166,7 +173,7 @@ def measure_wearable(cfg: WearableConfig) -> list[dict]:
     w = _Wearable(cfg)
     try:
         rows = [_realtime(w, acc, cfg.start_index, cfg.realtime_s)]
-        rows.append(_detector(acc))
+        rows += _detector(acc)
         rows += _latency(w, acc)
     finally:
         w.pub.close()

@@ -42,12 +42,16 @@ def csv_bytes(t_s: np.ndarray, acc: np.ndarray) -> bytes:
 
 
 @functools.lru_cache(maxsize=None)
-def drive_csvs(n_rows: int = 1200) -> tuple[bytes, ...]:
-    """Stretches of the drive that each contain a detector trigger (so mutations reach the model)."""
+def event_starts() -> list[int]:
+    """First samples of stretches of the drive that each contain a detector trigger (so mutations reach the model)."""
     rec = recording()
+    return [max(0, int(e["start_s"] * rec.sample_rate_hz) - 300) for e in rec.truth_json()["events"]][:4] or [0]
+
+
+def drive_csvs(n_rows: int = 1200) -> tuple[bytes, ...]:
+    """The stretches of :func:`event_starts` as CSV recordings."""
     t, acc = drive()
-    starts = [max(0, int(e["start_s"] * rec.sample_rate_hz) - 300) for e in rec.truth_json()["events"]][:4]
-    return tuple(csv_bytes(t[s:s + n_rows], acc[s:s + n_rows]) for s in starts or [0])
+    return tuple(csv_bytes(t[s:s + n_rows], acc[s:s + n_rows]) for s in event_starts())
 
 
 def firmware_bytes(acc: np.ndarray, message: str, key: bytes | None, t0_boot_s: float, signing_t: int) -> bytes:

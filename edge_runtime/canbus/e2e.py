@@ -50,9 +50,12 @@ class E2EProtector:
         self._counters: dict[int, int] = {}
         self._lock = threading.Lock()
         self._payloads: OrderedDict[tuple, bytes] = OrderedDict()
+        self._data_ids: dict[int, int] = {}  # per frame ID: its DBC attribute, looked up once
 
     def _payload(self, message, signals: dict) -> bytes:
-        key = (message.frame_id, *sorted(signals.items()))
+        # the signals in the caller's order: the encoders build them in a fixed order, and the same
+        # signals in another order only make a second entry with the same bytes (no sort per frame)
+        key = (message.frame_id, *signals.items())
         with self._lock:
             data = self._payloads.get(key)
             if data is not None:
@@ -65,13 +68,22 @@ class E2EProtector:
                 self._payloads.popitem(last=False)
         return data
 
+    def skip(self, message, n: int) -> None:
+        """``n`` frames of ``message`` that were not sent: its alive counter moves on as if they had been."""
+        with self._lock:
+            counter = self._counters.get(message.frame_id, 0)
+            self._counters[message.frame_id] = (counter + n) % (COUNTER_MAX + 1)
+
     def protect(self, message, signals: dict) -> can.Message:
         with self._lock:
             counter = self._counters.get(message.frame_id, 0)
             self._counters[message.frame_id] = (counter + 1) % (COUNTER_MAX + 1)
         data = bytearray(self._payload(message, signals))
         data[COUNTER_BYTE] |= counter
-        p01.e2e_p01_protect(data, e2e_data_id(message), length=len(data), increment_counter=False)
+        data_id = self._data_ids.get(message.frame_id)
+        if data_id is None:
+            data_id = self._data_ids[message.frame_id] = e2e_data_id(message)
+        p01.e2e_p01_protect(data, data_id, length=len(data), increment_counter=False)
         return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
 
 

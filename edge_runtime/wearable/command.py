@@ -39,7 +39,8 @@ BAD_INPUT: tuple[type[BaseException], ...] = ()
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--replay", metavar="FILE.csv", help="a recording t,ax,ay,az (s, m/s^2), processed as fast as possible")
+    src.add_argument("--replay", metavar="FILE.csv|FILE.imu", help="a recording, CSV t,ax,ay,az (s, m/s^2) or one "
+                     "written by --record, processed as fast as possible")
     src.add_argument("--imu", metavar="serial:PATH?key=@FILE|key=env:NAME|unsigned=yes | sim[?minutes=M&seed=S&...]",
                      help="a live IMU: MAVLink HIGHRES_IMU/SCALED_IMU on a serial line, signed with the MAVLink 2 "
                           "key in FILE or in the environment variable NAME (unsigned only when the spec says "
@@ -48,6 +49,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="stop a live source after S seconds")
     p.add_argument("--can-log", metavar="OUT.log|.asc|.blf|.csv", help="write every CAN frame sent (python-can formats)")
     p.add_argument("--alerts", metavar="OUT.jsonl", help="write one JSON object per classifier decision")
+    p.add_argument("--record", metavar="OUT.imu", help="write every sample the loop is fed as an IMU recording "
+                   "(float32 m/s^2; --replay reads it much faster than CSV)")
     p.add_argument("--config", metavar="BOX.toml", help="the box configuration (see edge_runtime/box.example.toml)")
     p.add_argument("--print-config", action="store_true", help="print the effective configuration as TOML and exit")
     p.add_argument("--assets", metavar="DIR", help="model directory with manifest.json [model] assets")
@@ -95,12 +98,13 @@ def cmd(args: argparse.Namespace) -> int:
         for note in source.replay_stats.notices:
             print(f"notice: {note}", file=sys.stderr)
         outputs = _outputs(stack, args.alerts, args.quiet)
+        record = _recorder(stack, args.record)
         pub = _open_publisher(cfg, args.can_log, _status_of(engine), data_clock=source.live is None)
         stack.callback(pub.close)
         loop = WearableLoop(engine, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
         t_wall = time.perf_counter()
         with suppress(KeyboardInterrupt):
-            _drive(source, loop, outputs)
+            _drive(source, loop, outputs, record)
     _print_summary(loop, source, cfg, args.can_log, time.perf_counter() - t_wall)
     return 0
 
@@ -129,11 +133,12 @@ class _Source:
 
 
 def _open_source(args: argparse.Namespace, cfg) -> _Source:
-    from edge_runtime.wearable.sources import ReplayStats, read_imu_csv
+    from edge_runtime.wearable.recording import open_replay
+    from edge_runtime.wearable.sources import ReplayStats
 
     stats = ReplayStats()
     if args.replay:
-        blocks = read_imu_csv(args.replay, stats, range_mps2=cfg.imu.range_mps2)
+        blocks = open_replay(args.replay, stats, range_mps2=cfg.imu.range_mps2)
         if args.realtime:
             blocks = (b for block in blocks for b in _paced(block, cfg.imu.sample_rate_hz))
         return _Source(blocks, stats)
@@ -225,6 +230,17 @@ def _open_publisher(cfg, can_log: str | None, status: WearableStatus, data_clock
     return pub.start()
 
 
+def _recorder(stack: ExitStack, path: str | None) -> Callable[[ImuBlock], None] | None:
+    """``--record``: each block fed to the loop goes to an IMU recording (closed with ``stack``)."""
+    if not path:
+        return None
+    from edge_runtime.wearable.recording import RecordingWriter
+
+    writer = RecordingWriter(path)
+    stack.callback(writer.close)
+    return writer.write
+
+
 def _outputs(stack: ExitStack, alerts_path: str | None, quiet: bool) -> list[Callable[[Decision], None]]:
     """The output handlers, in order: the ``--alerts`` JSONL log (closed with ``stack``), the console."""
     handlers: list[Callable[[Decision], None]] = []
@@ -259,9 +275,11 @@ def replay(cfg, classifier, acc_mps2, outputs: Iterable[Callable[[Decision], Non
     return loop
 
 
-def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision], None]]) -> None:
-    """Every event of the source: a block goes to the loop and its decisions to the outputs;
-    a live sensor's state goes to the status. A disconnected sensor ends the run."""
+def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision], None]],
+           record: Callable[[ImuBlock], None] | None = None) -> None:
+    """Every event of the source: a block goes to ``record`` (``--record``), then to the loop and
+    its decisions to the outputs; a live sensor's state goes to the status. A disconnected sensor
+    ends the run."""
     from edge_runtime.core.service import keepalive
     from edge_runtime.wearable.sources import ImuBlock
 
@@ -275,6 +293,8 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
                 break
             continue
         _sensor_state(loop.publisher, "ok")
+        if record is not None:
+            record(event)
         for block in _data_clock_steps(loop, event) if source.live is None else (event,):
             for decision in loop.feed(block):
                 for output in outputs:
@@ -284,12 +304,23 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
 
 
 def _data_clock_steps(loop: WearableLoop, block: ImuBlock) -> Iterator[ImuBlock]:
-    """A recorded block in pieces of one heartbeat period, the publisher's data clock moved to
-    the start of each: every heartbeat goes out at its data time and reports the samples fed
-    by then (a recording is one block: fed whole, every heartbeat would count all of it)."""
+    """A recorded block as the loop is fed it, the publisher's data clock moved to its start:
+    every heartbeat goes out at its data time and reports the samples fed by then.
+
+    A block of finite samples is fed whole: within it only the sample count grows, and a
+    heartbeat reads that only to tell "starting" (nothing fed yet), so each heartbeat says what
+    it said when the block went in pieces, at a fraction of the calls (the loop's decisions do
+    not depend on how a stream is split). A block with non-finite samples goes in pieces of one
+    heartbeat period, so the heartbeat after a bad sample, and only that one, says degraded."""
+    import numpy as np
+
     from edge_runtime.wearable.sources import ImuBlock
 
     pub = loop.publisher
+    if np.isfinite(block.acc_mps2).all():
+        pub.advance_to(block.t0_s)
+        yield block
+        return
     step = max(1, round(pub.period * loop.rate_hz))
     for i in range(0, len(block.acc_mps2), step):
         t0_s = block.t0_s + i / loop.rate_hz
@@ -325,7 +356,9 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
     )
     c = loop.publisher.summary()
     print(f"  CAN {cfg.can.interface}:{cfg.can.channel}: frames sent {c['frames_sent']} (alerts {c['alerts_sent']} "
-          f"+ copies {c['alert_copies_sent']}, heartbeats {c['heartbeats_sent']}), send errors {c['send_errors']}, "
+          f"+ copies {c['alert_copies_sent']}, heartbeats {c['heartbeats_sent']}"
+          + (f"; {c['frames_unheard']} of them not encoded: nobody on the bus to hear them" if c["frames_unheard"]
+             else "") + f"), send errors {c['send_errors']}, "
           f"reconnects {c['reconnects']}"
           + (f"; logged to {can_log}" if can_log else ""))
     if c["alerts_held"] or c["alerts_lost"]:

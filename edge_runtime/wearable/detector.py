@@ -23,6 +23,7 @@ NaNs): the window must fill again before the next trigger.
 """
 from __future__ import annotations
 
+from array import array
 from dataclasses import dataclass
 
 import numpy as np
@@ -140,14 +141,23 @@ class StreamingDetector:
         self.triggers: list[int] = []
         self._keep = max(cfg.lag, cfg.pre_frames)  # history a new sample may need
         self._lag, self._thr, self._axis = cfg.lag, cfg.threshold_mps2, cfg.axis  # read per sample
-        self._buf = np.empty((self._keep + _ROOM_FRAMES, 3), np.float32)
-        self._ax = np.empty(len(self._buf), np.float64)  # the watched axis, as detect_triggers compares it
+        self._alloc(self._keep + _ROOM_FRAMES)
         self._len = 0  # rows of _buf in use: frames n_seen - _len ... n_seen - 1, none before _valid_from
         self._valid_from = 0  # first sample of the current continuous stretch
         self._allowed_from = cfg.lag  # earliest frame that may trigger
-        self._cap = np.empty((cfg.capture_frames, 3), np.float32)
+        self._cap_a = array("f", bytes(4 * 3 * cfg.capture_frames))
+        self._cap = np.frombuffer(self._cap_a, np.float32).reshape(-1, 3)
         self._cap_trigger: int | None = None  # the capture filling, if any ...
         self._cap_have = 0  # ... and its frames so far
+
+    def _alloc(self, rows: int) -> None:
+        """The history buffers for ``rows`` frames: Python arrays that :meth:`push_sample` writes one
+        float at a time (no numpy call per sample: in a 100 Hz loop each costs microseconds on cold
+        caches), and numpy views of the same memory for blocks."""
+        self._buf_a = array("f", bytes(4 * 3 * rows))
+        self._ax_a = array("d", bytes(8 * rows))
+        self._buf = np.frombuffer(self._buf_a, np.float32).reshape(rows, 3)
+        self._ax = np.frombuffer(self._ax_a, np.float64)  # the watched axis, as detect_triggers compares it
 
     @property
     def capturing(self) -> bool:
@@ -185,10 +195,10 @@ class StreamingDetector:
         if self._len + n > len(self._buf):  # compact: keep the window's history, make room
             keep = min(self._len, self._keep)
             rows, ax = self._buf[self._len - keep : self._len], self._ax[self._len - keep : self._len]
+            rows, ax = rows.copy(), ax.copy()  # the slices may overlap the target, or go with the old buffer
             if keep + n > len(self._buf):  # a block longer than the room: a buffer that holds it
-                self._buf = np.empty((self._keep + max(n, _ROOM_FRAMES), 3), np.float32)
-                self._ax = np.empty(len(self._buf), np.float64)
-            self._buf[:keep], self._ax[:keep] = rows.copy(), ax.copy()  # the slices may overlap the target
+                self._alloc(self._keep + max(n, _ROOM_FRAMES))
+            self._buf[:keep], self._ax[:keep] = rows, ax
             self._len = keep
         if n == 1:  # the live 100 Hz loop: item assignments, no slicing
             self._buf[self._len] = block[0]
@@ -197,6 +207,44 @@ class StreamingDetector:
             self._buf[self._len : self._len + n] = block
             self._ax[self._len : self._len + n] = block[:, self._axis]
         self._len += n
+
+    def push_sample(self, x: float, y: float, z: float) -> Capture | None:
+        """:meth:`push` of one finite sample given as three floats, the 100 Hz loop's call: the same
+        triggers and captures, written into the buffers element by element (the capture it
+        completes, if any)."""
+        if self._len == len(self._buf):
+            self._append(np.array([[x, y, z]], np.float32))  # compaction: rare, the block path does it
+        else:
+            i = self._len
+            buf = self._buf_a
+            buf[3 * i], buf[3 * i + 1], buf[3 * i + 2] = x, y, z
+            self._ax_a[i] = buf[3 * i + self._axis]  # the float32 value, as push compares it
+            self._len = i + 1
+        t = self.n_seen
+        end = self.n_seen = t + 1
+        s0 = end - self._len
+        if self._cap_trigger is not None:  # one more frame of the capture filling (it cannot trigger)
+            return self._fill_one(s0)
+        lag = self._lag
+        if t >= self._valid_from + lag and t >= self._allowed_from:
+            j = t - s0
+            if abs(self._ax_a[j] - self._ax_a[j - lag]) > self._thr:
+                self.triggers.append(t)
+                self._allowed_from = t + self.cfg.post_frames
+                self._cap_trigger, self._cap_have = t, 0
+                done = self._fill(s0, end)
+                return done[0] if done else None
+        return None
+
+    def _fill_one(self, s0: int) -> Capture | None:
+        have = self._cap_have
+        r = 3 * (self._cap_trigger - self.cfg.pre_frames + have - s0)
+        self._cap_a[3 * have : 3 * have + 3] = self._buf_a[r : r + 3]
+        self._cap_have = have = have + 1
+        if have < self.cfg.capture_frames:
+            return None
+        t, self._cap_trigger = self._cap_trigger, None
+        return Capture(t, t - self.cfg.pre_frames, self._cap.copy())
 
     def push(self, block: np.ndarray) -> list[Capture]:
         if type(block) is not np.ndarray or block.dtype != np.float32 or block.ndim != 2:

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
@@ -91,7 +91,8 @@ class AlertPolicy:
                              lambda v: len(v) == N_SUBSEQ and all(p <= 1.0 for p in v)))
     """Threshold of a decision after S = 1..6 sub-windows (a preliminary alert or a revision for S < 6,
     the full window's for S = 6); a negative entry: the model manifest's min_confidence_by_steps for
-    that S (chosen on validation data), else 0.9 for S < 6 and min_confidence for S = 6."""
+    that S (chosen on validation data), else 0.9 for S < 6 and min_confidence for S = 6. 1 for an
+    S < 6: no decision after S sub-windows (the step is not computed)."""
     event_hold_s: float = config.setting(5.0, config.within(0.0, 120.0, "s"))
     """An alert event stays active until this long after the end of its last capture: a capture
     triggered meanwhile continues it and raises no new alert. 0: every capture is its own event.
@@ -164,7 +165,8 @@ class Decision(Verdict):
     @classmethod
     def made(cls, verdict: Verdict, alerted: bool, status: str | None = None,
              latency_ms: float | None = None, alert_seq: int | None = None) -> "Decision":
-        return cls(**{**asdict(verdict), "status": status or verdict.status}, alerted=alerted, latency_ms=latency_ms,
+        # the verdict's fields as they are (asdict would deep-copy probs: a third of a replay's decision cost)
+        return cls(**{**vars(verdict), "status": status or verdict.status}, alerted=alerted, latency_ms=latency_ms,
                    alert_seq=alert_seq)
 
     def to_json(self) -> dict:
@@ -245,14 +247,18 @@ class WearableLoop:
         self._seg_index0 = 0  # detector index of the current continuous stretch ...
         self._seg_t0 = 0.0  # ... and its stream time
         self._rx: float | None = None  # arrival time of the block being fed
-        offered = tuple(getattr(classifier, "early_steps", (N_SUBSEQ,)))
-        self._early_steps = offered if policy.decision == "early" else (N_SUBSEQ,)
-        self._early = self._early_steps != (N_SUBSEQ,)
-        self.decision_mode = "early decisions after S = " + ",".join(map(str, self._early_steps)) if self._early \
-            else "full-window decisions" + (" (the model takes S = 6 only)" if policy.decision == "early" else "")
-        self._prefix = getattr(classifier, "classify_prefix", None)
         early = getattr(classifier, "early", None)
         self._manifest_thresholds: dict[int, float] = dict(getattr(early, "min_confidence_by_steps", {}) or {})
+        offered = tuple(getattr(classifier, "early_steps", (N_SUBSEQ,)))
+        # A threshold of 1 before the full window means no decision at that step (the manifest gives S = 1
+        # one: near-chance, and outside int8's agreement gate), so the loop does not compute it at all.
+        self._early_steps = tuple(s for s in offered if s == N_SUBSEQ or self.policy.threshold(
+            s, self._manifest_thresholds) < 1.0) if policy.decision == "early" else (N_SUBSEQ,)
+        self._early = self._early_steps != (N_SUBSEQ,)
+        self.decision_mode = "early decisions after S = " + ",".join(map(str, self._early_steps)) if self._early \
+            else "full-window decisions" + (" (the model takes S = 6 only)" if offered == (N_SUBSEQ,) else
+                                            " (every S < 6 has threshold 1)" if policy.decision == "early" else "")
+        self._prefix = getattr(classifier, "classify_prefix", None)
         self._capture: _CaptureState | None = None  # the capture being decided
         self._first_frames = needed_frames(self._early_steps[0])
         self._next_frames = self._first_frames  # frames the next early step needs
@@ -285,11 +291,13 @@ class WearableLoop:
         if not block.continuous or self.detector.n_seen == 0:  # nothing fed yet, or a gap
             self._restart(block.t0_s)
         self._rx = block.rx_monotonic_s
-        if len(acc) == 1:  # the live 100 Hz loop: one sample, checked as three floats (no ufunc machinery)
-            fine = all(map(math.isfinite, acc[0].tolist()))
-        else:
-            fine = bool(np.isfinite(acc).all())
-        if fine:  # the common case
+        if len(acc) == 1:  # the live 100 Hz loop: one sample as three floats, no numpy call per sample
+            sample = acc[0].tolist()
+            if all(map(math.isfinite, sample)):
+                self.status.count_samples(1)
+                cap = self.detector.push_sample(*sample)
+                return (self._steps_of(cap.trigger_index, cap.data) if cap is not None else []) + self._early_due()
+        elif np.isfinite(acc).all():  # the common case
             self.status.count_samples(len(acc))
             return self._push(acc)
         bad = ~np.isfinite(acc).all(axis=1)
@@ -314,10 +322,14 @@ class WearableLoop:
         out: list[Decision] = []
         for cap in self.detector.push(acc):  # completed in this block: every step still due, in order
             out += self._steps_of(cap.trigger_index, cap.data)
+        return out + self._early_due()
+
+    def _early_due(self) -> list[Decision]:
+        """The early steps the capture still filling now holds the frames for."""
         if self._early and self.detector.capturing and self.detector.filled >= self._next_frames:
             trigger, so_far = self.detector.filling
-            out += self._steps_of(trigger, so_far)
-        return out
+            return self._steps_of(trigger, so_far)
+        return []
 
     # ------------------------------------------------------------------ decisions
 

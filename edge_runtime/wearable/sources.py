@@ -96,8 +96,8 @@ def screen_samples(acc: np.ndarray, range_mps2: float) -> tuple[np.ndarray, int,
     sample that has a non-finite axis or one beyond ``range_mps2`` set to NaN (so the loop
     counts it and the model never sees it), the number set to NaN for being out of range,
     and the number at full scale (saturated, passed on)."""
-    a = np.asarray(acc, dtype=np.float64).reshape(-1, 3)
-    with np.errstate(invalid="ignore", over="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):  # a signalling NaN (a binary recording may hold one) warns
+        a = np.asarray(acc, dtype=np.float64).reshape(-1, 3)
         mag = np.abs(a)
         beyond = (mag > range_mps2 * (1 + SATURATION_TOLERANCE)).any(axis=1)
         at_scale = (mag >= range_mps2 * (1 - SATURATION_TOLERANCE)).any(axis=1) & ~beyond

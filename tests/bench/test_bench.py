@@ -106,6 +106,7 @@ def test_loops(quick):
     assert w["peak_rss_mb"] > 0
     d = loops["detector"]
     assert d["samples"] == d["n"] == DRIVE_SAMPLES and d["triggers"] >= 1
+    assert loops["detector_sample"]["n"] == DRIVE_SAMPLES and loops["detector_sample"]["triggers"] == d["triggers"]
     # every completed capture of the drive is decided at least once (the last trigger's may still be filling), and
     # with early decisions at most once per sub-window (6); alerted ones are a subset
     assert d["triggers"] - 1 <= loops["decision_latency"]["n"] <= 6 * d["triggers"]

@@ -277,3 +277,39 @@ def test_updates_of_an_alert_go_out_under_its_alert_seq_with_their_own_status_an
     got = [(d["AlertSeq"], str(d["Status"]), str(d["Class"])) for _, i, d in _frames(tmp_path / "f.log") if i == 0x3A0]
     assert got == ([(0, "preliminary", "Phone")] * 5 + [(0, "revised", "Texting")] * 5 + [(0, "confirmed", "Texting")] * 5
                    + [(1, "alert", "Drink")] * 5 + [(1, "withdrawn", "Other")] * 5)
+
+
+def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_is_what_it_would_have_been():
+    """A data-clock publisher whose virtual bus has nobody else on its channel skips encoding the
+    heartbeats and alert frames; once a listener joins, its frames equal those of a publisher that
+    was heard all along."""
+    def publisher(channel):
+        pub = AlertPublisher(can.Bus(interface="virtual", channel=channel), heartbeat_period_s=0.1,
+                             clock=Clock.DATA)
+        pub.status.count_samples(100)
+        return pub
+
+    heard, unheard = publisher("beats-heard"), publisher("beats-unheard")
+    rx_heard = can.Bus(interface="virtual", channel="beats-heard")
+    for pub in (heard, unheard):
+        pub.advance_to(0.0)
+        pub.status.set_alerts_undelivered(1)  # the next UNDELIVERED_HEARTBEATS heartbeats say degraded ...
+        pub.advance_to(0.25)  # ... two of which nobody hears on the unheard bus
+        pub.publish_alert(SimpleNamespace(t_trigger_s=0.1, t_alert_s=0.25, label="Phone", confidence=0.9,
+                                          status="alert", compute_us=0.0))  # its first frame unheard, its copies heard
+        pub.status.count_samples(10, non_finite=3)
+    rx_unheard = can.Bus(interface="virtual", channel="beats-unheard")
+    for pub in (heard, unheard):
+        pub.advance_to(1.0)
+        pub.close()
+    assert unheard.frames_unheard == 4 and heard.frames_unheard == 0
+    assert unheard.heartbeats_sent == heard.heartbeats_sent == 11 and unheard.alert_copies_sent == 4
+
+    def frames(rx):
+        out = []
+        while (m := rx.recv(timeout=0)) is not None:
+            out.append(bytes(m.data))
+        rx.shutdown()
+        return out
+
+    assert frames(rx_unheard) == frames(rx_heard)[4:]

@@ -205,3 +205,57 @@ def test_the_min_confidence_flag_is_the_full_windows_threshold_before_the_models
     out = capsys.readouterr().out
     assert "min_confidence = 0.7" in out and "min_confidence_by_steps = [-1.0, -1.0, -1.0, -1.0, -1.0, 0.7]" in out
     assert 'decision = "full_window"' in out
+
+
+def _replayed(cfg, events, can_log):
+    """Decisions (without their wall-clock compute time) and CAN frames of ``events`` driven as a replay."""
+    from edge_runtime.wearable.classifier import Engine
+
+    engine = Engine.from_manifest()
+    pub = command._open_publisher(cfg, str(can_log), command._status_of(engine), data_clock=True)
+    decisions = []
+    try:
+        loop = WearableLoop(engine, cfg.detector, cfg.alerts, publisher=pub)
+        command._drive(command._Source(events, ReplayStats()), loop, [lambda d: decisions.append(d.to_json())])
+    finally:
+        pub.close()
+    for d in decisions:
+        d.pop("compute_us")
+    frames = [(round(m.timestamp, 3), m.arbitration_id, bytes(m.data)) for m in can.LogReader(str(can_log))]
+    return decisions, frames
+
+
+def test_a_recording_fed_in_blocks_decides_as_sample_by_sample_and_beats_as_in_heartbeat_pieces(tmp_path):
+    """The replay feeds whole blocks of finite samples. Its decisions are those of the live path (one
+    sample at a time); its frames are those of feeding every heartbeat period on its own, which a
+    heartbeat's counts are defined by (what was fed by its data time)."""
+    from firmware_sim.devices.wrist import simulate_drive
+
+    acc = np.ascontiguousarray(simulate_drive(3.0, seed=5).acc_mps2, dtype=np.float32)
+    acc[9000:9030] = np.nan  # a run of bad samples: the detector restarts, a heartbeat says degraded
+    cut = 12_345  # a gap of 2 s there: a new block that does not continue the previous one
+    blocks = [ImuBlock(0.0, acc[:cut]), ImuBlock(cut / 100 + 2.0, acc[cut:], continuous=False)]
+
+    def split(n):
+        return [ImuBlock(b.t0_s + i / 100, b.acc_mps2[i : i + n], b.continuous or i > 0)
+                for b in blocks for i in range(0, len(b.acc_mps2), n)]
+
+    cfg = command.effective_config(argparse.Namespace(config=None, assets=None, model=None, threads=None,
+                                                      min_confidence=None, decision=None, threshold=None))
+    fast, fast_frames = _replayed(cfg, blocks, tmp_path / "blocks.log")
+    per_sample, _ = _replayed(cfg, split(1), tmp_path / "samples.log")
+    _, piece_frames = _replayed(cfg, split(10), tmp_path / "pieces.log")
+    assert len(fast) >= 5 and any(d["alerted"] for d in fast)
+    assert fast == per_sample
+    beats = [f for f in fast_frames if f[1] == 0x3A1]
+    assert beats == [f for f in piece_frames if f[1] == 0x3A1] and len(beats) >= 10 * 180
+    degraded = [t for t, i, d in beats if str(AlertEncoder().decode(can.Message(arbitration_id=i, data=d))["State"])
+                == "degraded"]
+    gap_s = cut / 100 + 2.0
+    assert degraded and all(90.0 < t <= 90.4 or gap_s < t <= gap_s + 0.1 for t in degraded)  # bad samples, the gap
+    assert any(t > gap_s for t in degraded)
+
+    def alerts(frames):  # TimeSinceTrigger counts wall-clock compute time: counter and status, class, confidence, AlertSeq
+        return [(t, d[1:4] + d[6:8]) for t, i, d in frames if i == 0x3A0]
+
+    assert alerts(fast_frames) == alerts(piece_frames)

@@ -22,12 +22,18 @@ def _signal(seed: int, n: int) -> np.ndarray:
     return x
 
 
-def _stream(x: np.ndarray, cuts: list[int], det: StreamingDetector | None = None):
+def _stream(x: np.ndarray, cuts: list[int], det: StreamingDetector | None = None, as_floats: bool = False):
+    """``x`` pushed in the blocks ``cuts`` makes; with ``as_floats`` a one-sample block goes in as
+    the 100 Hz loop gives it (:meth:`StreamingDetector.push_sample`)."""
     det = det or StreamingDetector()
     caps = []
     edges = [0, *sorted(set(c for c in cuts if 0 < c < len(x))), len(x)]
     for a, b in zip(edges[:-1], edges[1:]):
-        caps += det.push(x[a:b])
+        if as_floats and b - a == 1:
+            cap = det.push_sample(*x[a].tolist())
+            caps += [cap] if cap is not None else []
+        else:
+            caps += det.push(x[a:b])
     return det, caps
 
 
@@ -36,9 +42,12 @@ def _stream(x: np.ndarray, cuts: list[int], det: StreamingDetector | None = None
 def test_streaming_matches_reference_for_any_block_split(seed, n, data):
     x = _signal(seed, n)
     cuts = data.draw(st.lists(st.integers(1, n - 1), max_size=40))
+    if data.draw(st.booleans()):  # a stretch sample by sample, as floats, between blocks
+        a = data.draw(st.integers(0, n - 1))
+        cuts += list(range(a, min(n, a + data.draw(st.integers(1, 1500)))))
     ref_triggers = detect_triggers(x)
     ref_caps = extract_captures(x, ref_triggers)
-    det, caps = _stream(x, cuts)
+    det, caps = _stream(x, cuts, as_floats=data.draw(st.booleans()))
     assert det.triggers == ref_triggers.tolist()
     assert [c.trigger_index for c in caps] == [c.trigger_index for c in ref_caps]
     for c, r in zip(caps, ref_caps):
@@ -50,8 +59,11 @@ def test_sample_by_sample_equals_one_block():
     x = _signal(3, 5000)
     one, caps_one = _stream(x, [])
     each, caps_each = _stream(x, list(range(1, len(x))))
-    assert one.triggers == each.triggers and len(one.triggers) >= 3
-    assert len(caps_one) == len(caps_each)
+    floats, caps_floats = _stream(x, list(range(1, len(x))), as_floats=True)
+    assert one.triggers == each.triggers == floats.triggers and len(one.triggers) >= 3
+    assert len(caps_one) == len(caps_each) == len(caps_floats)
+    for a, b in zip(caps_one, caps_floats):
+        assert a.trigger_index == b.trigger_index and np.array_equal(a.data, b.data)
 
 
 def test_trigger_rule_window_capture_and_pause():

@@ -249,6 +249,16 @@ def test_early_thresholds_come_from_the_config_else_the_manifest():
         min_confidence_by_steps=(-1.0,) * 5 + (0.7,)))[0])[-1] == ("alert", 6, "Phone", 0)
 
 
+def test_a_threshold_of_1_before_the_full_window_means_no_decision_and_no_model_call_at_that_step():
+    answers = {1: ("Drink", 1.0), 3: ("Phone", 1.0), 6: ("Phone", 0.8)}  # confidence 1: what float32 may round to
+    ds, _, clf, loop = _early_run(answers, manifest_thresholds={1: 1.0})
+    assert [s for s, _ in clf.seen] == [2, 3, 4, 5, 6] and loop.decision_mode == "early decisions after S = 2,3,4,5,6"
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    ds, _, clf, loop = _early_run(answers, policy=AlertPolicy(min_confidence_by_steps=(1.0,) * 5 + (-1.0,)))
+    assert [s for s, _ in clf.seen] == [6] and _summary(ds) == [("alert", 6, "Phone", 0)]
+    assert loop.decision_mode == "full-window decisions (every S < 6 has threshold 1)"
+
+
 def test_early_decisions_do_not_depend_on_how_the_stream_is_cut():
     acc = _steps(9000, [1000, 4000])
     answers = {1: ("Drink", 0.99), 3: ("Phone", 0.95), 6: ("Phone", 0.9)}
