@@ -49,6 +49,7 @@ Faults (docs/design.md section 8: degrade loudly)
 """
 from __future__ import annotations
 
+import logging
 import math
 import os
 import queue
@@ -64,6 +65,8 @@ from edge_runtime import config
 from edge_runtime.core.manifest import ModelIntegrityError
 from edge_runtime.errors import InputError
 from edge_runtime.robot.keypoints import FORMATS, Person
+
+log = logging.getLogger(__name__)
 
 PAD_VALUE = 0.5
 """Letterbox border (RGB in [0, 1])."""
@@ -243,6 +246,12 @@ class CameraStatus:
     file), "disconnected" (no frame for give_up_s)."""
     since_s: float
     """Seconds since the last frame."""
+
+    def log(self) -> None:
+        """One log line (event ``camera_state``): a warning unless the frames are back. Logged with
+        ``--quiet`` too: a service's journal must show a camera that stalled."""
+        log.log(logging.INFO if self.state == "ok" else logging.WARNING, "camera %s (%.2f s since the last frame)",
+                self.state, self.since_s, extra={"event": "camera_state"})
 
 
 @dataclass

@@ -67,6 +67,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import logging
 import queue
 import sys
 import threading
@@ -89,6 +90,7 @@ if TYPE_CHECKING:  # imported when the loop runs, not for every command's option
     from edge_runtime.robot.link.base import RobotLink
     from edge_runtime.robot.loop import FrameRecord, RobotLoop
 
+log = logging.getLogger(__name__)
 TICK_S = 0.01
 """Control cycle of the real-time driver (s)."""
 EXIT_LINK_FAULT = 3
@@ -312,7 +314,7 @@ def _keypoint_source(args, cfg) -> KeypointSource:
             raise CliError("--camera needs --pose-model POSE.onnx (or [camera] pose_model)")
         model = PoseModel(cam.pose_model, keypoint_format=cam.keypoint_format, threads=cfg.lifter.threads)
         source = CameraKeypointSource(args.camera, model, cfg.camera_source)
-        frames = _camera_frames(source, args.quiet)
+        frames = _camera_frames(source)
     if camera is None:
         size = source.frame_size() if source is not None else None
         camera = CameraModel.from_fov(*(size or (1280, 720)))
@@ -320,16 +322,16 @@ def _keypoint_source(args, cfg) -> KeypointSource:
     return KeypointSource(frames, lifter, live=source is not None, tracking=cfg.people)
 
 
-def _camera_frames(source, quiet: bool):
-    """(t_s, people) from a camera source; its status changes go to stderr."""
+def _camera_frames(source):
+    """(t_s, people) from a camera source; its status changes are logged (event camera_state)."""
     from edge_runtime.robot.camera_source import CameraFrame
 
     try:
         for item in source.frames():
             if isinstance(item, CameraFrame):
                 yield item.t_s, item.people
-            elif not quiet:
-                print(f"camera: {item.state} ({item.since_s:.2f} s since the last frame)", file=sys.stderr)
+            else:
+                item.log()
     finally:
         source.close()
 
@@ -572,7 +574,8 @@ def _safe_stop(link: RobotLink) -> None:
     try:
         link.stop()
     except Exception as e:  # noqa: BLE001 - reported, the controller's watchdog stops the arm anyway
-        print(f"warning: final stop not sent ({type(e).__name__}: {e}); the arm's watchdog stops it", file=sys.stderr)
+        log.warning("final stop not sent (%s: %s); the arm's watchdog stops it", type(e).__name__, e,
+                    extra={"event": "final_stop_not_sent"})
 
 
 def _summary(loop: RobotLoop, link: RobotLink, states: dict, wall_s: float) -> dict:

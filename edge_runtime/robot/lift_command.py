@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 
 import numpy as np
@@ -139,8 +138,7 @@ def _frames_from_video(args, stats: dict, threads: int):
                     yield item.t_s, item.index, item.people
                     continue
                 stats[item.state] = stats.get(item.state, 0) + 1
-                if not args.quiet:
-                    print(f"camera: {item.state} ({item.since_s:.2f} s since the last frame)", file=sys.stderr)
+                item.log()
         finally:
             source.close()
             stats.update(source.stats.to_json())

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
+import logging
 import time
 from contextlib import ExitStack, suppress
 from dataclasses import dataclass
@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from edge_runtime.wearable.mavlink_source import MavlinkImuSource
     from edge_runtime.wearable.sources import ImuBlock, ReplayStats
 
+log = logging.getLogger(__name__)
 BAD_INPUT: tuple[type[BaseException], ...] = ()
 """Everything the wearable refuses is in the error tree already (``errors.BAD_INPUT``, ``LinkError``)."""
 
@@ -96,7 +97,7 @@ def cmd(args: argparse.Namespace) -> int:
         stack.callback(source.close)
         engine = _load_classifier(cfg)
         for note in source.replay_stats.notices:
-            print(f"notice: {note}", file=sys.stderr)
+            log.info("%s", note, extra={"event": "replay_notice"})
         outputs = _outputs(stack, args.alerts, args.quiet)
         record = _recorder(stack, args.record)
         pub = _open_publisher(cfg, args.can_log, _status_of(engine), data_clock=source.live is None)
@@ -168,8 +169,8 @@ def _open_live_source(spec: str, cfg) -> MavlinkImuSource:
         raise CliError(f"--imu serial:{line.path}: no signing key; give {KEY_FORMS}, "
                        "or add ?unsigned=yes if an unsigned IMU line is intended")
     if line.unsigned:
-        print(f"warning: --imu serial:{line.path} is unsigned (unsigned=yes): any device on the line "
-              "can inject or replay IMU samples", file=sys.stderr)
+        log.warning("--imu serial:%s is unsigned (unsigned=yes): any device on the line can inject or replay "
+                    "IMU samples", line.path, extra={"event": "imu_unsigned"})
     from edge_runtime.wearable.mavlink_source import MavlinkImuSource
 
     try:
@@ -331,7 +332,8 @@ def _data_clock_steps(loop: WearableLoop, block: ImuBlock) -> Iterator[ImuBlock]
 def _sensor_state(pub: AlertPublisher, state: str, detail: str = "") -> None:
     """A change of the sensor's state is printed and reported at once, not at the next heartbeat period."""
     if pub.status.set_sensor(state):
-        print(f"sensor: {state}{detail}", file=sys.stderr)
+        log.log(logging.INFO if state == "ok" else logging.WARNING, "sensor %s%s", state, detail,
+                extra={"event": "sensor_state"})
         pub.send_heartbeat()
 
 

@@ -53,7 +53,7 @@ def test_run_makes_a_missing_extra_one_line_and_exit_2_but_a_missing_own_module_
 @pytest.mark.slow
 @pytest.mark.parametrize("argv, message", [
     (("edge_runtime", "wearable", "--imu", "serial:/dev/null?unsigned=yes"),
-     "warning: --imu serial:/dev/null is unsigned (unsigned=yes): any device on the line can inject or replay "
+     "level=WARNING component=edge_runtime.wearable.command event=imu_unsigned --imu serial:/dev/null is unsigned (unsigned=yes): any device on the line can inject or replay "
      "IMU samples\nerror: wearable needs pyserial (module serial): pip install 'edge-safety[serial-imu]'"),
     (("firmware_sim", "imu", "--help"),
      "error: firmware_sim imu needs pymavlink (module pymavlink): pip install 'edge-safety[sim]'"),

@@ -3,6 +3,7 @@ registered in (edge_runtime/__main__.py, cli.run_command)."""
 import argparse
 import importlib
 import json
+import logging
 import re
 import subprocess
 import sys
@@ -135,17 +136,19 @@ class Live:
         self.stats = argparse.Namespace(saturated=2, dropped=7)
 
 
-def test_drive_reports_each_change_of_the_sensor_once_and_stops_when_it_is_gone(capsys):
+def test_drive_reports_each_change_of_the_sensor_once_and_stops_when_it_is_gone(caplog):
     pub = Publisher()
     loop = WearableLoop(Classifier(), publisher=pub)
     rest = np.tile(np.float32([0, 0, 9.81]), (10, 1))
     events = [SourceStatus("silent", 0.2), SourceStatus("silent", 0.25), ImuBlock(0.0, rest), ImuBlock(0.1, rest),
               SourceStatus("disconnected", 1.0), ImuBlock(0.2, rest)]
     source = command._Source(iter(events), ReplayStats(), live=Live())
+    caplog.set_level(logging.INFO, logger="edge_runtime")
     command._drive(source, loop, outputs=[])
-    err = capsys.readouterr().err.splitlines()
-    assert err == ["sensor: silent (0.20 s since the last sample)", "sensor: ok",
-                   "sensor: disconnected (1.00 s since the last sample)"]
+    lines = [(r.levelname, r.event, r.getMessage()) for r in caplog.records if getattr(r, "event", "") == "sensor_state"]
+    assert lines == [("WARNING", "sensor_state", "sensor silent (0.20 s since the last sample)"),
+                     ("INFO", "sensor_state", "sensor ok"),
+                     ("WARNING", "sensor_state", "sensor disconnected (1.00 s since the last sample)")]
     assert pub.heartbeats == 3  # one at each change, at once
     counts = pub.status.counts()
     assert (counts.sensor, counts.samples, counts.saturated, counts.source_dropped) == ("disconnected", 20, 2, 7)
