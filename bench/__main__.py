@@ -1,4 +1,4 @@
-"""python -m bench [--threads N ...] [--cpus 0,1] [--quick] [--json OUT.json] [--markdown OUT.md] [--compare OLD.json]
+"""python -m bench [--threads N ...] [--cpus 0,1] [--busy-cpus 1] [--quick] [--json OUT.json] [--markdown OUT.md] [--compare OLD.json]
 
 What the box will do, per shipped model and per loop:
 
@@ -38,6 +38,9 @@ def build_parser() -> OneLineParser:
                       "model, and the loops' costs, on this machine.")
     p.add_argument("--threads", type=positive_int, nargs="+", default=[1, 2], help="intra-op threads (default 1 2)")
     p.add_argument("--cpus", default=None, help="pin to these CPUs, e.g. 0,1 or 0-1 (os.sched_setaffinity)")
+    p.add_argument("--busy-cpus", default=None, metavar="CPUS",
+                   help="run a busy-loop process on each of these CPUs while measuring (a load generator: "
+                        "the other core busy); pin the bench elsewhere with --cpus")
     p.add_argument("--n", type=positive_int, default=2000, help="timed calls per configuration (default 2000)")
     p.add_argument("--warmup", type=positive_int, default=200, help="untimed calls per configuration and round")
     p.add_argument("--rounds", type=positive_int, default=2, help="sweeps over all configurations (default 2)")
@@ -76,7 +79,9 @@ def _write(path: str, text: str) -> None:
 
 
 def cmd(a) -> int:
-    from bench.machine import parse_cpus, pin_cpus
+    from contextlib import nullcontext
+
+    from bench.machine import LoadGenerator, parse_cpus, pin_cpus
     from bench.report import compare, format_markdown, format_table
     from bench.sweep import BenchOptions, run_bench
 
@@ -89,7 +94,10 @@ def cmd(a) -> int:
     opts = BenchOptions(assets=a.assets or "", threads=tuple(a.threads), use_torch=not a.no_torch,
                         use_openvino=not a.no_openvino, models=a.models, loops=not a.no_loops, seed=a.seed,
                         command="python -m bench " + " ".join(sys.argv[1:]), **sizes)
-    report = run_bench(opts)
+    busy = LoadGenerator(parse_cpus(a.busy_cpus)) if a.busy_cpus else nullcontext()
+    with busy:
+        report = run_bench(opts)
+    report["load_generator_cpus"] = busy.cpus if a.busy_cpus else []
     print(format_table(report))
     if a.json:
         _write(a.json, json.dumps(report, indent=2))

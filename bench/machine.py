@@ -95,3 +95,39 @@ def pin_cpus(cpus: list[int]) -> list[int]:
         raise ValueError(f"--cpus: CPU(s) {missing} not available to this process (available: {sorted(allowed)})")
     os.sched_setaffinity(0, cpus)
     return sorted(os.sched_getaffinity(0))
+
+
+def _spin(cpu: int) -> None:
+    os.sched_setaffinity(0, [cpu])
+    while True:
+        pass
+
+
+class LoadGenerator:
+    """One busy-looping process pinned to each of ``cpus`` while the ``with`` block runs: "the
+    other core busy", as a box running the camera decoder or the wearable beside the robot loop
+    would have it. Pin the bench itself elsewhere (``--cpus``) or the two share a core."""
+
+    def __init__(self, cpus: list[int]):
+        allowed = os.sched_getaffinity(0)
+        missing = sorted(set(cpus) - allowed)
+        if missing:
+            raise ValueError(f"--busy-cpus: CPU(s) {missing} not available to this process "
+                             f"(available: {sorted(allowed)})")
+        self.cpus = list(cpus)
+        self.procs: list = []
+
+    def __enter__(self) -> "LoadGenerator":
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")  # no copy of the bench's state (sessions, threads) in the spinner
+        self.procs = [ctx.Process(target=_spin, args=(c,), daemon=True) for c in self.cpus]
+        for p in self.procs:
+            p.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for p in self.procs:
+            p.terminate()
+        for p in self.procs:
+            p.join(5)

@@ -121,7 +121,9 @@ def format_markdown(report: dict) -> str:
              f"{m['cpus_used']}, load average {m['load_avg_1_5_15']} at the start), python {m['python']}, "
              f"onnxruntime {m['onnxruntime']}, openvino {m.get('openvino') or 'absent'}, torch "
              f"{m['torch'] or 'absent'}; batch 1, {report['method']['n']} timed calls per row after "
-             f"{report['method']['warmup']} warm-up calls. A shared machine: expect noise.", "",
+             f"{report['method']['warmup']} warm-up calls. A shared machine: expect noise."
+             + (f" A busy-loop process ran on CPU(s) {report['load_generator_cpus']} throughout (the other core busy)."
+                if report.get("load_generator_cpus") else ""), "",
              "| model | precision | runtime | threads | p50 µs | p99 µs | mean µs | file KiB | peak RSS MiB |",
              "|---|---|---|---:|---:|---:|---:|---:|---:|"]
     for r in report["results"]:

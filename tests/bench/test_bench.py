@@ -5,9 +5,11 @@ process isolation and the ratios' arithmetic are.
 """
 import copy
 import json
+import os
 import shutil
 import subprocess
 import sys
+import time
 
 import pytest
 from support import REPO_ROOT
@@ -283,3 +285,21 @@ def test_openvino_times_the_shipped_file():
     r = measure(InferenceConfig(str(ASSETS_DIR), "convlstm-int8", "openvino", n=5, warmup=1))
     assert len(r["times_ns"]) == 5 and min(r["times_ns"]) > 0
     assert r["file_bytes"] == (ASSETS_DIR / "convlstm.int8.onnx").stat().st_size and r["openvino"]
+
+
+@pytest.mark.slow
+def test_load_generator_keeps_a_pinned_process_busy_only_while_measuring():
+    from bench.machine import LoadGenerator
+
+    with LoadGenerator([0]) as gen:
+        (proc,) = gen.procs
+        deadline = time.monotonic() + 10
+        while os.sched_getaffinity(proc.pid) != {0} and time.monotonic() < deadline:
+            time.sleep(0.05)  # the child pins itself as it starts
+        assert proc.is_alive() and os.sched_getaffinity(proc.pid) == {0}
+    assert not proc.is_alive()
+
+
+def test_busy_cpus_that_are_not_there_are_one_line(capsys):
+    assert main(["--quick", "--no-loops", "--busy-cpus", "4096"]) == 2
+    assert _last_err(capsys).startswith("error: --busy-cpus")
