@@ -86,6 +86,7 @@ def cmd(a) -> int:
     from bench.sweep import BenchOptions, run_bench
 
     old = _load_report(a.compare) if a.compare else None  # bad input before minutes of measuring
+    busy = LoadGenerator(parse_cpus(a.busy_cpus)) if a.busy_cpus else nullcontext()  # checked before pinning
     if a.cpus:
         pin_cpus(parse_cpus(a.cpus))
     sizes = {"n": a.n, "warmup": a.warmup, "rounds": a.rounds, **(QUICK if a.quick else {})}
@@ -94,7 +95,6 @@ def cmd(a) -> int:
     opts = BenchOptions(assets=a.assets or "", threads=tuple(a.threads), use_torch=not a.no_torch,
                         use_openvino=not a.no_openvino, models=a.models, loops=not a.no_loops, seed=a.seed,
                         command="python -m bench " + " ".join(sys.argv[1:]), **sizes)
-    busy = LoadGenerator(parse_cpus(a.busy_cpus)) if a.busy_cpus else nullcontext()
     with busy:
         report = run_bench(opts)
     report["load_generator_cpus"] = busy.cpus if a.busy_cpus else []
