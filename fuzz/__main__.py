@@ -23,18 +23,25 @@ def _row(r: TargetReport) -> tuple:
     return (r.name, r.inputs, r.refused, r.crashes, r.silent_acceptances, r.hangs, f"{r.rate_per_s:,.0f}")
 
 
-def markdown(reports: list[TargetReport], commands: str | list[str], commit: str | None = None) -> str:
-    """The table (and a total row for several targets), the command lines, the tracebacks."""
+def markdown(reports: list[TargetReport], commands: str | list[str], commit: str | None = None,
+             missing: list[str] | None = None) -> str:
+    """The table (and a total row for several targets), the command lines, the tracebacks; a
+    ``code`` column when the targets ran on different commits, and the targets ``missing``."""
     commands = [commands] if isinstance(commands, str) else commands
     lines = ["# Fuzz run\n", *(f"`{c}`\n" for c in commands)]
-    if commit:
+    per_target = len({r.commit for r in reports}) > 1
+    if commit and not per_target:
         lines.append(f"Code: commit `{commit}`.\n")
-    lines += ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
-    lines += ["| " + " | ".join(map(str, _row(r))) + " |" for r in reports]
+    if missing:
+        lines.append(f"**Not in this report** (no run of theirs was given): {', '.join(missing)}.\n")
+    header = HEADER + (("code",) if per_target else ())
+    lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(map(str, _row(r) + ((f"`{r.commit}`",) if per_target else ()))) + " |"
+              for r in reports]
     if len(reports) > 1:
         total = TargetReport("**all**", *(sum(getattr(r, k) for r in reports)
                                           for k in ("inputs", "refused", "crashes", "silent_acceptances", "hangs")))
-        lines.append("| " + " | ".join(map(str, _row(total)[:-1])) + " | |")
+        lines.append("| " + " | ".join(map(str, _row(total)[:-1])) + " |" + " |" * (1 + per_target))
     for r in reports:
         for f in r.findings:
             lines += [f"\n## {r.name}: {f.key} ({f.count} inputs)\n", "```", f.traceback.rstrip(),

@@ -64,6 +64,8 @@ class TargetReport:
     hangs: int = 0
     seconds: float = 0.0
     findings: list[Finding] = field(default_factory=list)
+    commit: str = ""
+    """The code commit the target ran on, when a merged report joins runs of several commits."""
 
     @property
     def rate_per_s(self) -> float:

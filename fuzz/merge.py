@@ -1,9 +1,11 @@
-"""``python -m fuzz merge SHARD.json|SHARD.log ... [--commit HASH] [--command CMD ...] [--json OUT] [--md OUT]``
+"""``python -m fuzz merge SHARD.json|SHARD.log ... [--commit HASH ...] [--command CMD ...] [--json OUT] [--md OUT]``
 
 One report from several shards of one campaign: ``make fuzz`` on a shared 2-core machine is
 run as shards (``python -m fuzz --target ... --json a.json`` in two processes), each writing
 its own JSON; this joins their targets into one table, keeping each shard's command line and
-the code commit they ran on (given, since a shard's JSON does not record it). A target named
+the code commit they ran on (given, since a shard's JSON does not record it: one for every shard,
+or one per shard in order when a campaign's shards ran on different commits; each target then
+carries its own). The report names the targets of fuzz/targets that no shard ran. A target named
 in two shards is an error: the table would count it twice. A shard still running has no
 JSON yet: its log (stdout) gives the targets it has finished (``load_log``).
 """
@@ -58,9 +60,15 @@ def load_log(path: Path) -> tuple[dict, list[TargetReport]]:
     return {"command": f"(finished targets read from {path.name})"}, reports
 
 
-def merge(paths: list[Path], commit: str | None = None, commands: list[str] | None = None) -> dict:
+def merge(paths: list[Path], commit: str | list[str] | None = None, commands: list[str] | None = None) -> dict:
     """The shards' targets in one document: ``commands`` (one per shard: given, else the
-    shard's own), ``commit``, ``targets``. A ``.log`` path is read with :func:`load_log`."""
+    shard's own), ``commit`` (one, or one per shard), ``targets`` (each with its commit),
+    ``missing`` (targets of fuzz/targets no shard ran). A ``.log`` path is read with :func:`load_log`."""
+    from fuzz.harness import discover
+
+    commits = [commit] if isinstance(commit, str) or commit is None else list(commit)
+    if len(commits) not in (1, len(paths)):
+        raise MergeError(f"--commit: give one for every shard or one per shard ({len(paths)}), got {len(commits)}")
     given, commands, seeds, targets, seen = list(commands or []), [], set(), [], {}
     for i, path in enumerate(paths):
         doc, reports = load_log(path) if path.suffix == ".log" else load_shard(path)
@@ -71,9 +79,11 @@ def merge(paths: list[Path], commit: str | None = None, commands: list[str] | No
             if r.name in seen:
                 raise MergeError(f"{path}: target {r.name} is also in {seen[r.name]}")
             seen[r.name] = path
+            r.commit = commits[i if len(commits) > 1 else 0] or ""
             targets.append(r)
-    return {"commands": commands, "commit": commit, "seed": sorted(seeds, key=str),
-            "targets": sorted(targets, key=lambda r: r.name)}
+    one = sorted({c for c in commits if c})
+    return {"commands": commands, "commit": one[0] if len(one) == 1 else one, "seed": sorted(seeds, key=str),
+            "targets": sorted(targets, key=lambda r: r.name), "missing": sorted(set(discover()) - set(seen))}
 
 
 def main(argv: list[str]) -> int:
@@ -81,14 +91,15 @@ def main(argv: list[str]) -> int:
 
     ap = argparse.ArgumentParser(prog="python -m fuzz merge", description=__doc__.splitlines()[0])
     ap.add_argument("shards", nargs="+", type=Path, metavar="SHARD.json")
-    ap.add_argument("--commit", help="the code commit the shards ran on (recorded in the report)")
+    ap.add_argument("--commit", action="append", metavar="HASH",
+                    help="the code commit the shards ran on: once for all, or once per shard in order")
     ap.add_argument("--command", action="append", metavar="CMD",
                     help="the command line of each shard, in order (default: the one its JSON records)")
     ap.add_argument("--json", metavar="OUT")
     ap.add_argument("--md", metavar="OUT")
     a = ap.parse_args(argv)
     try:
-        merged = merge(a.shards, a.commit, a.command)
+        merged = merge(a.shards, a.commit if a.commit and len(a.commit) > 1 else (a.commit or [None])[0], a.command)
     except MergeError as e:
         print(f"python -m fuzz merge: {e}", file=sys.stderr)
         return 2
@@ -100,5 +111,6 @@ def main(argv: list[str]) -> int:
         Path(a.json).write_text(json.dumps({**merged, "targets": [r.to_json() for r in reports]}, indent=1) + "\n")
     if a.md:
         Path(a.md).parent.mkdir(parents=True, exist_ok=True)
-        Path(a.md).write_text(markdown(reports, merged["commands"], merged["commit"]))
+        commit = merged["commit"] if isinstance(merged["commit"], str) else None
+        Path(a.md).write_text(markdown(reports, merged["commands"], commit, merged["missing"]))
     return 0 if all(r.clean for r in reports) else 1

@@ -75,3 +75,19 @@ def test_a_running_shard_is_read_from_its_log_with_the_targets_it_finished(tmp_p
     (tmp_path / "c.log").write_text("nothing here\n")
     assert main(["merge", str(tmp_path / "c.log")]) == 2
     assert "no table header" in capsys.readouterr().err
+
+
+def test_shards_of_different_commits_keep_each_targets_commit_and_name_the_targets_not_run(tmp_path, capsys):
+    _shard(tmp_path / "a.json", ["t1"])
+    _shard(tmp_path / "b.json", ["t2"])
+    out_json, out_md = tmp_path / "fuzz.json", tmp_path / "fuzz.md"
+    assert main(["merge", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--commit", "aaa1111",
+                 "--commit", "bbb2222", "--json", str(out_json), "--md", str(out_md)]) == 0
+    doc = json.loads(out_json.read_text())
+    assert {t["name"]: t["commit"] for t in doc["targets"]} == {"t1": "aaa1111", "t2": "bbb2222"}
+    assert "csv_replay" in doc["missing"]  # a real target of fuzz/targets that no shard ran
+    md = out_md.read_text()
+    assert "| t1 |" in md and "`aaa1111` |" in md and "Not in this report" in md
+    assert main(["merge", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--commit", "a", "--commit", "b",
+                 "--commit", "c"]) == 2
+    assert "one per shard" in capsys.readouterr().err
