@@ -98,6 +98,17 @@ class AlertPolicy:
     5 s was chosen on validation drives (``firmware_sim drive-eval --seed 1``, 5 h, full window):
     repeat alerts 23 -> 1 at unchanged event recall (0.886); 10 s cost 0.03 of recall, 15 s 0.13."""
 
+    earliest_alert_step: int = config.setting(1, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
+    """No preliminary alert or revision before this many sub-windows (the full window, S = 6, always
+    decides): the first sub-windows hold little of the motion, and a wrong early class is a false alarm."""
+    early_agreement_steps: int = config.setting(1, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
+    """A preliminary alert or a revision needs the same top class at this many consecutive decided
+    sub-window counts, ending at its own (1: its own step alone). One confident step may be a
+    passing shape of the motion; two that agree are less often."""
+    early_min_margin: float = config.setting(0.0, config.PROBABILITY)
+    """A preliminary alert or a revision needs its top class this far (calibrated probability) above
+    the second: a confident step torn between two distractions (Phone or Texting) waits."""
+
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_confidence <= 1.0:
             raise ValueError("min_confidence must lie in [0, 1]")
@@ -112,6 +123,13 @@ class AlertPolicy:
         if confidence < (self.min_confidence if threshold is None else threshold):
             return "uncertain"
         return "alert"
+
+    def early_ready(self, steps: int, margin: float, agreeing_steps: int) -> bool:
+        """Whether a confident early step (S < 6) may alert or revise: late enough, far enough ahead
+        of the second class, and agreeing with the steps before it (``agreeing_steps``: consecutive
+        decided steps, its own included, whose top class is its)."""
+        return (steps >= self.earliest_alert_step and margin >= self.early_min_margin
+                and agreeing_steps >= self.early_agreement_steps)
 
     def threshold(self, steps: int, manifest: dict[int, float]) -> float:
         """The threshold after ``steps`` sub-windows: configured, else the manifest's, else 0.9 before
@@ -214,6 +232,9 @@ class _CaptureState:
     event: AlertEvent | None = None
     continues: bool = False
     """It started while ``event`` was active: it continues that event, and raises no alert."""
+    last_label: str | None = None
+    agreeing: int = 0
+    """Consecutive decided steps so far whose top class is ``last_label``."""
 
 
 class WearableLoop:
@@ -387,8 +408,13 @@ class WearableLoop:
         compute_us = (time.perf_counter() - t_start) * 1e6
         k = int(np.argmax(probs))
         label, conf = self.classes[k], float(probs[k])
+        st.agreeing = st.agreeing + 1 if label == st.last_label else 1
+        st.last_label = label
         threshold = self.policy.threshold(steps, self._manifest_thresholds)
         status = self.policy.status(label, conf, threshold)
+        if status == "alert" and not full and not self.policy.early_ready(
+                steps, conf - float(np.partition(probs, -2)[-2]), st.agreeing):
+            status = "uncertain"
         ev = st.event
         if st.continues:
             status = "continued"

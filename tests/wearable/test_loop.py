@@ -183,9 +183,9 @@ def test_the_heartbeat_thread_reports_what_the_loop_counts():
 # ---------------------------------------------------------------------------- early decisions and events
 
 
-def _early_run(answers, policy=AlertPolicy(), acc=None, split=None, **kw):
+def _early_run(answers, policy=AlertPolicy(), acc=None, split=None, clf=None, **kw):
     pub = Publisher()
-    clf = Scripted(answers, **kw)
+    clf = Scripted(answers, **kw) if clf is None else clf
     loop = WearableLoop(clf, policy=policy, publisher=pub)
     acc = _steps(3000, [1000]) if acc is None else acc
     cuts = range(0, len(acc), split) if split else [0]
@@ -247,6 +247,66 @@ def test_early_thresholds_come_from_the_config_else_the_manifest():
     assert _summary(_early_run(answers, manifest_thresholds={6: 0.85})[0])[-1] == ("uncertain", 6, "Phone", None)
     assert _summary(_early_run(answers, manifest_thresholds={6: 0.85}, policy=AlertPolicy(
         min_confidence_by_steps=(-1.0,) * 5 + (0.7,)))[0])[-1] == ("alert", 6, "Phone", 0)
+
+
+class Torn(Scripted):
+    """Scripted, with a runner-up class per step: (label, p) whose probability is taken from the rest."""
+
+    def __init__(self, answers, runner_up, **kw):
+        super().__init__(answers, **kw)
+        self.runner_up = runner_up
+
+    def classify_prefix(self, x, steps):
+        probs = super().classify_prefix(x, steps)
+        if steps in self.runner_up:
+            label, p = self.runner_up[steps]
+            top = int(np.argmax(probs))
+            rest = [k for k in range(len(CLASSES)) if k not in (top, CLASSES.index(label))]
+            probs[CLASSES.index(label)] = p
+            probs[rest] = (1 - probs[top] - p) / len(rest)
+        return probs
+
+
+def test_no_preliminary_alert_before_the_earliest_step():
+    answers = {2: ("Phone", 0.95), 3: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    ds, *_ = _early_run(answers, AlertPolicy(earliest_alert_step=3))
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    # a revision waits too; the full window always decides
+    ds, *_ = _early_run({1: ("Drink", 0.99), 2: ("Phone", 0.95), 6: ("Phone", 0.9)}, AlertPolicy(earliest_alert_step=6))
+    assert _summary(ds) == [("alert", 6, "Phone", 0)]
+
+
+def test_two_steps_must_agree_before_an_early_alert_or_a_revision():
+    answers = {1: ("Drink", 0.5), 2: ("Phone", 0.95), 3: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    assert _summary(_early_run(answers)[0])[0] == ("preliminary", 2, "Phone", 0)
+    ds, *_ = _early_run(answers, AlertPolicy(early_agreement_steps=2))
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    # agreement counts the top class, confident or not: S = 1 says Phone at 0.3
+    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.9)}, AlertPolicy(early_agreement_steps=2))
+    assert _summary(ds)[0] == ("preliminary", 2, "Phone", 0)
+    answers = {2: ("Phone", 0.95), 4: ("Texting", 0.95), 5: ("Texting", 0.95), 6: ("Texting", 0.9)}
+    ds, *_ = _early_run(answers, AlertPolicy(early_agreement_steps=2))
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("revised", 5, "Texting", 0),
+                            ("confirmed", 6, "Texting", 0)]
+
+
+def test_an_early_step_torn_between_two_classes_waits():
+    answers = {2: ("Phone", 0.5), 3: ("Phone", 0.8), 6: ("Phone", 0.9)}
+    policy = AlertPolicy(early_min_margin=0.2, min_confidence_by_steps=(-1.0, 0.5, 0.5, -1.0, -1.0, -1.0))
+    ds = _early_run(answers, policy, clf=Torn(answers, {2: ("Texting", 0.45), 3: ("Texting", 0.1)}))[0]
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    ds = _early_run(answers, AlertPolicy(min_confidence_by_steps=policy.min_confidence_by_steps),
+                    clf=Torn(answers, {2: ("Texting", 0.35)}))[0]
+    assert _summary(ds)[0] == ("preliminary", 2, "Phone", 0)  # no margin asked: the confident step alerts
+
+
+@pytest.mark.parametrize("key, value", [("earliest_alert_step", 0), ("earliest_alert_step", 7),
+                                        ("early_agreement_steps", 0), ("early_min_margin", 1.5)])
+def test_early_policy_settings_are_validated(key, value):
+    from edge_runtime import config
+
+    with pytest.raises(config.ConfigError, match=rf"\[alerts\] {key}: must be"):
+        config.from_dict({"alerts": {key: value}}, "box.toml")
 
 
 def test_early_decisions_do_not_depend_on_how_the_stream_is_cut():
