@@ -1,0 +1,467 @@
+"""``python -m firmware_sim early-tune``: where the time and the errors of early decisions go, and
+the decision policy's trade-off, on validation drives only.
+
+    python -m firmware_sim early-tune --seed 1 --hours 20 --out reports/wearable/early_tuning
+
+The drives are ``drive-eval``'s (:func:`~firmware_sim.scenarios.drive_eval.held_out_drives`) for
+``--seed``: seed 1 is validation, where the policy is chosen; seed 2 is the held-out figure, which
+this command refuses (``drive-eval --seed 2`` measures the shipped choice, once).
+
+1. **Breakdown** of the shipped configuration (``breakdown.json``, ``breakdown.md``): per
+   distraction, the detector's trigger delay after the onset, the sub-window count S of the first
+   alert, its class, why a distraction was missed; per false alert, what motion set it off (an
+   Other motion and its kind, the hand returning after a distraction, plain driving).
+2. **Sweep** of the decision policy (``tradeoff.json``, ``tradeoff.md``, ``tradeoff.png``): the
+   per-step confidence (the manifest's thresholds, or one threshold for every early step), the
+   earliest step that may alert, two consecutive steps agreeing, the margin over the second class,
+   the full window's threshold and the event hold. Each point is the runtime's own decisions
+   (:class:`~edge_runtime.wearable.loop.WearableLoop` on every drive), scored as ``drive-eval``
+   scores them; the model's outputs are computed once per capture and step and kept
+   (:class:`CachedClassifier`), so only the policy is re-run. The operating point is chosen by
+   :data:`RULE` and reported with the setting that ships it.
+
+The detector's threshold changes the captures themselves; ``--detector-thresholds`` re-runs the
+chosen policy with other thresholds (new captures go through the model once).
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import itertools
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from edge_runtime.cli import CliError, positive_float
+from edge_runtime.wearable.labels import DISTRACTIONS, OTHER
+from firmware_sim.scenarios.drive_eval import MATCH_BEFORE_S, Drive, ModeScore, _section, held_out_drives
+from firmware_sim.scenarios.scoring import raises_alert
+
+HELD_OUT_SEED = 2
+"""drive-eval's held-out seed: never tuned on."""
+AFTER_DISTRACTION_S = 3.0
+"""A false alert triggered this soon after a distraction ended is put down to the hand returning."""
+RULE = ("among the policies with first-alert class accuracy >= 0.90 and false alerts <= the full "
+        "window's per driving hour (both on validation), the lowest median onset -> first alert; ties "
+        "(within 0.05 s) go to fewer false alerts, then to higher event recall")
+"""How the operating point is chosen. Class accuracy is the must-hold's (a wrong class is a wrong
+warning); false alerts may not exceed the dissertation's full-window decisions, so early decisions
+buy time without costing the driver more false warnings; within that, time is what early decisions
+are for."""
+
+
+class CachedClassifier:
+    """An early-deciding classifier whose calibrated outputs are kept per capture prefix and step:
+    the same capture asked again (another policy) does not reach the model. Keys are a hash of the
+    frames the step sees, so another detector setting's captures are simply new."""
+
+    def __init__(self, engine, path: Path | None = None):
+        self.engine = engine
+        self.classes = list(engine.classes)
+        self.early_steps = engine.early_steps
+        self.early = engine.early
+        self.path = path
+        self.calls = 0
+        self._probs: dict[str, np.ndarray] = {}
+        if path is not None and path.is_file():
+            with np.load(path) as z:
+                self._probs = dict(zip(z["keys"].tolist(), z["probs"]))
+
+    @staticmethod
+    def _key(x: np.ndarray, steps: int) -> str:
+        data = np.ascontiguousarray(x, dtype=np.float32)
+        return f"{steps}:{hashlib.blake2b(data.tobytes(), digest_size=16).hexdigest()}"
+
+    def classify_prefix(self, x: np.ndarray, steps: int) -> np.ndarray:
+        key = self._key(x, steps)
+        probs = self._probs.get(key)
+        if probs is None:
+            self.calls += 1
+            probs = self._probs[key] = np.asarray(self.engine.classify_prefix(x, steps), np.float32)
+        return probs
+
+    def classify_capture(self, x700: np.ndarray) -> np.ndarray:
+        return self.classify_prefix(x700, 6)
+
+    def save(self) -> None:
+        if self.path is not None and self.calls:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            keys = list(self._probs)
+            np.savez(self.path, keys=np.asarray(keys), probs=np.stack([self._probs[k] for k in keys]))
+
+
+def decide(drives: list[Drive], classifier, cfg) -> list[list[dict]]:
+    """The runtime's decisions (``--alerts`` lines) on every drive: the loop without a bus (every
+    would-alert decision counts as sent, as on a bus that takes every frame)."""
+    from edge_runtime.wearable.loop import WearableLoop
+    from edge_runtime.wearable.sources import ImuBlock
+
+    out = []
+    for drive in drives:
+        loop = WearableLoop(classifier, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz)
+        out.append([d.to_json() for d in loop.feed(ImuBlock(0.0, drive.acc_mps2))])
+    return out
+
+
+def score(drives: list[Drive], decisions: list[list[dict]]) -> dict:
+    s = ModeScore()
+    for drive, ds in zip(drives, decisions):
+        s.add(drive, ds)
+    return s.as_dict()
+
+
+# ---------------------------------------------------------------------------------------------- breakdown
+
+
+def _owner(events: list[dict], t: float) -> dict | None:
+    return next((e for e in events if e["start_s"] - MATCH_BEFORE_S <= t <= e["end_s"]), None)
+
+
+def false_alert_cause(drive: Drive, t_trigger_s: float) -> str:
+    """What set off a capture that belongs to no distraction."""
+    other = _owner([e for e in drive.events if e["label"] == OTHER], t_trigger_s)
+    if other is not None:
+        return f"Other motion ({other.get('kind', 'unspecified')})"
+    ended = [e["end_s"] for e in drive.events if e["label"] in DISTRACTIONS and e["end_s"] < t_trigger_s]
+    if ended and t_trigger_s - max(ended) <= AFTER_DISTRACTION_S:
+        return "hand returning after a distraction"
+    return "driving (no hand event)"
+
+
+def breakdown(drives: list[Drive], decisions: list[list[dict]], pre_frames: int, rate_hz: int) -> dict:
+    """Per distraction and per false alert: where the time and the errors go."""
+    events, false_alerts = [], []
+    for drive, ds in zip(drives, decisions):
+        truth = [e for e in drive.events if e["label"] in DISTRACTIONS]
+        alerts = sorted((d for d in ds if raises_alert(d)), key=lambda d: d["t_alert_s"])
+        firsts: dict[int, dict] = {}
+        for d in alerts:
+            e = _owner(truth, d["t_trigger_s"])
+            if e is None:
+                false_alerts.append({"drive": drive.name, "kind": drive.kind, "t_trigger_s": d["t_trigger_s"],
+                                     "label": d["label"], "steps": d["steps"], "confidence": d["confidence"],
+                                     "withdrawn": any(u["status"] == "withdrawn" and u["event_start_s"] ==
+                                                      d["event_start_s"] for u in ds),
+                                     "cause": false_alert_cause(drive, d["t_trigger_s"])})
+            else:
+                firsts.setdefault(id(e), d)
+        for e in truth:
+            own = [d for d in ds if _owner(truth, d["t_trigger_s"]) is e]
+            triggers = sorted({d["t_trigger_s"] for d in own})
+            first = firsts.get(id(e))
+            row = {"drive": drive.name, "label": e["label"], "start_s": e["start_s"],
+                   "duration_s": round(e["end_s"] - e["start_s"], 3),
+                   "trigger_delay_s": round(triggers[0] - e["start_s"], 3) if triggers else None,
+                   "captures": len(triggers)}
+            if first is not None:
+                row.update(first_steps=first["steps"], first_label=first["label"],
+                           first_correct=first["label"] == e["label"], first_confidence=first["confidence"],
+                           onset_to_alert_s=round(first["t_alert_s"] - e["start_s"], 3),
+                           first_trigger_delay_s=round(first["t_trigger_s"] - e["start_s"], 3))
+            else:
+                statuses = {d["status"] for d in own}
+                row["missed"] = ("no trigger" if not own else "continued an earlier event" if statuses == {"continued"}
+                                 else "full window said Other" if "not_alerted" in statuses
+                                 else "not confident at any step")
+            events.append(row)
+    return {"events": events, "false_alerts": false_alerts,
+            "summary": summarise(events, false_alerts, pre_frames, rate_hz)}
+
+
+def _stats(values) -> dict:
+    v = np.asarray([x for x in values if x is not None], float)
+    if not v.size:
+        return {"n": 0}
+    return {"n": int(v.size), "median": round(float(np.median(v)), 3), "p95": round(float(np.percentile(v, 95)), 3)}
+
+
+def _count(rows, key) -> dict:
+    out: dict = {}
+    for r in rows:
+        out[r[key]] = out.get(r[key], 0) + 1
+    return dict(sorted(out.items(), key=lambda kv: (-kv[1], str(kv[0]))))
+
+
+def summarise(events: list[dict], false_alerts: list[dict], pre_frames: int, rate_hz: int) -> dict:
+    from edge_runtime.wearable.classifier import needed_frames
+
+    alerted = [r for r in events if "first_steps" in r]
+    by_step = {}
+    for s in sorted({r["first_steps"] for r in alerted}):
+        rows = [r for r in alerted if r["first_steps"] == s]
+        by_step[str(s)] = {"first_alerts": len(rows),
+                           "class_accuracy": round(sum(r["first_correct"] for r in rows) / len(rows), 4),
+                           "frame_after_trigger_s": round((needed_frames(s) - 1 - pre_frames) / rate_hz, 2),
+                           "onset_to_alert_s": _stats(r["onset_to_alert_s"] for r in rows)}
+    confusion: dict[str, dict[str, int]] = {}
+    for r in alerted:
+        confusion.setdefault(r["label"], {}).setdefault(r["first_label"], 0)
+        confusion[r["label"]][r["first_label"]] += 1
+    return {
+        "distractions": len(events), "alerted": len(alerted),
+        "trigger_delay_s": _stats(r["trigger_delay_s"] for r in events),
+        "first_alert_trigger_delay_s": _stats(r.get("first_trigger_delay_s") for r in alerted),
+        "onset_to_alert_s": _stats(r["onset_to_alert_s"] for r in alerted),
+        "first_alert_by_steps": by_step,
+        "missed_by_reason": _count([r for r in events if "missed" in r], "missed"),
+        "first_alert_confusion": confusion,
+        "false_alerts": len(false_alerts),
+        "false_alerts_by_cause": _count(false_alerts, "cause"),
+        "false_alerts_by_steps": _count(false_alerts, "steps"),
+        "false_alerts_by_drive_kind": _count(false_alerts, "kind"),
+        "false_alerts_withdrawn": sum(r["withdrawn"] for r in false_alerts),
+    }
+
+
+def breakdown_markdown(b: dict, title: str, command: str) -> str:
+    s = b["summary"]
+    lines = [f"# {title}", "", f"`{command}`", "",
+             f"{s['distractions']} distractions, {s['alerted']} alerted; {s['false_alerts']} false alerts "
+             f"({s['false_alerts_withdrawn']} withdrawn by a later step).", "",
+             "## Where the time goes", "",
+             f"- detector trigger after the onset (first capture of each distraction): {s['trigger_delay_s']}",
+             f"- trigger of the capture that alerted first: {s['first_alert_trigger_delay_s']}",
+             f"- onset -> first alert frame: {s['onset_to_alert_s']}", "",
+             "| first alert at S | alerts | class accuracy | frame after the trigger (s) | onset -> alert median (s) |",
+             "|---:|---:|---:|---:|---:|"]
+    lines += [f"| {k} | {v['first_alerts']} | {v['class_accuracy']} | {v['frame_after_trigger_s']} | "
+              f"{v['onset_to_alert_s'].get('median', '–')} |" for k, v in s["first_alert_by_steps"].items()]
+    lines += ["", "## Where the errors go", "", f"- missed distractions by reason: {s['missed_by_reason']}",
+              f"- false alerts by cause: {s['false_alerts_by_cause']}",
+              f"- false alerts by the step that raised them: {s['false_alerts_by_steps']}",
+              f"- false alerts by kind of drive: {s['false_alerts_by_drive_kind']}", "",
+              "First-alert class (rows: truth, columns: the first alert's class):", ""]
+    cols = sorted({c for row in s["first_alert_confusion"].values() for c in row})
+    lines += ["| truth | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
+    lines += [f"| {t} | " + " | ".join(str(row.get(c, 0)) for c in cols) + " |"
+              for t, row in sorted(s["first_alert_confusion"].items())]
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------------------------- sweep
+
+GRID = {
+    "early_threshold": ("manifest", 0.6, 0.7, 0.8, 0.9, 0.95),
+    "earliest_alert_step": (1, 2, 3),
+    "early_agreement_steps": (1, 2),
+    "early_min_margin": (0.0, 0.2, 0.4),
+    "full_window_threshold": ("manifest", 0.7, 0.85),
+    "event_hold_s": (3.0, 5.0, 10.0),
+}
+"""The policies swept: ``early_threshold`` is the threshold of every step S < 6 ("manifest": the
+manifest's per-step thresholds, chosen on the selection cohort's captures)."""
+
+
+def policy_settings(point: dict, manifest: dict[int, float]) -> dict:
+    """The ``[alerts]`` keys of a sweep point."""
+    early = point["early_threshold"]
+    by_steps = [manifest.get(s, -1.0) if early == "manifest" else float(early) for s in range(1, 6)]
+    full = point["full_window_threshold"]
+    by_steps.append(manifest.get(6, -1.0) if full == "manifest" else float(full))
+    return {"min_confidence_by_steps": [round(p, 4) for p in by_steps],
+            "earliest_alert_step": point["earliest_alert_step"],
+            "early_agreement_steps": point["early_agreement_steps"],
+            "early_min_margin": point["early_min_margin"], "event_hold_s": point["event_hold_s"]}
+
+
+def _figures(s: dict) -> dict:
+    return {"median_s": s["onset_to_first_alert_s"]["median"], "p95_s": s["onset_to_first_alert_s"]["p95"],
+            "event_recall": s["event_recall"], "class_accuracy": s["first_alert_class_accuracy"],
+            "false_alerts_per_hour": s["false_alerts_per_hour"], "late": s["first_alerts_after_the_distraction_ended"],
+            "repeat_alerts": s["repeat_alerts"]}
+
+
+def sweep(drives, classifier, cfg, grid: dict = GRID, progress=print) -> list[dict]:
+    from edge_runtime import config
+
+    manifest = dict(classifier.early.min_confidence_by_steps)
+    names = list(grid)
+    rows = []
+    for values in itertools.product(*(grid[n] for n in names)):
+        point = dict(zip(names, values))
+        if point["early_agreement_steps"] > 1 and point["earliest_alert_step"] < point["early_agreement_steps"]:
+            continue  # the same policy as earliest = agreement
+        settings = policy_settings(point, manifest)
+        c = config.override(cfg, "alerts", decision="early", **settings)
+        rows.append({"point": point, "settings": settings, **_figures(score(drives, decide(drives, classifier, c)))})
+        if len(rows) % 50 == 0:
+            progress(f"  {len(rows)} policies")
+    return rows
+
+
+def choose(rows: list[dict], full_window: dict) -> dict | None:
+    """The operating point by :data:`RULE` (None: no policy meets its constraints)."""
+    ok = [r for r in rows if r["class_accuracy"] is not None and r["class_accuracy"] >= 0.90
+          and r["false_alerts_per_hour"] <= full_window["false_alerts_per_hour"] and r["median_s"] is not None]
+    if not ok:
+        return None
+    best = min(r["median_s"] for r in ok)
+    tied = [r for r in ok if r["median_s"] <= best + 0.05]
+    return min(tied, key=lambda r: (r["false_alerts_per_hour"], -r["event_recall"], r["median_s"]))
+
+
+def pareto(rows: list[dict]) -> list[dict]:
+    """Policies no other beats on median latency, false alerts/h and class accuracy at once."""
+    def dominated(r):
+        return any(o["median_s"] <= r["median_s"] and o["false_alerts_per_hour"] <= r["false_alerts_per_hour"]
+                   and o["class_accuracy"] >= r["class_accuracy"] and (o["median_s"], o["false_alerts_per_hour"],
+                   -o["class_accuracy"]) != (r["median_s"], r["false_alerts_per_hour"], -r["class_accuracy"])
+                   for o in rows)
+    return sorted((r for r in rows if r["median_s"] is not None and not dominated(r)), key=lambda r: r["median_s"])
+
+
+def plot_tradeoff(rows: list[dict], marks: dict[str, dict], out_png: Path, title: str) -> None:
+    """Median latency against false alerts per hour, coloured by first-alert class accuracy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [r for r in rows if r["median_s"] is not None]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
+    for ax, (y, ylabel) in zip(axes, [("false_alerts_per_hour", "false alerts per driving hour"),
+                                      ("class_accuracy", "first-alert class accuracy")]):
+        sc = ax.scatter([r["median_s"] for r in rows], [r[y] for r in rows], s=9,
+                        c=[r["class_accuracy" if y != "class_accuracy" else "false_alerts_per_hour"] for r in rows],
+                        cmap="viridis" if y != "class_accuracy" else "magma_r", alpha=0.8, lw=0)
+        fig.colorbar(sc, ax=ax, label="class accuracy" if y != "class_accuracy" else "false alerts / h")
+        for (name, r), colour in zip(marks.items(), ("C3", "C1", "C0", "C2")):
+            ax.scatter([r["median_s"]], [r[y]], s=90, facecolors="none", edgecolors=colour, lw=1.8, label=name)
+        if y == "false_alerts_per_hour":
+            ax.axhline(0.5, color="0.5", ls=":", lw=1)
+            ax.text(ax.get_xlim()[0], 0.5, " must-hold 0.5/h", va="bottom", fontsize=7, color="0.4")
+        else:
+            ax.axhline(0.90, color="0.5", ls=":", lw=1)
+            ax.text(ax.get_xlim()[0], 0.90, " must-hold 0.90", va="bottom", fontsize=7, color="0.4")
+        ax.axvline(2.0, color="0.5", ls=":", lw=1)
+        ax.set_xlabel("onset → first alert frame, median (s)")
+        ax.set_ylabel(ylabel)
+        ax.legend(fontsize=7, loc="best")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=110)
+    plt.close(fig)
+
+
+def _row_md(name: str, r: dict) -> str:
+    return (f"| {name} | {r['median_s']} | {r['p95_s']} | {r['event_recall']} | {r['class_accuracy']} | "
+            f"{r['false_alerts_per_hour']} | {r['late']} | {r['repeat_alerts']} |")
+
+
+def tradeoff_markdown(report: dict) -> str:
+    head = ["| policy | median (s) | p95 (s) | event recall | class accuracy | false alerts / h | late | repeat |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [f"# Early decisions: the decision policy's trade-off on validation ({report['hours']:g} h, seed "
+             f"{report['seed']})", "", f"`{report['command']}`", "", f"Drives: {report['held_out']}", "",
+             f"{len(report['rows'])} policies swept over {report['grid']}; model outputs computed once per capture "
+             f"and step ({report['model_calls']} model calls this run).", "",
+             f"**Rule**: {report['rule']}.", ""]
+    chosen = report["chosen"]
+    lines += ["**Chosen**: " + (f"`{chosen['settings']}`" if chosen else "no policy meets the rule's constraints"),
+              "", *head]
+    lines += [_row_md(name, r) for name, r in report["marks"].items()]
+    lines += ["", "## Pareto front (median latency, false alerts/h, class accuracy)", "", *head]
+    lines += [_row_md(f"`{r['point']}`", r) for r in report["pareto"]]
+    if report.get("detector"):
+        lines += ["", "## Detector threshold, with the chosen policy", "",
+                  "| threshold (m/s²) | trigger delay median (s) | median (s) | p95 (s) | event recall | "
+                  "class accuracy | false alerts / h |", "|---:|---:|---:|---:|---:|---:|---:|"]
+        lines += [f"| {d['threshold_mps2']} | {d['trigger_delay_s'].get('median')} | {d['median_s']} | {d['p95_s']} | "
+                  f"{d['event_recall']} | {d['class_accuracy']} | {d['false_alerts_per_hour']} |"
+                  for d in report["detector"]]
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------------------------- command
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--hours", type=positive_float, default=20.0, help="hours of validation driving (default 20)")
+    p.add_argument("--seed", type=int, default=1, help=f"drive-eval's seed; validation (default 1), never the "
+                                                       f"held-out {HELD_OUT_SEED}")
+    p.add_argument("--out", required=True, help="output directory (breakdown.*, tradeoff.*)")
+    p.add_argument("--baseline-share", type=float, default=0.3, help="as drive-eval's (default 0.3)")
+    p.add_argument("--drive-minutes", type=positive_float, default=30.0, help="as drive-eval's (default 30)")
+    p.add_argument("--config", metavar="BOX.toml", help="the box configuration (default: the shipped defaults)")
+    p.add_argument("--cache", metavar="NPZ", help="keep the model's outputs here between runs")
+    p.add_argument("--detector-thresholds", default="",
+                   help="also re-run the chosen policy with these detector thresholds (m/s^2, comma-separated)")
+    p.add_argument("--no-sweep", action="store_true", help="the breakdown of the configuration only")
+
+
+def cmd(a) -> int:
+    from edge_runtime import config
+    from edge_runtime.core.manifest import ASSETS_DIR
+    from edge_runtime.wearable import alerts, classifier, detector, loop, sources  # noqa: F401 - their sections
+    from edge_runtime.wearable.classifier import Engine
+    from firmware_sim.__main__ import _out_dir
+
+    if a.seed == HELD_OUT_SEED:
+        raise CliError(f"--seed {HELD_OUT_SEED} is the held-out seed: tune on validation (seed 1); measure the "
+                       "shipped choice once with drive-eval")
+    t_wall = time.perf_counter()
+    cfg = config.load(a.config)
+    out = _out_dir(a.out)
+    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
+    clf = CachedClassifier(engine, Path(a.cache) if a.cache else None)
+    command = "python -m firmware_sim early-tune " + " ".join(
+        f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()
+        if k in ("hours", "seed", "out", "baseline_share", "drive_minutes", "config", "detector_thresholds")
+        and v not in (None, ""))
+    drives = list(held_out_drives(a.hours, a.seed, a.baseline_share, a.drive_minutes))
+    print(f"early-tune: {sum(d.hours for d in drives):.1f} h of validation driving (seed {a.seed}), {len(drives)} "
+          f"drives", flush=True)
+    held_out = (f"drive-eval's seed {a.seed}: distraction drives {drives[0].name}.., baseline drives "
+                f"{drives[-1].name.rsplit(' subject', 1)[0]}")
+    shipped = {}
+    for mode in ("early", "full_window"):
+        ds = decide(drives, clf, config.override(cfg, "alerts", decision=mode))
+        shipped[mode] = (ds, _figures(score(drives, ds)))
+        b = breakdown(drives, ds, cfg.detector.pre_frames, cfg.imu.sample_rate_hz)
+        b.update(command=command, seed=a.seed, hours=a.hours, mode=mode,
+                 config={"alerts": _section(cfg.alerts), "detector": _section(cfg.detector)})
+        (out / f"breakdown_{mode}.json").write_text(json.dumps(b, indent=1))
+        (out / f"breakdown_{mode}.md").write_text(breakdown_markdown(
+            b, f"Where the time and the errors go: {mode} decisions, validation seed {a.seed}, {a.hours:g} h", command))
+        print(breakdown_markdown(b, f"{mode}", command), flush=True)
+    clf.save()
+    if a.no_sweep:
+        return 0
+    rows = sweep(drives, clf, cfg, progress=lambda line: print(line, flush=True))
+    full = shipped["full_window"][1]
+    chosen = choose(rows, full)
+    marks = {"shipped before (early)": {"point": "config", **shipped["early"][1]},
+             "full window": {"point": "full_window", **full}}
+    if chosen is not None:
+        marks["chosen"] = chosen
+    report = {"command": command, "seed": a.seed, "hours": a.hours, "held_out": held_out, "rule": RULE,
+              "grid": {k: list(v) for k, v in GRID.items()}, "model": f"{engine.name} ({engine.precision})",
+              "manifest_thresholds": dict(clf.early.min_confidence_by_steps), "model_calls": clf.calls,
+              "marks": marks, "chosen": chosen, "pareto": pareto(rows), "rows": rows}
+    if chosen is not None:
+        best = config.override(cfg, "alerts", decision="early", **chosen["settings"])
+        b = breakdown(drives, decide(drives, clf, best), cfg.detector.pre_frames, cfg.imu.sample_rate_hz)
+        b.update(command=command, seed=a.seed, hours=a.hours, mode="early, chosen",
+                 config={"alerts": _section(best.alerts), "detector": _section(best.detector)})
+        (out / "breakdown_chosen.json").write_text(json.dumps(b, indent=1))
+        (out / "breakdown_chosen.md").write_text(breakdown_markdown(
+            b, f"Where the time and the errors go: the chosen policy, validation seed {a.seed}, {a.hours:g} h",
+            command))
+        report["detector"] = []
+        for thr in [float(t) for t in a.detector_thresholds.split(",") if t.strip()]:
+            c = config.override(best, "detector", threshold_mps2=thr)
+            ds = decide(drives, clf, c)
+            report["detector"].append({"threshold_mps2": thr, **_figures(score(drives, ds)),
+                                       "trigger_delay_s": breakdown(drives, ds, c.detector.pre_frames,
+                                                                    c.imu.sample_rate_hz)["summary"]["trigger_delay_s"]})
+        clf.save()
+    report["wall_s"] = round(time.perf_counter() - t_wall, 1)
+    (out / "tradeoff.json").write_text(json.dumps(report, indent=1))
+    (out / "tradeoff.md").write_text(tradeoff_markdown(report))
+    plot_tradeoff(rows, marks, out / "tradeoff.png",
+                  f"decision policies on validation drives (seed {a.seed}, {a.hours:g} h): {len(rows)} points")
+    print(tradeoff_markdown(report))
+    print(f"wrote {out}/breakdown_*.json|md, tradeoff.json|md|png in {report['wall_s']} s")
+    return 0

@@ -1,0 +1,99 @@
+"""firmware_sim/scenarios/early_tuning.py: the breakdown of where the time and errors go, the cached
+model outputs, the sweep and the rule that picks the operating point (a scripted classifier on step
+signals: known answers)."""
+import pytest
+from support.early_model import Scripted, step_signal
+
+from edge_runtime import config
+from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
+from firmware_sim.__main__ import main
+from firmware_sim.scenarios.drive_eval import Drive, evaluate
+from firmware_sim.scenarios.early_tuning import (
+    CachedClassifier,
+    breakdown,
+    choose,
+    decide,
+    false_alert_cause,
+    score,
+    sweep,
+)
+
+
+class Counting(Scripted):
+    """Scripted, counting how often the model is asked (as an Engine would be)."""
+
+    def __init__(self, answers):
+        super().__init__(answers)
+        self.early.min_confidence_by_steps = {}
+        self.calls = 0
+
+    def classify_prefix(self, x, steps):
+        self.calls += 1
+        return super().classify_prefix(x, steps)
+
+
+def _drive():
+    # triggers at 10 s (a Phone 9.5..14 s), 40 s (an Other motion 39.8..41 s: a false alert),
+    # 52 s (2 s after a Drink ended: the hand returning), 75 s (nothing there)
+    acc = step_signal(9000, [1000, 4000, 5200, 7500])
+    events = [{"start_s": 9.5, "end_s": 14.0, "label": "Phone"},
+              {"start_s": 39.8, "end_s": 41.0, "label": "Other", "kind": "scratch_head"},
+              {"start_s": 45.0, "end_s": 50.0, "label": "Drink"}]
+    return Drive("steps", acc, events, "distraction")
+
+
+def _cfg(**alerts):
+    return config.override(config.load(None), "alerts", **{"event_hold_s": 0.0, **alerts})
+
+
+def test_decide_is_the_runtime_replay_and_the_cache_asks_the_model_once():
+    answers = {2: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    model = Counting(answers)
+    clf = CachedClassifier(model)
+    drives = [_drive()]
+    first = decide(drives, clf, _cfg())
+    asked = model.calls
+    assert asked == 2 * 6  # four captures of two shapes (a step up, a step down), six steps each
+    assert decide(drives, clf, _cfg(earliest_alert_step=3)) != first and model.calls == asked
+    # the same figures as drive-eval's replay through the publisher
+    replayed = evaluate(drives, Scripted(answers), _cfg(), modes=("early",), progress=lambda _: None)
+    assert score(drives, first) == replayed["scores"]["early"]
+
+
+def test_breakdown_says_when_the_trigger_came_which_step_alerted_and_what_set_off_false_alerts():
+    drive = _drive()
+    ds = decide([drive], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), _cfg())
+    b = breakdown([drive], ds, pre_frames=100, rate_hz=100)
+    phone, drink = b["events"]
+    assert (phone["trigger_delay_s"], phone["first_steps"], phone["first_correct"]) == (0.5, 2, True)
+    assert phone["onset_to_alert_s"] == pytest.approx(11.62 - 9.5)
+    assert drink["missed"] == "no trigger" and drink["trigger_delay_s"] is None
+    assert [f["cause"] for f in b["false_alerts"]] == ["Other motion (scratch_head)",
+                                                       "hand returning after a distraction", "driving (no hand event)"]
+    s = b["summary"]
+    assert s["first_alert_by_steps"]["2"]["first_alerts"] == 1 and s["false_alerts_by_steps"] == {2: 3}
+    # the full window says Other: a missed distraction, for that reason
+    ds = decide([drive], Scripted({6: ("Other", 0.9)}), _cfg())
+    assert breakdown([drive], ds, 100, 100)["events"][0]["missed"] == "full window said Other"
+    assert false_alert_cause(drive, 30.0) == "driving (no hand event)"
+
+
+def test_sweep_scores_each_policy_and_the_rule_takes_the_fastest_that_keeps_class_and_false_alerts():
+    drives = [_drive()]
+    clf = CachedClassifier(Counting({2: ("Phone", 0.95), 4: ("Texting", 0.95), 6: ("Phone", 0.9)}))
+    grid = {"early_threshold": ("manifest", 0.9), "earliest_alert_step": (1, 3), "early_agreement_steps": (1,),
+            "early_min_margin": (0.0,), "full_window_threshold": ("manifest",), "event_hold_s": (0.0,)}
+    rows = sweep(drives, clf, _cfg(), grid, progress=lambda _: None)
+    assert len(rows) == 4
+    by = {(r["point"]["early_threshold"], r["point"]["earliest_alert_step"]): r for r in rows}
+    # no manifest thresholds: 0.9 before the full window; from S = 3 on the first alert is S = 4's Texting
+    assert by[("manifest", 1)]["class_accuracy"] == 1.0 and by[("manifest", 3)]["class_accuracy"] == 0.0
+    assert by[(0.9, 1)]["median_s"] < by[(0.9, 3)]["median_s"]
+    full = {"false_alerts_per_hour": 1e9}
+    assert choose(rows, full)["point"]["earliest_alert_step"] == 1
+    assert choose(rows, {"false_alerts_per_hour": 0.0}) is None  # every policy has false alerts here
+
+
+def test_the_held_out_seed_is_refused(tmp_path, capsys):
+    assert main(["early-tune", "--seed", "2", "--out", str(tmp_path)]) != 0
+    assert "held-out" in capsys.readouterr().err
