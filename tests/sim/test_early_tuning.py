@@ -78,7 +78,7 @@ def test_breakdown_says_when_the_trigger_came_which_step_alerted_and_what_set_of
     assert false_alert_cause(drive, 30.0) == "driving (no hand event)"
 
 
-def test_sweep_scores_each_policy_and_the_rule_takes_the_fastest_that_keeps_class_and_false_alerts():
+def test_sweep_scores_each_policy_and_the_rule_takes_the_fastest_that_keeps_class_and_recall():
     drives = [_drive()]
     clf = CachedClassifier(Counting({2: ("Phone", 0.95), 4: ("Texting", 0.95), 6: ("Phone", 0.9)}))
     grid = {"early_threshold": ("manifest", 0.9), "earliest_alert_step": (1, 3), "early_agreement_steps": (1,),
@@ -89,9 +89,28 @@ def test_sweep_scores_each_policy_and_the_rule_takes_the_fastest_that_keeps_clas
     # no manifest thresholds: 0.9 before the full window; from S = 3 on the first alert is S = 4's Texting
     assert by[("manifest", 1)]["class_accuracy"] == 1.0 and by[("manifest", 3)]["class_accuracy"] == 0.0
     assert by[(0.9, 1)]["median_s"] < by[(0.9, 3)]["median_s"]
-    full = {"false_alerts_per_hour": 1e9}
-    assert choose(rows, full)["point"]["earliest_alert_step"] == 1
-    assert choose(rows, {"false_alerts_per_hour": 0.0}) is None  # every policy has false alerts here
+    assert all(r["event_recall"] == 0.5 for r in rows)  # the Drink has no trigger
+    assert choose(rows, {"event_recall": 0.5})["point"]["earliest_alert_step"] == 1
+    assert choose(rows, {"event_recall": 0.6}) is None  # no policy keeps that recall
+
+
+class ByShape(Scripted):
+    """Phone at every step, 0.9 sure of a capture whose step goes up, 0.6 of one whose step goes down."""
+
+    def classify_prefix(self, x, steps):
+        return self._probs("Phone", 0.9 if x[-1, 0] > x[0, 0] else 0.6)
+
+
+def test_per_step_thresholds_are_the_lowest_confidence_whose_captures_are_right_often_enough(monkeypatch):
+    from firmware_sim.scenarios import early_tuning
+
+    monkeypatch.setattr(early_tuning, "MIN_SUPPORT", 1)
+    # steps up at 10 s and 52 s (Phone distractions), down at 40 s and 75 s (nothing there)
+    acc = step_signal(9000, [1000, 4000, 5200, 7500])
+    events = [{"start_s": 9.5, "end_s": 14.0, "label": "Phone"}, {"start_s": 51.5, "end_s": 60.0, "label": "Phone"}]
+    got = early_tuning.precision_thresholds([Drive("steps", acc, events, "distraction")], ByShape({}),
+                                            config.load(None).detector, [0.5, 0.9])
+    assert got == {"precision 0.5": [0.3] * 5, "precision 0.9": [0.61] * 5}
 
 
 def test_the_held_out_seed_is_refused(tmp_path, capsys):
