@@ -204,14 +204,15 @@ def evaluate(drives, classifier, cfg, modes=MODES, progress=print) -> dict:
 
 def _better_example(best: dict | None, mode: str, drive: Drive, decisions: list[dict], matched) -> dict | None:
     """The distraction to plot: a preliminary alert that arrived before the distraction ended beats a
-    full-window alert, a right class a wrong one; among equals the earliest alert relative to the onset."""
+    full-window alert, a right class a wrong one, one the full window kept one it withdrew; among equals
+    the earliest alert relative to the onset."""
     for e, first in matched:
         if first is None:
             continue
+        related = [d for d in decisions if d.get("event_start_s") == first["event_start_s"]]
         rank = (first["status"] == "preliminary" and first["t_alert_s"] < e["end_s"], first["label"] == e["label"],
-                -(first["t_alert_s"] - e["start_s"]))
+                all(d["status"] != "withdrawn" for d in related), -(first["t_alert_s"] - e["start_s"]))
         if best is None or rank > best["rank"]:
-            related = [d for d in decisions if d.get("event_start_s") == first["event_start_s"]]
             lo = max(0, int((e["start_s"] - 4.0) * 100))
             hi = min(len(drive.acc_mps2), int((max(e["end_s"], related[-1]["t_alert_s"]) + 3.0) * 100))
             best = {"rank": rank, "mode": mode, "drive": drive.name, "event": e, "decisions": related,

@@ -90,8 +90,13 @@ def test_sweep_scores_each_policy_and_the_rule_takes_the_fastest_that_keeps_clas
     assert by[("manifest", 1)]["class_accuracy"] == 1.0 and by[("manifest", 3)]["class_accuracy"] == 0.0
     assert by[(0.9, 1)]["median_s"] < by[(0.9, 3)]["median_s"]
     assert all(r["event_recall"] == 0.5 for r in rows)  # the Drink has no trigger
-    assert choose(rows, {"event_recall": 0.5})["point"]["earliest_alert_step"] == 1
-    assert choose(rows, {"event_recall": 0.6}) is None  # no policy keeps that recall
+    full = {"event_recall": 0.5, "repeat_alerts": 0}
+    assert choose(rows, full)["point"]["earliest_alert_step"] == 1
+    assert choose(rows, {**full, "event_recall": 0.6}) is None  # no policy keeps that recall
+    for r in rows:
+        if r["point"]["earliest_alert_step"] == 1:
+            r["repeat_alerts"] = 1  # now the faster policies warn twice for one distraction
+    assert choose(rows, full) is None  # the slower ones have the wrong class
 
 
 class ByShape(Scripted):
@@ -116,3 +121,38 @@ def test_per_step_thresholds_are_the_lowest_confidence_whose_captures_are_right_
 def test_the_held_out_seed_is_refused(tmp_path, capsys):
     assert main(["early-tune", "--seed", "2", "--out", str(tmp_path)]) != 0
     assert "held-out" in capsys.readouterr().err
+
+
+def test_the_detector_threshold_moves_only_for_a_clear_gain_in_time():
+    from firmware_sim.scenarios.early_tuning import choose_detector
+
+    full = {"event_recall": 0.8, "repeat_alerts": 10}
+
+    def run(thr, median, recall=0.85):
+        return {"threshold_mps2": thr, "median_s": median, "event_recall": recall, "class_accuracy": 0.91,
+                "false_alerts_per_hour": 2.0, "repeat_alerts": 5, "settings": {"earliest_alert_step": 2}}
+
+    # a tie in time that another threshold wins on recall: the current one stays
+    assert choose_detector([run(4.5, 4.70, 0.86), run(5.0, 4.68)], full, 5.0) == 5.0
+    assert choose_detector([run(4.5, 4.50), run(5.0, 4.68)], full, 5.0) == 4.5  # clearly faster
+    assert choose_detector([run(4.5, 4.70), run(5.0, 4.60, recall=0.7)], full, 5.0) == 4.5  # 5.0 loses recall
+
+
+def test_the_shipped_alert_policy_is_the_one_validation_chose():
+    """Fails when a shipped [alerts] or [detector] default differs from what reports/wearable/early_tuning
+    chose on validation: re-run the command it names, or ship its choice."""
+    import json
+    from pathlib import Path
+
+    from edge_runtime.core.manifest import ASSETS_DIR
+    from edge_runtime.wearable.classifier import Engine
+    from edge_runtime.wearable.loop import AlertPolicy
+
+    report = json.loads((Path(__file__).resolve().parents[2] / "reports/wearable/early_tuning/tradeoff.json").read_text())
+    chosen, shipped = report["chosen"]["settings"], AlertPolicy()
+    manifest = Engine.from_manifest(ASSETS_DIR, "int8").early.min_confidence_by_steps
+    assert [shipped.threshold(s, manifest) for s in range(1, 7)] == chosen["min_confidence_by_steps"]
+    assert {k: getattr(shipped, k) for k in chosen if k != "min_confidence_by_steps"} == \
+        {k: v for k, v in chosen.items() if k != "min_confidence_by_steps"}
+    assert shipped.decision == "early"
+    assert config.load(None).detector.threshold_mps2 == report["chosen_detector_threshold_mps2"]
