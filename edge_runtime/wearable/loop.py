@@ -112,7 +112,7 @@ class AlertPolicy:
     early_agreement_steps: int = config.setting(1, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
     """A preliminary alert or a revision needs the same top class at this many consecutive decided
     sub-window counts, ending at its own (1: its own step alone). One confident step may be a
-    passing shape of the motion; two that agree are less often. On validation, 2 cost 0.28 s of
+    passing shape of the motion; two that agree are less often. On validation, 2 cost 0.24 s of
     median latency on average for 0.003 of class accuracy (a higher threshold buys it cheaper): 1."""
     early_min_margin: float = config.setting(0.0, config.PROBABILITY)
     """A preliminary alert or a revision needs its top class this far (calibrated probability) above

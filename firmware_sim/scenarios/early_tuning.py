@@ -388,6 +388,45 @@ def choose_detector(rows: list[dict], full_window: dict, current_mps2: float) ->
     return pick["threshold_mps2"]
 
 
+EFFECTS = ("median_s", "class_accuracy", "false_alerts_per_hour", "event_recall")
+
+
+def knob_effects(rows: list[dict], grid: dict = GRID) -> dict:
+    """Per knob and value: how the figures change, on average and at the extremes, between policies
+    that differ only in that knob (its first value in the grid against this one)."""
+    index = {tuple(sorted(r["point"].items(), key=lambda kv: kv[0])): r for r in rows}
+    out: dict = {}
+    for knob, values in grid.items():
+        for v in values[1:]:
+            deltas = {f: [] for f in EFFECTS}
+            for r in rows:
+                if r["point"][knob] != v:
+                    continue
+                base = index.get(tuple(sorted({**r["point"], knob: values[0]}.items(), key=lambda kv: kv[0])))
+                if base is None or r["median_s"] is None or base["median_s"] is None:
+                    continue
+                for f in EFFECTS:
+                    deltas[f].append(r[f] - base[f])
+            if deltas["median_s"]:
+                out.setdefault(knob, {})[f"{values[0]} -> {v}"] = {
+                    "pairs": len(deltas["median_s"]),
+                    **{f: {"mean": round(float(np.mean(d)), 4), "min": round(float(np.min(d)), 4),
+                           "max": round(float(np.max(d)), 4)} for f, d in deltas.items()}}
+    return out
+
+
+def bounds(rows: list[dict], full_window: dict) -> dict:
+    """The best each figure gets among the policies that keep the full window's event recall."""
+    keep = [r for r in rows if r["event_recall"] >= full_window["event_recall"] and r["median_s"] is not None]
+    if not keep:
+        return {}
+    best = {"median_s": min(keep, key=lambda r: r["median_s"]),
+            "p95_s": min(keep, key=lambda r: r["p95_s"]),
+            "class_accuracy": max(keep, key=lambda r: r["class_accuracy"]),
+            "false_alerts_per_hour": min(keep, key=lambda r: r["false_alerts_per_hour"])}
+    return {f: {"value": r[f], "point": r["point"]} for f, r in best.items()}
+
+
 def pareto(rows: list[dict]) -> list[dict]:
     """Policies no other beats on median latency, false alerts/h and class accuracy at once."""
     def dominated(r):
@@ -445,6 +484,17 @@ def tradeoff_markdown(report: dict) -> str:
     lines += ["**Chosen**: " + (f"`{chosen['settings']}`" if chosen else "no policy meets the rule's constraints"),
               "", *head]
     lines += [_row_md(name, r) for name, r in report["marks"].items()]
+    lines += ["", f"## The best each figure gets while event recall stays >= the full window's "
+                  f"({report['marks']['full window']['event_recall']})", "",
+              "| figure | best | policy |", "|---|---:|---|"]
+    lines += [f"| {f} | {b['value']} | `{b['point']}` |" for f, b in report["bounds_at_full_window_recall"].items()]
+    lines += ["", "## What each knob does (policies that differ only in it: mean [min, max] change)", "",
+              "| knob | change | pairs | median (s) | class accuracy | false alerts / h | event recall |",
+              "|---|---|---:|---:|---:|---:|---:|"]
+    for knob, changes in report["knob_effects"].items():
+        for change, e in changes.items():
+            lines.append(f"| {knob} | {change} | {e['pairs']} | " + " | ".join(
+                f"{e[f]['mean']:+.3f} [{e[f]['min']:+.3f}, {e[f]['max']:+.3f}]" for f in EFFECTS) + " |")
     lines += ["", "## Pareto front (median latency, false alerts/h, class accuracy)", "", *head]
     lines += [_row_md(f"`{r['point']}`", r) for r in report["pareto"]]
     if report.get("detector"):
@@ -507,7 +557,7 @@ def cmd(a) -> int:
         b = breakdown(drives, ds, cfg.detector.pre_frames, cfg.imu.sample_rate_hz)
         b.update(command=command, seed=a.seed, hours=a.hours, mode=mode,
                  config={"alerts": _section(cfg.alerts), "detector": _section(cfg.detector)})
-        (out / f"breakdown_{mode}.json").write_text(json.dumps(b, indent=1))
+        (out / f"breakdown_{mode}.json").write_text(json.dumps(b, separators=(",", ":")))
         (out / f"breakdown_{mode}.md").write_text(breakdown_markdown(
             b, f"Where the time and the errors go: {mode} decisions, validation seed {a.seed}, {a.hours:g} h", command))
         print(breakdown_markdown(b, f"{mode}", command), flush=True)
@@ -524,7 +574,8 @@ def cmd(a) -> int:
     report = {"command": command, "seed": a.seed, "hours": a.hours, "held_out": held_out, "rule": RULE,
               "grid": {k: list(v) for k, v in GRID.items()}, "model": f"{engine.name} ({engine.precision})",
               "manifest_thresholds": dict(clf.early.min_confidence_by_steps), "model_calls": clf.calls,
-              "marks": marks, "chosen": chosen, "pareto": pareto(rows), "rows": rows}
+              "marks": marks, "chosen": chosen, "bounds_at_full_window_recall": bounds(rows, full),
+              "knob_effects": knob_effects(rows), "pareto": pareto(rows), "rows": rows}
     if chosen is not None:
         best = config.override(cfg, "alerts", decision="early", **chosen["settings"])
         report["detector"] = []
@@ -546,7 +597,7 @@ def cmd(a) -> int:
         b = breakdown(drives, decided, best.detector.pre_frames, best.imu.sample_rate_hz)
         b.update(command=command, seed=a.seed, hours=a.hours, mode="early, chosen",
                  config={"alerts": _section(best.alerts), "detector": _section(best.detector)})
-        (out / "breakdown_chosen.json").write_text(json.dumps(b, indent=1))
+        (out / "breakdown_chosen.json").write_text(json.dumps(b, separators=(",", ":")))
         (out / "breakdown_chosen.md").write_text(breakdown_markdown(
             b, f"Where the time and the errors go: the chosen policy, validation seed {a.seed}, {a.hours:g} h",
             command))

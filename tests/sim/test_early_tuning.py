@@ -156,3 +156,18 @@ def test_the_shipped_alert_policy_is_the_one_validation_chose():
         {k: v for k, v in chosen.items() if k != "min_confidence_by_steps"}
     assert shipped.decision == "early"
     assert config.load(None).detector.threshold_mps2 == report["chosen_detector_threshold_mps2"]
+
+
+def test_knob_effects_compare_policies_that_differ_in_one_knob_only():
+    from firmware_sim.scenarios.early_tuning import knob_effects
+
+    def row(margin, hold, median, cls):
+        return {"point": {"early_min_margin": margin, "event_hold_s": hold}, "median_s": median,
+                "class_accuracy": cls, "false_alerts_per_hour": 1.0, "event_recall": 0.9}
+
+    rows = [row(0.0, 3.0, 4.0, 0.90), row(0.3, 3.0, 4.5, 0.92), row(0.0, 5.0, 3.0, 0.80), row(0.3, 5.0, 3.1, 0.80)]
+    got = knob_effects(rows, {"early_min_margin": (0.0, 0.3), "event_hold_s": (3.0, 5.0)})
+    margin = got["early_min_margin"]["0.0 -> 0.3"]
+    assert margin["pairs"] == 2 and margin["median_s"] == {"mean": 0.3, "min": 0.1, "max": 0.5}
+    assert margin["class_accuracy"]["max"] == pytest.approx(0.02)
+    assert got["event_hold_s"]["3.0 -> 5.0"]["class_accuracy"]["mean"] == pytest.approx(-0.11)
