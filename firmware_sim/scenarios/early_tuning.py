@@ -109,6 +109,17 @@ class CachedClassifier:
             np.savez(self.path, keys=np.asarray(keys), probs=np.stack([self._probs[k] for k in keys]))
 
 
+BASELINES = {
+    "early_manifest": {"decision": "early", "min_confidence_by_steps": [-1.0] * 6, "earliest_alert_step": 1,
+                       "early_agreement_steps": 1, "early_min_margin": 0.0},
+    "early": {"decision": "early"},
+    "full_window": {"decision": "full_window"},
+}
+"""The policies the sweep is compared with, on the configuration given (``--config``, else the shipped)."""
+BASELINE_WORDS = {"early_manifest": "early, the manifest's thresholds (the default before tuning)",
+                  "early": "early, as configured", "full_window": "full window"}
+
+
 def decide(drives: list[Drive], classifier, cfg) -> list[list[dict]]:
     """The runtime's decisions (``--alerts`` lines) on every drive: the loop without a bus (every
     would-alert decision counts as sent, as on a bus that takes every frame)."""
@@ -551,24 +562,25 @@ def cmd(a) -> int:
     held_out = (f"drive-eval's seed {a.seed}: distraction drives {drives[0].name}.., baseline drives "
                 f"{drives[-1].name.rsplit(' subject', 1)[0]}")
     shipped = {}
-    for mode in ("early", "full_window"):
-        ds = decide(drives, clf, config.override(cfg, "alerts", decision=mode))
-        shipped[mode] = (ds, _figures(score(drives, ds)))
-        b = breakdown(drives, ds, cfg.detector.pre_frames, cfg.imu.sample_rate_hz)
-        b.update(command=command, seed=a.seed, hours=a.hours, mode=mode,
-                 config={"alerts": _section(cfg.alerts), "detector": _section(cfg.detector)})
-        (out / f"breakdown_{mode}.json").write_text(json.dumps(b, separators=(",", ":")))
-        (out / f"breakdown_{mode}.md").write_text(breakdown_markdown(
-            b, f"Where the time and the errors go: {mode} decisions, validation seed {a.seed}, {a.hours:g} h", command))
-        print(breakdown_markdown(b, f"{mode}", command), flush=True)
+    for name, what in BASELINES.items():
+        c = config.override(cfg, "alerts", **what)
+        ds = decide(drives, clf, c)
+        shipped[name] = (ds, _figures(score(drives, ds)))
+        b = breakdown(drives, ds, c.detector.pre_frames, c.imu.sample_rate_hz)
+        b.update(command=command, seed=a.seed, hours=a.hours, mode=name,
+                 config={"alerts": _section(c.alerts), "detector": _section(c.detector)})
+        (out / f"breakdown_{name}.json").write_text(json.dumps(b, separators=(",", ":")))
+        (out / f"breakdown_{name}.md").write_text(breakdown_markdown(
+            b, f"Where the time and the errors go: {name} ({BASELINE_WORDS[name]}), validation seed {a.seed}, "
+               f"{a.hours:g} h", command))
+        print(breakdown_markdown(b, name, command), flush=True)
     clf.save()
     if a.no_sweep:
         return 0
-    rows = sweep(drives, clf, cfg, progress=lambda line: print(line, flush=True))
+    rows = sweep(drives, clf, cfg, GRID, progress=lambda line: print(line, flush=True))
     full = shipped["full_window"][1]
     chosen = choose(rows, full)
-    marks = {"shipped before (early)": {"point": "config", **shipped["early"][1]},
-             "full window": {"point": "full_window", **full}}
+    marks = {BASELINE_WORDS[name]: {"point": name, **figures} for name, (_, figures) in shipped.items()}
     if chosen is not None:
         marks["chosen"] = chosen
     report = {"command": command, "seed": a.seed, "hours": a.hours, "held_out": held_out, "rule": RULE,

@@ -171,3 +171,25 @@ def test_knob_effects_compare_policies_that_differ_in_one_knob_only():
     assert margin["pairs"] == 2 and margin["median_s"] == {"mean": 0.3, "min": 0.1, "max": 0.5}
     assert margin["class_accuracy"]["max"] == pytest.approx(0.02)
     assert got["event_hold_s"]["3.0 -> 5.0"]["class_accuracy"]["mean"] == pytest.approx(-0.11)
+
+
+def test_the_command_writes_the_breakdowns_the_tradeoff_and_its_choice(tmp_path, monkeypatch, capsys):
+    import json
+
+    from firmware_sim.scenarios import early_tuning
+
+    monkeypatch.setattr(early_tuning, "GRID", {
+        "early_threshold": ("manifest", 0.9), "earliest_alert_step": (2,), "early_agreement_steps": (1,),
+        "early_min_margin": (0.0,), "full_window_threshold": ("manifest",), "event_hold_s": (5.0,)})
+    # a short run on seed 7 (neither validation nor held-out): the shipped model on two 3-minute drives
+    assert main(["early-tune", "--seed", "7", "--hours", "0.1", "--drive-minutes", "3", "--out", str(tmp_path),
+                 "--cache", str(tmp_path / "cache.npz"), "--detector-thresholds", "5.0"]) == 0
+    for name in ("early_manifest", "early", "full_window"):
+        b = json.loads((tmp_path / f"breakdown_{name}.json").read_text())
+        assert b["summary"]["distractions"] == len(b["events"]) > 0
+    report = json.loads((tmp_path / "tradeoff.json").read_text())
+    assert len(report["rows"]) == 2 and (tmp_path / "tradeoff.png").stat().st_size > 10_000
+    assert {"full window", "early, as configured"} <= set(report["marks"])
+    assert report["chosen"] is None or report["chosen"] in report["rows"]
+    assert (tmp_path / "cache.npz").is_file()
+    capsys.readouterr()
