@@ -15,7 +15,9 @@ AlertSeq its DISTRACTION_ALERT frames carry, or that none went out; only then is
 Early decisions (``[alerts] decision = "early"``, with a model that accepts fewer than
 6 sub-windows: :attr:`~edge_runtime.wearable.classifier.Engine.early_steps`). While a
 capture fills, the loop classifies its first S sub-windows as soon as the capture holds
-``needed_frames(S)`` frames. A confident distraction at S < 6 is a *preliminary* alert;
+``needed_frames(S)`` frames. A confident distraction at S < 6 is a *preliminary* alert (confident:
+the step's threshold, from ``earliest_alert_step`` on, ``early_min_margin`` ahead of the second class,
+the same class at ``early_agreement_steps`` consecutive steps: :meth:`AlertPolicy.early_ready`);
 later steps may *revise* its class, and the full window (S = 6) makes the final decision:
 *confirmed*, *revised* or *withdrawn* (Other or uncertain). Each decision that says
 something new is made once and handed out, like every other; the full-window decision of
