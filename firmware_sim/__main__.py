@@ -115,6 +115,8 @@ _MODULE_COMMANDS = (
     ("head-error", "scenarios.head_error", "head position error in the robot frame after calibration, through the lifter"),
     ("drive-eval", "scenarios.drive_eval", "held-out simulated driving through the wearable runtime: event recall, "
                                            "first-alert class, onset to alert, false alerts per hour"),
+    ("early-tune", "scenarios.early_tuning", "early decisions on validation drives: where the time and the errors "
+                                              "go, the decision policy's trade-off and its operating point"),
     ("record", "scenarios.recording", "a ready-to-use recording: several people's COCO keypoints, camera, calibration walk, truth"),
     ("score-lift", "scenarios.lift_score", "a lift's output against a recording's truth: reprojection, MPJPE per motion type"),
     ("crossings", "scenarios.crossings", "people crossing in front of the camera: how often the tracker keeps the right id"),

@@ -15,7 +15,9 @@ AlertSeq its DISTRACTION_ALERT frames carry, or that none went out; only then is
 Early decisions (``[alerts] decision = "early"``, with a model that accepts fewer than
 6 sub-windows: :attr:`~edge_runtime.wearable.classifier.Engine.early_steps`). While a
 capture fills, the loop classifies its first S sub-windows as soon as the capture holds
-``needed_frames(S)`` frames. A confident distraction at S < 6 is a *preliminary* alert;
+``needed_frames(S)`` frames. A confident distraction at S < 6 is a *preliminary* alert (confident:
+the step's threshold, from ``earliest_alert_step`` on, ``early_min_margin`` ahead of the second class,
+the same class at ``early_agreement_steps`` consecutive steps: :meth:`AlertPolicy.early_ready`);
 later steps may *revise* its class, and the full window (S = 6) makes the final decision:
 *confirmed*, *revised* or *withdrawn* (Other or uncertain). Each decision that says
 something new is made once and handed out, like every other; the full-window decision of
@@ -87,17 +89,38 @@ class AlertPolicy:
     revised or withdrawn), when the model accepts partial captures; 'full_window': one decision per
     capture at T+599, the dissertation's."""
     min_confidence_by_steps: tuple[float, ...] = config.setting(
-        (-1.0,) * N_SUBSEQ, ("a list of 6 numbers, each in [0, 1] or negative",
-                             lambda v: len(v) == N_SUBSEQ and all(p <= 1.0 for p in v)))
+        (0.9,) * (N_SUBSEQ - 1) + (-1.0,), ("a list of 6 numbers, each in [0, 1] or negative",
+                                             lambda v: len(v) == N_SUBSEQ and all(p <= 1.0 for p in v)))
     """Threshold of a decision after S = 1..6 sub-windows (a preliminary alert or a revision for S < 6,
     the full window's for S = 6); a negative entry: the model manifest's min_confidence_by_steps for
-    that S (chosen on validation data), else 0.9 for S < 6 and min_confidence for S = 6. 1 for an
-    S < 6: no decision after S sub-windows (the step is not computed)."""
+    that S, else 0.9 for S < 6 and min_confidence for S = 6; 1 for an S < 6: no decision after S
+    sub-windows (the step is not computed). 0.9 before the full window was chosen on
+    validation drives (``firmware_sim early-tune --seed 1``, reports/wearable/early_tuning): the
+    manifest's early thresholds tell a distraction from Other in single captures but not which
+    distraction (first-alert class 0.81 on those drives, Phone taken for Texting most), and the
+    rule there asks class accuracy >= 0.90 at the full window's recall. S = 6 keeps the manifest's."""
     event_hold_s: float = config.setting(5.0, config.within(0.0, 120.0, "s"))
     """An alert event stays active until this long after the end of its last capture: a capture
     triggered meanwhile continues it and raises no new alert. 0: every capture is its own event.
     5 s was chosen on validation drives (``firmware_sim drive-eval --seed 1``, 5 h, full window):
-    repeat alerts 23 -> 1 at unchanged event recall (0.886); 10 s cost 0.03 of recall, 15 s 0.13."""
+    repeat alerts 23 -> 1 at unchanged event recall (0.886); 10 s cost 0.03 of recall, 15 s 0.13. The
+    early-decision sweep (``firmware_sim early-tune``) kept it: 3 s gained 0.01 of recall at 3.6 times
+    the repeat alerts, 10 s cost 0.05 of recall."""
+
+    earliest_alert_step: int = config.setting(2, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
+    """No preliminary alert or revision before this many sub-windows (the full window, S = 6, always
+    decides): the first sub-windows hold little of the motion, and a wrong early class is a false alarm.
+    2 was chosen with the thresholds above: at 0.9, S = 1 alerts are rare and tie with 2 on validation,
+    and the tie goes to the later step (int8 and fp32 agree least at S = 1)."""
+    early_agreement_steps: int = config.setting(1, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
+    """A preliminary alert or a revision needs the same top class at this many consecutive decided
+    sub-window counts, ending at its own (1: its own step alone). One confident step may be a
+    passing shape of the motion; two that agree are less often. On validation, 2 cost 0.24 s of
+    median latency on average for 0.003 of class accuracy (a higher threshold buys it cheaper): 1."""
+    early_min_margin: float = config.setting(0.0, config.PROBABILITY)
+    """A preliminary alert or a revision needs its top class this far (calibrated probability) above
+    the second: a confident step torn between two distractions (Phone or Texting) waits. On validation
+    the early mistakes are confident ones: 0.3 moved class accuracy by 0.003 on average: 0."""
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_confidence <= 1.0:
@@ -113,6 +136,13 @@ class AlertPolicy:
         if confidence < (self.min_confidence if threshold is None else threshold):
             return "uncertain"
         return "alert"
+
+    def early_ready(self, steps: int, margin: float, agreeing_steps: int) -> bool:
+        """Whether a confident early step (S < 6) may alert or revise: late enough, far enough ahead
+        of the second class, and agreeing with the steps before it (``agreeing_steps``: consecutive
+        decided steps, its own included, whose top class is its)."""
+        return (steps >= self.earliest_alert_step and margin >= self.early_min_margin
+                and agreeing_steps >= self.early_agreement_steps)
 
     def threshold(self, steps: int, manifest: dict[int, float]) -> float:
         """The threshold after ``steps`` sub-windows: configured, else the manifest's, else 0.9 before
@@ -216,6 +246,9 @@ class _CaptureState:
     event: AlertEvent | None = None
     continues: bool = False
     """It started while ``event`` was active: it continues that event, and raises no alert."""
+    last_label: str | None = None
+    agreeing: int = 0
+    """Consecutive decided steps so far whose top class is ``last_label``."""
 
 
 class WearableLoop:
@@ -251,9 +284,11 @@ class WearableLoop:
         self._manifest_thresholds: dict[int, float] = dict(getattr(early, "min_confidence_by_steps", {}) or {})
         offered = tuple(getattr(classifier, "early_steps", (N_SUBSEQ,)))
         # A threshold of 1 before the full window means no decision at that step (the manifest gives S = 1
-        # one: near-chance, and outside int8's agreement gate), so the loop does not compute it at all.
-        self._early_steps = tuple(s for s in offered if s == N_SUBSEQ or self.policy.threshold(
-            s, self._manifest_thresholds) < 1.0) if policy.decision == "early" else (N_SUBSEQ,)
+        # one: near-chance, and outside int8's agreement gate), so the loop does not compute it at all;
+        # nor a step before the earliest that may alert, unless it counts for agreement with that one.
+        first_useful = policy.earliest_alert_step - (policy.early_agreement_steps - 1)
+        self._early_steps = tuple(s for s in offered if s == N_SUBSEQ or (s >= first_useful and self.policy.threshold(
+            s, self._manifest_thresholds) < 1.0)) if policy.decision == "early" else (N_SUBSEQ,)
         self._early = self._early_steps != (N_SUBSEQ,)
         self.decision_mode = "early decisions after S = " + ",".join(map(str, self._early_steps)) if self._early \
             else "full-window decisions" + (" (the model takes S = 6 only)" if offered == (N_SUBSEQ,) else
@@ -399,8 +434,13 @@ class WearableLoop:
         compute_us = (time.perf_counter() - t_start) * 1e6
         k = int(np.argmax(probs))
         label, conf = self.classes[k], float(probs[k])
+        st.agreeing = st.agreeing + 1 if label == st.last_label else 1
+        st.last_label = label
         threshold = self.policy.threshold(steps, self._manifest_thresholds)
         status = self.policy.status(label, conf, threshold)
+        if status == "alert" and not full and not self.policy.early_ready(
+                steps, conf - float(np.partition(probs, -2)[-2]), st.agreeing):
+            status = "uncertain"
         ev = st.event
         if st.continues:
             status = "continued"

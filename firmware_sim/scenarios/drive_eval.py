@@ -204,13 +204,15 @@ def evaluate(drives, classifier, cfg, modes=MODES, progress=print) -> dict:
 
 def _better_example(best: dict | None, mode: str, drive: Drive, decisions: list[dict], matched) -> dict | None:
     """The distraction to plot: a preliminary alert that arrived before the distraction ended beats a
-    full-window alert; among equals the earliest alert relative to the onset."""
+    full-window alert, a right class a wrong one, one the full window kept one it withdrew; among equals
+    the earliest alert relative to the onset."""
     for e, first in matched:
         if first is None:
             continue
-        rank = (first["status"] == "preliminary" and first["t_alert_s"] < e["end_s"], -(first["t_alert_s"] - e["start_s"]))
+        related = [d for d in decisions if d.get("event_start_s") == first["event_start_s"]]
+        rank = (first["status"] == "preliminary" and first["t_alert_s"] < e["end_s"], first["label"] == e["label"],
+                all(d["status"] != "withdrawn" for d in related), -(first["t_alert_s"] - e["start_s"]))
         if best is None or rank > best["rank"]:
-            related = [d for d in decisions if d.get("event_start_s") == first["event_start_s"]]
             lo = max(0, int((e["start_s"] - 4.0) * 100))
             hi = min(len(drive.acc_mps2), int((max(e["end_s"], related[-1]["t_alert_s"]) + 3.0) * 100))
             best = {"rank": rank, "mode": mode, "drive": drive.name, "event": e, "decisions": related,
@@ -237,7 +239,7 @@ def plot_example(ex: dict, out_png: Path) -> None:
     ax.text(e["start_s"], ymax * 0.92, " onset", color="C3", fontsize=8)
     ax.text(e["end_s"], ymax * 0.92, " end", color="C3", fontsize=8)
     shown_trigger = set()
-    for d in ex["decisions"]:
+    for k, d in enumerate(ex["decisions"]):
         if d["t_trigger_s"] not in shown_trigger:
             shown_trigger.add(d["t_trigger_s"])
             ax.axvline(d["t_trigger_s"], color="0.4", lw=0.8, ls="--")
@@ -245,7 +247,7 @@ def plot_example(ex: dict, out_png: Path) -> None:
         final = d["steps"] == 6
         colour = {"preliminary": "C1", "withdrawn": "0.5", "continued": "0.7"}.get(d["status"], "C2" if final else "C1")
         ax.axvline(d["t_alert_s"], color=colour, lw=1.6 if d["alerted"] else 0.8)
-        ax.text(d["t_alert_s"], ymax * (0.75 if final else 0.6),
+        ax.text(d["t_alert_s"], ymax * (0.8 - 0.22 * (k % 3)),  # staggered: nearby frames' labels apart
                 f" {d['status']} {d['label']}\n S={d['steps']}, p={d['confidence']:.2f}", color=colour, fontsize=7)
     ax.set_ylim(-ymax, ymax)
     ax.set_xlabel("recording time (s)")

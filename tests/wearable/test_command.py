@@ -206,7 +206,10 @@ def test_a_model_that_takes_partial_captures_makes_early_decisions_unless_full_w
 def test_the_min_confidence_flag_is_the_full_windows_threshold_before_the_models_manifest(capsys):
     assert table.main(["wearable", "--min-confidence", "0.7", "--decision", "full_window", "--print-config"]) == 0
     out = capsys.readouterr().out
-    assert "min_confidence = 0.7" in out and "min_confidence_by_steps = [-1.0, -1.0, -1.0, -1.0, -1.0, 0.7]" in out
+    from edge_runtime.wearable.loop import AlertPolicy
+
+    early = ", ".join(map(repr, AlertPolicy().min_confidence_by_steps[:-1]))  # the early steps keep the shipped ones
+    assert "min_confidence = 0.7" in out and f"min_confidence_by_steps = [{early}, 0.7]" in out
     assert 'decision = "full_window"' in out
 
 

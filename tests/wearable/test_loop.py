@@ -183,9 +183,15 @@ def test_the_heartbeat_thread_reports_what_the_loop_counts():
 # ---------------------------------------------------------------------------- early decisions and events
 
 
-def _early_run(answers, policy=AlertPolicy(), acc=None, split=None, **kw):
+def Policy(**kw):
+    """An early policy that alerts from S = 1 at the manifest's thresholds (else 0.9): the loop's mechanics,
+    not the shipped operating point (tests/sim/test_early_tuning.py pins that one to its validation report)."""
+    return AlertPolicy(**{"min_confidence_by_steps": (-1.0,) * 6, "earliest_alert_step": 1, **kw})
+
+
+def _early_run(answers, policy=Policy(), acc=None, split=None, clf=None, **kw):
     pub = Publisher()
-    clf = Scripted(answers, **kw)
+    clf = Scripted(answers, **kw) if clf is None else clf
     loop = WearableLoop(clf, policy=policy, publisher=pub)
     acc = _steps(3000, [1000]) if acc is None else acc
     cuts = range(0, len(acc), split) if split else [0]
@@ -230,7 +236,7 @@ def test_a_preliminary_alert_may_be_revised_and_the_full_window_may_withdraw_it(
 def test_unconfident_early_steps_wait_and_full_window_mode_decides_once():
     ds, pub, *_ = _early_run({2: ("Phone", 0.85), 6: ("Phone", 0.8)})  # 0.85 < 0.9, the default early threshold
     assert _summary(ds) == [("alert", 6, "Phone", 0)] and pub.handed[0].event_seq is None
-    ds, _, clf, _ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.8)}, policy=AlertPolicy(decision="full_window"))
+    ds, _, clf, _ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.8)}, policy=Policy(decision="full_window"))
     assert _summary(ds) == [("alert", 6, "Phone", 0)] and [s for s, _ in clf.seen] == [6]
     ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.8)}, early_steps=(6,))  # a fixed-S model
     assert _summary(ds) == [("alert", 6, "Phone", 0)]
@@ -241,11 +247,11 @@ def test_early_thresholds_come_from_the_config_else_the_manifest():
     ds, *_ = _early_run(answers, manifest_thresholds={2: 0.8})
     assert _summary(ds)[0] == ("preliminary", 2, "Phone", 0)
     ds, *_ = _early_run(answers, manifest_thresholds={2: 0.8},
-                        policy=AlertPolicy(min_confidence_by_steps=(-1.0, 0.86, -1.0, -1.0, -1.0, -1.0)))
+                        policy=Policy(min_confidence_by_steps=(-1.0, 0.86, -1.0, -1.0, -1.0, -1.0)))
     assert _summary(ds) == [("alert", 6, "Phone", 0)]
     # the full window: configured, else the manifest's, else min_confidence
     assert _summary(_early_run(answers, manifest_thresholds={6: 0.85})[0])[-1] == ("uncertain", 6, "Phone", None)
-    assert _summary(_early_run(answers, manifest_thresholds={6: 0.85}, policy=AlertPolicy(
+    assert _summary(_early_run(answers, manifest_thresholds={6: 0.85}, policy=Policy(
         min_confidence_by_steps=(-1.0,) * 5 + (0.7,)))[0])[-1] == ("alert", 6, "Phone", 0)
 
 
@@ -259,10 +265,80 @@ def test_a_threshold_of_1_before_the_full_window_means_no_decision_and_no_model_
     assert loop.decision_mode == "full-window decisions (every S < 6 has threshold 1)"
 
 
+class Torn(Scripted):
+    """Scripted, with a runner-up class per step: (label, p) whose probability is taken from the rest."""
+
+    def __init__(self, answers, runner_up, **kw):
+        super().__init__(answers, **kw)
+        self.runner_up = runner_up
+
+    def classify_prefix(self, x, steps):
+        probs = super().classify_prefix(x, steps)
+        if steps in self.runner_up:
+            label, p = self.runner_up[steps]
+            top = int(np.argmax(probs))
+            rest = [k for k in range(len(CLASSES)) if k not in (top, CLASSES.index(label))]
+            probs[CLASSES.index(label)] = p
+            probs[rest] = (1 - probs[top] - p) / len(rest)
+        return probs
+
+
+def test_no_preliminary_alert_before_the_earliest_step():
+    answers = {2: ("Phone", 0.95), 3: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    ds, *_ = _early_run(answers, Policy(earliest_alert_step=3))
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    # a revision waits too; the full window always decides
+    ds, *_ = _early_run({1: ("Drink", 0.99), 2: ("Phone", 0.95), 6: ("Phone", 0.9)}, Policy(earliest_alert_step=6))
+    assert _summary(ds) == [("alert", 6, "Phone", 0)]
+
+
+def test_steps_before_the_earliest_alert_step_are_not_computed_unless_agreement_needs_them():
+    answers = {2: ("Phone", 0.95), 3: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    ds, _, clf, loop = _early_run(answers, Policy(earliest_alert_step=3))
+    assert [s for s, _ in clf.seen] == [3, 4, 5, 6] and loop.decision_mode == "early decisions after S = 3,4,5,6"
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    ds, _, clf, _ = _early_run(answers, Policy(earliest_alert_step=3, early_agreement_steps=2))
+    assert [s for s, _ in clf.seen] == [2, 3, 4, 5, 6]  # S = 2 must agree with S = 3
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+
+
+def test_two_steps_must_agree_before_an_early_alert_or_a_revision():
+    answers = {1: ("Drink", 0.5), 2: ("Phone", 0.95), 3: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    assert _summary(_early_run(answers)[0])[0] == ("preliminary", 2, "Phone", 0)
+    ds, *_ = _early_run(answers, Policy(early_agreement_steps=2))
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    # agreement counts the top class, confident or not: S = 1 says Phone at 0.3
+    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.9)}, Policy(early_agreement_steps=2))
+    assert _summary(ds)[0] == ("preliminary", 2, "Phone", 0)
+    answers = {2: ("Phone", 0.95), 4: ("Texting", 0.95), 5: ("Texting", 0.95), 6: ("Texting", 0.9)}
+    ds, *_ = _early_run(answers, Policy(early_agreement_steps=2))
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("revised", 5, "Texting", 0),
+                            ("confirmed", 6, "Texting", 0)]
+
+
+def test_an_early_step_torn_between_two_classes_waits():
+    answers = {2: ("Phone", 0.5), 3: ("Phone", 0.8), 6: ("Phone", 0.9)}
+    policy = Policy(early_min_margin=0.2, min_confidence_by_steps=(-1.0, 0.5, 0.5, -1.0, -1.0, -1.0))
+    ds = _early_run(answers, policy, clf=Torn(answers, {2: ("Texting", 0.45), 3: ("Texting", 0.1)}))[0]
+    assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    ds = _early_run(answers, Policy(min_confidence_by_steps=policy.min_confidence_by_steps),
+                    clf=Torn(answers, {2: ("Texting", 0.35)}))[0]
+    assert _summary(ds)[0] == ("preliminary", 2, "Phone", 0)  # no margin asked: the confident step alerts
+
+
+@pytest.mark.parametrize("key, value", [("earliest_alert_step", 0), ("earliest_alert_step", 7),
+                                        ("early_agreement_steps", 0), ("early_min_margin", 1.5)])
+def test_early_policy_settings_are_validated(key, value):
+    from edge_runtime import config
+
+    with pytest.raises(config.ConfigError, match=rf"\[alerts\] {key}: must be"):
+        config.from_dict({"alerts": {key: value}}, "box.toml")
+
+
 def test_early_decisions_do_not_depend_on_how_the_stream_is_cut():
     acc = _steps(9000, [1000, 4000])
     answers = {1: ("Drink", 0.99), 3: ("Phone", 0.95), 6: ("Phone", 0.9)}
-    policy = AlertPolicy(event_hold_s=0.0)
+    policy = Policy(event_hold_s=0.0)
     whole = _summary(_early_run(answers, policy, acc)[0])
     assert whole == [("preliminary", 1, "Drink", 0), ("revised", 3, "Phone", 0), ("confirmed", 6, "Phone", 0),
                      ("preliminary", 1, "Drink", 1), ("revised", 3, "Phone", 1), ("confirmed", 6, "Phone", 1)]
@@ -275,20 +351,20 @@ def test_early_decisions_do_not_depend_on_how_the_stream_is_cut():
 def test_a_capture_during_an_active_event_continues_it_and_raises_no_alert():
     # captures at 10 s, 20 s (4 s after the first ended: the hand returning), 45 s (19 s of quiet: a new event)
     acc = _steps(8000, [1000, 2000, 4500])
-    ds, pub, _, loop = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.9)}, AlertPolicy(event_hold_s=10.0), acc)
+    ds, pub, _, loop = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.9)}, Policy(event_hold_s=10.0), acc)
     assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("confirmed", 6, "Phone", 0),
                             ("continued", 6, "Phone", None),
                             ("preliminary", 2, "Phone", 1), ("confirmed", 6, "Phone", 1)]
     assert [d.event_start_s for d in ds] == [10.0, 10.0, 10.0, 45.0, 45.0]
     assert not ds[2].alerted and len(pub.handed) == 4 and loop.stats.events == 2
     # event_hold_s = 0: every capture is its own event
-    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.9)}, AlertPolicy(event_hold_s=0.0), acc)
+    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Phone", 0.9)}, Policy(event_hold_s=0.0), acc)
     assert [d.alert_seq for d in ds if d.steps == 2] == [0, 1, 2]
 
 
 def test_a_withdrawn_alert_ends_its_event():
     acc = _steps(8000, [1000, 2000])
-    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Other", 0.9)}, AlertPolicy(event_hold_s=10.0), acc)
+    ds, *_ = _early_run({2: ("Phone", 0.95), 6: ("Other", 0.9)}, Policy(event_hold_s=10.0), acc)
     assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("withdrawn", 6, "Other", 0),
                             ("preliminary", 2, "Phone", 1), ("withdrawn", 6, "Other", 1)]
 
@@ -301,7 +377,7 @@ def test_decisions_in_the_alert_log_carry_steps_and_event_start():
 
 def test_a_capture_cut_by_a_gap_gets_no_update_and_the_next_capture_decides_early_again():
     pub = Publisher()
-    loop = WearableLoop(Scripted({1: ("Phone", 0.95), 6: ("Phone", 0.9)}), policy=AlertPolicy(event_hold_s=60.0),
+    loop = WearableLoop(Scripted({1: ("Phone", 0.95), 6: ("Phone", 0.9)}), policy=Policy(event_hold_s=60.0),
                         publisher=pub)  # a long hold: only the cut ends the event
     acc = step_signal(1300, [1000])
     first = loop.feed(ImuBlock(0.0, acc))  # the capture from frame 900 holds 400 frames when the stream stops
