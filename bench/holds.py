@@ -263,6 +263,7 @@ def tampered() -> dict:
         other = next(e for e in entries if e["name"] == "convlstm-fp32")
         assets = Path(tmp) / "with-hash"
         shutil.copytree(ASSETS_DIR, assets)
+        public_key = _sign_genuine(assets, Path(tmp) / "keys")  # the builder signs what he built
         manifest = json.loads((assets / "manifest.json").read_text())
         for e in manifest["models"]:
             if e["name"] == entry["name"]:
@@ -274,9 +275,29 @@ def tampered() -> dict:
             with_hash = "LOADED (a sha256 proves integrity, not who built the model)"
         except ModelIntegrityError as e:
             with_hash = f"refused: {e}"
+        signed = "not checked: the signed-models extra (cryptography) is not installed"
+        if public_key is not None:
+            try:
+                Engine.from_manifest(assets, entry["name"], public_key_file=public_key)
+                signed = "LOADED"
+            except ModelIntegrityError as e:
+                signed = f"refused: {str(e).split(': ', 1)[-1]}"
     refused = sum(r["verdict"] == "refused" for r in rows)
     return {"cases": len(rows), "refused": refused, "untouched_copy_loads": True, "rows": rows,
-            "model_and_hash_replaced": with_hash}
+            "model_and_hash_replaced": with_hash, "model_and_hash_replaced_on_a_box_with_a_public_key": signed}
+
+
+def _sign_genuine(assets: Path, keys: Path) -> Path | None:
+    """A key pair in ``keys`` and the untouched manifest of ``assets`` signed with it (the public
+    key file), or None without the signed-models extra."""
+    try:
+        from export.sign import keygen, sign_manifest
+
+        private, public = keygen(keys)
+    except ValueError:  # SignError: cryptography is missing
+        return None
+    sign_manifest(assets, private)
+    return public
 
 
 # ----------------------------------------------------------------------------------------------

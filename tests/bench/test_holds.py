@@ -33,6 +33,8 @@ def test_every_tampered_model_is_refused_and_the_untouched_copy_loads():
     assert {row["tampering"] for row in r["rows"]} == {"one byte flipped", "truncated to half",
                                                        "swapped for another shipped model"}
     assert r["model_and_hash_replaced"].startswith("LOADED")  # what only a signature could refuse
+    pytest.importorskip("cryptography")
+    assert r["model_and_hash_replaced_on_a_box_with_a_public_key"].startswith("refused: the manifest's signature")
 
 
 def test_memory_is_sampled_every_period_of_stream_time():
