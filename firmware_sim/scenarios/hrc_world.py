@@ -641,16 +641,10 @@ def _occlude(percepts, k: int, camera: Camera, Jc: np.ndarray, arm) -> None:
 
 
 def _feed(loop: RobotLoop, outs: list):
-    """One camera frame of every worker's perception into the loop: the valid ones together (with
-    their worker index as id), nobody for workers not detected, and an invalid frame when any
-    worker's is (the arm stops: one worker the runtime cannot see properly is enough)."""
-    bad = [o for o in outs if not o.valid and str(o.reason or "").split(":", 1)[0] != NO_PERSON]
-    if bad:
-        return loop.feed_lifted(bad[0])
-    seen = [(w, o) for w, o in enumerate(outs) if o.valid]
-    if not seen:
-        return loop.feed_joints(None)
-    return loop.feed_joints(np.stack([o.joints_cam_m for _, o in seen]), ids=[w for w, _ in seen])
+    """One camera frame of every worker's perception into the loop, with his worker index as his
+    id (the simulator knows who is who: it stands in for ``keypoints.PersonTracker``), the way the
+    product feeds its tracked people (``RobotLoop.feed_poses``)."""
+    return loop.feed_poses(list(enumerate(outs)))
 
 
 def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult:
