@@ -629,13 +629,20 @@ class HazardMonitor:
             for hold in self._below.values():
                 hold.clear_for(t_s, False)
             return
-        # de-escalate one level at a time, each after dwell_s beyond its exit radius
+        # de-escalate one level at a time, each after dwell_s beyond its exit radius. "head": the
+        # dissertation's steps, a dwell each (Fig. 3.5); whole_body: each level's dwell counts from
+        # when the separation got beyond its exit radius, so a person who has left both the retract
+        # and the stop distance for dwell_s lets the arm work at once after its retraction (the same
+        # evidence, not a second wait: resuming promptly is what SSM is for, ISO/TS 15066 5.5.4.2)
+        together = z.separation == "whole_body"
+        beyond = {lvl: hold.clear_for(t_s, d > exit_r[lvl]) for lvl, hold in self._below.items()} if together else {}
         while self.level > entry:
             level = State.LEVEL2 if self.level == State.LEVEL2 else State.LEVEL1
-            if self._below[level].clear_for(t_s, d > exit_r[level]) < z.dwell_s:
+            if (beyond[level] if together else self._below[level].clear_for(t_s, d > exit_r[level])) < z.dwell_s:
                 break
             self.level = State.LEVEL1 if level == State.LEVEL2 else State.NORMAL
-            self._below[level].clear_for(t_s, False)
+            if not together:
+                self._below[level].clear_for(t_s, False)
 
     def _decide(self, t_s: float, d: float = math.inf, wid=None, est=None) -> Decision:
         if self._fault is not None and self.level != State.LEVEL2:
