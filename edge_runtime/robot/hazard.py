@@ -110,8 +110,12 @@ class TrackerParams:
     min_samples: int = config.setting(3, ("an integer of at least 2", lambda v: v >= 2))
     """Frames a fit needs; with fewer (a new track) the velocity is taken as zero. At
     5.8 Hz a 0.5 s window holds 3 frames."""
-    max_speed_mps: float = config.setting(3.0, config.POSITIVE)
-    """Head speeds above this (m/s) are clipped: faster than a running worker, so noise."""
+    max_speed_mps: float = config.setting(2.0, config.POSITIVE)
+    """Head speeds above this (m/s) are clipped: the fastest the cell assumes anyone moves (ISO
+    13855's K = 2000 mm/s for a hand or arm, above its 1.6 m/s walking; the issue's running
+    bursts), so faster is the lifter's depth noise. At 3.0 m/s a worker walking past 3 m out at
+    1.2 m/s, lifted from a camera 8 m away, was tracked at 2.9 m/s toward the arm and made it
+    retract (hard:20, hard_000)."""
     jump_m: float = config.setting(1.0, config.POSITIVE)
     """A head that moves further than this between two frames (beyond what
     ``max_speed_mps`` allows) is a new track: the window restarts."""
@@ -476,9 +480,11 @@ class HazardMonitor:
         self.estimates = ests  # each person's head estimate, for the per-person log
         if self.zones.separation == "head":
             entry, exit_r, nearest = self._head_zones(ests, effector_m)
+            d_exit = nearest[0]
         else:
-            entry, exit_r, nearest = self._speed_and_separation(t_s, people, ests, effector_m, arm_q_rad, unseen)
-        self._update_level(t_s, entry, nearest[0], nearest[2], exit_r)
+            entry, exit_r, nearest, d_exit = self._speed_and_separation(t_s, people, ests, effector_m, arm_q_rad,
+                                                                        unseen)
+        self._update_level(t_s, entry, d_exit, nearest[2], exit_r)
         if self._fault is not None and self._fault_clear.clear_for(t_s, True) >= self.zones.dwell_s:
             self._fault = None
         return self._decide(t_s, *nearest)
@@ -506,8 +512,9 @@ class HazardMonitor:
         who keeps coming, LEVEL1 (stop) below the protective distance at the slowest useful
         speed (stop-only: at full speed), else NORMAL at the speed the nearest one allows. The
         people seen before but not now count by their reachable set (:meth:`_lost`).
-        (entry level, exit radii, nearest (d, id, head)); the exit is judged on the smallest
-        separation, lost people's included."""
+        (entry level, exit radii, nearest seen (d, id, head), the separation the exit is judged on:
+        the smallest, lost people's included). The nearest is a person seen in this frame: a
+        retraction goes away from someone whose head is known."""
         z = self.zones
         caps = arm_capsules(arm_q_rad) if arm_q_rad is not None else effector_capsule(effector_m)
         eff_g = ground(effector_m)
@@ -551,7 +558,7 @@ class HazardMonitor:
                   State.LEVEL1: z.body_protective_distance_m(v_stop, human_speed) + z.hysteresis_m}
         # nobody seen or accounted for (every lost person forgotten after lost_hold_s): full speed
         self._scale = 1.0 if worst[1] is None else self._speed_scale(worst[2], human_speed)
-        return entry, exit_r, (min(nearest[0], worst[2]),) + nearest[1:]
+        return entry, exit_r, nearest, min(nearest[0], worst[2])
 
     def _lost(self, t_s: float, seen_now: set, caps):
         """(id, worst-case separation m, his speed m/s) of every person seen validly before but not
