@@ -18,12 +18,22 @@ Two ways to protect people (``[zones] separation``):
   now and ``predict_s`` ahead (his whole body moved with his head's velocity). ISO/TS 15066
   speed and separation monitoring: the protective separation distance at robot speed v_r is
   ``S_p = v_h (T_r + T_s) + v_r (T_r + T_s / 2) + C + Z_d + Z_r`` (v_h: his tracked speed,
-  at least ISO 13855's 1.6 m/s), so a separation allows the robot speed that inverts it.
+  at least ISO 13855's 1.6 m/s; T_s the stopping time from v_r, in proportion to it), so a
+  separation allows the robot speed that inverts it.
   NORMAL works at that speed (``speed_scale``, in steps of ``speed_step``; stop-only:
   full speed or nothing), LEVEL1 stops below the protective distance at the slowest useful
   speed, LEVEL2 retracts when a person keeps coming (toward the arm faster than
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
-  ``retract_lead_s``.
+  ``retract_lead_s``. After a retraction the arm works again once the person has been
+  beyond both exit distances for ``dwell_s``.
+  **People the camera loses** (hidden, out of view, or lifted invalidly while others are
+  lifted): each is judged by his reachable set, his last valid body with every joint
+  ``lost_person_speed_mps`` x the time since closer to the arm. While that set stays outside
+  the protective distance he is no reason to stop (the arm slows for it as for anyone); once
+  it reaches it, the arm stops (``person_lost``) until he is seen again or, ``lost_hold_s``
+  after his last valid pose, he is forgotten. A person the lifter has never lifted validly
+  stops the arm (FAULT, ``person_unseen``) as long as he is in view unlifted. The camera or
+  lifter failing as a whole (stale or invalid frames) is still a fault stop.
 * **"head"**: the dissertation's zones around the end effector, below.
 
 * **Tracking and prediction (Eq. 3).** ``HeadTracker`` fits a straight line to the
@@ -52,8 +62,10 @@ Two ways to protect people (``[zones] separation``):
   the *exit* radius (entry radius + ``hysteresis_m``) for ``dwell_s`` without a break,
   so keypoint noise at a zone boundary cannot make the arm chatter.
 * **Fail-safe** (``FAULT``): no pose for more than ``stale_after_s`` (200 ms), or the
-  lifter's output invalid, and the arm stops with a distinct reason. A worker who was
-  inside R1 and vanishes from view also holds the arm stopped (``worker_lost``).
+  lifter's output invalid, and the arm stops with a distinct reason ("head": one person's
+  invalid lift is an invalid frame; "whole_body": see people the camera loses, above). A
+  worker who was inside R1 and vanishes from view also holds the arm stopped
+  (``worker_lost``, "head").
   The fault clears after ``dwell_s`` of valid frames.
 * **Retraction (Eq. 6 and Sec. 3.2.4.4)**, at the end of this module as pure functions:
   where the hand goes when a worker enters level 2, and which way the tool points. Numbers

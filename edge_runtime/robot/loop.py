@@ -14,7 +14,8 @@ injectable ``clock`` (``time.monotonic`` by default; a scenario runner passes it
 simulated clock). Its driver calls
 
 * ``feed_joints(...)`` / ``feed_lifted(...)`` / ``feed_people(...)`` (every tracked person
-  lifted with his own window) for every camera frame, and
+  lifted with his own window; ``feed_poses`` for people lifted already: one person's invalid
+  lift is judged on him, not the whole frame) for every camera frame, and
 * ``tick()`` at the control rate (e.g. every 10 ms): link polling, the 200 ms staleness
   check, the task motion and the heartbeat.
 
@@ -33,7 +34,8 @@ LEVEL2     ``retract(P_eff + L)`` on entry (Eq. 6; again when it  red, 4000 Hz 8
            controller reports it unreachable, one retraction
            straight toward the base, and if that is refused too:
            ``stop()`` (``retract_unreachable``)
-FAULT      ``stop()`` (pose stale / invalid / no pose yet)          yellow
+FAULT      ``stop()`` (pose stale / invalid / no pose yet, or a    yellow
+           person in view never lifted validly)
 =========  =====================================================  ==================
 
 The link is a :class:`edge_runtime.robot.link.base.LinkInterface` (a ``RobotLink``, or a
