@@ -18,8 +18,7 @@ Two ways to protect people (``[zones] separation``):
   now and ``predict_s`` ahead (his whole body moved with his head's velocity). ISO/TS 15066
   speed and separation monitoring: the protective separation distance at robot speed v_r is
   ``S_p = v_h (T_r + T_s) + v_r (T_r + T_s / 2) + C + Z_d + Z_r`` (v_h: his tracked speed,
-  at least ISO 13855's 1.6 m/s; T_s the stopping time from v_r, in proportion to it), so a
-  separation allows the robot speed that inverts it.
+  at least ISO 13855's 1.6 m/s), so a separation allows the robot speed that inverts it.
   NORMAL works at that speed (``speed_scale``, in steps of ``speed_step``; stop-only:
   full speed or nothing), LEVEL1 stops below the protective distance at the slowest useful
   speed, LEVEL2 retracts when a person keeps coming (toward the arm faster than
@@ -122,12 +121,11 @@ class TrackerParams:
     min_samples: int = config.setting(3, ("an integer of at least 2", lambda v: v >= 2))
     """Frames a fit needs; with fewer (a new track) the velocity is taken as zero. At
     5.8 Hz a 0.5 s window holds 3 frames."""
-    max_speed_mps: float = config.setting(2.0, config.POSITIVE)
-    """Head speeds above this (m/s) are clipped: the fastest the cell assumes anyone moves (ISO
-    13855's K = 2000 mm/s for a hand or arm, above its 1.6 m/s walking; the issue's running
-    bursts), so faster is the lifter's depth noise. At 3.0 m/s a worker walking past 3 m out at
-    1.2 m/s, lifted from a camera 8 m away, was tracked at 2.9 m/s toward the arm and made it
-    retract (hard:20, hard_000)."""
+    max_speed_mps: float = config.setting(3.0, config.POSITIVE)
+    """Head speeds above this (m/s) are clipped: faster than a running worker, so noise. (2.0 m/s,
+    the fastest the hard suite's workers walk, cut retractions for walkers tracked too fast from a
+    far camera, but a worker whose lift jumped in close was then retracted from too late:
+    hard:200, hard_163, 0.05 m.)"""
     jump_m: float = config.setting(1.0, config.POSITIVE)
     """A head that moves further than this between two frames (beyond what
     ``max_speed_mps`` allows) is a new track: the window restarts."""
@@ -237,43 +235,26 @@ class ZoneParams:
         if self.separation not in ("whole_body", "head"):
             raise ValueError(f"separation: must be whole_body or head, got {self.separation!r}")
 
-    def body_stop_time_s(self, robot_speed_mps: float) -> float:
-        """whole_body: the robot's stopping time T_s (s) from speed v_r: ``iso_stop_time_s`` at
-        full speed, proportionally less from a lower one (a stop at constant deceleration;
-        ISO 10218-1 Annex B's stopping data are taken at 33, 66 and 100 % of speed because they
-        shrink with it). The simulated Sawyer brakes every joint at a fixed rate, so its stop
-        from 10 % speed takes a tenth of the full-speed stop."""
-        full = self.iso_robot_speed_mps
-        return self.iso_stop_time_s * min(robot_speed_mps / full, 1.0) if full > 0 else self.iso_stop_time_s
-
     def body_protective_distance_m(self, robot_speed_mps: float, human_speed_mps: float | None = None) -> float:
         """whole_body: ISO/TS 15066's S_p (m, 5.5.4.2.3) at robot speed v_r:
-        ``v_h (T_r + T_s) + v_r T_r + v_r T_s / 2 + C + Z_d + Z_r``, with the stopping time
-        ``T_s(v_r)`` of :meth:`body_stop_time_s`, the stopping distance ``S_s = v_r T_s / 2`` of a
-        constant deceleration, and v_h at least ``iso_human_speed_mps``. A slower arm stops
-        sooner, so the human's share ``v_h (T_r + T_s)`` shrinks with it: that, not the arm's own
-        travel, is most of what slowing down buys."""
+        ``v_h (T_r + T_s) + v_r T_r + v_r T_s / 2 + C + Z_d + Z_r``, with the stopping distance
+        ``S_s = v_r T_s / 2`` of a constant deceleration and v_h at least ``iso_human_speed_mps``.
+        T_s is the full-speed stopping time at every speed: scaling it with v_r (a slower arm stops
+        sooner) widened the band in which the arm works from 1.15-1.31 m to 0.71-1.31 m and let a
+        worker standing 0.8 m out reach a slow arm (hard:200, hard_148: 0.05 m), since only a
+        person who keeps coming makes it retract."""
         v_h = max(self.iso_human_speed_mps, human_speed_mps or 0.0)
-        t_s = self.body_stop_time_s(robot_speed_mps)
-        return (v_h * (self.iso_reaction_time_s + t_s) + robot_speed_mps * (self.iso_reaction_time_s + 0.5 * t_s)
+        return (v_h * (self.iso_reaction_time_s + self.iso_stop_time_s)
+                + robot_speed_mps * (self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s)
                 + self.body_intrusion_m + self.body_sensing_uncertainty_m + self.iso_robot_uncertainty_m)
 
     def allowed_speed_mps(self, separation_m: float, human_speed_mps: float | None = None) -> float:
         """whole_body: the fastest robot speed (m/s, 0..``iso_robot_speed_mps``) whose S_p is
-        within ``separation_m``. S_p = a v_r^2 + b v_r + S_p(0) (T_s grows with v_r), so this
-        is the quadratic's positive root."""
-        full = self.iso_robot_speed_mps
+        within ``separation_m`` (S_p is linear in v_r, so this inverts it)."""
         slack = separation_m - self.body_protective_distance_m(0.0, human_speed_mps)
-        if slack <= 0 or full <= 0:
-            return 0.0
-        v_h = max(self.iso_human_speed_mps, human_speed_mps or 0.0)
-        a = 0.5 * self.iso_stop_time_s / full
-        b = self.iso_reaction_time_s + v_h * self.iso_stop_time_s / full
-        if a > 0:
-            v = (-b + math.sqrt(b * b + 4.0 * a * slack)) / (2.0 * a)
-        else:
-            v = slack / b if b > 0 else math.inf
-        return float(min(v, full))
+        per_mps = self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s
+        v = slack / per_mps if per_mps > 0 else (math.inf if slack >= 0 else 0.0)
+        return float(min(max(v, 0.0), self.iso_robot_speed_mps))
 
     @property
     def r2_m(self) -> float:

@@ -327,9 +327,6 @@ def test_allowed_speed_inverts_the_protective_distance():
     sp = 1.6 * 0.45 + 0.6 * 0.3 + 0.1 + 0.3 + 0.01
     assert z.body_protective_distance_m(0.6) == pytest.approx(sp)
     assert z.body_protective_distance_m(0.6, 2.0) == pytest.approx(sp + 0.4 * 0.45)
-    # a slower arm stops sooner (T_s in proportion to its speed): the human's share shrinks with it
-    assert z.body_protective_distance_m(0.06) == pytest.approx(1.6 * (0.15 + 0.03) + 0.06 * (0.15 + 0.015) + 0.41)
-    assert z.body_protective_distance_m(0.0) == pytest.approx(1.6 * 0.15 + 0.41)
 
 
 def body_facing_arm(sep_z_m, reach=False):
@@ -361,7 +358,7 @@ def settle(mon, body, t0=0.0, seconds=1.0):
 def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops():
     z = WHOLE_BODY
     scales, states = [], []
-    for sep in (4.0, 1.55, 1.35, 1.15, 1.0, 0.8):
+    for sep in (4.0, 1.55, 1.45, 1.35, 1.2, 1.0):
         d = settle(ready_body(z), body_facing_arm(sep))
         scales.append(d.speed_scale)
         states.append(d.state)
@@ -437,13 +434,13 @@ def test_a_person_lost_far_from_the_arm_does_not_stop_it():
 
 def test_a_person_lost_near_the_arm_stops_it_at_once():
     z = WHOLE_BODY
-    body = body_facing_arm(1.0)                                      # the arm crawls for him but works
-    mon = ready_body(z, 1.0)
+    body = body_facing_arm(1.42)                                     # the arm crawls for him but works
+    mon = ready_body(z, 1.42)
     assert settle(mon, body).state == State.NORMAL
-    d = lose(mon, 1.0, 2, {0: "missing_joints: left_hip"}, {1: body_facing_arm(6.0)})[-1]
+    d = lose(mon, 1.0, 2, {0: "missing_joints: left_hip"})[-1]
     assert d.state == State.LEVEL1 and d.reason.startswith("person_lost")
     # he is seen again a step back (beyond the exit hysteresis): the arm works again, judged on him
-    assert settle(mon, body_facing_arm(1.3), t0=2.0, seconds=z.dwell_s + 0.5).state == State.NORMAL
+    assert settle(mon, body_facing_arm(1.7), t0=2.0, seconds=z.dwell_s + 0.5).state == State.NORMAL
 
 
 def test_a_person_never_lifted_validly_stops_the_arm():
@@ -474,8 +471,8 @@ def test_a_lost_person_stops_the_arm_once_his_reachable_set_gets_within_the_prot
 
 def test_a_lost_person_is_forgotten_after_the_hold_and_the_scene_clears():
     z = WHOLE_BODY
-    mon = ready_body(z, 1.2)
-    settle(mon, body_facing_arm(1.2))
+    mon = ready_body(z, 1.42)
+    settle(mon, body_facing_arm(1.42))
     held = lose(mon, 1.0, int((z.lost_hold_s - 0.2) * FPS))
     assert held[-1].state == State.LEVEL1
     d = lose(mon, 1.0 + z.lost_hold_s, int((z.dwell_s + 0.5) * FPS))[-1]

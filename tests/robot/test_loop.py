@@ -446,8 +446,8 @@ def speeds(link):
 
 def test_whole_body_the_arm_slows_as_a_worker_comes_closer_and_speeds_up_when_he_leaves():
     loop, link, clock = make_whole_body()
-    # from 2.5 m out he edges closer at 0.25 m/s (slower than "keeps coming") to 1.1 m, stays, then leaves
-    where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else max(1.1, 2.5 - 0.25 * (t - 2)) if t < 8 else 8.0))  # noqa: E731
+    # from 2.5 m out he edges closer at 0.25 m/s (slower than "keeps coming") to 1.55 m, stays, then leaves
+    where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else max(1.55, 2.5 - 0.25 * (t - 2)) if t < 8 else 8.0))  # noqa: E731
     frames = drive(loop, link, clock, Path(where, 11.0))
     sent = speeds(link)
     assert sent[0] == pytest.approx(0.6)                                  # full speed at work
@@ -516,7 +516,7 @@ def drive_poses(loop, link, clock, frames_fn, seconds, fps=30.0, tick_s=0.01):
 
 
 def test_one_persons_invalid_lift_stops_the_arm_only_when_he_could_be_near():
-    far, near = at_tool_height(0.8 + 4.0), at_tool_height(0.8 + 1.05)
+    far, near = at_tool_height(0.8 + 4.0), at_tool_height(0.8 + 1.45)
     hidden = "missing_joints: left_hip"
     for where, stops in ((far, False), (near, True)):
         loop, link, clock = make_whole_body()
