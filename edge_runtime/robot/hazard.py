@@ -23,7 +23,16 @@ Two ways to protect people (``[zones] separation``):
   full speed or nothing), LEVEL1 stops below the protective distance at the slowest useful
   speed, LEVEL2 retracts when a person keeps coming (toward the arm faster than
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
-  ``retract_lead_s``.
+  ``retract_lead_s``. After a retraction the arm works again once the person has been
+  beyond both exit distances for ``dwell_s``.
+  **People the camera loses** (hidden, out of view, or lifted invalidly while others are
+  lifted): each is judged by his reachable set, his last valid body with every joint
+  ``lost_person_speed_mps`` x the time since closer to the arm. While that set stays outside
+  the protective distance he is no reason to stop (the arm slows for it as for anyone); once
+  it reaches it, the arm stops (``person_lost``) until he is seen again or, ``lost_hold_s``
+  after his last valid pose, he is forgotten. A person the lifter has never lifted validly
+  stops the arm (FAULT, ``person_unseen``) as long as he is in view unlifted. The camera or
+  lifter failing as a whole (stale or invalid frames) is still a fault stop.
 * **"head"**: the dissertation's zones around the end effector, below.
 
 * **Tracking and prediction (Eq. 3).** ``HeadTracker`` fits a straight line to the
@@ -52,8 +61,10 @@ Two ways to protect people (``[zones] separation``):
   the *exit* radius (entry radius + ``hysteresis_m``) for ``dwell_s`` without a break,
   so keypoint noise at a zone boundary cannot make the arm chatter.
 * **Fail-safe** (``FAULT``): no pose for more than ``stale_after_s`` (200 ms), or the
-  lifter's output invalid, and the arm stops with a distinct reason. A worker who was
-  inside R1 and vanishes from view also holds the arm stopped (``worker_lost``).
+  lifter's output invalid, and the arm stops with a distinct reason ("head": one person's
+  invalid lift is an invalid frame; "whole_body": see people the camera loses, above). A
+  worker who was inside R1 and vanishes from view also holds the arm stopped
+  (``worker_lost``, "head").
   The fault clears after ``dwell_s`` of valid frames.
 * **Retraction (Eq. 6 and Sec. 3.2.4.4)**, at the end of this module as pure functions:
   where the hand goes when a worker enters level 2, and which way the tool points. Numbers
@@ -111,7 +122,10 @@ class TrackerParams:
     """Frames a fit needs; with fewer (a new track) the velocity is taken as zero. At
     5.8 Hz a 0.5 s window holds 3 frames."""
     max_speed_mps: float = config.setting(3.0, config.POSITIVE)
-    """Head speeds above this (m/s) are clipped: faster than a running worker, so noise."""
+    """Head speeds above this (m/s) are clipped: faster than a running worker, so noise. (2.0 m/s,
+    the fastest the hard suite's workers walk, cut retractions for walkers tracked too fast from a
+    far camera, but a worker whose lift jumped in close was then retracted from too late:
+    hard:200, hard_163, 0.05 m.)"""
     jump_m: float = config.setting(1.0, config.POSITIVE)
     """A head that moves further than this between two frames (beyond what
     ``max_speed_mps`` allows) is a new track: the window restarts."""
@@ -195,8 +209,17 @@ class ZoneParams:
     stale_after_s: float = config.setting(0.2, ("a number in (0, 1]", lambda v: 0 < v <= 1))
     """No pose for longer than this (s) and the arm stops (reason ``pose_stale``)."""
     lost_hold_s: float = config.setting(3.0, config.NON_NEGATIVE)
-    """A worker last seen inside R1 who vanishes holds the arm stopped this long (s) of
-    empty frames before the scene counts as clear (reason ``worker_lost``)."""
+    """How long (s) a person stays accounted for after his last valid pose. "head": a worker
+    last seen inside R1 who vanishes holds the arm stopped this long of empty frames (reason
+    ``worker_lost``). "whole_body": a person hidden, out of view or lifted invalidly is judged
+    by his reachable set (``lost_person_speed_mps``) for this long, then forgotten: by then he
+    has left the camera's view (which must cover the protective zone, ISO 13855 5), and coming
+    back he is a new person, who stops the arm until he is lifted validly."""
+    lost_person_speed_mps: float = config.setting(2.0, config.POSITIVE)
+    """whole_body: how fast (m/s) a person the camera has lost may have come closer since his last
+    valid pose, every joint of him (his reachable set grows this fast, or at his last tracked
+    speed if that was faster): ISO 13855's 2.0 m/s for a hand or arm (K = 2000 mm/s, 6.2.3),
+    above its 1.6 m/s walking, and the hard suite's running bursts."""
     retract_weight_away_m: float = config.setting(0.3, config.NON_NEGATIVE)
     """Eq. 6 weight factor 1: the step away from the head (m)."""
     retract_weight_path_m: float = config.setting(0.2, config.NON_NEGATIVE)
@@ -213,9 +236,13 @@ class ZoneParams:
             raise ValueError(f"separation: must be whole_body or head, got {self.separation!r}")
 
     def body_protective_distance_m(self, robot_speed_mps: float, human_speed_mps: float | None = None) -> float:
-        """whole_body: ISO/TS 15066's S_p (m) at robot speed v_r:
+        """whole_body: ISO/TS 15066's S_p (m, 5.5.4.2.3) at robot speed v_r:
         ``v_h (T_r + T_s) + v_r T_r + v_r T_s / 2 + C + Z_d + Z_r``, with the stopping distance
-        ``S_s = v_r T_s / 2`` of a constant deceleration and v_h at least ``iso_human_speed_mps``."""
+        ``S_s = v_r T_s / 2`` of a constant deceleration and v_h at least ``iso_human_speed_mps``.
+        T_s is the full-speed stopping time at every speed: scaling it with v_r (a slower arm stops
+        sooner) widened the band in which the arm works from 1.15-1.31 m to 0.71-1.31 m and let a
+        worker standing 0.8 m out reach a slow arm (hard:200, hard_148: 0.05 m), since only a
+        person who keeps coming makes it retract."""
         v_h = max(self.iso_human_speed_mps, human_speed_mps or 0.0)
         return (v_h * (self.iso_reaction_time_s + self.iso_stop_time_s)
                 + robot_speed_mps * (self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s)
@@ -378,6 +405,15 @@ class _Hold:
         return t_s - self.since_s
 
 
+@dataclass(frozen=True)
+class _Seen:
+    """A person's last valid pose (robot frame) and his tracked ground speed then."""
+
+    t_s: float
+    person_m: np.ndarray
+    speed_mps: float
+
+
 @dataclass
 class HazardMonitor:
     """The zone state machine over every tracked worker (see the module docstring).
@@ -405,17 +441,28 @@ class HazardMonitor:
         self._below = {State.LEVEL2: _Hold(), State.LEVEL1: _Hold()}
         self._lost_since_s: float | None = None
         self._scale = 1.0
-        self._seen_s: float | None = None  # when a worker was last seen (whole-body speed scaling)
+        self._seen: dict = {}
+        """whole_body: each person's last valid pose (``_Seen``), kept ``lost_hold_s`` after it."""
+        self._unseen: str | None = None  # this frame: a person lifted invalidly and never validly
+        self._lost_stop: list = []  # this frame: the lost people whose reachable set stops the arm
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
         """How often the pose stream went stale."""
 
     # -- inputs ---------------------------------------------------------------------------
 
-    def observe(self, t_s: float, people: dict[int, np.ndarray], effector_m, arm_q_rad=None) -> Decision:
-        """A valid pose frame: update the trackers and the zone level."""
+    def observe(self, t_s: float, people: dict[int, np.ndarray], effector_m, arm_q_rad=None,
+                unseen: dict | None = None) -> Decision:
+        """A valid pose frame: update the trackers and the zone level. ``unseen``: id -> reason for
+        the people the camera reports in this frame but the lifter could not lift (whole_body: each
+        is judged from his last valid pose, :meth:`_lost`; "head": the frame is invalid)."""
+        unseen = dict(unseen or {})
+        if unseen and self.zones.separation == "head":
+            wid, why = next(iter(unseen.items()))
+            return self.invalid(t_s, f"person {wid}: {why}")
         self._last_pose_s = t_s
-        for wid in [w for w in self._trackers if w not in people]:
+        keep = people if self.zones.separation == "head" else self._seen.keys() | people.keys()
+        for wid in [w for w in self._trackers if w not in keep]:  # a lost person's tracker bridges his gap
             del self._trackers[wid]
         ests = {}
         for wid, person in people.items():
@@ -426,9 +473,11 @@ class HazardMonitor:
         self.estimates = ests  # each person's head estimate, for the per-person log
         if self.zones.separation == "head":
             entry, exit_r, nearest = self._head_zones(ests, effector_m)
+            d_exit = nearest[0]
         else:
-            entry, exit_r, nearest = self._speed_and_separation(t_s, people, ests, effector_m, arm_q_rad)
-        self._update_level(t_s, entry, nearest[0], nearest[2], exit_r)
+            entry, exit_r, nearest, d_exit = self._speed_and_separation(t_s, people, ests, effector_m, arm_q_rad,
+                                                                        unseen)
+        self._update_level(t_s, entry, d_exit, nearest[2], exit_r)
         if self._fault is not None and self._fault_clear.clear_for(t_s, True) >= self.zones.dwell_s:
             self._fault = None
         return self._decide(t_s, *nearest)
@@ -447,19 +496,25 @@ class HazardMonitor:
         self._scale = 1.0
         return entry, {State.LEVEL2: z.r2_m + z.hysteresis_m, State.LEVEL1: z.r1_m + z.hysteresis_m}, nearest
 
-    def _speed_and_separation(self, t_s: float, people, ests: dict[int, HeadEstimate], effector_m, arm_q_rad):
+    def _speed_and_separation(self, t_s: float, people, ests: dict[int, HeadEstimate], effector_m, arm_q_rad,
+                              unseen: dict):
         """Whole-body speed and separation monitoring (ISO/TS 15066). Per person: the smallest
         separation of his body now and predicted ``predict_s`` ahead (every joint moved with his
         head's velocity) from the arm's capsules; the robot speed that separation allows; and
         whether he keeps coming. LEVEL2 (retract) for one closer than ``body_retract_distance_m``
         who keeps coming, LEVEL1 (stop) below the protective distance at the slowest useful
-        speed (stop-only: at full speed), else NORMAL at the speed the nearest one allows."""
+        speed (stop-only: at full speed), else NORMAL at the speed the nearest one allows. The
+        people seen before but not now count by their reachable set (:meth:`_lost`).
+        (entry level, exit radii, nearest seen (d, id, head), the separation the exit is judged on:
+        the smallest, lost people's included). The nearest is a person seen in this frame: a
+        retraction goes away from someone whose head is known."""
         z = self.zones
         caps = arm_capsules(arm_q_rad) if arm_q_rad is not None else effector_capsule(effector_m)
         eff_g = ground(effector_m)
         v_full = z.iso_robot_speed_mps
         v_stop = z.min_speed_fraction * v_full if z.speed_scaling else v_full
-        entry, nearest, worst = State.NORMAL, (math.inf, None, None), (v_full, None)
+        entry, nearest = State.NORMAL, (math.inf, None, None)
+        worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
         for wid, est in ests.items():
             centres, radii = body_spheres(people[wid])
             ahead = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]) * z.predict_s
@@ -467,6 +522,7 @@ class HazardMonitor:
             d = separation_m(np.concatenate([centres, centres + ahead]), np.concatenate([radii, radii]), caps)
             v_g = ground(est.velocity_mps)
             speed = float(np.linalg.norm(v_g))
+            self._seen[wid] = _Seen(t_s, np.asarray(people[wid], float), speed)
             toward = eff_g - ground(est.position_m)
             approach = float(v_g @ toward) / max(float(np.linalg.norm(toward)), 1e-9)
             allowed = z.allowed_speed_mps(d, speed)
@@ -480,15 +536,44 @@ class HazardMonitor:
             if d < nearest[0]:
                 nearest = (d, wid, est)
             if allowed < worst[0] or worst[1] is None:
-                worst = (allowed, speed)
+                worst = (allowed, speed, d)
+        self._unseen = next((f"person {w}: {why}" for w, why in unseen.items() if w not in self._seen), None)
+        self._lost_stop = []
+        for wid, d, speed in self._lost(t_s, set(ests), caps):
+            allowed = z.allowed_speed_mps(d, speed)
+            if allowed < v_stop - 1e-9:
+                entry = max(entry, State.LEVEL1)
+                self._lost_stop.append(wid)
+            if allowed < worst[0] or worst[1] is None:
+                worst = (allowed, speed, d)
         human_speed = worst[1]
         exit_r = {State.LEVEL2: z.body_retract_distance_m + z.hysteresis_m,
                   State.LEVEL1: z.body_protective_distance_m(v_stop, human_speed) + z.hysteresis_m}
-        if ests:
-            self._scale, self._seen_s = self._speed_scale(nearest[0], human_speed), t_s
-        elif self._seen_s is None or t_s - self._seen_s >= z.lost_hold_s:
-            self._scale = 1.0  # nobody for lost_hold_s: a worker who vanished near the arm may be hidden
-        return entry, exit_r, nearest
+        # nobody seen or accounted for (every lost person forgotten after lost_hold_s): full speed
+        self._scale = 1.0 if worst[1] is None else self._speed_scale(worst[2], human_speed)
+        return entry, exit_r, nearest, min(nearest[0], worst[2])
+
+    def _lost(self, t_s: float, seen_now: set, caps):
+        """(id, worst-case separation m, his speed m/s) of every person seen validly before but not
+        in this frame (hidden, out of view, or lifted invalidly), for ``lost_hold_s`` after his last
+        valid pose, then forgotten. His reachable set: his last valid body, every joint come
+        ``v (t - t_seen)`` closer, v = ``lost_person_speed_mps`` or his last tracked speed if faster
+        (ISO 13855's approach speeds): nothing the camera lost is assumed to have stood still, and
+        once that set is within the protective distance the arm stops (``person_lost``)."""
+        z = self.zones
+        out = []
+        for wid, seen in list(self._seen.items()):
+            if wid in seen_now:
+                continue
+            age = t_s - seen.t_s
+            if age > z.lost_hold_s or age < 0:
+                del self._seen[wid]
+                self._trackers.pop(wid, None)
+                continue
+            speed = max(z.lost_person_speed_mps, seen.speed_mps)
+            d = separation_m(*body_spheres(seen.person_m), caps) - speed * age
+            out.append((wid, d, speed))
+        return out
 
     def _speed_scale(self, d: float, human_speed_mps: float | None) -> float:
         """The share of full speed at separation ``d``: down to a multiple of ``speed_step`` at
@@ -531,7 +616,7 @@ class HazardMonitor:
 
     def _update_level(self, t_s: float, entry: State, d: float, est, exit_r: dict) -> None:
         z = self.zones
-        if est is None and self.level >= State.LEVEL1:
+        if z.separation == "head" and est is None and self.level >= State.LEVEL1:
             # nobody seen: a worker last seen inside R1 may be hidden, not gone
             if self._lost_since_s is None:
                 self._lost_since_s = t_s
@@ -544,21 +629,32 @@ class HazardMonitor:
             for hold in self._below.values():
                 hold.clear_for(t_s, False)
             return
-        # de-escalate one level at a time, each after dwell_s beyond its exit radius
+        # de-escalate one level at a time, each after dwell_s beyond its exit radius. "head": the
+        # dissertation's steps, a dwell each (Fig. 3.5); whole_body: each level's dwell counts from
+        # when the separation got beyond its exit radius, so a person who has left both the retract
+        # and the stop distance for dwell_s lets the arm work at once after its retraction (the same
+        # evidence, not a second wait: resuming promptly is what SSM is for, ISO/TS 15066 5.5.4.2)
+        together = z.separation == "whole_body"
+        beyond = {lvl: hold.clear_for(t_s, d > exit_r[lvl]) for lvl, hold in self._below.items()} if together else {}
         while self.level > entry:
             level = State.LEVEL2 if self.level == State.LEVEL2 else State.LEVEL1
-            if self._below[level].clear_for(t_s, d > exit_r[level]) < z.dwell_s:
+            if (beyond[level] if together else self._below[level].clear_for(t_s, d > exit_r[level])) < z.dwell_s:
                 break
             self.level = State.LEVEL1 if level == State.LEVEL2 else State.NORMAL
-            self._below[level].clear_for(t_s, False)
+            if not together:
+                self._below[level].clear_for(t_s, False)
 
     def _decide(self, t_s: float, d: float = math.inf, wid=None, est=None) -> Decision:
         if self._fault is not None and self.level != State.LEVEL2:
             state, reason = State.FAULT, self._fault
+        elif self._unseen is not None and self.level != State.LEVEL2:
+            state, reason = State.FAULT, f"person_unseen: {self._unseen}"
         elif self.level == State.NORMAL:
             state, reason = State.NORMAL, "clear"
         elif self._lost_since_s is not None:
             state, reason = self.level, "worker_lost"
+        elif self._lost_stop and self.level == State.LEVEL1:
+            state, reason = self.level, f"person_lost: {', '.join(str(w) for w in self._lost_stop)}"
         else:
             state, reason = self.level, ("level2_retract" if self.level == State.LEVEL2 else "level1_stop")
         if self._fault is not None and state == State.LEVEL2:

@@ -14,7 +14,8 @@ injectable ``clock`` (``time.monotonic`` by default; a scenario runner passes it
 simulated clock). Its driver calls
 
 * ``feed_joints(...)`` / ``feed_lifted(...)`` / ``feed_people(...)`` (every tracked person
-  lifted with his own window) for every camera frame, and
+  lifted with his own window; ``feed_poses`` for people lifted already: one person's invalid
+  lift is judged on him, not the whole frame) for every camera frame, and
 * ``tick()`` at the control rate (e.g. every 10 ms): link polling, the 200 ms staleness
   check, the task motion and the heartbeat.
 
@@ -33,7 +34,8 @@ LEVEL2     ``retract(P_eff + L)`` on entry (Eq. 6; again when it  red, 4000 Hz 8
            controller reports it unreachable, one retraction
            straight toward the base, and if that is refused too:
            ``stop()`` (``retract_unreachable``)
-FAULT      ``stop()`` (pose stale / invalid / no pose yet)          yellow
+FAULT      ``stop()`` (pose stale / invalid / no pose yet, or a    yellow
+           person in view never lifted validly)
 =========  =====================================================  ==================
 
 The link is a :class:`edge_runtime.robot.link.base.LinkInterface` (a ``RobotLink``, or a
@@ -222,6 +224,8 @@ class LoopCounters:
     """Motion commands sent again (unacknowledged, or a stop refused)."""
     speed_changes: int = 0
     """Speed overrides sent (whole-body speed scaling)."""
+    unseen: int = 0
+    """People in a frame whose lift was invalid (each judged from his last valid pose)."""
 
 
 @dataclass
@@ -306,14 +310,15 @@ class RobotLoop:
     # -- inputs ---------------------------------------------------------------------------
 
     def feed_joints(self, joints_m, valid: bool = True, reason: str = "", ids=None,
-                    t_in_s: float | None = None, observed=None) -> FrameRecord:
+                    t_in_s: float | None = None, observed=None, unseen: dict | None = None) -> FrameRecord:
         """One frame of 3D joints: (17, 3) for one worker, (P, 17, 3) for several, (0, 17, 3)
         or None for nobody seen. ``valid``/``reason``: the lifter's verdict; an invalid frame
         stops the arm, except ``no_person`` (nobody detected): that is an empty scene, judged
         like any frame without workers (a worker lost inside a zone holds the arm). ``ids``:
         a stable id per person (default: their index) so each keeps his own tracker.
         ``t_in_s``: when the frame's input arrived (default: now). ``observed`` ((P, 17) bool,
-        optional): the joints seen in this frame, for the floor anchoring."""
+        optional): the joints seen in this frame, for the floor anchoring. ``unseen``: id -> reason
+        for people in this frame whose lift is invalid (``HazardMonitor.observe``)."""
         t_in = self.clock() if t_in_s is None else t_in_s
         if not valid and reason.split(":", 1)[0] == NO_PERSON:
             joints_m, valid = None, True
@@ -336,24 +341,32 @@ class RobotLoop:
             why = reason if not valid else "non-finite joints" if shaped else f"joints of shape {persons.shape}"
             decision = self.monitor.invalid(t_in, why)
         else:
-            decision = self.monitor.observe(t_in, dict(zip(keys, persons)), self.effector_m(), self._last_q)
+            self.counters.unseen += len(unseen or ())
+            decision = self.monitor.observe(t_in, dict(zip(keys, persons)), self.effector_m(), self._last_q,
+                                            unseen)
             people = self._people(keys, persons)
         return self._act(t_in, decision, record=True, people=people)
 
     def feed_people(self, lifter: PeopleLifter, t_frame_s: float, people) -> FrameRecord:
         """One frame of tracked people (``Person`` objects with stable ids, from
-        ``keypoints.PersonTracker``), each lifted with his own window by ``lifter``. A person
-        whose lift is invalid makes the frame invalid (the arm stops, as for one person); an
-        empty list is an empty scene. ``t_in_s`` is taken before lifting."""
+        ``keypoints.PersonTracker``), each lifted with his own window by ``lifter`` and judged by
+        :meth:`feed_poses`. ``t_in_s`` is taken before lifting."""
         t_in = self.clock()
-        poses = lifter.push(t_frame_s, people)
-        bad = next(((pid, p) for pid, p in poses if not p.valid), None)
-        if bad is not None:
-            return self.feed_joints(None, False, f"person {bad[0]}: {bad[1].reason}", t_in_s=t_in)
-        if not poses:
-            return self.feed_joints(None, t_in_s=t_in)
-        return self.feed_joints(np.stack([p.joints_cam_m for _, p in poses]), ids=[pid for pid, _ in poses],
-                                t_in_s=t_in, observed=np.stack([p.observed for _, p in poses]))
+        return self.feed_poses(lifter.push(t_frame_s, people), t_in_s=t_in)
+
+    def feed_poses(self, poses, t_in_s: float | None = None) -> FrameRecord:
+        """One frame of lifted people, ``[(id, LiftedPose)]``. The valid ones are judged; one lifted
+        invalidly (hidden joints, a lift out of range) is ``unseen`` in this frame: judged by his
+        reachable set from his last valid pose, or, never lifted validly, a stop (the hazard
+        module). ``no_person`` (nothing of him detected) is simply not there. An empty list is an
+        empty scene."""
+        valid = [(pid, p) for pid, p in poses if p.valid]
+        unseen = {pid: str(p.reason or "invalid") for pid, p in poses
+                  if not p.valid and str(p.reason or "").split(":", 1)[0] != NO_PERSON}
+        if not valid:
+            return self.feed_joints(None, t_in_s=t_in_s, unseen=unseen)
+        return self.feed_joints(np.stack([p.joints_cam_m for _, p in valid]), ids=[pid for pid, _ in valid],
+                                t_in_s=t_in_s, observed=np.stack([p.observed for _, p in valid]), unseen=unseen)
 
     def _people(self, keys, persons: np.ndarray) -> list[dict]:
         """What the runtime believes about each person (robot frame): FrameRecord.people."""

@@ -246,12 +246,18 @@ def productivity(ran: list[dict]) -> dict:
     hrc_world's rule), and ``false_stops_per_worker_hour`` over walk-by traffic: the scenarios in
     which no worker ever came within the protective distance at full speed, per hour of workers
     in view there (``walkby_worker_h``): there every halt of the task (a stop, a retraction, or a
-    fault stop: an invalid or stale pose) is a stop with nobody within the protective distance."""
+    fault stop: an invalid or stale pose) is a stop with nobody within the protective distance;
+    ``walkby_stops_by_reason``: those halts by the runtime's reason code (``person_unseen``,
+    ``person_lost``, ``level2_retract``, ...)."""
     scenario_s = sum(d["scenario_s"] for d in ran)
     walkby = [d for d in ran if not d["came_within_protective"]]
     walkby_h = sum(d["worker_s"] for d in walkby) / 3600.0
     walkby_stops = sum(d["halts"] for d in walkby)
     kinds: dict[str, int] = {}
+    walkby_reasons: dict[str, int] = {}
+    for d in walkby:
+        for why, n in d.get("halt_reasons", {}).items():
+            walkby_reasons[why] = walkby_reasons.get(why, 0) + n
     for d in ran:
         for w in d.get("worker_specs") or [{"kind": d["kind"]}]:
             kinds[w["kind"]] = kinds.get(w["kind"], 0) + 1
@@ -259,6 +265,7 @@ def productivity(ran: list[dict]) -> dict:
         "productive_time_share": round(sum(d["productive_s"] for d in ran) / scenario_s, 4) if scenario_s else None,
         "false_stops": sum(d["false_alarms"] for d in ran),
         "halts": sum(d["halts"] for d in ran), "walkby_scenarios": len(walkby), "walkby_worker_h": round(walkby_h, 4), "walkby_stops": walkby_stops,
+        "walkby_stops_by_reason": walkby_reasons,
         "false_stops_per_worker_hour": round(walkby_stops / walkby_h, 2) if walkby_h else None,
         "worker_kinds": kinds, "speed_changes": sum(d.get("speed_changes", 0) for d in ran),
     }

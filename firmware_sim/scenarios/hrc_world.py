@@ -494,6 +494,7 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     frame_s = tick_s = 0.0  # wall-clock time inside the runtime (per-frame calls, ticks)
     head_err = []
     productive_steps, came_within, halts, prev_state = 0, False, 0, State.NORMAL
+    halt_reasons: dict[str, int] = {}
     try:
         for step in range(n_total):
             now = clock()
@@ -571,7 +572,10 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
                 prev_level = level
                 st = loop.monitor.state
                 productive_steps += st == State.NORMAL
-                halts += st != State.NORMAL and prev_state == State.NORMAL
+                if st != State.NORMAL and prev_state == State.NORMAL:  # a halt, and the runtime's reason
+                    halts += 1
+                    why = loop.monitor.reason.split(":", 1)[0].split(" (", 1)[0]
+                    halt_reasons[why] = halt_reasons.get(why, 0) + 1
                 prev_state = st
                 max_state = max(max_state, st) if st != State.FAULT else max_state
                 for lvl in radii:
@@ -609,7 +613,7 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
         "scenario_s": round(scenario_s, 3), "worker_s": round(worker_s, 3),
         "productive_s": round(productive_steps * dt, 3), "productive_time_share": round(productive_steps * dt
                                                                                        / scenario_s, 4),
-        "came_within_protective": bool(came_within), "halts": halts,
+        "came_within_protective": bool(came_within), "halts": halts, "halt_reasons": halt_reasons,
     }
     return RunResult(summary, np.array(trace_t), np.array(trace_head), np.array(trace_ee), np.array(trace_state),
                      reaction, head_err, np.array(trace_speed), np.array(trace_limit))
@@ -641,16 +645,10 @@ def _occlude(percepts, k: int, camera: Camera, Jc: np.ndarray, arm) -> None:
 
 
 def _feed(loop: RobotLoop, outs: list):
-    """One camera frame of every worker's perception into the loop: the valid ones together (with
-    their worker index as id), nobody for workers not detected, and an invalid frame when any
-    worker's is (the arm stops: one worker the runtime cannot see properly is enough)."""
-    bad = [o for o in outs if not o.valid and str(o.reason or "").split(":", 1)[0] != NO_PERSON]
-    if bad:
-        return loop.feed_lifted(bad[0])
-    seen = [(w, o) for w, o in enumerate(outs) if o.valid]
-    if not seen:
-        return loop.feed_joints(None)
-    return loop.feed_joints(np.stack([o.joints_cam_m for _, o in seen]), ids=[w for w, _ in seen])
+    """One camera frame of every worker's perception into the loop, with his worker index as his
+    id (the simulator knows who is who: it stands in for ``keypoints.PersonTracker``), the way the
+    product feeds its tracked people (``RobotLoop.feed_poses``)."""
+    return loop.feed_poses(list(enumerate(outs)))
 
 
 def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult:
@@ -662,7 +660,8 @@ def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult
                "command_delay_s": {"LEVEL1": None, "LEVEL2": None}, "reaction_ms": percentiles([]), "frames": 0,
                "head_error_m": percentiles([], 1.0, (50, 95)), "runtime_cpu_share": None, "calibration_scale": None,
                "speed_changes": 0, "scenario_s": 0.0, "worker_s": 0.0, "productive_s": 0.0,
-               "productive_time_share": None, "came_within_protective": False, "halts": 0}
+               "productive_time_share": None, "came_within_protective": False, "halts": 0,
+               "halt_reasons": {}}
     return RunResult(summary, np.empty(0), np.empty((0, 1, 2)), np.empty((0, 2)), np.empty(0, int))
 
 

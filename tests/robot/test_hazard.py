@@ -402,3 +402,84 @@ def test_the_arm_links_count_not_just_the_effector():
     one = (hand[None], np.zeros(1))
     assert separation_m(*one, caps) == pytest.approx(0.45 - ARM_LINK_RADII_M[3], abs=0.03)
     assert separation_m(*one, effector_capsule(pts[-2])) > separation_m(*one, caps) + 0.15
+
+
+# -- people the camera loses: the reachable-set rule (whole body) -------------------------------
+
+def lose(mon, t0, frames, unseen=None, others=None):
+    """``frames`` frames from ``t0`` in which person 0 is not lifted (absent, or with ``unseen``
+    the reason his lift is invalid); ``others``: people still seen. The decisions."""
+    out = []
+    for i in range(frames):
+        out.append(mon.observe(t0 + i / FPS, dict(others or {}), EFF, unseen=unseen))
+    return out
+
+
+def separation_of(body):
+    return separation_m(*body_spheres(body), effector_capsule(EFF))
+
+
+def test_a_person_lost_far_from_the_arm_does_not_stop_it():
+    z = WHOLE_BODY
+    mon = ready_body(z, 4.0)
+    settle(mon, body_facing_arm(4.0))
+    for t0, unseen in ((1.0, None), (3.0, {0: "missing_joints: hip"})):     # hidden, or lifted invalidly
+        decisions = lose(mon, t0, 5, unseen)
+        assert all(d.state == State.NORMAL for d in decisions)
+        settle(mon, body_facing_arm(4.0), t0=t0 + 0.2)
+    # someone else in view does not change that
+    other = {1: body_facing_arm(6.0)}
+    assert all(d.state == State.NORMAL for d in lose(mon, 5.0, 5, {0: "missing_joints: hip"}, other))
+
+
+def test_a_person_lost_near_the_arm_stops_it_at_once():
+    z = WHOLE_BODY
+    body = body_facing_arm(1.42)                                     # the arm crawls for him but works
+    mon = ready_body(z, 1.42)
+    assert settle(mon, body).state == State.NORMAL
+    d = lose(mon, 1.0, 2, {0: "missing_joints: left_hip"})[-1]
+    assert d.state == State.LEVEL1 and d.reason.startswith("person_lost")
+    # he is seen again a step back (beyond the exit hysteresis): the arm works again, judged on him
+    assert settle(mon, body_facing_arm(1.7), t0=2.0, seconds=z.dwell_s + 0.5).state == State.NORMAL
+
+
+def test_a_person_never_lifted_validly_stops_the_arm():
+    z = WHOLE_BODY
+    mon = ready_body(z, 6.0)
+    d = mon.observe(1.0, {0: body_facing_arm(6.0)}, EFF, unseen={1: "missing_joints: right_ankle"})
+    assert d.state == State.FAULT and d.reason.startswith("person_unseen: person 1")
+
+
+def test_a_lost_person_stops_the_arm_once_his_reachable_set_gets_within_the_protective_distance():
+    z = WHOLE_BODY
+    body = body_facing_arm(3.0)
+    mon = ready_body(z, 3.0)
+    settle(mon, body)
+    # how long he can be out of sight before, at the worst-case speed, he could be within S_p
+    slack = separation_of(body) - z.body_protective_distance_m(z.min_speed_fraction * z.iso_robot_speed_mps,
+                                                                z.lost_person_speed_mps)
+    bound_s = slack / z.lost_person_speed_mps
+    assert 0.1 < bound_s < z.lost_hold_s
+    decisions = lose(mon, 1.0, int((bound_s + 0.3) * FPS))
+    t = [1.0 + i / FPS for i in range(len(decisions))]
+    before = [d for d, ti in zip(decisions, t) if ti - (1.0 - 1 / FPS) < bound_s - 0.05]
+    after = [d for d, ti in zip(decisions, t) if ti - (1.0 - 1 / FPS) > bound_s + 0.05]
+    assert before and all(d.state == State.NORMAL for d in before)
+    assert after and all(d.state == State.LEVEL1 and d.reason.startswith("person_lost") for d in after)
+    assert before[-1].speed_scale < 1.0                              # slowing down while the set grows
+
+
+def test_a_lost_person_is_forgotten_after_the_hold_and_the_scene_clears():
+    z = WHOLE_BODY
+    mon = ready_body(z, 1.42)
+    settle(mon, body_facing_arm(1.42))
+    held = lose(mon, 1.0, int((z.lost_hold_s - 0.2) * FPS))
+    assert held[-1].state == State.LEVEL1
+    d = lose(mon, 1.0 + z.lost_hold_s, int((z.dwell_s + 0.5) * FPS))[-1]
+    assert d.state == State.NORMAL and d.speed_scale == 1.0
+
+
+def test_head_zones_treat_a_person_lifted_invalidly_as_an_invalid_frame():
+    mon = ready()
+    d = mon.observe(1.0, {0: head_at(6.0)}, EFF, unseen={1: "missing_joints: head"})
+    assert d.state == State.FAULT and d.reason.startswith("pose_invalid: person 1")

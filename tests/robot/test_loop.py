@@ -484,3 +484,54 @@ def test_an_unacknowledged_speed_override_is_counted_and_sent_again():
     s = loop.status()
     assert s["unacked"] >= 1 and s["retries"] >= 1 and s["command_alarm"].startswith("speed")
     assert len(set(speeds(link)[1:])) == 1 and len(speeds(link)) >= 3   # the same limit, sent again
+
+
+@dataclass
+class Pose:
+    """What the loop reads of a LiftedPose."""
+
+    joints_cam_m: np.ndarray
+    valid: bool
+    reason: str | None
+    observed: np.ndarray
+
+
+def lifted(joints=None, reason=None):
+    if joints is None:
+        return Pose(np.full((17, 3), np.nan), False, reason, np.zeros(17, bool))
+    return Pose(joints, True, None, np.ones(17, bool))
+
+
+def drive_poses(loop, link, clock, frames_fn, seconds, fps=30.0, tick_s=0.01):
+    """``frames_fn(t) -> [(id, pose)]`` fed through ``feed_poses`` at ``fps``; the records."""
+    out, next_frame = [], 0.0
+    while clock.t < seconds:
+        if clock.t + 1e-9 >= next_frame:
+            out.append(loop.feed_poses(frames_fn(clock.t)))
+            next_frame += 1 / fps
+        loop.tick()
+        link.advance(tick_s)
+        clock.t = round(clock.t + tick_s, 9)
+    return out
+
+
+def test_one_persons_invalid_lift_stops_the_arm_only_when_he_could_be_near():
+    far, near = at_tool_height(0.8 + 4.0), at_tool_height(0.8 + 1.45)
+    hidden = "missing_joints: left_hip"
+    for where, stops in ((far, False), (near, True)):
+        loop, link, clock = make_whole_body()
+        # seen validly for 2 s with a colleague far off, then his lift goes invalid for 0.5 s
+        frames = drive_poses(loop, link, clock, lambda t, where=where: [(1, lifted(at_tool_height(8.0)))] + [
+            (0, lifted(where) if t < 2.0 else lifted(None, hidden))], 2.5)
+        assert frames[int(1.9 * 30)].state == "NORMAL"
+        assert (frames[-1].state == "LEVEL1" and frames[-1].reason.startswith("person_lost")) == stops
+        assert (frames[-1].state == "NORMAL") == (not stops) and loop.status()["unseen"] > 0
+
+
+def test_a_person_never_lifted_validly_stops_the_arm_and_nobody_detected_does_not():
+    loop, link, clock = make_whole_body()
+    frames = drive_poses(loop, link, clock, lambda t: [(1, lifted(at_tool_height(8.0)))] + (
+        [(0, lifted(None, "missing_joints: right_ankle"))] if t >= 2.0 else [(0, lifted(None, "no_person: x"))]), 2.2)
+    assert frames[int(1.9 * 30)].state == "NORMAL"
+    assert frames[-1].state == "FAULT" and frames[-1].reason.startswith("person_unseen: person 0")
+    assert "stop" in link.names()

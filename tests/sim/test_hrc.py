@@ -347,8 +347,10 @@ def test_productivity_counts_work_and_the_stops_of_walk_by_traffic():
     d = [{"scenario_s": 10.0, "productive_s": 6.0, "false_alarms": 1, "came_within_protective": True, "halts": 2,
           "worker_s": 10.0, "kind": "stop"},
          {"scenario_s": 10.0, "productive_s": 9.0, "false_alarms": 0, "came_within_protective": False, "halts": 1,
-          "worker_s": 20.0, "kind": "pass", "worker_specs": [{"kind": "walkby"}, {"kind": "walkby"}]}]
+          "worker_s": 20.0, "kind": "pass", "worker_specs": [{"kind": "walkby"}, {"kind": "walkby"}],
+          "halt_reasons": {"person_unseen": 1}}]
     p = hrc.productivity(d)
     assert p["productive_time_share"] == pytest.approx(0.75) and p["false_stops"] == 1
     assert p["walkby_scenarios"] == 1 and p["false_stops_per_worker_hour"] == pytest.approx(1 / (20 / 3600), rel=1e-3)
     assert p["worker_kinds"] == {"stop": 1, "walkby": 2}
+    assert p["walkby_stops_by_reason"] == {"person_unseen": 1}                # walk-by halts only, by cause
