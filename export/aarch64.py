@@ -25,7 +25,7 @@ installed the same way on this machine, on the same simulated drive.
    timed per inference: not a speed claim, qemu translates every instruction), and the aarch64
    autosar-e2e's CRCs against x86's.
 
-The result is written as JSON and Markdown (``--report-dir``, default reports/box/aarch64.*).
+The result is written as JSON and Markdown (``--report-dir``; by default reports/box/aarch64.json and reports/box/aarch64.md).
 Exit status 0 when everything agrees, 1 otherwise; a missing tool, download or build step is one
 line, exit 2.
 """
@@ -77,7 +77,7 @@ CAN_MEASURED = ("TimeSinceTrigger", "E2E_CRC")
 time (emulation is ~1000x slower), and the CRC covers it."""
 ONNXRUNTIME_ALSO = ("1.22.1", "1.28.0", "1.32.0")
 """onnxruntime versions whose aarch64 wheels also run the shipped models under emulation, beside the
-bundle's pinned one: the range INSTALL.md states (export.bundle.ONNXRUNTIME_TESTED) comes from here."""
+bundle's pinned one: the range the bundle's install notes state (export.bundle.ONNXRUNTIME_TESTED) comes from here."""
 MODELS = ("int8", "fp32")
 DECISIONS = ("early", "full_window")
 EMU_ENV = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": "/tmp", "LANG": "C.UTF-8"}

@@ -7,7 +7,7 @@ The drives are ``drive-eval``'s (:func:`~firmware_sim.scenarios.drive_eval.held_
 ``--seed``: seed 1 is validation, where the policy is chosen; seed 2 is the held-out figure, which
 this command refuses (``drive-eval --seed 2`` measures the shipped choice, once).
 
-1. **Breakdown** of the shipped configuration (``breakdown.json``, ``breakdown.md``): per
+1. **Breakdown** of the shipped configuration (``breakdown_<name>`` as JSON and Markdown, e.g. reports/wearable/early_tuning/breakdown_chosen.md): per
    distraction, the detector's trigger delay after the onset, the sub-window count S of the first
    alert, its class, why a distraction was missed; per false alert, what motion set it off (an
    Other motion and its kind, the hand returning after a distraction, plain driving).

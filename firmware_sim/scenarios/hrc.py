@@ -86,10 +86,19 @@ is what a validation holds for. The other sections (the wearable's, posture, lin
 not change what the cell does, so editing them does not void a validation."""
 
 
+NOT_SAFETY_KEYS = {"lifter": ("manifest_public_key",)}
+"""Keys of the safety sections that do not change what the cell does, left out of the sections'
+hash: which builder's signed manifest the box trusts (issue 16) decides whether the shipped
+models load at all, not how the loop behaves with them."""
+
+
 def config_dict(box, sections=None) -> dict:
-    """The configuration as plain JSON values (tuples as lists), all sections or ``sections``."""
+    """The configuration as plain JSON values (tuples as lists), all sections or ``sections``
+    (without :data:`NOT_SAFETY_KEYS`)."""
     whole = config._as_lists(asdict(box))
-    return whole if sections is None else {k: whole[k] for k in sections}
+    if sections is None:
+        return whole
+    return {k: {f: v for f, v in whole[k].items() if f not in NOT_SAFETY_KEYS.get(k, ())} for k in sections}
 
 
 def config_sha256(box, sections=None) -> str:

@@ -161,7 +161,7 @@ def test_bad_arguments_are_refused_in_one_line_before_any_work(tmp_path, capsys,
 
 
 def test_the_committed_aarch64_report_is_of_the_pinned_onnxruntime_and_agrees():
-    """The pin (and INSTALL.md's tested versions) changes only with a new make aarch64-check run."""
+    """The pin (and the tested versions the bundle's install notes give) changes only with a new make aarch64-check run."""
     import json
 
     from support import REPO_ROOT
