@@ -87,12 +87,17 @@ def parse_cpus(spec: str) -> list[int]:
     return sorted(cpus)
 
 
-def pin_cpus(cpus: list[int]) -> list[int]:
-    """Pin this process (and the children it starts) to ``cpus``; ValueError if they are not available."""
+def require_cpus(cpus: list[int], option: str) -> None:
+    """ValueError naming ``option`` unless every one of ``cpus`` is available to this process."""
     allowed = os.sched_getaffinity(0)
     missing = sorted(set(cpus) - allowed)
     if missing:
-        raise ValueError(f"--cpus: CPU(s) {missing} not available to this process (available: {sorted(allowed)})")
+        raise ValueError(f"{option}: CPU(s) {missing} not available to this process (available: {sorted(allowed)})")
+
+
+def pin_cpus(cpus: list[int]) -> list[int]:
+    """Pin this process (and the children it starts) to ``cpus``; ValueError if they are not available."""
+    require_cpus(cpus, "--cpus")
     os.sched_setaffinity(0, cpus)
     return sorted(os.sched_getaffinity(0))
 
@@ -109,11 +114,7 @@ class LoadGenerator:
     would have it. Pin the bench itself elsewhere (``--cpus``) or the two share a core."""
 
     def __init__(self, cpus: list[int]):
-        allowed = os.sched_getaffinity(0)
-        missing = sorted(set(cpus) - allowed)
-        if missing:
-            raise ValueError(f"--busy-cpus: CPU(s) {missing} not available to this process "
-                             f"(available: {sorted(allowed)})")
+        require_cpus(cpus, "--busy-cpus")
         self.cpus = list(cpus)
         self.procs: list = []
 
