@@ -27,6 +27,7 @@ from export.bundle import (
     venv_python,
     write_box_files,
 )
+from export.box_files import UNITS
 
 ROOT = REPO_ROOT
 RUNTIME = ROOT / "edge_runtime"
@@ -117,6 +118,35 @@ def test_box_files_supervise_the_runtime_and_install_offline(tmp_path):
         assert any(line.startswith("WatchdogSec=") and int(line.split("=")[1]) > 0 for line in unit)
         assert f"ExecStart=@PREFIX@/bin/{script} --config @ETC@/box.toml $EDGE_ARGS" in unit
         assert (tmp_path / "systemd" / f"{name}.env").read_text().count("EDGE_ARGS=") == 1
+
+
+def _systemd_verify(unit: Path) -> list[str]:
+    """What ``systemd-analyze verify`` says about the unit (it exits 0 on unknown keys, so read it)."""
+    r = subprocess.run(["systemd-analyze", "verify", str(unit)], capture_output=True, text=True, timeout=60)
+    said = [line for line in (r.stdout + r.stderr).splitlines() if unit.name in line]
+    return said + ([f"exit {r.returncode}"] if r.returncode else [])
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")
+def test_systemd_accepts_the_installed_units(tmp_path):
+    """The units as install.sh writes them (@PREFIX@ and @ETC@ filled in) pass systemd's own check:
+    a misspelt directive would otherwise be ignored by systemd with a warning, not refused."""
+    write_box_files(tmp_path, Path("edge_safety_runtime-9-py3-none-any.whl"), "all", "x86_64", "3.11", ())
+    prefix, etc = tmp_path / "opt", tmp_path / "etc"
+    (prefix / "bin").mkdir(parents=True)
+    etc.mkdir()
+    for u in UNITS.values():
+        script = prefix / "bin" / u["NAME"]
+        script.write_text("#!/bin/sh\n")
+        script.chmod(0o755)
+        shutil.copy(tmp_path / "systemd" / f"{u['NAME']}.env", etc)
+        text = (tmp_path / "systemd" / f"{u['NAME']}.service").read_text()
+        unit = tmp_path / f"{u['NAME']}.service"
+        unit.write_text(text.replace("@PREFIX@", str(prefix)).replace("@ETC@", str(etc)))
+        assert _systemd_verify(unit) == []
+        unit.write_text(unit.read_text().replace("Restart=on-failure", "Restart=on-failure\nRestrat=always"))
+        assert any("Restrat" in line for line in _systemd_verify(unit))  # the check does see a bad key
 
 
 def test_tampered_model_is_not_bundled(tmp_path, capsys):
