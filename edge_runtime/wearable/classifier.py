@@ -188,8 +188,9 @@ def preprocess_prefix(x_prefix: np.ndarray, steps: int) -> np.ndarray:
     # and the last frame once for every missing one
     total = _ones(len(buf)) @ buf if m == n else _ones(n) @ x.astype(np.float64)
     mean = (total + (CAPTURE_FRAMES - n) * x[-1].astype(np.float64)) / CAPTURE_FRAMES
-    windows = np.lib.stride_tricks.as_strided(buf, (pairs, block.shape[1], N_CHANNELS),
-                                              (PAIR_FRAMES * buf.strides[0], *buf.strides))
+    # each pair's frames, a view 231 frames further on (ndarray() makes it without as_strided's Python layers)
+    windows = np.ndarray((pairs, block.shape[1], N_CHANNELS), buf.dtype, buf, 0,
+                         (PAIR_FRAMES * buf.strides[0], *buf.strides))
     rows = steps * SUBSEQ_FRAMES
     y = np.matmul(block, windows).reshape(-1, N_CHANNELS)[:rows]
     y += edge[:rows] * mean
