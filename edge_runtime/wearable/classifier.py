@@ -239,6 +239,12 @@ def calibrate(probs: np.ndarray, temperature: float) -> np.ndarray:
     # replay calibrates 18,000 times a day, and these calls on K numbers cost more than their arithmetic).
     # p >= 1e-12 keeps p ** (1/T) >= 1e-240 for T >= 0.05: no underflow, so no max is needed; the float32
     # results equal those of the log/exp form on 250,000 random probability vectors at the shipped temperatures
+    if p.ndim == 1:  # one decision, the loop's case: the same operations on K Python floats, without numpy's calls
+        q = [min(max(v, 1e-12), 1.0) ** (1.0 / temperature) for v in p.tolist()]
+        total = 0.0
+        for v in q:
+            total += v
+        return np.array([v / total for v in q], dtype=np.float32)
     q = np.power(np.minimum(np.maximum(p, 1e-12), 1.0), 1.0 / temperature)
     return (q / np.add.reduce(q, axis=-1, keepdims=True)).astype(np.float32)
 
