@@ -174,27 +174,37 @@ def preprocess_prefix(x_prefix: np.ndarray, steps: int) -> np.ndarray:
     is one (66, 298) product instead of 198 rows against every frame, and the mean enters as
     ``M x + (1 - row sum) * mean`` rather than through a subtraction from every frame."""
     x = np.asarray(x_prefix, dtype=np.float32)
-    need = needed_frames(steps)
+    need, pairs, buf_frames, edge = _prefix_layout(steps)
     n = len(x)
     if x.ndim != 2 or x.shape[1] != N_CHANNELS or n < need or n > CAPTURE_FRAMES:
         raise ValueError(f"a prefix for {steps} sub-windows needs {need}..{CAPTURE_FRAMES} frames "
                          f"of (n, 3), got {x.shape}")
-    first, block, edge = _pair_block()
-    pairs = (steps + 1) // 2
-    buf = np.zeros(((pairs - 1) * PAIR_FRAMES + block.shape[1], N_CHANNELS))  # frames from `first` on, 0 outside
-    m = min(n, len(buf) + first)
+    first, block, _ = _pair_block()
+    buf = np.zeros((buf_frames, N_CHANNELS))  # the capture's frames from `first` on, 0 outside
+    m = min(n, buf_frames + first)
     buf[-first:m - first] = x[:m]
     # the edge-padded capture's mean: the frames' sum (their float64 copy in buf when it holds them all)
     # and the last frame once for every missing one
-    total = _ones(len(buf)) @ buf if m == n else _ones(n) @ x.astype(np.float64)
-    mean = (total + (CAPTURE_FRAMES - n) * x[-1].astype(np.float64)) / CAPTURE_FRAMES
+    if m == n:
+        mean = (_ones(buf_frames) @ buf + (CAPTURE_FRAMES - n) * buf[n - 1 - first]) / CAPTURE_FRAMES
+    else:
+        mean = (_ones(n) @ x.astype(np.float64) + (CAPTURE_FRAMES - n) * x[-1].astype(np.float64)) / CAPTURE_FRAMES
     # each pair's frames, a view 231 frames further on (ndarray() makes it without as_strided's Python layers)
     windows = np.ndarray((pairs, block.shape[1], N_CHANNELS), buf.dtype, buf, 0,
                          (PAIR_FRAMES * buf.strides[0], *buf.strides))
-    rows = steps * SUBSEQ_FRAMES
-    y = np.matmul(block, windows).reshape(-1, N_CHANNELS)[:rows]
-    y += edge[:rows] * mean
+    y = np.matmul(block, windows).reshape(-1, N_CHANNELS)[:len(edge)]
+    y += edge * mean
     return y.astype(np.float32).reshape(steps, SUBSEQ_FRAMES, N_CHANNELS)
+
+
+@lru_cache(maxsize=None)
+def _prefix_layout(steps: int) -> tuple[int, int, int, np.ndarray]:
+    """For ``steps`` sub-windows: the frames they need, the pairs of sub-windows to compute, the frames
+    of the buffer those pairs read (from :func:`_pair_block`'s first frame on) and the rows' share of
+    the mean padding (steps * 33, 1)."""
+    first, block, edge = _pair_block()
+    pairs = (steps + 1) // 2
+    return needed_frames(steps), pairs, (pairs - 1) * PAIR_FRAMES + block.shape[1], edge[:steps * SUBSEQ_FRAMES]
 
 
 PAIR_ROWS = 2 * SUBSEQ_FRAMES
