@@ -432,14 +432,16 @@ class WearableLoop:
         else:
             probs = np.asarray(self.classifier.classify_capture(data))
         compute_us = (time.perf_counter() - t_start) * 1e6
-        k = int(np.argmax(probs))
-        label, conf = self.classes[k], float(probs[k])
+        values = probs.tolist()  # K Python floats: cheaper to pick from than numpy calls on K numbers
+        conf = max(values)
+        k = values.index(conf)  # the first of equal maxima, as np.argmax
+        label = self.classes[k]
         st.agreeing = st.agreeing + 1 if label == st.last_label else 1
         st.last_label = label
         threshold = self.policy.threshold(steps, self._manifest_thresholds)
         status = self.policy.status(label, conf, threshold)
         if status == "alert" and not full and not self.policy.early_ready(
-                steps, conf - float(np.partition(probs, -2)[-2]), st.agreeing):
+                steps, conf - sorted(values)[-2], st.agreeing):
             status = "uncertain"
         ev = st.event
         if st.continues:
@@ -464,7 +466,7 @@ class WearableLoop:
             label=label,
             confidence=conf,
             status=status,
-            probs={c: float(p) for c, p in zip(self.classes, probs)},
+            probs=dict(zip(self.classes, values)),
             compute_us=compute_us,
             rx_monotonic_s=self._rx,
             steps=steps,

@@ -316,3 +316,18 @@ def test_a_malformed_early_object_is_refused(early):
 
     with pytest.raises(ModelIntegrityError, match="early"):
         early_engine(early=early)
+
+
+def test_calibrating_one_decision_gives_the_batch_path_s_float32_values():
+    """The loop calibrates one probability vector at a time in Python floats; a batch goes through
+    numpy. Both are softmax(log p / T) and give the same float32 values."""
+    rng = np.random.default_rng(4)
+    probs = rng.dirichlet(np.full(6, 0.3), size=5000).astype(np.float32)
+    probs[0] = [1.0, 0, 0, 0, 0, 0]  # a zero probability: clipped to 1e-12, as in the batch path
+    for t in (0.6357, 0.8944, 1.2611):
+        batch = calibrate(probs, t)
+        single = np.stack([calibrate(p, t) for p in probs])
+        np.testing.assert_array_equal(single, batch)
+        logp = np.log(np.clip(probs.astype(np.float64), 1e-12, 1.0)) / t
+        want = np.exp(logp - logp.max(1, keepdims=True))
+        np.testing.assert_allclose(batch, want / want.sum(1, keepdims=True), rtol=1e-6, atol=1e-30)

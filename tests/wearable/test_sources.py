@@ -151,3 +151,22 @@ def test_a_bad_line_after_plain_chunks_is_named_and_a_missing_last_newline_is_fi
     p.write_text("t,ax,ay,az\n" + lines + "3.00,1,x,3\n")
     with pytest.raises(InputError, match=r"r\.csv:302: field 'ay' is not a number"):
         list(read_imu_csv(p, chunk_rows=16))
+
+
+@pytest.mark.parametrize("value, counts", [(None, (0, 0)), (np.nan, (0, 0)), (np.inf, (1, 0)), (200.0, (1, 0)),
+                                           (156.9, (0, 1)), (156.9 * (1 - 2e-6), (0, 0))])
+def test_a_float32_block_is_screened_as_its_float64_copy(value, counts):
+    """A recording's float32 block takes a shortcut when all of it lies well inside the range; the
+    result (samples, NaN where refused, counts) is the full check's, whatever one sample holds."""
+    from edge_runtime.wearable.sources import screen_samples
+
+    acc = np.random.default_rng(3).normal(0.0, 20.0, (4096, 3)).astype(np.float32)
+    if value is not None:
+        acc[1234, 1] = value
+    got, out_of_range, saturated = screen_samples(acc, 156.9)
+    want, want_out, want_sat = screen_samples(acc.astype(np.float64), 156.9)
+    np.testing.assert_array_equal(got, want)  # NaN in the same places
+    assert (out_of_range, saturated) == (want_out, want_sat)
+    assert got.dtype == np.float32 and got is not acc
+    assert (out_of_range, saturated) == counts
+    assert np.isnan(got).any() == (value is not None and not np.isfinite(value) or value == 200.0)
