@@ -12,7 +12,7 @@
   select    --out reports/wearable/selection --seed 0 [--subjects 12] [--minutes 10] [--epochs 24] [--jobs 2]
             -> the training recipe chosen on a separate simulated cohort (models/selection.py)
   report    --out reports/wearable --seed 0 [--subjects 20] [--epochs N] [--archs convlstm,cnn,lstm,lda]
-            [--data TRAIN.npz --test TEST.npz] [--minutes 15] [--jobs 2] [--no-within] [--reuse]
+            [--data TRAIN.npz --test TEST.npz] [--minutes 15] [--jobs 2] [--no-within] [--reuse | --reuse-only]
 
 Bad input exits with status 2 and one line on stderr naming the file and field.
 """
@@ -83,8 +83,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--no-within", action="store_true")
     r.add_argument("--folds", type=int, default=None, help="hold out only the first N subjects (default: all)")
     r.add_argument("--selection", default=None, help="selection.json (default: reports/wearable/selection/)")
-    r.add_argument("--reuse", action="store_true", help="read back archs whose results are already in --out "
-                                                        "(delete an arch's directory to retrain it)")
+    r.add_argument("--reuse", action="store_true", help="read back the LOSO folds already saved in --out from the "
+                                                        "same data and recipe; train only the missing ones")
+    r.add_argument("--reuse-only", action="store_true", help="like --reuse, but train no fold: report the saved "
+                                                             "folds (the report says how many each figure covers)")
     r.add_argument("--no-progress", action="store_true")
     return p
 
@@ -209,7 +211,7 @@ def cmd_report(a) -> int:
         raise DataError("--test: given without --data")
     s = run_report(a.out, seed=a.seed, subjects=a.subjects, epochs=a.epochs, archs=archs, data=a.data,
                    test=a.test, minutes=a.minutes, jobs=a.jobs, within=not a.no_within, reuse=a.reuse,
-                   progress=not a.no_progress, folds=a.folds, selection=a.selection)
+                   progress=not a.no_progress, folds=a.folds, selection=a.selection, reuse_only=a.reuse_only)
     for arch, m in s["loso"].items():
         print(f"{arch:>8} LOSO macro-F1 {m['macro_f1']:.3f}"
               + (f"  within {s['within'][arch]['macro_f1']:.3f}" if arch in s["within"] else ""))

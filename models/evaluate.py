@@ -27,7 +27,8 @@ def predict(model, X700: np.ndarray, batch_size: int = 512) -> np.ndarray:
     """Class probabilities (N, K) for capture windows (N, 700, 3) m/s^2.
 
     ``model``: a torch module (applies :func:`edge_runtime.wearable.classifier.preprocess`,
-    then softmax) or anything with ``predict_proba(X700)`` (the LDA baseline).
+    then softmax; windows already preprocessed, (N, 6, 33, 3), are used as they are) or anything
+    with ``predict_proba(X700)`` (the LDA baseline).
     """
     X700 = np.asarray(X700, dtype=np.float32)
     if hasattr(model, "predict_proba"):
@@ -39,16 +40,19 @@ def predict(model, X700: np.ndarray, batch_size: int = 512) -> np.ndarray:
 
 
 def _torch_batches(model, X700: np.ndarray, batch_size: int, forward) -> list[np.ndarray]:
-    """``forward`` (a function of the model input) on preprocessed batches of X700, the model in
-    eval mode and without gradients; the model's training flag restored afterwards."""
+    """``forward`` (a function of the model input) on preprocessed batches of X700 (or of X700 itself
+    when it is already preprocessed, (N, 6, 33, 3): a LOSO run preprocesses each set once, not per
+    fold), the model in eval mode and without autograd; the model's training flag restored afterwards."""
     import torch
 
+    ready = X700.shape[1:] == (6, 33, 3)
     was_training = model.training
     model.eval()
     out = []
-    with torch.no_grad():
+    with torch.inference_mode():
         for i in range(0, len(X700), batch_size):
-            out.append(forward(torch.from_numpy(preprocess(X700[i:i + batch_size]))).double().numpy())
+            x = X700[i:i + batch_size]
+            out.append(forward(torch.from_numpy(x if ready else preprocess(x))).double().numpy())
     model.train(was_training)
     return out
 

@@ -6,9 +6,15 @@
 TRAIN set. The fold trains on every other subject's training windows and is
 scored on the held-out subject's detector captures from the TEST set when one
 is given (the dissertation's protocol), else on the held-out subject's own
-training windows. Each fold's checkpoint goes to DIR/folds/s<K>/; pooled
-predictions to DIR/predictions.npz; a final model trained on all subjects to
-DIR/model.pt (its ``metrics`` are the LOSO figures).
+training windows. Each fold's checkpoint and its result (result.npz: the held-out
+subject's predictions, per-step probabilities; result.json: its calibration and
+what it was made from) go to DIR/folds/s<K>/ as soon as the fold completes; with
+``resume`` a re-run reads back every fold whose result was made from the same data
+(content hashes of TRAIN, TEST and the calibration set), architecture, epochs, seed
+and recipe, and trains only the others, so a killed run loses only the folds under
+way. The key does not cover the training code: delete DIR/folds/ after changing it.
+Pooled predictions go to DIR/predictions.npz; a final model trained on all
+subjects to DIR/model.pt (its ``metrics`` are the LOSO figures).
 
 ``run_within`` (within-participant, Table 2.1): per subject, leave-one-trial-out
 when the NPZ carries ``trial`` (train on the subject's other trials, score the
@@ -22,6 +28,7 @@ depend on ``jobs``: every fold is seeded with the same ``seed``.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from concurrent.futures import ProcessPoolExecutor
@@ -151,6 +158,22 @@ def _load_test(test):
     return _TEST_CACHE["ws"]
 
 
+_PRE_CACHE: dict = {}
+
+
+def _model_inputs(ws: WindowSet, arch: str) -> np.ndarray:
+    """What ``arch`` reads of every window of ``ws``: the raw windows for the LDAs, else the
+    preprocessed inputs (N, 6, 33, 3), computed once per process and set (the test captures and
+    the calibration cohort were preprocessed again in every fold). Preprocessing works window by
+    window, so a row is the same whether it is computed alone or with the whole set."""
+    if arch in LDA_FEATURES:
+        return ws.X
+    held = _PRE_CACHE.get(id(ws))
+    if held is None or held[0] is not ws:  # an id can be reused once its set is freed
+        held = _PRE_CACHE[id(ws)] = (ws, preprocess_all(ws.X).numpy())
+    return held[1]
+
+
 def _training_set(job: dict, train: WindowSet, key, test: WindowSet | None) -> tuple[np.ndarray, np.ndarray]:
     """The fold's training inputs: the other subjects' ground-truth windows, plus their detector
     captures when the recipe says so (``job["recipe"]["captures"]``)."""
@@ -158,21 +181,20 @@ def _training_set(job: dict, train: WindowSet, key, test: WindowSet | None) -> t
     if not (job["recipe"].get("captures") and test is not None):
         return X, y
     c = np.flatnonzero(np.isin(test.subject, np.unique(train.subject[job["train_idx"]])))
-    Xc = test.X[c] if job["arch"] in LDA_FEATURES else preprocess_all(test.X[c]).numpy()
-    return np.concatenate([X, Xc]), np.concatenate([y, test.y[c]])
+    return np.concatenate([X, _model_inputs(test, job["arch"])[c]]), np.concatenate([y, test.y[c]])
 
 
-def _calibrated_steps(model, ev: WindowSet, calib) -> dict:
-    """The ConvLSTM's decisions after 1..6 sub-windows on ``ev`` (S, N, K), raw and scaled by
+def _calibrated_steps(model, ev_inputs: np.ndarray, calib) -> dict:
+    """The ConvLSTM's decisions after 1..6 sub-windows on ``ev_inputs`` (S, N, K), raw and scaled by
     temperatures fitted on ``calib`` (the selection cohort's captures, never the held-out subject)."""
     from models.selection import calibrate_steps
 
-    raw = predict_steps(model, ev.X)
+    raw = predict_steps(model, ev_inputs)
     if calib is None:
         return {"raw": raw, "calibrated": raw, "calibration": None}
     cal_ws = _load_calib(calib)
     other = list(cal_ws.classes).index("Other")
-    c = calibrate_steps(predict_steps(model, cal_ws.X), cal_ws.y, other)
+    c = calibrate_steps(predict_steps(model, _model_inputs(cal_ws, "convlstm")), cal_ws.y, other)
     scaled = np.stack([temper(p, c["temperature_by_steps"][str(s)]) for s, p in enumerate(raw, start=1)])
     return {"raw": raw, "calibrated": scaled, "calibration": c}
 
@@ -189,29 +211,85 @@ def _load_calib(calib):
 
 
 def _fold(job: dict) -> dict:
-    """Train one fold and score it (runs in a worker process or inline)."""
+    """Train one fold and score it (runs in a worker process or inline); with a ``ckpt_dir``, its
+    checkpoint and result are written there before it returns."""
     test = _load_test(job.get("test"))
     train, _ = _cached(job["train"])
     key = job["train"] if isinstance(job["train"], str) else id(job["train"])
-    ev = (test if job["eval_from"] == "test" else train).subset(job["eval_idx"])
+    src = test if job["eval_from"] == "test" else train
+    ev = src.subset(job["eval_idx"])
     job.setdefault("recipe", {})
     X, y = _training_set(job, train, key, test)
     model = fit(job["arch"], X, y, len(train.classes), epochs=job["epochs"], seed=job["seed"],
                 progress=job["progress"], threads=job["threads"], desc=job["desc"],
                 shift_fwd=job["recipe"].get("shift_fwd", SHIFT_FWD),
                 schedule_epochs=job["recipe"].get("schedule_epochs"))
-    probs = predict(model, ev.X) if len(ev) else np.zeros((0, len(train.classes)))
+    ev_inputs = _model_inputs(src, job["arch"])[job["eval_idx"]]
+    probs = predict(model, ev_inputs) if len(ev) else np.zeros((0, len(train.classes)))
     res = {"name": job["name"], "y_true": ev.y, "y_pred": probs.argmax(1) if len(ev) else ev.y[:0],
            "probs": probs, "subject": ev.subject,
            "repeat": ev.repeat if ev.repeat is not None else np.zeros(len(ev), np.int8)}
     if job["arch"] == "convlstm" and len(ev):
-        res["steps"] = _calibrated_steps(model, ev, job.get("calib"))
+        res["steps"] = _calibrated_steps(model, ev_inputs, job.get("calib"))
     if job.get("ckpt_dir") and is_main_process():
         fm = compute_metrics(ev.y, res["y_pred"], train.classes) if len(ev) else {}
         save_checkpoint(job["ckpt_dir"], model, arch=job["arch"], classes=train.classes, seed=job["seed"],
                         epochs=job["epochs"], metrics={**_summary(fm), "fold": job["name"]},
                         data={"train": f"{train.source} minus {job['name']}",
                               "test": f"{(test or train).source} {job['name']}"})
+        if job.get("key"):
+            _save_fold(Path(job["ckpt_dir"]), res, job["key"])
+    return res
+
+
+# --------------------------------------------------------------------------- fold results on disk
+
+_ARRAYS = ("y_true", "y_pred", "probs", "subject", "repeat")
+
+
+def fingerprint(ws: WindowSet | None) -> str | None:
+    """A content hash of a window set (windows, labels, subjects, repeat flags): a saved fold is
+    reused only for the very data it was made from, whatever the file is called."""
+    if ws is None:
+        return None
+    h = hashlib.sha256()
+    for a in (ws.X, ws.y, ws.subject, ws.repeat):
+        if a is not None:
+            h.update(np.ascontiguousarray(a).tobytes())
+    h.update(json.dumps(list(ws.classes)).encode())
+    return h.hexdigest()[:16]
+
+
+def _save_fold(d: Path, res: dict, key: dict) -> None:
+    """folds/s<K>/result.npz + result.json; the JSON is written last (and both by rename), so a
+    fold killed while writing is not taken for a completed one."""
+    d.mkdir(parents=True, exist_ok=True)
+    arrays = {k: np.asarray(res[k]) for k in _ARRAYS}
+    if "steps" in res:
+        arrays.update(step_raw=res["steps"]["raw"], step_calibrated=res["steps"]["calibrated"])
+    tmp = d / "result.tmp.npz"
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, d / "result.npz")
+    meta = {"name": res["name"], "key": key,
+            "calibration": res["steps"]["calibration"] if "steps" in res else None}
+    (d / "result.tmp.json").write_text(json.dumps(meta, indent=1, allow_nan=True))
+    os.replace(d / "result.tmp.json", d / "result.json")
+
+
+def _load_fold(d: Path, key: dict) -> dict | None:
+    """The saved result of the fold in ``d`` when it was made with ``key``, else None."""
+    try:
+        meta = json.loads((d / "result.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if meta.get("key") != key:
+        return None
+    with np.load(d / "result.npz") as z:
+        res = {k: z[k] for k in _ARRAYS}
+        if "step_raw" in z.files:
+            res["steps"] = {"raw": z["step_raw"], "calibrated": z["step_calibrated"],
+                            "calibration": meta["calibration"]}
+    res["name"] = meta["name"]
     return res
 
 
@@ -240,11 +318,14 @@ def _job_data(ws: WindowSet | None, n_workers: int):
 
 def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, epochs: int | None = None,
              seed: int = 0, jobs: int = 1, progress: bool = True, final_model: bool = True,
-             recipe: dict | None = None, calib: WindowSet | None = None, folds: int | None = None) -> dict:
+             recipe: dict | None = None, calib: WindowSet | None = None, folds: int | None = None,
+             resume: bool = False, train_missing: bool = True) -> dict:
     """One fold per subject (the first ``folds`` subjects only, when given). ``recipe``: the
     selection's choices (``captures``: the training subjects' detector captures join the training
     set; ``shift_fwd``; ``schedule_epochs``). ``calib``: validation captures (the selection cohort's)
-    on which each ConvLSTM fold fits its per-step temperatures."""
+    on which each ConvLSTM fold fits its per-step temperatures. ``resume``: read back the folds
+    saved by an earlier run with the same data and recipe (see the module docstring);
+    ``train_missing=False``: train none, pool only the saved folds (the metrics say which)."""
     _check_compatible(train, test)
     recipe = dict(recipe or {})
     epochs = DEFAULT_EPOCHS[arch] if epochs is None else epochs
@@ -256,6 +337,10 @@ def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, ep
     from models.train import dist_info
     distributed = dist_info()[0]
     n_workers = 1 if distributed else max(1, jobs)
+    # what a saved fold must have been made from to be reused (JSON round trip: as read back)
+    key = json.loads(json.dumps({"arch": arch, "epochs": epochs, "seed": seed, "recipe": recipe,
+                                 "train": fingerprint(train), "test": fingerprint(test),
+                                 "calib": fingerprint(calib) if arch == "convlstm" else None}))
     job_list = []
     for s in subjects[:folds]:
         ev_idx = (np.flatnonzero(test.subject == s) if test is not None else np.flatnonzero(train.subject == s))
@@ -266,8 +351,15 @@ def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, ep
             eval_from="test" if test is not None else "train",
             ckpt_dir=str(out / "folds" / f"s{int(s)}"), desc=f"{arch} LOSO s{int(s)}",
             progress=progress and n_workers == 1, progress_folds=progress, recipe=recipe,
-            calib=_job_data(calib, n_workers)))
-    results = _run_jobs(job_list, n_workers)
+            calib=_job_data(calib, n_workers), key={**key, "fold": f"s{int(s)}"}))
+    saved = {j["name"]: _load_fold(Path(j["ckpt_dir"]), j["key"]) for j in job_list} if resume else {}
+    reused = [n for n, r in saved.items() if r is not None]
+    todo = [j for j in job_list if saved.get(j["name"]) is None] if train_missing else []
+    trained = {r["name"]: r for r in _run_jobs(todo, n_workers)} if todo else {}
+    results = [saved.get(j["name"]) or trained[j["name"]] for j in job_list
+               if saved.get(j["name"]) is not None or j["name"] in trained]
+    if not results:
+        raise DataError(f"{out / 'folds'}: no saved {arch} fold matches this data and recipe (nothing to report)")
     cat = lambda key: np.concatenate([r[key] for r in results])  # noqa: E731
     with_steps = all("steps" in r for r in results) and results
     steps = None if not with_steps else {
@@ -275,7 +367,8 @@ def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, ep
     m = _finish(out, arch, train.classes, cat("y_true"), cat("y_pred"), cat("probs"), cat("subject"),
                 {"protocol": "leave-one-subject-out", "evaluated_on": "test captures" if test is not None
                  else "held-out training windows", "folds": [r["name"] for r in results],
-                 "all_folds": len(job_list) == len(subjects),
+                 "all_folds": len(results) == len(subjects), "subjects_total": int(len(subjects)),
+                 "folds_reused": reused,
                  "epochs": epochs, "seed": seed, "train": train.source,
                  "test": test.source if test is not None else None,
                  "recipe": recipe, **({"calibration_per_fold": {r["name"]: r["steps"]["calibration"]

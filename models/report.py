@@ -67,8 +67,9 @@ def class_table(results: dict[str, dict], title: str) -> list[str]:
 
 
 def _folds(m: dict) -> str:
+    """How many LOSO folds (held-out subjects) a figure pools: "20", or "6 of 20" when folds are missing."""
     n = len(m.get("folds") or [])
-    return f"{n}" + ("" if m.get("all_folds", True) else " (subset)")
+    return f"{n}" if m.get("all_folds", True) else f"{n} of {m.get('subjects_total', '?')}"
 
 
 def headline_table(loso: dict[str, dict]) -> list[str]:
@@ -145,12 +146,12 @@ def same_folds_table(loso: dict[str, dict], out_p: Path, test_ws) -> list[str]:
 
 
 def onset_table(loso: dict[str, dict]) -> list[str]:
-    lines = ["| Architecture | macro-F1, every capture | macro-F1, onset captures | accuracy, repeat captures |",
-             "|---|---:|---:|---:|"]
+    lines = ["| Architecture | LOSO folds | macro-F1, every capture | macro-F1, onset captures | "
+             "accuracy, repeat captures |", "|---|---:|---:|---:|---:|"]
     for a, m in loso.items():
         rep = m.get("repeat_only") or {}
-        lines.append(f"| {NAMES[a]} | {_f(m['macro_f1'])} | {_f(m.get('onset_only', {}).get('macro_f1'))} | "
-                     f"{_f(rep.get('accuracy'))} |")
+        lines.append(f"| {NAMES[a]} | {_folds(m)} | {_f(m['macro_f1'])} | "
+                     f"{_f(m.get('onset_only', {}).get('macro_f1'))} | {_f(rep.get('accuracy'))} |")
     return lines + [""]
 
 
@@ -201,10 +202,12 @@ def _cached(run_dir: Path, reuse: bool) -> dict | None:
 def run_report(out: str, *, seed: int = 0, subjects: int = 20, epochs: int | None = None,
                archs=ARCH_ORDER, data: str | None = None, test: str | None = None, minutes: float = 15.0,
                jobs: int = 2, within: bool = True, progress: bool = True, command: str | None = None,
-               reuse: bool = False, folds: int | None = None, selection: str | None = None) -> dict:
-    """LOSO (and within-subject) for every arch; with ``reuse``, an arch whose
-    metrics.json is already under ``out`` is read back instead of retrained
-    (delete its directory to retrain just that one)."""
+               reuse: bool = False, folds: int | None = None, selection: str | None = None,
+               reuse_only: bool = False) -> dict:
+    """LOSO (and within-subject) for every arch; with ``reuse``, every LOSO fold saved under
+    ``out/<arch>/loso/folds/`` from the same data and recipe is read back and only the missing
+    folds are trained (with ``reuse_only`` none: the report covers the saved folds, and says how
+    many); a within-subject metrics.json is read back whole (delete a directory to retrain it)."""
     out_p = Path(out)
     out_p.mkdir(parents=True, exist_ok=True)
     t_start = time.time()
@@ -216,8 +219,8 @@ def run_report(out: str, *, seed: int = 0, subjects: int = 20, epochs: int | Non
 
     recipe, calib = load_recipe(selection), selection_captures(selection)
     loso, wit, timing = _run_archs(archs, train, test_ws, out_p, epochs=epochs, seed=seed, jobs=jobs, within=within,
-                                   progress=progress, reuse=reuse, t_start=t_start, recipe=recipe, calib=calib,
-                                   folds=folds)
+                                   progress=progress, reuse=reuse or reuse_only, t_start=t_start, recipe=recipe,
+                                   calib=calib, folds=folds, reuse_only=reuse_only)
     command = command or "python -m models " + " ".join(shlex.quote(x) for x in sys.argv[1:])
     md = _markdown(loso, wit, detector, command=command, seed=seed, data=data, test=test, train=train,
                    test_ws=test_ws, wall_s=time.time() - t_start, out_dir=out_p)
@@ -247,8 +250,8 @@ def _cohort(out_p: Path, data: str | None, test: str | None, *, seed: int, subje
 
 
 def _run_archs(archs, train, test_ws, out_p: Path, *, epochs: int | None, seed: int, jobs: int, within: bool,
-               progress: bool, reuse: bool, t_start: float, recipe: dict, calib, folds: int | None
-               ) -> tuple[dict, dict, dict]:
+               progress: bool, reuse: bool, t_start: float, recipe: dict, calib, folds: int | None,
+               reuse_only: bool = False) -> tuple[dict, dict, dict]:
     """(LOSO metrics, within-subject metrics, seconds) per arch, each run (or read back) in turn.
     Every arch trains with the selection's recipe (captures, time shift); the ConvLSTM also with its
     chosen epochs, and its per-step temperatures are fitted on the selection cohort (``calib``)."""
@@ -261,9 +264,11 @@ def _run_archs(archs, train, test_ws, out_p: Path, *, epochs: int | None, seed: 
             ep = epochs
         else:
             ep = recipe["epochs"] if a == "convlstm" else DEFAULT_EPOCHS[a]
-        loso[a] = _cached(out_p / a / "loso", reuse) or run_loso(
-            a, train, test_ws, out_p / a / "loso", epochs=ep, seed=seed, jobs=jobs, progress=progress,
-            recipe=recipe, calib=calib if a == "convlstm" else None, folds=folds, final_model=False)
+        # per fold: with reuse, the folds saved by earlier runs (same data and recipe) are read back
+        # and only the missing ones trained (none with reuse_only), so a LOSO can span sessions
+        loso[a] = run_loso(a, train, test_ws, out_p / a / "loso", epochs=ep, seed=seed, jobs=jobs,
+                           progress=progress, recipe=recipe, calib=calib if a == "convlstm" else None,
+                           folds=folds, final_model=False, resume=reuse, train_missing=not reuse_only)
         _add_repeat_only(loso[a], out_p / a / "loso", test_ws)
         if loso[a].get("steps"):
             save_steps_png(loso[a], out_p / a / "loso" / "steps.png")
@@ -304,7 +309,7 @@ def _markdown(loso: dict, wit: dict, detector: dict | None, *, command: str, see
            "its trigger falls in. No choice was made on these subjects (see 'What chose what').", "",
            *headline_table(loso)]
     if conv and conv.get("steps"):
-        md += ["### Early decisions: the ConvLSTM after S of its 6 sub-windows", "",
+        md += [f"### Early decisions: the ConvLSTM after S of its 6 sub-windows (LOSO folds: {_folds(conv)})", "",
                "One model (79,598 parameters, deep supervision over prefixes) decides on the first S sub-windows "
                "of the capture's preprocessing. Temperatures per step are fitted per fold on the selection cohort "
                "(NLL), never on the held-out subject; ECE over 15 confidence bins.", "", *steps_table(conv),

@@ -258,3 +258,67 @@ def test_cohort_datasets_from_simulator(tmp_path):
     det = r["detector"]
     assert 0 <= det["recall"] <= 1 and 0 <= det["precision"] <= 1
     assert (tmp_path / "detector.json").exists()
+
+
+def test_loso_resumes_from_saved_folds(tmp_path, toy, monkeypatch):
+    """Each fold's result is saved as it completes; a re-run with ``resume`` reads back the folds made
+    from the same data and recipe, trains only the missing ones, and pools the same predictions as a
+    run that trained them all. Other epochs (or other data) are not reused."""
+    import models.experiments as ex
+
+    test = toy_windows(n_per_class=3, n_classes=4, n_subjects=3, seed=5)
+    full = run_loso("cnn", toy, test, tmp_path / "full", epochs=1, seed=0, progress=False, final_model=False)
+
+    out = tmp_path / "run"
+    first = run_loso("cnn", toy, test, out, epochs=1, seed=0, progress=False, final_model=False, folds=2)
+    assert first["folds"] == ["s0", "s1"] and first["folds_reused"] == []
+    assert first["all_folds"] is False and first["subjects_total"] == 3
+    assert (out / "folds" / "s1" / "result.json").exists()
+
+    trained = []
+    real_fit = ex.fit
+    monkeypatch.setattr(ex, "fit", lambda *a, **k: trained.append(1) or real_fit(*a, **k))
+    done = run_loso("cnn", toy, test, out, epochs=1, seed=0, progress=False, final_model=False, resume=True)
+    assert len(trained) == 1 and done["folds_reused"] == ["s0", "s1"] and done["all_folds"] is True
+    with np.load(tmp_path / "full" / "predictions.npz") as a, np.load(out / "predictions.npz") as b:
+        for k in ("y_true", "y_pred", "probs", "subject"):
+            np.testing.assert_array_equal(a[k], b[k])
+    assert done["macro_f1"] == full["macro_f1"]
+
+    trained.clear()
+    run_loso("cnn", toy, test, out, epochs=2, seed=0, progress=False, final_model=False, resume=True, folds=1)
+    assert len(trained) == 1  # the saved fold was made with 1 epoch: trained again
+    trained.clear()
+    other = toy_windows(n_per_class=3, n_classes=4, n_subjects=3, seed=6)
+    run_loso("cnn", toy, other, tmp_path / "full", epochs=1, seed=0, progress=False, final_model=False,
+             resume=True, folds=1)
+    assert len(trained) == 1  # other test captures: not the saved fold's data
+
+
+def test_loso_reuse_only_pools_the_saved_folds_and_says_how_many(tmp_path, toy):
+    """``train_missing=False`` trains nothing: the figures pool the saved folds, the metrics name them,
+    and a killed fold (result.json not written) counts as missing."""
+    run_loso("lda", toy, None, tmp_path, seed=0, progress=False, final_model=False, folds=2)
+    (tmp_path / "folds" / "s1" / "result.json").unlink()  # as if killed while writing s1
+    m = run_loso("lda", toy, None, tmp_path, seed=0, progress=False, final_model=False, resume=True,
+                 train_missing=False)
+    assert m["folds"] == ["s0"] and m["subjects_total"] == 3 and m["all_folds"] is False
+    assert m["n"] == int(np.sum(toy.subject == 0))
+    from models.report import _folds
+    assert _folds(m) == "1 of 3"
+    with pytest.raises(DataError, match="no saved lda fold"):
+        run_loso("lda", toy, None, tmp_path / "empty", seed=0, progress=False, final_model=False, resume=True,
+                 train_missing=False)
+
+
+def test_preprocessed_inputs_predict_like_raw_windows(toy):
+    """A LOSO preprocesses each set once and predicts from the cached inputs: the same probabilities,
+    bit for bit, as predicting from the raw windows; a row's preprocessing does not depend on its batch."""
+    from models.evaluate import predict_steps
+    from models.train import preprocess_all
+
+    model = fit("convlstm", toy.X, toy.y, 4, epochs=1, seed=0, progress=False)
+    pre = preprocess_all(toy.X).numpy()
+    np.testing.assert_array_equal(predict(model, pre), predict(model, toy.X))
+    np.testing.assert_array_equal(predict_steps(model, pre), predict_steps(model, toy.X))
+    np.testing.assert_array_equal(pre[5:9], preprocess_all(toy.X[5:9]).numpy())

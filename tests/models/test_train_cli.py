@@ -130,7 +130,14 @@ def test_report_on_given_data(tmp_path, data):
     md = (out / "report.md").read_text()
     # the product figure leads; the dissertation's tables follow as the comparison
     assert md.index("every capture it classifies") < md.index("Onset captures") < md.index("Comparison with")
-    assert "| LDA (12 summary stats) | 2 (subset) |" in md
+    assert "| LDA (12 summary stats) | 2 of 3 |" in md
     assert "Table 2.2" in md and "Table 2.3" in md and "Table 2.1" in md and "python -m models report" in md
     assert (out / "lda" / "loso" / "confusion.png").exists()
+    # --reuse-only reports the saved folds and trains none: still 2 of the 3 subjects
+    r = run("report", "--out", out, "--data", data / "train.npz", "--test", data / "test.npz", "--archs",
+            "lda", "--jobs", "1", "--no-progress", "--no-within", "--reuse-only")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["loso"]["lda"]["folds"] == ["s0", "s1"]
+    assert "| LDA | 2 of 3 |" in (out / "report.md").read_text()
     assert_one_line_error(run("report", "--out", out, "--archs", "svm"), "--archs")
