@@ -69,6 +69,9 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--epochs", type=int, default=24, help="the longest candidate run (checkpoints every 3 epochs)")
     c.add_argument("--train-subjects", type=int, default=8, help="selection subjects that train; the rest validate")
     c.add_argument("--jobs", type=int, default=2)
+    c.add_argument("--stage", choices=("recipe", "early"), default="recipe",
+                   help="recipe: captures, time shift, epochs (stage 1); early: the step-loss weights on top of "
+                        "OUT/selection.json's stage 1 (models/selection.py, EARLY_RULE)")
 
     r = sub.add_parser("report", help="simulate the cohort, LOSO + within for every arch, tables")
     r.add_argument("--out", default="reports/wearable")
@@ -187,8 +190,12 @@ def cmd_import(a) -> int:
 
 def cmd_select(a) -> int:
     from models.dataset import DataError
-    from models.selection import run_selection
+    from models.selection import run_early_selection, run_selection
 
+    if a.stage == "early":
+        run_early_selection(a.out, jobs=a.jobs)
+        print(f"wrote {Path(a.out) / 'selection.json'}")
+        return 0
     if a.subjects < 2 or not (1 <= a.train_subjects < a.subjects):
         raise DataError(f"--train-subjects: must be between 1 and --subjects - 1 ({a.subjects - 1}), got {a.train_subjects}")
     if a.epochs < 1:

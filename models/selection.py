@@ -51,6 +51,21 @@ CANDIDATES = (
     {"captures": True, "shift_fwd": 10},
     {"captures": False, "shift_fwd": 10},
 )
+BASELINE_STEP_WEIGHTS = (0.5, 0.5, 0.5, 0.5, 0.5, 1.0)
+EARLY_CANDIDATES = (
+    BASELINE_STEP_WEIGHTS,  # the current recipe (models.train.STEP_LOSS_WEIGHTS before stage 2)
+    (1.0, 1.0, 1.0, 1.0, 1.0, 1.0),  # every step weighted as the full window
+    (0.5, 1.0, 1.0, 0.5, 0.5, 1.0),  # S = 2 and 3 (the early alerts' steps) weighted as the full window
+)
+EARLY_STEPS = (2, 3)
+EARLY_FULL_TOLERANCE = 0.01
+EARLY_MARGIN = 0.02
+EARLY_RULE = ("on the selection cohort's validation subjects (every detector capture), the early figure is "
+              "the mean macro-F1 of the decisions after S = 2 and S = 3 sub-windows. The baseline is the current "
+              "recipe at stage 1's epochs. A new weighting's checkpoint (any evaluated epoch count) is eligible "
+              f"when its full-window (S = 6) macro-F1 is at least the baseline's - {EARLY_FULL_TOLERANCE}; the eligible "
+              "one with the highest early figure (rounded to 0.001; ties -> fewer epochs) wins if its early figure "
+              f"is at least the baseline's + {EARLY_MARGIN}, else the current recipe stays")
 DEFAULT_RECIPE = {"captures": True, "shift_fwd": 50, "epochs": 25, "schedule_epochs": 25,
                   "chosen_on": "not chosen: no selection.json (run python -m models select)"}
 SELECTION_JSON = Path(__file__).resolve().parent.parent / "reports" / "wearable" / "selection" / "selection.json"
@@ -96,7 +111,8 @@ def _candidate(job: dict) -> dict:
             history.append({"epochs": epoch + 1, "steps": rows})
 
     fit("convlstm", X, y, len(gt.classes), epochs=job["epochs"], seed=job["seed"], progress=False,
-        shift_fwd=job["recipe"]["shift_fwd"], on_epoch=on_epoch)
+        shift_fwd=job["recipe"]["shift_fwd"], on_epoch=on_epoch,
+        step_loss_weights=job["recipe"].get("step_loss_weights"))
     return {"recipe": job["recipe"], "n_train": int(len(y)), "history": history}
 
 
@@ -116,11 +132,7 @@ def run_selection(out: str | Path, *, seed: int = 0, subjects: int = 12, minutes
     job_list = [{"recipe": r, "epochs": epochs, "seed": seed, "train": str(data / "train.npz"),
                  "test": str(data / "test.npz"), "train_subjects": train_subjects, "val_subjects": val_subjects}
                 for r in CANDIDATES]
-    if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as ex:
-            results = list(ex.map(_candidate, job_list))
-    else:
-        results = [_candidate(j) for j in job_list]
+    results = _train_candidates(job_list, jobs)
     best = max(((r, h) for r in results for h in r["history"]),
                key=lambda rh: (round(rh[1]["steps"][-1]["macro_f1"], 3), -rh[1]["epochs"]))
     chosen_on = (f"selection cohort (python -m models select, seed {sel_seed}): trained on subjects "
@@ -141,6 +153,73 @@ def run_selection(out: str | Path, *, seed: int = 0, subjects: int = 12, minutes
     return sel
 
 
+def _train_candidates(job_list: list[dict], jobs: int) -> list[dict]:
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as ex:
+            return list(ex.map(_candidate, job_list))
+    return [_candidate(j) for j in job_list]
+
+
+def early_score(h: dict) -> float:
+    """Stage 2's early figure of one validation checkpoint: mean macro-F1 at S = 2 and 3."""
+    return float(np.mean([h["steps"][s - 1]["macro_f1"] for s in EARLY_STEPS]))
+
+
+def choose_early(results: list[dict], baseline_epochs: int) -> tuple[dict, dict, dict]:
+    """``EARLY_RULE`` applied to stage 2's candidates: (winning candidate, its checkpoint, the
+    baseline's checkpoint). The first candidate is the current recipe (``BASELINE_STEP_WEIGHTS``)."""
+    base = results[0]
+    base_h = next(h for h in base["history"] if h["epochs"] == baseline_epochs)
+    full0, early0 = base_h["steps"][-1]["macro_f1"], early_score(base_h)
+    eligible = [(r, h) for r in results[1:] for h in r["history"]
+                if h["steps"][-1]["macro_f1"] >= full0 - EARLY_FULL_TOLERANCE]
+    if eligible:
+        r, h = max(eligible, key=lambda rh: (round(early_score(rh[1]), 3), -rh[1]["epochs"]))
+        if early_score(h) >= early0 + EARLY_MARGIN:
+            return r, h, base_h
+    return base, base_h, base_h
+
+
+def run_early_selection(out: str | Path, *, jobs: int = 1, log=print) -> dict:
+    """Stage 2 (issue 12, early decisions): with stage 1's captures, time shift, seed and schedule,
+    train the ConvLSTM under each of ``EARLY_CANDIDATES``' step-loss weights and keep a new one only
+    by ``EARLY_RULE``. Rewrites OUT/selection.json (its recipe gains ``step_loss_weights`` only when
+    a new weighting wins) and OUT/selection.md."""
+    out = Path(out)
+    t0 = time.time()
+    sel = json.loads((out / "selection.json").read_text())
+    stage1 = {k: v for k, v in sel["recipe"].items() if k != "step_loss_weights"}
+    data = out / "data"
+    if not ((data / "train.npz").exists() and (data / "test.npz").exists()):
+        log(f"simulating the selection cohort again (seed {sel['selection_seed']}) -> {data}")
+        build_cohort_datasets(sel["subjects"], sel["selection_seed"], sel["minutes_per_trial"], data, progress=False)
+    seed = sel["selection_seed"] - SELECTION_SEED_OFFSET
+    job_list = [{"recipe": {"captures": stage1["captures"], "shift_fwd": stage1["shift_fwd"], "step_loss_weights": list(w)},
+                 "epochs": stage1["schedule_epochs"], "seed": seed, "train": str(data / "train.npz"),
+                 "test": str(data / "test.npz"), "train_subjects": sel["train_subjects"],
+                 "val_subjects": sel["validation_subjects"]} for w in EARLY_CANDIDATES]
+    results = _train_candidates(job_list, jobs)
+    win, win_h, base_h = choose_early(results, stage1["epochs"])
+    new = win is not results[0]
+    recipe = dict(stage1)
+    if new:
+        recipe.update(epochs=win_h["epochs"], step_loss_weights=win["recipe"]["step_loss_weights"],
+                      validation_macro_f1_every_capture=win_h["steps"][-1]["macro_f1"],
+                      validation_early_macro_f1_s2_s3=early_score(win_h))
+    sel["recipe"] = recipe
+    sel["early_stage"] = {"command": f"python -m models select --out {out} --stage early --jobs {jobs}",
+                          "rule": EARLY_RULE, "candidates": results, "new_recipe_won": new,
+                          "baseline": {"epochs": base_h["epochs"], "steps": base_h["steps"]},
+                          "chosen": {"step_loss_weights": win["recipe"]["step_loss_weights"],
+                                     "epochs": win_h["epochs"], "steps": win_h["steps"]},
+                          "wall_s": round(time.time() - t0, 1)}
+    (out / "selection.json").write_text(json.dumps(sel, indent=2))
+    (out / "selection.md").write_text("\n".join(_markdown(sel)) + "\n")
+    log(f"stage 2: {'new' if new else 'kept'} step-loss weights {win['recipe']['step_loss_weights']}, "
+        f"{win_h['epochs']} epochs, in {time.time() - t0:.0f} s")
+    return sel
+
+
 def _markdown(sel: dict) -> list[str]:
     lines = ["# Training recipe chosen on the selection cohort", "", f"Command: `{sel['command']}`", "",
              f"Criterion: {sel['criterion']}. {sel['recipe']['chosen_on']}.", "",
@@ -151,9 +230,34 @@ def _markdown(sel: dict) -> list[str]:
         for h in c["history"]:
             lines.append(f"| {'yes' if c['recipe']['captures'] else 'no'} | {c['recipe']['shift_fwd']} | {h['epochs']} | "
                          + " | ".join(f"{r['macro_f1']:.3f}" for r in h["steps"]) + " |")
-    r = sel["recipe"]
+    r = {k: v for k, v in sel["recipe"].items() if k != "step_loss_weights"}
+    if "early_stage" in sel:  # stage 1's own pick (stage 2 may have changed the epochs)
+        r.update(epochs=sel["early_stage"]["baseline"]["epochs"])
     lines += ["", f"**Chosen:** captures in training {'yes' if r['captures'] else 'no'}, shift forward "
                   f"{r['shift_fwd']} frames, {r['epochs']} epochs (cosine schedule over {r['schedule_epochs']})."]
+    return lines + (_early_markdown(sel) if "early_stage" in sel else [])
+
+
+def _early_markdown(sel: dict) -> list[str]:
+    e = sel["early_stage"]
+    lines = ["", "## Stage 2: the step-loss weights, for early decisions (issue 12)", "",
+             f"Command: `{e['command']}` ({e['wall_s']:.0f} s). Same cohort, subjects, seed, captures, time shift "
+             "and schedule as above; only the ConvLSTM's loss weight of the decision after 1..6 sub-windows differs.",
+             "", f"**Rule** (stated before the run): {e['rule']}", "",
+             "| step-loss weights (S = 1..6) | epochs | " + " | ".join(f"macro-F1 S={s}" for s in range(1, N_STEPS + 1))
+             + " | accuracy S=2 | accuracy S=3 | early (mean macro-F1 S=2,3) |",
+             "|---|---:|" + "---:|" * (N_STEPS + 3)]
+    for c in e["candidates"]:
+        w = ", ".join(f"{x:g}" for x in c["recipe"]["step_loss_weights"])
+        for h in c["history"]:
+            lines.append(f"| ({w}) | {h['epochs']} | " + " | ".join(f"{r['macro_f1']:.3f}" for r in h["steps"])
+                         + f" | {h['steps'][1]['accuracy']:.3f} | {h['steps'][2]['accuracy']:.3f} | {early_score(h):.3f} |")
+    ch, b = e["chosen"], e["baseline"]
+    lines += ["", f"Baseline (the current recipe, {b['epochs']} epochs): early {early_score(b):.3f}, "
+                  f"full window {b['steps'][-1]['macro_f1']:.3f}.",
+              "", f"**Chosen:** step-loss weights ({', '.join(f'{x:g}' for x in ch['step_loss_weights'])}), "
+                  f"{ch['epochs']} epochs: early {early_score(ch):.3f}, full window {ch['steps'][-1]['macro_f1']:.3f} "
+                  f"({'a new recipe' if e['new_recipe_won'] else 'the current recipe kept'})."]
     return lines
 
 

@@ -145,11 +145,14 @@ def preprocess_all(X: np.ndarray, chunk: int = 1024) -> torch.Tensor:
 def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int, seed: int,
         batch_size: int = 64, lr: float | None = None, val: tuple[np.ndarray, np.ndarray] | None = None,
         progress: bool = True, augmentation: bool = True, threads: int | None = 1, desc: str = "",
-        shift_fwd: int = SHIFT_FWD, schedule_epochs: int | None = None, on_epoch=None):
+        shift_fwd: int = SHIFT_FWD, schedule_epochs: int | None = None, on_epoch=None,
+        step_loss_weights=None):
     """Train ``arch`` on windows X (N, 700, 3) m/s^2 (or already preprocessed, (N, 6, 33, 3)) with labels
     y; returns the model in eval mode. ``lr`` defaults to ``DEFAULT_LR[arch]``. The cosine decay
     spans ``schedule_epochs`` (default ``epochs``): stopping at an epoch the validation chose keeps
-    the schedule it was chosen under. ``on_epoch(epoch, model)`` is called after every epoch."""
+    the schedule it was chosen under. ``on_epoch(epoch, model)`` is called after every epoch.
+    ``step_loss_weights``: the ConvLSTM's weight of the decision after 1..6 sub-windows (default
+    ``STEP_LOSS_WEIGHTS``; the selection compares others)."""
     y = np.asarray(y, dtype=np.int64)
     if arch in LDA_FEATURES:
         return LDAClassifier(n_classes, LDA_FEATURES[arch]).fit(X, y)
@@ -164,7 +167,8 @@ def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int,
     net = DDP(model) if distributed else model
     opt = torch.optim.Adam(model.parameters(), lr=DEFAULT_LR[arch] if lr is None else lr)
     loss_fn = nn.CrossEntropyLoss(weight=class_weights(y, n_classes))
-    step_w = torch.tensor(STEP_LOSS_WEIGHTS) / sum(STEP_LOSS_WEIGHTS) if arch == "convlstm" else None
+    sw = STEP_LOSS_WEIGHTS if step_loss_weights is None else tuple(float(w) for w in step_loss_weights)
+    step_w = torch.tensor(sw) / sum(sw) if arch == "convlstm" else None
     sampler = DistributedSampler(range(len(y)), num_replicas=world, rank=rank, shuffle=True, seed=seed)
     rng = np.random.default_rng([seed, rank])  # augmentation differs per rank
     steps_per_epoch = math.ceil(len(sampler) / batch_size)
