@@ -287,7 +287,8 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
 
     provenance = {"command": command, "seed": seed, "data": data_info,
                   "training": {"arch": ARCH, "epochs": epochs, "seed": seed, "windows": n_windows,
-                               "recipe": recipe, "step_loss_weights": list(STEP_LOSS_WEIGHTS),
+                               "recipe": recipe,
+                               "step_loss_weights": list(recipe.get("step_loss_weights", STEP_LOSS_WEIGHTS)),
                                **({"reused_checkpoint": str(checkpoint)} if checkpoint else {}),
                                "function": "models.train.fit", "threads": 1, "seconds": round(train_s, 1)},
                   "git_commit": commit, "versions": versions(), "opset": DEFAULT_OPSET,
@@ -348,7 +349,8 @@ def _train(train, test, recipe: dict, *, epochs: int, seed: int, work: Path, dat
         f"{epochs} epochs of a {recipe['schedule_epochs']}-epoch schedule, seed {seed})")
     t = time.time()
     model = fit(ARCH, X, y, len(train.classes), epochs=epochs, seed=seed, progress=progress,
-                desc=f"{ARCH} assets", shift_fwd=recipe["shift_fwd"], schedule_epochs=recipe["schedule_epochs"])
+                desc=f"{ARCH} assets", shift_fwd=recipe["shift_fwd"], schedule_epochs=recipe["schedule_epochs"],
+                step_loss_weights=recipe.get("step_loss_weights"))
     train_s = time.time() - t
     save_checkpoint(work / ARCH, model, arch=ARCH, classes=list(train.classes), seed=seed, epochs=epochs, metrics={},
                     data=data)

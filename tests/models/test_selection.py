@@ -6,7 +6,17 @@ import json
 import numpy as np
 
 from models.dataset import save_npz
-from models.selection import CANDIDATES, DEFAULT_RECIPE, load_recipe, run_selection, training_arrays
+from models.selection import (
+    BASELINE_STEP_WEIGHTS,
+    CANDIDATES,
+    DEFAULT_RECIPE,
+    EARLY_CANDIDATES,
+    choose_early,
+    load_recipe,
+    run_early_selection,
+    run_selection,
+    training_arrays,
+)
 from models.toy import toy_windows
 
 
@@ -41,3 +51,38 @@ def test_selection_scores_only_validation_subjects_and_writes_the_recipe(tmp_pat
 
 def test_no_selection_means_the_documented_default(tmp_path):
     assert load_recipe(tmp_path / "missing.json") == DEFAULT_RECIPE
+
+
+def _checkpoint(epochs: int, s2: float, s3: float, s6: float) -> dict:
+    return {"epochs": epochs, "steps": [{"steps": s, "macro_f1": f, "accuracy": f}
+                                        for s, f in enumerate((0.4, s2, s3, 0.7, 0.7, s6), start=1)]}
+
+
+def test_the_early_rule_keeps_the_current_recipe_unless_a_new_one_clearly_wins():
+    base = {"recipe": {"step_loss_weights": list(BASELINE_STEP_WEIGHTS)}, "history": [_checkpoint(12, 0.65, 0.75, 0.80)]}
+    new = {"recipe": {"step_loss_weights": [1.0] * 6},
+           "history": [_checkpoint(12, 0.72, 0.80, 0.78),   # early much better, full window worse: not eligible
+                       _checkpoint(15, 0.67, 0.76, 0.80),   # +0.015 early: below the margin
+                       _checkpoint(18, 0.70, 0.78, 0.795)]}  # +0.04 early, full window within 0.01: wins
+    win, h, b = choose_early([base, new], 12)
+    assert win is new and h["epochs"] == 18 and b["epochs"] == 12
+    new["history"] = new["history"][:2]
+    win, h, _ = choose_early([base, new], 12)
+    assert win is base and h["epochs"] == 12
+
+
+def test_the_early_stage_writes_the_step_weights_only_when_they_win(tmp_path):
+    d = tmp_path / "data"
+    save_npz(d / "train.npz", toy_windows(n_per_class=6, n_classes=3, n_subjects=3, seed=0))
+    save_npz(d / "test.npz", toy_windows(n_per_class=4, n_classes=3, n_subjects=3, seed=1))
+    run_selection(tmp_path, subjects=3, epochs=3, n_train=2, jobs=1, log=lambda s: None)
+    stage1 = load_recipe(tmp_path / "selection.json")
+    sel = run_early_selection(tmp_path, jobs=1, log=lambda s: None)
+    e = sel["early_stage"]
+    assert [c["recipe"]["step_loss_weights"] for c in e["candidates"]] == [list(w) for w in EARLY_CANDIDATES]
+    r = load_recipe(tmp_path / "selection.json")
+    if e["new_recipe_won"]:
+        assert r["step_loss_weights"] == e["chosen"]["step_loss_weights"] != list(BASELINE_STEP_WEIGHTS)
+    else:
+        assert r == stage1
+    assert "Stage 2" in (tmp_path / "selection.md").read_text()
