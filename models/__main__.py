@@ -11,6 +11,7 @@
             [--classes A,B,...] [--append]
   select    --out reports/wearable/selection --seed 0 [--subjects 12] [--minutes 10] [--epochs 24] [--jobs 2]
             -> the training recipe chosen on a separate simulated cohort (models/selection.py)
+            [--stage early]: then the step-loss weights for early decisions, on top of stage 1's recipe
   report    --out reports/wearable --seed 0 [--subjects 20] [--epochs N] [--archs convlstm,cnn,lstm,lda]
             [--data TRAIN.npz --test TEST.npz] [--minutes 15] [--jobs 2] [--no-within] [--reuse | --reuse-only]
 

@@ -18,6 +18,9 @@ cohort. What it chooses, written to OUT/selection.json and read by ``python -m m
 
 The criterion is the validation subjects' macro-F1 over every capture after all 6 sub-windows
 (the full-window decision; the early steps are reported but do not choose), ties to fewer epochs.
+Stage 2 (``--stage early``, :func:`run_early_selection`) then compares the ConvLSTM's step-loss
+weights for early decisions by ``EARLY_RULE`` and keeps the current ones unless a new weighting
+clearly wins (2026-11-25: kept).
 Temperatures and preliminary-alert thresholds are fitted later, per shipped or per fold model,
 on this cohort's captures too (:func:`calibrate_steps`).
 """

@@ -76,8 +76,10 @@ ROT_DEG = 8.0
 NOISE_MPS2 = 0.05
 DEFAULT_EPOCHS = {"convlstm": 25, "cnn": 25, "lstm": 20, "lda": 0, "lda_summary": 0}  # ~1 min per LOSO fold on 1 core
 STEP_LOSS_WEIGHTS = (0.5, 0.5, 0.5, 0.5, 0.5, 1.0)
-"""ConvLSTM loss weight of the decision after 1..6 sub-windows (not tuned: the full-capture decision
-weighs twice any early one so that it stays today's decision)."""
+"""ConvLSTM loss weight of the decision after 1..6 sub-windows: the full-capture decision weighs twice
+any early one so that it stays today's decision. Compared on the selection cohort with every step at
+1.0 and with S = 2, 3 at 1.0 (``python -m models select --stage early``): kept, the others within
+0.005 of its early-step macro-F1 (reports/wearable/selection/selection.md)."""
 LDA_FEATURES = {"lda": "input", "lda_summary": "summary"}
 """The LDA baselines: on the 594-number model input, and on 12 summary statistics (issue 12)."""
 DEFAULT_LR = {"convlstm": 1e-3, "cnn": 1e-3, "lstm": 1e-2}
