@@ -1,6 +1,6 @@
 """Where the early decisions' errors are, on the selection cohort only (issue 12, "What a retrain would need").
 
-    PYTHONPATH=. python reports/wearable/selection/early_errors.py [OUT.md]
+    PYTHONPATH=. python reports/wearable/selection/early_errors.py [OUT_MD]
 
 Trains the chosen recipe (reports/wearable/selection/selection.json: captures, time shift, epochs,
 schedule, step-loss weights, seed 0) on the selection cohort's training subjects, exactly as
