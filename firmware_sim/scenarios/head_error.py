@@ -70,6 +70,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--calibration-method", choices=(*METHODS_FIT, TRUTH), default=CalibrationParams().method,
                         help="the calibration fit (edge_runtime.robot.calibration; default: its default), or "
                              f"'{TRUTH}': the simulated camera's true extrinsics (the reference)")
+    parser.add_argument("--assets", metavar="DIR", help="lifter models (manifest.json) to measure; default: the shipped")
+    parser.add_argument("--ray-tolerance-px", type=float, default=None,
+                        help="the lifter's [lifter] ray_tolerance_px (default: its default)")
     parser.add_argument("--json", required=True, metavar="OUT.json", help="write the figures here")
     parser.add_argument("--plot", metavar="OUT.png", help="error vs distance, both methods")
 
@@ -252,7 +255,7 @@ def plot(summary: dict, path: str | Path) -> None:
 
 
 def cmd(args) -> int:
-    from edge_runtime.core.manifest import ManifestError
+    from edge_runtime.core.manifest import ASSETS_DIR, ManifestError
     from edge_runtime.robot.lifter import LifterParams, StreamingLifter
 
     methods = METHODS if args.anchor == "both" else (args.anchor,)
@@ -260,7 +263,8 @@ def cmd(args) -> int:
         if not Path(p).parent.is_dir():
             raise CliError(f"{p}: directory {Path(p).parent} does not exist")
     try:
-        lifter = StreamingLifter.from_manifest(params=LifterParams(precision=args.precision))
+        lifter = StreamingLifter.from_manifest(args.assets or ASSETS_DIR, LifterParams(
+            precision=args.precision, **({} if args.ray_tolerance_px is None else {"ray_tolerance_px": args.ray_tolerance_px})))
     except (ManifestError, OSError, ValueError) as e:
         raise CliError(f"lifter {args.precision}: {e}") from None
     rng = np.random.default_rng(args.seed)
