@@ -197,7 +197,10 @@ def summarise(results: list[dict], methods, args) -> dict:
     out = {"command": (f"python -m firmware_sim head-error --placements {args.placements} --seed {args.seed} "
                        f"--anchor {args.anchor} --precision {args.precision} "
                        f"--calibration-method {args.calibration_method} --noise {args.noise} --json {args.json}"
-                       + (f" --plot {args.plot}" if args.plot else "")),
+                       + (f" --plot {args.plot}" if args.plot else "")
+                       + (f" --assets {args.assets}" if getattr(args, "assets", None) else "")
+                       + (f" --ray-tolerance-px {args.ray_tolerance_px:g}"
+                          if getattr(args, "ray_tolerance_px", None) is not None else "")),
            "lifter_precision": args.precision, "calibration_method": args.calibration_method, "placements": args.placements,
            "calibrations_refused": [r["refused"] for r in results if "refused" in r],
            "frames": int(len(dist)), "methods": {}}
