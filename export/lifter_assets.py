@@ -231,7 +231,10 @@ def manifest_entries(row: dict, fp32: Path, int8: Path, provenance: dict) -> lis
     rf = row["config"]["filter_widths"]
     rfield = int(np.prod(rf))
     common = {
-        "model_version": f"{provenance['version']}+lifter.c{row['channels']}.seed{provenance['seed']}",
+        # the training data's recipe is part of the version: two lifters of one size and seed trained on
+        # different data are different models, and only the version tells a reader which one runs
+        "model_version": (f"{provenance['version']}+lifter.{provenance.get('data', {}).get('recipe', 'walks')}"
+                          f".c{row['channels']}.seed{provenance['seed']}"),
         "parameters": row["parameters"],
         "config": row["config"],
         "classes": [],
