@@ -18,13 +18,14 @@ Two ways to protect people (``[zones] separation``):
   now and ``predict_s`` ahead (his whole body moved with his head's velocity). ISO/TS 15066
   speed and separation monitoring: the protective separation distance at robot speed v_r is
   ``S_p = v_h (T_r + T_s) + v_r (T_r + T_s / 2) + C + Z_d + Z_r`` (v_h: his tracked speed,
-  at least ISO 13855's 1.6 m/s), so a separation allows the robot speed that inverts it.
-  NORMAL works at that speed (``speed_scale``, in steps of ``speed_step``; stop-only:
-  full speed or nothing), LEVEL1 stops below the protective distance at the slowest useful
-  speed, LEVEL2 retracts when a person keeps coming (toward the arm faster than
-  ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
-  ``retract_lead_s``. After a retraction the arm works again once the person has been
-  beyond both exit distances for ``dwell_s``.
+  at least ISO 13855's 1.6 m/s; T_s shrinking with v_r, ``stop_time_scales``), so a
+  separation allows the robot speed that inverts it. NORMAL works at that speed
+  (``speed_scale``, in steps of ``speed_step``; stop-only: full speed or nothing), LEVEL1
+  stops below the protective distance at the slowest useful speed, LEVEL2 retracts for anyone
+  within ``reach_retract_m`` and for a person who keeps coming (toward the arm faster than
+  ``approach_speed_mps``) whose path over the next ``retract_lead_s`` (his body moved on at
+  his velocity) comes within ``body_retract_distance_m``. After a retraction the arm works
+  again once the person has been beyond both exit distances for ``dwell_s``.
   **People the camera loses** (hidden, out of view, or lifted invalidly while others are
   lifted): each is judged by his reachable set, his last valid body with every joint
   ``lost_person_speed_mps`` x the time since closer to the arm. While that set stays outside
@@ -78,7 +79,8 @@ Two ways to protect people (``[zones] separation``):
     worker contributes no second term). The target is ``P_eff + s * L``, with the step ``s``
     (0..1) shortened so that the hand never comes closer than ``min_radius_m`` to the base's
     axis (closer in, the Sawyer cannot hold its tool pointed at the base), then pulled in
-    to ``max_radius_m`` (with its tool pointed at the base the Sawyer reaches 0.7-0.8 m).
+    to ``max_radius_m`` (with its tool pointed at the base the Sawyer reaches 0.7-0.8 m). A
+    target that ends up nearer his predicted path than the hand is: no retraction, a stop.
   - **The fallback.** When the controller refuses Eq. 6's target: straight toward the base's
     axis, as far as Eq. 6's step (``w1 + w2``) but not inside ``min_radius_m``.
   - **Height.** No target below ``min_height_m``.
@@ -186,12 +188,24 @@ class ZoneParams:
     head's after calibration: median 0.29 m, reports/robot/head_error.md)."""
     body_retract_distance_m: float = config.setting(0.6, config.POSITIVE)
     """whole_body: a person who keeps coming (faster than ``approach_speed_mps`` toward the arm)
-    makes it retract (Eq. 6) once his separation is below this (m) plus his approach speed times
-    ``retract_lead_s``: 1.9 m at 1.4 m/s, 2.4 m at 2.0 m/s, 1.1 m at 0.5 m/s."""
+    makes it retract (Eq. 6) once his path over ``retract_lead_s`` beyond ``predict_s`` (his body
+    moved on at his velocity) comes within this separation (m): straight at the arm that is a
+    separation (``predict_s`` ahead) of 1.9 m at 1.4 m/s,
+    2.4 m at 2.0 m/s, 1.1 m at 0.5 m/s; a walker passing the cell further out than this, none."""
     retract_lead_s: float = config.setting(0.9, config.NON_NEGATIVE)
     """whole_body: how long before he would reach ``body_retract_distance_m`` the retraction
     starts (s). The Sawyer needs about 2 s to finish a retraction but moves its hand half of the
     way in the first second, at up to 0.6 m/s; a slower walker lets the arm work longer."""
+    stop_time_scales: bool = True
+    """whole_body: T_s in S_p shrinks with the arm's speed (``iso_stop_time_s`` from full speed,
+    proportionally less from a slower one: a constant deceleration), so the arm may work slowly
+    closer in (S_p 0.71 m at 10 % speed, 1.31 m at full speed, against 1.13-1.31 m with the
+    full-speed T_s throughout). A person that close is within ``reach_retract_m`` of it or nearly:
+    without that rule a worker standing 0.8 m from a slow arm reached it (hard:200, hard_148)."""
+    reach_retract_m: float = config.setting(0.9, config.NON_NEGATIVE)
+    """whole_body: anyone whose separation is below this (m) makes the arm retract (Eq. 6), coming
+    or not: he can reach it faster than the camera and the lifter see an arm move (ISO 13855's
+    850 mm reach through, C), so the arm does not work, even slowly, within his reach."""
     approach_speed_mps: float = config.setting(0.3, config.NON_NEGATIVE)
     """whole_body: a person "keeps coming" when his head moves toward the end effector faster
     than this (m/s; above the tracker's 0.1 m/s of velocity noise)."""
@@ -235,25 +249,38 @@ class ZoneParams:
         if self.separation not in ("whole_body", "head"):
             raise ValueError(f"separation: must be whole_body or head, got {self.separation!r}")
 
+    def stop_time_s(self, robot_speed_mps: float) -> float:
+        """whole_body: T_s at robot speed v_r (s): ``iso_stop_time_s`` from full speed
+        (``iso_robot_speed_mps``), and with ``stop_time_scales`` proportionally less from a lower
+        one (a constant deceleration)."""
+        if not self.stop_time_scales or self.iso_robot_speed_mps <= 0:
+            return self.iso_stop_time_s
+        return self.iso_stop_time_s * min(max(robot_speed_mps, 0.0) / self.iso_robot_speed_mps, 1.0)
+
     def body_protective_distance_m(self, robot_speed_mps: float, human_speed_mps: float | None = None) -> float:
         """whole_body: ISO/TS 15066's S_p (m, 5.5.4.2.3) at robot speed v_r:
         ``v_h (T_r + T_s) + v_r T_r + v_r T_s / 2 + C + Z_d + Z_r``, with the stopping distance
-        ``S_s = v_r T_s / 2`` of a constant deceleration and v_h at least ``iso_human_speed_mps``.
-        T_s is the full-speed stopping time at every speed: scaling it with v_r (a slower arm stops
-        sooner) widened the band in which the arm works from 1.15-1.31 m to 0.71-1.31 m and let a
-        worker standing 0.8 m out reach a slow arm (hard:200, hard_148: 0.05 m), since only a
-        person who keeps coming makes it retract."""
+        ``S_s = v_r T_s / 2`` of a constant deceleration, T_s = :meth:`stop_time_s` and v_h at
+        least ``iso_human_speed_mps``."""
         v_h = max(self.iso_human_speed_mps, human_speed_mps or 0.0)
-        return (v_h * (self.iso_reaction_time_s + self.iso_stop_time_s)
-                + robot_speed_mps * (self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s)
+        t_s = self.stop_time_s(robot_speed_mps)
+        return (v_h * (self.iso_reaction_time_s + t_s) + robot_speed_mps * (self.iso_reaction_time_s + 0.5 * t_s)
                 + self.body_intrusion_m + self.body_sensing_uncertainty_m + self.iso_robot_uncertainty_m)
 
     def allowed_speed_mps(self, separation_m: float, human_speed_mps: float | None = None) -> float:
         """whole_body: the fastest robot speed (m/s, 0..``iso_robot_speed_mps``) whose S_p is
-        within ``separation_m`` (S_p is linear in v_r, so this inverts it)."""
+        within ``separation_m`` (S_p is linear in v_r, or quadratic with ``stop_time_scales``: this
+        inverts it)."""
         slack = separation_m - self.body_protective_distance_m(0.0, human_speed_mps)
-        per_mps = self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s
-        v = slack / per_mps if per_mps > 0 else (math.inf if slack >= 0 else 0.0)
+        v_h = max(self.iso_human_speed_mps, human_speed_mps or 0.0)
+        if self.stop_time_scales and self.iso_robot_speed_mps > 0:
+            k = self.iso_stop_time_s / self.iso_robot_speed_mps      # T_s = k v_r
+            a, b = 0.5 * k, v_h * k + self.iso_reaction_time_s          # S_p - S_p(0) = a v^2 + b v
+            v = (-b + math.sqrt(b * b + 4 * a * slack)) / (2 * a) if slack > 0 and a > 0 else (
+                slack / b if b > 0 else math.inf) if slack > 0 else 0.0
+        else:
+            per_mps = self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s
+            v = slack / per_mps if per_mps > 0 else (math.inf if slack >= 0 else 0.0)
         return float(min(max(v, 0.0), self.iso_robot_speed_mps))
 
     @property
@@ -377,6 +404,10 @@ class Decision:
     speed_scale: float = 1.0
     """Share of full speed the arm may work at in NORMAL (whole-body speed and separation
     monitoring; 1.0 otherwise)."""
+    coming: bool = True
+    """whole_body: someone's path over the retraction's lead reaches ``body_retract_distance_m``
+    of the arm where it is now (he comes at it, not past it): only then does a repeat retraction
+    make sense ("head": always True)."""
 
 
 def alarms(params: ZoneParams) -> dict[State, Alarm]:
@@ -445,6 +476,7 @@ class HazardMonitor:
         """whole_body: each person's last valid pose (``_Seen``), kept ``lost_hold_s`` after it."""
         self._unseen: str | None = None  # this frame: a person lifted invalidly and never validly
         self._lost_stop: list = []  # this frame: the lost people whose reachable set stops the arm
+        self._coming = False  # this frame: someone's path over the retraction lead reaches the arm
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
         """How often the pose stream went stale."""
@@ -514,19 +546,31 @@ class HazardMonitor:
         v_full = z.iso_robot_speed_mps
         v_stop = z.min_speed_fraction * v_full if z.speed_scaling else v_full
         entry, nearest = State.NORMAL, (math.inf, None, None)
+        self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
         for wid, est in ests.items():
             centres, radii = body_spheres(people[wid])
-            ahead = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]) * z.predict_s
-            # now and ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost here
-            d = separation_m(np.concatenate([centres, centres + ahead]), np.concatenate([radii, radii]), caps)
+            v3 = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]])
             v_g = ground(est.velocity_mps)
             speed = float(np.linalg.norm(v_g))
-            self._seen[wid] = _Seen(t_s, np.asarray(people[wid], float), speed)
             toward = eff_g - ground(est.position_m)
             approach = float(v_g @ toward) / max(float(np.linalg.norm(toward)), 1e-9)
+            # now, predict_s ahead and, for one who keeps coming, along his path over the retraction's
+            # lead: all in one call (numpy's per-call overhead, not the arithmetic, is the cost here)
+            # (the lead counts from the prediction's horizon, as the separation it is compared with did)
+            leads = (z.predict_s + z.retract_lead_s * np.arange(1, RETRACT_LEAD_STEPS + 1) / RETRACT_LEAD_STEPS
+                     if approach > z.approach_speed_mps else np.empty(0))
+            shifts = np.concatenate([[0.0, z.predict_s], leads])
+            seps = separation_per_shift_m(centres, radii, v3, shifts, caps)
+            d = float(seps[:2].min())
+            self._seen[wid] = _Seen(t_s, np.asarray(people[wid], float), speed)
             allowed = z.allowed_speed_mps(d, speed)
-            if approach > z.approach_speed_mps and d <= z.body_retract_distance_m + approach * z.retract_lead_s:
+            # retract for one within reach, or one whose path over the lead brings him within
+            # body_retract_distance_m: a walker passing the cell comes at the arm only until he is
+            # abreast of it, and his path, not his approach speed, says how close he gets
+            coming = bool(len(leads)) and float(seps.min()) <= z.body_retract_distance_m
+            self._coming |= coming
+            if d <= z.reach_retract_m or coming:
                 level = State.LEVEL2
             elif allowed < v_stop - 1e-9:
                 level = State.LEVEL1
@@ -547,7 +591,7 @@ class HazardMonitor:
             if allowed < worst[0] or worst[1] is None:
                 worst = (allowed, speed, d)
         human_speed = worst[1]
-        exit_r = {State.LEVEL2: z.body_retract_distance_m + z.hysteresis_m,
+        exit_r = {State.LEVEL2: max(z.body_retract_distance_m, z.reach_retract_m) + z.hysteresis_m,
                   State.LEVEL1: z.body_protective_distance_m(v_stop, human_speed) + z.hysteresis_m}
         # nobody seen or accounted for (every lost person forgotten after lost_hold_s): full speed
         self._scale = 1.0 if worst[1] is None else self._speed_scale(worst[2], human_speed)
@@ -661,7 +705,7 @@ class HazardMonitor:
             reason = f"level2_retract ({self._fault})"
         scale = self._scale if state == State.NORMAL else 1.0
         dec = Decision(state, reason, d, wid, est, changed=(state, reason) != (self.last.state, self.last.reason),
-                       speed_scale=scale)
+                       speed_scale=scale, coming=self._coming or self.zones.separation == "head")
         self.state, self.reason, self.last = state, reason, dec
         return dec
 
@@ -758,17 +802,31 @@ def body_spheres(person_m) -> tuple[np.ndarray, np.ndarray]:
     return centres, np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[a] + BODY_RADII_M[b])])
 
 
+RETRACT_LEAD_STEPS = 3
+"""Points along a coming person's path over ``retract_lead_s`` at which his separation is checked."""
+
+
+def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_mps: np.ndarray, shifts_s,
+                           capsules) -> np.ndarray:
+    """The separation (m) of the spheres moved by ``velocity_mps`` x each of ``shifts_s`` (S,)
+    from the capsules: (S,)."""
+    shifts = np.asarray(shifts_s, float)
+    n = len(centres_m)
+    moved = (centres_m[None] + shifts[:, None, None] * np.asarray(velocity_mps, float)[None, None]).reshape(-1, 3)
+    a, b, r = capsules
+    ab = b - a
+    ap = moved[:, None, :] - a[None]
+    den = np.maximum((ab * ab).sum(-1), 1e-12)
+    t = np.clip((ap * ab[None]).sum(-1) / den, 0.0, 1.0)
+    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1) - r[None] - np.tile(radii_m, len(shifts))[:, None]
+    return d.min(axis=1).reshape(len(shifts), n).min(axis=1)
+
+
 def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
     """Smallest surface-to-surface distance (m) between spheres (``centres_m`` (N, 3),
     ``radii_m`` (N,)) and capsules (starts (K, 3), ends (K, 3), radii (K,)); negative when
     they overlap."""
-    a, b, r = capsules
-    ab = b - a                                                     # (K, 3)
-    ap = centres_m[:, None, :] - a[None]                           # (N, K, 3)
-    den = np.maximum((ab * ab).sum(-1), 1e-12)
-    t = np.clip((ap * ab[None]).sum(-1) / den, 0.0, 1.0)
-    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1)
-    return float((d - r[None] - radii_m[:, None]).min())
+    return float(separation_per_shift_m(centres_m, radii_m, np.zeros(3), (0.0,), capsules)[0])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -799,6 +857,23 @@ class Retraction:
 def _unit(v: np.ndarray) -> np.ndarray:
     n = float(np.linalg.norm(v))
     return v / n if n > 1e-9 else np.zeros_like(v)
+
+
+PATH_TOLERANCE_M = 0.05
+"""A retraction target nearer a worker's predicted path than the hand by more than this (m) is
+refused (:func:`eq6_retraction`); within it, a step straight back along a path coming at the
+hand, is not."""
+
+
+def path_distance_m(point_m, est: HeadEstimate, horizon_s: float) -> tuple[float, np.ndarray]:
+    """Ground distance (m) from ``point_m`` to the worker's predicted path (his head now, moving
+    on at his tracked velocity for ``horizon_s``), and the path's point nearest it (x, z)."""
+    p, v = ground(est.position_m), ground(est.velocity_mps) * horizon_s
+    q = ground(point_m)
+    den = float(v @ v)
+    t = min(max(float((q - p) @ v) / den, 0.0), 1.0) if den > 1e-12 else 0.0
+    near = p + t * v
+    return float(np.linalg.norm(q - near)), near
 
 
 def retract_direction(effector_m, est: HeadEstimate, params: ZoneParams = ZoneParams()) -> np.ndarray:
@@ -843,16 +918,21 @@ def limit_turn(yaw_rad: float, from_yaw_rad: float | None, max_turn_deg: float) 
 
 
 def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: RetractLimits,
-                   tool_yaw_rad: float | None, held_yaw_rad: float | None = None) -> Retraction:
+                   tool_yaw_rad: float | None, held_yaw_rad: float | None = None) -> Retraction | None:
     """Eq. 6's step from the effector, kept between ``min_radius_m`` and ``max_radius_m`` of
     the base's axis. ``tool_yaw_rad``: where the tool points now (None: unknown);
-    ``held_yaw_rad``: the yaw of the retraction under way, kept by a repeat one."""
+    ``held_yaw_rad``: the yaw of the retraction under way, kept by a repeat one. None when the
+    target, once kept within those radii, is nearer his predicted path than the hand is now:
+    then the arm stops where it is rather than move toward where he is going."""
     eff = np.asarray(effector_m, float)
     L = retract_direction(eff, head, zones)
     target = eff + step_outside_radius(ground(eff), ground(L), limits.min_radius_m) * L
     r = float(np.linalg.norm(ground(target)))
     if r > limits.max_radius_m:
         target[[0, 2]] *= limits.max_radius_m / r
+    gap_now = path_distance_m(eff, head, zones.retract_time_s)[0]
+    if path_distance_m(target, head, zones.retract_time_s)[0] < gap_now - PATH_TOLERANCE_M:
+        return None
     return _retraction(target, limits, tool_yaw_rad, held_yaw_rad)
 
 
