@@ -27,7 +27,14 @@ or the held one): ``joints_cam_m[j] = z_j * ((u_j - cx) / fx, (v_j - cy) / fy, 1
 included) every joint lands on its input keypoint; only depth, the part 2D cannot give,
 rests on the model (and on the floor anchoring of
 :mod:`edge_runtime.robot.calibration`, which slides the skeleton along these rays). The
-model's own joints stay in ``joints_model_cam_m``. A joint the model puts less than
+model's own joints stay in ``joints_model_cam_m``.
+
+A real detector errs by several pixels per joint and frame, and a ray through a noisy
+keypoint carries that error into 3D, while the model has seen 27 frames and averages much of
+it out. So the pixel ``(u_j, v_j)`` is first moved toward the model joint's own projection
+by at most ``ray_tolerance_px`` (1.5 px of the input camera): the output never strays from
+what the camera saw by more than that, and within it the model's smoother estimate wins.
+``ray_tolerance_px = 0`` puts every joint exactly on its keypoint's ray. A joint the model puts less than
 ``MIN_DEPTH_M`` in front of the camera makes the frame invalid (``model_output``).
 
 Streaming
@@ -113,6 +120,8 @@ MISSING_JOINTS = "missing_joints"
 TIME_NOT_INCREASING = "time_not_increasing"
 BAD_TIME = "bad_time"
 
+MAX_RAY_TOLERANCE_PX = 5.0
+"""The largest ``ray_tolerance_px`` accepted: issue 14's p95 bound on the reprojection."""
 MAX_RECEPTIVE_FIELD = 1024
 """The largest receptive field a manifest may declare (VideoPose3D's largest is 243 frames):
 the ring buffer is allocated from it."""
@@ -150,6 +159,12 @@ class LifterParams:
     lost_timeout_s: float = 0.5
     """A hole in the input (dropped or invalid frames) up to this long is bridged by linear
     interpolation; a longer one (the person was lost) resets the buffer."""
+    ray_tolerance_px: float = 1.5
+    """How far (input-camera pixels) a joint's projection may stay from its keypoint: each joint
+    goes on the ray of the point within this distance of its keypoint that is nearest to the
+    model's own projection (0 = exactly on the keypoint's ray). A detector errs by several pixels;
+    the model's x and y, which average it out over 27 frames, are kept as far as this allows.
+    1.5 px keeps the reprojection within issue 14's median 2 px with a margin."""
 
     def __post_init__(self):
         if self.precision not in PRECISIONS:
@@ -160,6 +175,9 @@ class LifterParams:
             raise ValueError(f"hold_frames: expected an integer >= 0, got {self.hold_frames!r}")
         if not 0.0 <= self.min_score <= 1.0:
             raise ValueError(f"min_score: expected a number in [0, 1], got {self.min_score!r}")
+        if not (math.isfinite(self.ray_tolerance_px) and 0.0 <= self.ray_tolerance_px <= MAX_RAY_TOLERANCE_PX):
+            raise ValueError(f"ray_tolerance_px: expected a number in [0, {MAX_RAY_TOLERANCE_PX:g}], "
+                             f"got {self.ray_tolerance_px!r}")
         for name in ("frame_rate_hz", "lost_timeout_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -421,18 +439,26 @@ class StreamingLifter:
         if model_joints[:, 2].min() < MIN_DEPTH_M:
             return self._invalid(t_s, f"model_output: a joint {model_joints[:, 2].min():.2f} m in front of the "
                                       "camera", observed)
-        joints = self._rays() * model_joints[:, 2:3]
+        joints = self._rays(model_joints) * model_joints[:, 2:3]
         warming = self.warming_up
         st.valid += 1
         st.warming_up += warming
         return LiftedPose(t_s, joints, joints[HIP].copy(), True, None, observed, warming, dt, held, model_joints)
 
-    def _rays(self) -> np.ndarray:
+    def _rays(self, model_joints: np.ndarray | None = None) -> np.ndarray:
         """(17, 3) canonical-camera rays (x/z, y/z, 1) of this frame's keypoints (observed or held):
-        the model's input for the last frame, un-normalised (``normalize_screen`` inverted)."""
+        the model's input for the last frame, un-normalised (``normalize_screen`` inverted). With
+        ``model_joints`` each ray is turned toward the model joint's own projection by at most
+        ``ray_tolerance_px`` (input-camera pixels, converted with the focal lengths' ratio)."""
         cam = self.canonical_camera
         half_w = cam.width_px / 2
         px = (self._last_seen + (1.0, cam.height_px / cam.width_px)) * half_w
+        tol = self.params.ray_tolerance_px * cam.fx_px / (self.camera.fx_px if self.camera is not None else cam.fx_px)
+        if model_joints is not None and tol > 0:
+            f = np.array([cam.fx_px, cam.fy_px])
+            toward = model_joints[:, :2] / model_joints[:, 2:3] * f + (cam.cx_px, cam.cy_px) - px
+            dist = np.linalg.norm(toward, axis=1, keepdims=True)
+            px = px + toward * np.minimum(1.0, tol / np.maximum(dist, 1e-9))
         return np.column_stack([(px[:, 0] - cam.cx_px) / cam.fx_px, (px[:, 1] - cam.cy_px) / cam.fy_px,
                                 np.ones(N_JOINTS)])
 

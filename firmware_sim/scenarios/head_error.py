@@ -70,6 +70,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--calibration-method", choices=(*METHODS_FIT, TRUTH), default=CalibrationParams().method,
                         help="the calibration fit (edge_runtime.robot.calibration; default: its default), or "
                              f"'{TRUTH}': the simulated camera's true extrinsics (the reference)")
+    parser.add_argument("--assets", metavar="DIR", help="lifter models (manifest.json) to measure; default: the shipped")
+    parser.add_argument("--ray-tolerance-px", type=float, default=None,
+                        help="the lifter's [lifter] ray_tolerance_px (default: its default)")
     parser.add_argument("--json", required=True, metavar="OUT.json", help="write the figures here")
     parser.add_argument("--plot", metavar="OUT.png", help="error vs distance, both methods")
 
@@ -194,7 +197,10 @@ def summarise(results: list[dict], methods, args) -> dict:
     out = {"command": (f"python -m firmware_sim head-error --placements {args.placements} --seed {args.seed} "
                        f"--anchor {args.anchor} --precision {args.precision} "
                        f"--calibration-method {args.calibration_method} --noise {args.noise} --json {args.json}"
-                       + (f" --plot {args.plot}" if args.plot else "")),
+                       + (f" --plot {args.plot}" if args.plot else "")
+                       + (f" --assets {args.assets}" if getattr(args, "assets", None) else "")
+                       + (f" --ray-tolerance-px {args.ray_tolerance_px:g}"
+                          if getattr(args, "ray_tolerance_px", None) is not None else "")),
            "lifter_precision": args.precision, "calibration_method": args.calibration_method, "placements": args.placements,
            "calibrations_refused": [r["refused"] for r in results if "refused" in r],
            "frames": int(len(dist)), "methods": {}}
@@ -252,7 +258,7 @@ def plot(summary: dict, path: str | Path) -> None:
 
 
 def cmd(args) -> int:
-    from edge_runtime.core.manifest import ManifestError
+    from edge_runtime.core.manifest import ASSETS_DIR, ManifestError
     from edge_runtime.robot.lifter import LifterParams, StreamingLifter
 
     methods = METHODS if args.anchor == "both" else (args.anchor,)
@@ -260,7 +266,8 @@ def cmd(args) -> int:
         if not Path(p).parent.is_dir():
             raise CliError(f"{p}: directory {Path(p).parent} does not exist")
     try:
-        lifter = StreamingLifter.from_manifest(params=LifterParams(precision=args.precision))
+        lifter = StreamingLifter.from_manifest(args.assets or ASSETS_DIR, LifterParams(
+            precision=args.precision, **({} if args.ray_tolerance_px is None else {"ray_tolerance_px": args.ray_tolerance_px})))
     except (ManifestError, OSError, ValueError) as e:
         raise CliError(f"lifter {args.precision}: {e}") from None
     rng = np.random.default_rng(args.seed)

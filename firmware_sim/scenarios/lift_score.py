@@ -16,7 +16,10 @@ warm-up, overall and per motion type (``truth.jsonl``'s ``motion``):
 * **P-MPJPE** (mm): after the best similarity alignment (Procrustes: rotation, scale, translation);
 * **root error** (mm): the pelvis in the camera frame, depth included (before any floor anchoring);
 * ``model_own_joints``: MPJPE and P-MPJPE of the network's own joints (``joints_model_cam_m``,
-  before the runtime puts them on the keypoints' rays), to show what the rays cost or gain.
+  before the runtime puts them on the keypoints' rays), to show what the rays cost or gain;
+* ``true_depth_on_rays``: P-MPJPE of joints on the lifted joints' rays at the TRUE depth of
+  each joint: what the rays alone cost, the floor of the output's P-MPJPE whatever the
+  network's depth (with ``ray_tolerance_px = 0`` the rays are the keypoints').
 """
 from __future__ import annotations
 
@@ -122,19 +125,22 @@ def _rows(recording: Path, lifted: Path) -> tuple[list, int, int]:
             img, _ = cv2.projectPoints(j, np.zeros(3), np.zeros(3), camera.K, camera.dist_array)
             reproj = np.linalg.norm(img.reshape(17, 2)[obs] - seen_2d[obs, :2], axis=1)
             model = np.asarray(p.get("joints_model_cam_m", j), float)
-            rows.append((true["motion"], reproj, *_errors_mm(j, tj), *_errors_mm(model, tj)[:2]))
+            on_rays = j / j[:, 2:3] * tj[:, 2:3]
+            rows.append((true["motion"], reproj, *_errors_mm(j, tj), *_errors_mm(model, tj)[:2],
+                         _errors_mm(on_rays, tj)[1]))
     return rows, frames, persons
 
 
 def _figures(rows) -> dict:
     reproj = np.concatenate([r[1] for r in rows]) if rows else np.zeros(0)
     q = lambda x, p: round(float(np.percentile(x, p)), 2) if len(x) else None  # noqa: E731
-    mp, pa, root, model_mp, model_pa = (np.array([r[k] for r in rows]) for k in (2, 3, 4, 5, 6))
+    mp, pa, root, model_mp, model_pa, rays_pa = (np.array([r[k] for r in rows]) for k in (2, 3, 4, 5, 6, 7))
     return {"n": len(rows), "reprojection_px": {"median": q(reproj, 50), "p95": q(reproj, 95), "joints": int(len(reproj))},
             "mpjpe_mm": round(float(mp.mean()), 1), "p_mpjpe_mm": round(float(pa.mean()), 1),
             "root_error_mm": {"median": q(root, 50), "p95": q(root, 95)},
             "model_own_joints": {"mpjpe_mm": round(float(model_mp.mean()), 1),
-                                 "p_mpjpe_mm": round(float(model_pa.mean()), 1)}}
+                                 "p_mpjpe_mm": round(float(model_pa.mean()), 1)},
+            "true_depth_on_rays": {"p_mpjpe_mm": round(float(rays_pa.mean()), 1)}}
 
 
 def cmd(args) -> int:
@@ -149,9 +155,10 @@ def cmd(args) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1) + "\n")
     print(f"{'motion':<12} {'n':>6} {'reproj px med/p95':>18} {'MPJPE mm':>9} {'P-MPJPE mm':>11} "
-          f"{'root mm med/p95':>16}  {'model MPJPE / P-MPJPE':>22}")
+          f"{'root mm med/p95':>16}  {'model MPJPE / P-MPJPE':>22}  {'rays at true depth P-MPJPE':>27}")
     for name, f in [("all", res["all"]), *res["by_motion"].items()]:
         r, root, m = f["reprojection_px"], f["root_error_mm"], f["model_own_joints"]
         print(f"{name:<12} {f['n']:>6} {r['median']:>8} / {r['p95']:<7} {f['mpjpe_mm']:>9} {f['p_mpjpe_mm']:>11} "
-              f"{root['median']:>7} / {root['p95']:<7}  {m['mpjpe_mm']:>10} / {m['p_mpjpe_mm']:<9}")
+              f"{root['median']:>7} / {root['p95']:<7}  {m['mpjpe_mm']:>10} / {m['p_mpjpe_mm']:<9}  "
+              f"{f['true_depth_on_rays']['p_mpjpe_mm']:>27}")
     return 0

@@ -155,10 +155,11 @@ def session(body: Body, camera: Camera, rng: np.random.Generator, seconds: float
 
 
 def scene(camera: Camera, rng: np.random.Generator, seconds: float, people: int,
-          noise: DetectorNoise = REAL_DETECTOR, kinds=MOTIONS) -> dict:
+          noise: DetectorNoise = REAL_DETECTOR, kinds=MOTIONS, body_fn=random_body) -> dict:
     """Several people's sessions seen by ``camera``: truth and COCO detector output with occlusion.
-    Returns ``motions`` (one per person, T frames each), ``keypoints`` (per person (T, 17, 3))."""
-    sessions = [session(random_body(rng), camera, rng, seconds, kinds) for _ in range(people)]
+    Returns ``motions`` (one per person, T frames each), ``keypoints`` (per person (T, 17, 3)).
+    ``body_fn(rng) -> Body`` makes each person (the lifter's training varies proportions too)."""
+    sessions = [session(body_fn(rng), camera, rng, seconds, kinds) for _ in range(people)]
     n = min(len(s) for s in sessions)
     sessions = [motions.Motion(s.body, s.rate_hz, s.angles_deg[:n], s.pelvis_xz_m[:n], s.heading_rad[:n],
                                s.labels[:n], s.joints_m[:n]) for s in sessions]

@@ -179,3 +179,47 @@ def test_ground_plane_root_recovers_the_pelvis_from_exact_keypoints():
     assert m["mpjpe_mm"] == 0 and m["root_error_mm"] == 0 and m["p_mpjpe_mm"] < 1e-3
     ps.meta.pop("extrinsics")
     assert ground_plane_root(ps, idx, ps.pose3d[idx]) is None
+
+
+def test_varied_splits_hold_out_motion_types_cameras_and_people():
+    from firmware_sim.scenarios.recording import MOTIONS
+    from models.pose_data import VariedConfig, build_varied_splits, summary
+
+    cfg = VariedConfig(train_scenes=3, val_scenes=1, test_scenes=1, seconds_per_scene=20, train_cameras=3,
+                       eval_cameras=1, holdout_motions=("reach",), seed=3)
+    sp = build_varied_splits(cfg)
+    names = sp["train"].meta["activity_names"]
+    assert names == list(MOTIONS) and "reach" not in sp["train"].meta["train_motions"]
+    assert names.index("reach") not in set(sp["train"].activity)
+    assert {names[i] for i in set(sp["train"].activity)} <= set(MOTIONS) - {"reach"}
+    cams = {k: set(v.camera) for k, v in sp.items()}
+    people = {k: set(v.subject) for k, v in sp.items()}
+    for a, b in (("train", "val"), ("train", "test"), ("val", "test")):
+        assert not cams[a] & cams[b] and not people[a] & people[b]
+    for ps in sp.values():
+        v = ps.valid
+        assert v.mean() > 0.3 and np.isfinite(ps.kp2d[v]).all() and np.allclose(ps.pose3d[:, 0], 0)
+        assert (ps.root3d[v, 2] > 0.3).all()
+    assert sum(summary(sp["test"])["activities"].values()) == sp["test"].valid.sum()
+    with pytest.raises(ValueError, match="holdout_motions"):
+        build_varied_splits(VariedConfig(holdout_motions=("juggle",)))
+
+
+def test_varied_inputs_are_the_runtimes_canonical_keypoints():
+    # a perfect detector: the model input, un-normalised, is the true joints projected by the canonical
+    # camera (the lens undistorted away), except where COCO -> H36M mapping builds a joint (head, spine...)
+    from firmware_sim.devices import camera as cam_sim
+    from firmware_sim.scenarios.recording import random_camera
+    from models.pose_data import VariedConfig, _scene_sequences
+
+    rng = np.random.default_rng(0)
+    camera = random_camera(rng)
+    d = _scene_sequences(camera, rng, VariedConfig(seconds_per_scene=5), 1, cam_sim.PERFECT, ("walk",), ("walk",))[0]
+    v = d["valid"]
+    j = np.asarray(d["pose3d"], float) + d["root3d"][:, None]          # camera frame already
+    canon = cam_sim.CANONICAL
+    px = j[..., :2] / j[..., 2:] * canon.fx_px + (canon.cx_px, canon.cy_px)
+    want = cam_sim.to_model_input(px)
+    limbs = [1, 2, 3, 4, 5, 6, 11, 12, 13, 14, 15, 16]
+    assert v.sum() > 100
+    assert np.abs(d["kp2d"][v][:, limbs] - want[v][:, limbs]).max() < 2e-3

@@ -61,7 +61,7 @@ def test_streaming_equals_batch_over_padded_sequence(assets, precision, seed):
     rng = np.random.default_rng(seed)
     n = 45
     kp = random_walk_keypoints(rng, n)
-    lifter = _lifter(assets, precision=precision)
+    lifter = _lifter(assets, precision=precision, ray_tolerance_px=0.0)
     stream = [lifter.push(i * PERIOD, kp[i]) for i in range(n)]
     assert all(p.valid for p in stream)
     assert [p.warming_up for p in stream] == [i < RF - 1 for i in range(n)]
@@ -83,6 +83,26 @@ def test_streaming_equals_batch_over_padded_sequence(assets, precision, seed):
     p2, r2 = lifter.lift_windows(padded_windows(other, RF))
     assert np.abs((p2 + r2[:, None])[RF - 1] - want[RF - 1]).max() > 1e-3
     assert np.allclose((p2 + r2[:, None])[RF], want[RF], atol=1e-5)  # ... and the 28th no longer sees it
+
+
+@pytest.mark.parametrize("tol_px", [1.5, 5.0])
+def test_joints_move_toward_the_model_by_at_most_the_ray_tolerance(assets, tol_px):
+    # each joint: the model's depth, on the ray of the point within tol_px of its keypoint nearest to
+    # the model joint's own projection (the model joint itself when that projects within tol_px)
+    kp = random_walk_keypoints(np.random.default_rng(6), 30)
+    lifter = _lifter(assets, ray_tolerance_px=tol_px)
+    for i in range(30):
+        p = lifter.push(i * PERIOD, kp[i])
+    m = p.joints_model_cam_m
+    model_px = m[:, :2] / m[:, 2:] * F_CANON + [640.0, 360.0]
+    out_px = p.joints_cam_m[:, :2] / p.joints_cam_m[:, 2:] * F_CANON + [640.0, 360.0]
+    np.testing.assert_allclose(p.joints_cam_m[:, 2], m[:, 2], atol=1e-9)
+    gap = np.linalg.norm(model_px - kp[29, :, :2], axis=1)
+    moved = np.linalg.norm(out_px - kp[29, :, :2], axis=1)
+    assert (gap > tol_px).any()
+    np.testing.assert_allclose(moved, np.minimum(gap, tol_px), atol=1e-6)
+    # toward the model's projection: what is left of the gap is the gap less the distance moved
+    np.testing.assert_allclose(np.linalg.norm(model_px - out_px, axis=1), gap - np.minimum(gap, tol_px), atol=1e-6)
 
 
 def test_dropped_frame_is_interpolated_into_the_buffer(assets):
@@ -255,12 +275,18 @@ def test_distorted_camera_keypoints_are_undistorted_before_lifting(assets):
     obj = np.concatenate([rays, np.ones((17, 1))], axis=1) * 4.0
     img, _ = cv2.projectPoints(obj, np.zeros(3), np.zeros(3), cam.K, cam.dist_array)
     kp_img = np.concatenate([img.reshape(17, 2), np.full((17, 1), 0.9)], axis=1)
-    a = _lifter(assets, camera=cam).push(0.0, kp_img)
-    b = _lifter(assets).push(0.0, canon_px)
+    a = _lifter(assets, camera=cam, ray_tolerance_px=0.0).push(0.0, kp_img)
+    b = _lifter(assets, ray_tolerance_px=0.0).push(0.0, canon_px)
     np.testing.assert_allclose(a.joints_cam_m, b.joints_cam_m, atol=1e-3)
     # projected with the distorted camera itself, the 3D joints land on the keypoints they came from
     back, _ = cv2.projectPoints(a.joints_cam_m, np.zeros(3), np.zeros(3), cam.K, cam.dist_array)
     np.testing.assert_allclose(back.reshape(17, 2), kp_img[:, :2], atol=0.01)
+    # with a tolerance in this camera's pixels they land within it (the stand-in's joints are far off
+    # their keypoints, so every joint uses all of it)
+    t = _lifter(assets, camera=cam, ray_tolerance_px=1.5).push(0.0, kp_img)
+    back, _ = cv2.projectPoints(t.joints_cam_m, np.zeros(3), np.zeros(3), cam.K, cam.dist_array)
+    off = np.linalg.norm(back.reshape(17, 2) - kp_img[:, :2], axis=1)
+    assert off.max() <= 1.5 + 0.01 and np.median(off) > 1.0
 
 
 # ---------------------------------------------------------------------------- model loading
@@ -320,15 +346,15 @@ def test_classifier_and_lifter_share_a_manifest(tmp_path):
 
 
 def test_params_are_validated():
-    for bad in ({"precision": "int4"}, {"threads": 0}, {"hold_frames": -1}, {"min_score": 1.5},
-                {"max_gap_periods": 0.5}, {"lost_timeout_s": 0}):
+    for bad in ({"precision": "int4"}, {"ray_tolerance_px": 5.5}, {"ray_tolerance_px": -1.0}, {"threads": 0},
+                {"hold_frames": -1}, {"min_score": 1.5}, {"max_gap_periods": 0.5}, {"lost_timeout_s": 0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             LifterParams(**bad)
 
 
 def test_held_joints_are_marked_and_stay_on_their_last_ray(assets):
     kp = random_walk_keypoints(np.random.default_rng(4), 5)
-    lifter = _lifter(assets)
+    lifter = _lifter(assets, ray_tolerance_px=0.0)
     for i in range(4):
         lifter.push(i * PERIOD, kp[i])
     gone = kp[4].copy()

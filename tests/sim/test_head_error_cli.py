@@ -17,9 +17,11 @@ def run(*args):
 
 def test_a_tiny_run_writes_the_figures(tmp_path):
     out = tmp_path / "he.json"
-    r = run("--placements", "2", "--seed", "4", "--json", str(out), "--plot", str(tmp_path / "he.png"))
+    r = run("--placements", "2", "--seed", "4", "--json", str(out), "--plot", str(tmp_path / "he.png"),
+            "--ray-tolerance-px", "1.5")
     assert r.returncode == 0, r.stderr
     data = json.loads(out.read_text())
+    assert "--ray-tolerance-px 1.5" in data["command"]
     assert set(data["methods"]) == {"off", "on"} and len(data["per_placement"]) == 2
     assert data["frames"] > 100
     for m in data["methods"].values():
@@ -34,7 +36,9 @@ def test_a_tiny_run_writes_the_figures(tmp_path):
 
 @pytest.mark.parametrize("args, word", [(["--placements", "0"], "--placements"),
                                         (["--anchor", "maybe"], "--anchor"),
-                                        (["--json", "/nonexistent/dir/x.json"], "/nonexistent/dir")])
+                                        (["--json", "/nonexistent/dir/x.json"], "/nonexistent/dir"),
+                                        (["--assets", "/nonexistent/assets"], "lifter int8"),
+                                        (["--ray-tolerance-px", "9"], "ray_tolerance_px")])
 def test_bad_arguments_are_one_line_and_exit_2(tmp_path, args, word):
     if "--json" not in args:
         args = [*args, "--json", str(tmp_path / "x.json")]

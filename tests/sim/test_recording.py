@@ -39,6 +39,8 @@ def test_lifted_joints_project_onto_their_keypoints_and_are_scored_per_motion(re
     assert res["scored_person_frames"] > 100
     assert res["all"]["reprojection_px"]["median"] <= 2 and res["all"]["reprojection_px"]["p95"] <= 5
     assert set(res["by_motion"]) <= set(MOTIONS) and res["all"]["p_mpjpe_mm"] > 0
+    # the same rays at the true depth: only the 2D errors are left, less than with the network's depth
+    assert 0 < res["all"]["true_depth_on_rays"]["p_mpjpe_mm"] < res["all"]["p_mpjpe_mm"]
 
 
 def test_calibrate_then_replay_every_person_with_no_arm(recording, tmp_path, capsys):
