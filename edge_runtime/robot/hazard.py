@@ -18,14 +18,15 @@ Two ways to protect people (``[zones] separation``):
   now and ``predict_s`` ahead (his whole body moved with his head's velocity). ISO/TS 15066
   speed and separation monitoring: the protective separation distance at robot speed v_r is
   ``S_p = v_h (T_r + T_s) + v_r (T_r + T_s / 2) + C + Z_d + Z_r`` (v_h: his tracked speed,
-  at least ISO 13855's 1.6 m/s; T_s shrinking with v_r, ``stop_time_scales``), so a
+  at least ISO 13855's 1.6 m/s; T_s the full-speed one, or with ``stop_time_scales``
+  shrinking with v_r), so a
   separation allows the robot speed that inverts it. NORMAL works at that speed
   (``speed_scale``, in steps of ``speed_step``; stop-only: full speed or nothing), LEVEL1
   stops below the protective distance at the slowest useful speed, LEVEL2 retracts for anyone
   within ``reach_retract_m`` and for a person who keeps coming (toward the arm faster than
-  ``approach_speed_mps``) whose path over the next ``retract_lead_s`` (his body moved on at
-  his velocity) comes within ``body_retract_distance_m``. After a retraction the arm works
-  again once the person has been beyond both exit distances for ``dwell_s``.
+  ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
+  ``retract_lead_s``. After a retraction the arm works again once the person has been
+  beyond both exit distances for ``dwell_s``.
   **People the camera loses** (hidden, out of view, or lifted invalidly while others are
   lifted): each is judged by his reachable set, his last valid body with every joint
   ``lost_person_speed_mps`` x the time since closer to the arm. While that set stays outside
@@ -187,20 +188,19 @@ class ZoneParams:
     head's after calibration: median 0.29 m, reports/robot/head_error.md)."""
     body_retract_distance_m: float = config.setting(0.6, config.POSITIVE)
     """whole_body: a person who keeps coming (faster than ``approach_speed_mps`` toward the arm)
-    makes it retract (Eq. 6) once his path over ``retract_lead_s`` beyond ``predict_s`` (his body
-    moved on at his velocity) comes within this separation (m): straight at the arm that is a
-    separation (``predict_s`` ahead) of 1.9 m at 1.4 m/s,
-    2.4 m at 2.0 m/s, 1.1 m at 0.5 m/s; a walker passing the cell further out than this, none."""
+    makes it retract (Eq. 6) once his separation is below this (m) plus his approach speed times
+    ``retract_lead_s``: 1.9 m at 1.4 m/s, 2.4 m at 2.0 m/s, 1.1 m at 0.5 m/s."""
     retract_lead_s: float = config.setting(0.9, config.NON_NEGATIVE)
     """whole_body: how long before he would reach ``body_retract_distance_m`` the retraction
     starts (s). The Sawyer needs about 2 s to finish a retraction but moves its hand half of the
     way in the first second, at up to 0.6 m/s; a slower walker lets the arm work longer."""
-    stop_time_scales: bool = True
+    stop_time_scales: bool = False
     """whole_body: T_s in S_p shrinks with the arm's speed (``iso_stop_time_s`` from full speed,
     proportionally less from a slower one: a constant deceleration), so the arm may work slowly
     closer in (S_p 0.71 m at 10 % speed, 1.31 m at full speed, against 1.13-1.31 m with the
-    full-speed T_s throughout). A person that close is within ``reach_retract_m`` of it or nearly:
-    without that rule a worker standing 0.8 m from a slow arm reached it (hard:200, hard_148)."""
+    full-speed T_s throughout). Off: with it (and ``reach_retract_m``) the arm worked 1.29-1.36x
+    as long as stop-only on the development seed, but two workers in hard:200 seed 1 reached a
+    slow arm (hard_038 0.088 m, hard_084 0.084 m; 0.287 / 0.123 m without it)."""
     reach_retract_m: float = config.setting(0.85, config.NON_NEGATIVE)
     """whole_body: anyone whose separation is below this (m) makes the arm retract (Eq. 6), coming
     or not: he can reach it faster than the camera and the lifter see an arm move (ISO 13855's
@@ -406,9 +406,10 @@ class Decision:
     """Share of full speed the arm may work at in NORMAL (whole-body speed and separation
     monitoring; 1.0 otherwise)."""
     coming: bool = True
-    """whole_body: someone's path over the retraction's lead reaches ``body_retract_distance_m``
-    of the arm where it is now (he comes at it, not past it): only then does a repeat retraction
-    make sense ("head": always True)."""
+    """whole_body: someone keeps coming at the arm where it is now (the retraction rule:
+    approaching faster than ``approach_speed_mps`` within ``body_retract_distance_m`` + his
+    approach speed x ``retract_lead_s``), not just standing within reach or passing it: only then
+    does a repeat retraction make sense ("head": always True)."""
 
 
 def alarms(params: ZoneParams) -> dict[State, Alarm]:
@@ -477,7 +478,7 @@ class HazardMonitor:
         """whole_body: each person's last valid pose (``_Seen``), kept ``lost_hold_s`` after it."""
         self._unseen: str | None = None  # this frame: a person lifted invalidly and never validly
         self._lost_stop: list = []  # this frame: the lost people whose reachable set stops the arm
-        self._coming = False  # this frame: someone's path over the retraction lead reaches the arm
+        self._coming = False  # this frame: someone keeps coming at the arm (the retraction rule)
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
         """How often the pose stream went stale."""
@@ -551,25 +552,20 @@ class HazardMonitor:
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
         for wid, est in ests.items():
             centres, radii = body_spheres(people[wid])
-            v3 = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]])
             v_g = ground(est.velocity_mps)
             speed = float(np.linalg.norm(v_g))
             toward = eff_g - ground(est.position_m)
             approach = float(v_g @ toward) / max(float(np.linalg.norm(toward)), 1e-9)
-            # now, predict_s ahead and, for one who keeps coming, along his path over the retraction's
-            # lead: all in one call (numpy's per-call overhead, not the arithmetic, is the cost here)
-            # (the lead counts from the prediction's horizon, as the separation it is compared with did)
-            leads = (z.predict_s + z.retract_lead_s * np.arange(1, RETRACT_LEAD_STEPS + 1) / RETRACT_LEAD_STEPS
-                     if approach > z.approach_speed_mps else np.empty(0))
-            shifts = np.concatenate([[0.0, z.predict_s], leads])
-            seps = separation_per_shift_m(centres, radii, v3, shifts, caps)
-            d = float(seps[:2].min())
+            # now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
+            v3 = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]])
+            d = float(separation_per_shift_m(centres, radii, v3, (0.0, z.predict_s), caps).min())
             self._seen[wid] = _Seen(t_s, np.asarray(people[wid], float), speed)
             allowed = z.allowed_speed_mps(d, speed)
-            # retract for one within reach, or one whose path over the lead brings him within
-            # body_retract_distance_m: a walker passing the cell comes at the arm only until he is
-            # abreast of it, and his path, not his approach speed, says how close he gets
-            coming = bool(len(leads)) and float(seps.min()) <= z.body_retract_distance_m
+            # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
+            # approach speed covers over the retraction's lead. (His path over the lead instead, so that a
+            # walker passing the cell is not retracted from, let a passer reach the arm in hard:200 seed 1,
+            # hard_093, 0.035 m: taken back.)
+            coming = approach > z.approach_speed_mps and d <= z.body_retract_distance_m + approach * z.retract_lead_s
             self._coming |= coming
             if d <= z.reach_retract_m or coming:
                 level = State.LEVEL2
@@ -801,10 +797,6 @@ def body_spheres(person_m) -> tuple[np.ndarray, np.ndarray]:
     a, b = np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS])
     centres = np.concatenate([p, 0.5 * (p[a] + p[b])])
     return centres, np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[a] + BODY_RADII_M[b])])
-
-
-RETRACT_LEAD_STEPS = 3
-"""Points along a coming person's path over ``retract_lead_s`` at which his separation is checked."""
 
 
 def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_mps: np.ndarray, shifts_s,

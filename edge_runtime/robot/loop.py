@@ -590,17 +590,17 @@ class RobotLoop:
 
     def _retract_again(self, decision: Decision) -> bool:
         """Retract once more when the last retraction is done, the worker has come
-        ``re_retract_m`` closer since it began and his path still reaches the arm where it is now
-        (he keeps walking at it: ``Decision.coming``), and there is still room to go (the new
+        ``re_retract_m`` closer since it began and he still keeps coming at the arm where it is now
+        (``Decision.coming``), and there is still room to go (the new
         target differs from where the hand is)."""
         r = self._retract
         if r is None or r.kind is not MotionKind.RETRACT or self._last_effector is None or decision.head is None:
             return False
         done = np.linalg.norm(self._last_effector - r.position_m) <= self.params.waypoint_tolerance_m
         closer = decision.distance_m < self._retract_distance_m - self.params.re_retract_m
-        # a worker who passes the retracted arm (his path no longer reaches it) is waited for where
-        # it is: a repeat Eq. 6 step along his walk made the hand follow him round the base
-        # (random:200 seed 1, random_183: 0.104 m)
+        # a worker who no longer keeps coming at the retracted arm (he passes it, or stands) is waited
+        # for where it is: a repeat Eq. 6 step along his walk made the hand follow a passing worker
+        # round the base (random:200 seed 1, random_183: 0.104 m)
         if not (done and closer and decision.coming):
             return False
         nxt = self._retract_motion(decision)

@@ -448,8 +448,8 @@ def speeds(link):
 
 def test_whole_body_the_arm_slows_as_a_worker_comes_closer_and_speeds_up_when_he_leaves():
     loop, link, clock = make_whole_body()
-    # from 2.5 m out he edges closer at 0.25 m/s (slower than "keeps coming") to 1.3 m (beyond reach_retract_m), stays, then leaves
-    where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else max(1.3, 2.5 - 0.25 * (t - 2)) if t < 8 else 8.0))  # noqa: E731
+    # from 2.5 m out he edges closer at 0.25 m/s (slower than "keeps coming") to 1.55 m, stays, then leaves
+    where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else max(1.55, 2.5 - 0.25 * (t - 2)) if t < 8 else 8.0))  # noqa: E731
     frames = drive(loop, link, clock, Path(where, 11.0))
     sent = speeds(link)
     assert sent[0] == pytest.approx(0.6)                                  # full speed at work
