@@ -204,9 +204,11 @@ class ZoneParams:
     reach_retract_m: float = config.setting(0.85, config.NON_NEGATIVE)
     """whole_body: anyone whose separation is below this (m) makes the arm retract (Eq. 6), coming
     or not: he can reach it faster than the camera and the lifter see an arm move (ISO 13855's
-    850 mm reach, C), so the arm does not work, even slowly, within his reach. On the development
-    suite (hard:60 seed 5) 0.9 m gave 1.29x stop-only's productive share and 0.75 m 1.36x, both
-    without a collision (min clearance 0.218 m)."""
+    850 mm reach, C), so the arm does not work, even slowly, within his reach. Chosen with
+    ``stop_time_scales`` on, where it bounds the band in which the arm works slowly (development
+    suite hard:60 seed 5: 0.9 m gave 1.29x stop-only's productive share, 0.75 m 1.36x, both without
+    a collision); with the full-speed T_s (shipped) S_p at the slowest speed is 1.13 m and this only
+    turns a stop into a retraction for someone standing within reach."""
     approach_speed_mps: float = config.setting(0.3, config.NON_NEGATIVE)
     """whole_body: a person "keeps coming" when his head moves toward the end effector faster
     than this (m/s; above the tracker's 0.1 m/s of velocity noise)."""
