@@ -18,10 +18,12 @@ Two ways to protect people (``[zones] separation``):
   now and ``predict_s`` ahead (his whole body moved with his head's velocity). ISO/TS 15066
   speed and separation monitoring: the protective separation distance at robot speed v_r is
   ``S_p = v_h (T_r + T_s) + v_r (T_r + T_s / 2) + C + Z_d + Z_r`` (v_h: his tracked speed,
-  at least ISO 13855's 1.6 m/s), so a separation allows the robot speed that inverts it.
-  NORMAL works at that speed (``speed_scale``, in steps of ``speed_step``; stop-only:
-  full speed or nothing), LEVEL1 stops below the protective distance at the slowest useful
-  speed, LEVEL2 retracts when a person keeps coming (toward the arm faster than
+  at least ISO 13855's 1.6 m/s; T_s the full-speed one, or with ``stop_time_scales``
+  shrinking with v_r), so a
+  separation allows the robot speed that inverts it. NORMAL works at that speed
+  (``speed_scale``, in steps of ``speed_step``; stop-only: full speed or nothing), LEVEL1
+  stops below the protective distance at the slowest useful speed, LEVEL2 retracts for anyone
+  within ``reach_retract_m`` and for a person who keeps coming (toward the arm faster than
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
   ``retract_lead_s``. After a retraction the arm works again once the person has been
   beyond both exit distances for ``dwell_s``.
@@ -192,6 +194,21 @@ class ZoneParams:
     """whole_body: how long before he would reach ``body_retract_distance_m`` the retraction
     starts (s). The Sawyer needs about 2 s to finish a retraction but moves its hand half of the
     way in the first second, at up to 0.6 m/s; a slower walker lets the arm work longer."""
+    stop_time_scales: bool = False
+    """whole_body: T_s in S_p shrinks with the arm's speed (``iso_stop_time_s`` from full speed,
+    proportionally less from a slower one: a constant deceleration), so the arm may work slowly
+    closer in (S_p 0.71 m at 10 % speed, 1.31 m at full speed, against 1.13-1.31 m with the
+    full-speed T_s throughout). Off: with it (and ``reach_retract_m``) the arm worked 1.29-1.36x
+    as long as stop-only on the development seed, but two workers in hard:200 seed 1 reached a
+    slow arm (hard_038 0.088 m, hard_084 0.084 m; 0.287 / 0.123 m without it)."""
+    reach_retract_m: float = config.setting(0.85, config.NON_NEGATIVE)
+    """whole_body: anyone whose separation is below this (m) makes the arm retract (Eq. 6), coming
+    or not: he can reach it faster than the camera and the lifter see an arm move (ISO 13855's
+    850 mm reach, C), so the arm does not work, even slowly, within his reach. Chosen with
+    ``stop_time_scales`` on, where it bounds the band in which the arm works slowly (development
+    suite hard:60 seed 5: 0.9 m gave 1.29x stop-only's productive share, 0.75 m 1.36x, both without
+    a collision); with the full-speed T_s (shipped) S_p at the slowest speed is 1.13 m and this only
+    turns a stop into a retraction for someone standing within reach."""
     approach_speed_mps: float = config.setting(0.3, config.NON_NEGATIVE)
     """whole_body: a person "keeps coming" when his head moves toward the end effector faster
     than this (m/s; above the tracker's 0.1 m/s of velocity noise)."""
@@ -235,25 +252,38 @@ class ZoneParams:
         if self.separation not in ("whole_body", "head"):
             raise ValueError(f"separation: must be whole_body or head, got {self.separation!r}")
 
+    def stop_time_s(self, robot_speed_mps: float) -> float:
+        """whole_body: T_s at robot speed v_r (s): ``iso_stop_time_s`` from full speed
+        (``iso_robot_speed_mps``), and with ``stop_time_scales`` proportionally less from a lower
+        one (a constant deceleration)."""
+        if not self.stop_time_scales or self.iso_robot_speed_mps <= 0:
+            return self.iso_stop_time_s
+        return self.iso_stop_time_s * min(max(robot_speed_mps, 0.0) / self.iso_robot_speed_mps, 1.0)
+
     def body_protective_distance_m(self, robot_speed_mps: float, human_speed_mps: float | None = None) -> float:
         """whole_body: ISO/TS 15066's S_p (m, 5.5.4.2.3) at robot speed v_r:
         ``v_h (T_r + T_s) + v_r T_r + v_r T_s / 2 + C + Z_d + Z_r``, with the stopping distance
-        ``S_s = v_r T_s / 2`` of a constant deceleration and v_h at least ``iso_human_speed_mps``.
-        T_s is the full-speed stopping time at every speed: scaling it with v_r (a slower arm stops
-        sooner) widened the band in which the arm works from 1.15-1.31 m to 0.71-1.31 m and let a
-        worker standing 0.8 m out reach a slow arm (hard:200, hard_148: 0.05 m), since only a
-        person who keeps coming makes it retract."""
+        ``S_s = v_r T_s / 2`` of a constant deceleration, T_s = :meth:`stop_time_s` and v_h at
+        least ``iso_human_speed_mps``."""
         v_h = max(self.iso_human_speed_mps, human_speed_mps or 0.0)
-        return (v_h * (self.iso_reaction_time_s + self.iso_stop_time_s)
-                + robot_speed_mps * (self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s)
+        t_s = self.stop_time_s(robot_speed_mps)
+        return (v_h * (self.iso_reaction_time_s + t_s) + robot_speed_mps * (self.iso_reaction_time_s + 0.5 * t_s)
                 + self.body_intrusion_m + self.body_sensing_uncertainty_m + self.iso_robot_uncertainty_m)
 
     def allowed_speed_mps(self, separation_m: float, human_speed_mps: float | None = None) -> float:
         """whole_body: the fastest robot speed (m/s, 0..``iso_robot_speed_mps``) whose S_p is
-        within ``separation_m`` (S_p is linear in v_r, so this inverts it)."""
+        within ``separation_m`` (S_p is linear in v_r, or quadratic with ``stop_time_scales``: this
+        inverts it)."""
         slack = separation_m - self.body_protective_distance_m(0.0, human_speed_mps)
-        per_mps = self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s
-        v = slack / per_mps if per_mps > 0 else (math.inf if slack >= 0 else 0.0)
+        v_h = max(self.iso_human_speed_mps, human_speed_mps or 0.0)
+        if self.stop_time_scales and self.iso_robot_speed_mps > 0:
+            k = self.iso_stop_time_s / self.iso_robot_speed_mps      # T_s = k v_r
+            a, b = 0.5 * k, v_h * k + self.iso_reaction_time_s          # S_p - S_p(0) = a v^2 + b v
+            v = (-b + math.sqrt(b * b + 4 * a * slack)) / (2 * a) if slack > 0 and a > 0 else (
+                slack / b if b > 0 else math.inf) if slack > 0 else 0.0
+        else:
+            per_mps = self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s
+            v = slack / per_mps if per_mps > 0 else (math.inf if slack >= 0 else 0.0)
         return float(min(max(v, 0.0), self.iso_robot_speed_mps))
 
     @property
@@ -377,6 +407,11 @@ class Decision:
     speed_scale: float = 1.0
     """Share of full speed the arm may work at in NORMAL (whole-body speed and separation
     monitoring; 1.0 otherwise)."""
+    coming: bool = True
+    """whole_body: someone keeps coming at the arm where it is now (the retraction rule:
+    approaching faster than ``approach_speed_mps`` within ``body_retract_distance_m`` + his
+    approach speed x ``retract_lead_s``), not just standing within reach or passing it: only then
+    does a repeat retraction make sense ("head": always True)."""
 
 
 def alarms(params: ZoneParams) -> dict[State, Alarm]:
@@ -445,6 +480,7 @@ class HazardMonitor:
         """whole_body: each person's last valid pose (``_Seen``), kept ``lost_hold_s`` after it."""
         self._unseen: str | None = None  # this frame: a person lifted invalidly and never validly
         self._lost_stop: list = []  # this frame: the lost people whose reachable set stops the arm
+        self._coming = False  # this frame: someone keeps coming at the arm (the retraction rule)
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
         """How often the pose stream went stale."""
@@ -514,19 +550,26 @@ class HazardMonitor:
         v_full = z.iso_robot_speed_mps
         v_stop = z.min_speed_fraction * v_full if z.speed_scaling else v_full
         entry, nearest = State.NORMAL, (math.inf, None, None)
+        self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
         for wid, est in ests.items():
             centres, radii = body_spheres(people[wid])
-            ahead = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]) * z.predict_s
-            # now and ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost here
-            d = separation_m(np.concatenate([centres, centres + ahead]), np.concatenate([radii, radii]), caps)
             v_g = ground(est.velocity_mps)
             speed = float(np.linalg.norm(v_g))
-            self._seen[wid] = _Seen(t_s, np.asarray(people[wid], float), speed)
             toward = eff_g - ground(est.position_m)
             approach = float(v_g @ toward) / max(float(np.linalg.norm(toward)), 1e-9)
+            # now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
+            v3 = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]])
+            d = float(separation_per_shift_m(centres, radii, v3, (0.0, z.predict_s), caps).min())
+            self._seen[wid] = _Seen(t_s, np.asarray(people[wid], float), speed)
             allowed = z.allowed_speed_mps(d, speed)
-            if approach > z.approach_speed_mps and d <= z.body_retract_distance_m + approach * z.retract_lead_s:
+            # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
+            # approach speed covers over the retraction's lead. (His path over the lead instead, so that a
+            # walker passing the cell is not retracted from, let a passer reach the arm in hard:200 seed 1,
+            # hard_093, 0.035 m: taken back.)
+            coming = approach > z.approach_speed_mps and d <= z.body_retract_distance_m + approach * z.retract_lead_s
+            self._coming |= coming
+            if d <= z.reach_retract_m or coming:
                 level = State.LEVEL2
             elif allowed < v_stop - 1e-9:
                 level = State.LEVEL1
@@ -547,7 +590,7 @@ class HazardMonitor:
             if allowed < worst[0] or worst[1] is None:
                 worst = (allowed, speed, d)
         human_speed = worst[1]
-        exit_r = {State.LEVEL2: z.body_retract_distance_m + z.hysteresis_m,
+        exit_r = {State.LEVEL2: max(z.body_retract_distance_m, z.reach_retract_m) + z.hysteresis_m,
                   State.LEVEL1: z.body_protective_distance_m(v_stop, human_speed) + z.hysteresis_m}
         # nobody seen or accounted for (every lost person forgotten after lost_hold_s): full speed
         self._scale = 1.0 if worst[1] is None else self._speed_scale(worst[2], human_speed)
@@ -661,7 +704,7 @@ class HazardMonitor:
             reason = f"level2_retract ({self._fault})"
         scale = self._scale if state == State.NORMAL else 1.0
         dec = Decision(state, reason, d, wid, est, changed=(state, reason) != (self.last.state, self.last.reason),
-                       speed_scale=scale)
+                       speed_scale=scale, coming=self._coming or self.zones.separation == "head")
         self.state, self.reason, self.last = state, reason, dec
         return dec
 
@@ -758,17 +801,27 @@ def body_spheres(person_m) -> tuple[np.ndarray, np.ndarray]:
     return centres, np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[a] + BODY_RADII_M[b])])
 
 
+def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_mps: np.ndarray, shifts_s,
+                           capsules) -> np.ndarray:
+    """The separation (m) of the spheres moved by ``velocity_mps`` x each of ``shifts_s`` (S,)
+    from the capsules: (S,)."""
+    shifts = np.asarray(shifts_s, float)
+    n = len(centres_m)
+    moved = (centres_m[None] + shifts[:, None, None] * np.asarray(velocity_mps, float)[None, None]).reshape(-1, 3)
+    a, b, r = capsules
+    ab = b - a
+    ap = moved[:, None, :] - a[None]
+    den = np.maximum((ab * ab).sum(-1), 1e-12)
+    t = np.clip((ap * ab[None]).sum(-1) / den, 0.0, 1.0)
+    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1) - r[None] - np.tile(radii_m, len(shifts))[:, None]
+    return d.min(axis=1).reshape(len(shifts), n).min(axis=1)
+
+
 def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
     """Smallest surface-to-surface distance (m) between spheres (``centres_m`` (N, 3),
     ``radii_m`` (N,)) and capsules (starts (K, 3), ends (K, 3), radii (K,)); negative when
     they overlap."""
-    a, b, r = capsules
-    ab = b - a                                                     # (K, 3)
-    ap = centres_m[:, None, :] - a[None]                           # (N, K, 3)
-    den = np.maximum((ab * ab).sum(-1), 1e-12)
-    t = np.clip((ap * ab[None]).sum(-1) / den, 0.0, 1.0)
-    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1)
-    return float((d - r[None] - radii_m[:, None]).min())
+    return float(separation_per_shift_m(centres_m, radii_m, np.zeros(3), (0.0,), capsules)[0])
 
 
 # ----------------------------------------------------------------------------------------------

@@ -32,9 +32,10 @@ runtime -> command written on the link), ``command_delay_s`` (simulated time fro
 head entering a zone to the runtime's command), ``head_error_m`` (``{"median", "p95"}``: the head
 the runtime was given against the true head, robot frame), ``runtime_cpu_share``, the settings
 (with every ZoneParams and LoopParams value used), ``config`` (the whole effective box
-configuration the runtime ran), ``config_sha256`` (its hash) and ``safety_sha256`` (the hash of
-the sections the cell's safety depends on, :data:`SAFETY_SECTIONS`), and ``details``: one object
-per scenario.
+configuration the runtime ran), ``config_sha256`` (its hash), ``lifter_model`` (the manifest entry
+of the lifter the box runs: name and sha256) and ``safety_sha256`` (the hash of the sections the
+cell's safety depends on, :data:`SAFETY_SECTIONS`, and of ``lifter_model``: a new lifter voids a
+validation as a changed default does), and ``details``: one object per scenario.
 
 One source of truth: the runtime runs the box configuration, the shipped defaults
 (``edge_runtime/box.example.toml``) unless ``--config BOX.toml`` names a box file; ``--zone``,
@@ -90,6 +91,33 @@ NOT_SAFETY_KEYS = {"lifter": ("manifest_public_key",)}
 """Keys of the safety sections that do not change what the cell does, left out of the sections'
 hash: which builder's signed manifest the box trusts (issue 16) decides whether the shipped
 models load at all, not how the loop behaves with them."""
+
+
+def lifter_model(box, assets_dir=None) -> dict:
+    """The identity of the lifter the box runs: the name and sha256 of the manifest entry its
+    ``[lifter] precision`` selects (``assets_dir``: the shipped assets by default). The cell's
+    perception is that model, so it is part of what a validation holds for; a manifest without
+    the entry gives its error instead of a hash (nothing validated runs without a lifter)."""
+    from edge_runtime.core.manifest import ASSETS_DIR, ManifestError, load_manifest, select_model
+    from edge_runtime.robot.lifter import LIFTER_ARCH
+
+    try:
+        entry = select_model(load_manifest(assets_dir or ASSETS_DIR), box.lifter.precision, arch=LIFTER_ARCH)
+    except ManifestError as e:
+        return {"name": None, "sha256": None, "error": str(e)}
+    return {"name": entry["name"], "sha256": entry["sha256"]}
+
+
+def safety_config(box, assets_dir=None) -> dict:
+    """What a validation holds for: the :data:`SAFETY_SECTIONS` of the configuration (without
+    :data:`NOT_SAFETY_KEYS`) and ``lifter_model``, the shipped lifter's identity."""
+    return {**config_dict(box, SAFETY_SECTIONS), "lifter_model": lifter_model(box, assets_dir)}
+
+
+def safety_sha256(box, assets_dir=None) -> str:
+    """sha256 of :func:`safety_config` (canonical JSON, sorted keys)."""
+    text = json.dumps(safety_config(box, assets_dir), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def config_dict(box, sections=None) -> dict:
@@ -310,7 +338,7 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
         "zone_params": asdict(zones), "loop_params": {k: v for k, v in asdict(box.robot_loop).items()
                                                        if k != "task_waypoints_m"},
         "config": config_dict(box), "config_sha256": config_sha256(box),
-        "safety_sha256": config_sha256(box, SAFETY_SECTIONS),
+        "lifter_model": lifter_model(box), "safety_sha256": safety_sha256(box),
     }
     out = summarize(results, settings)
     return (out, results) if keep_results else out
@@ -331,7 +359,9 @@ def record_validation(out: dict, path: str | Path, command: str) -> dict:
     except (OSError, ValueError):
         rec = {}
     if rec.get("safety_sha256") != out["safety_sha256"]:
-        rec = {"safety_sha256": out["safety_sha256"], "safety_config": {k: out["config"][k] for k in SAFETY_SECTIONS},
+        rec = {"safety_sha256": out["safety_sha256"],
+               "safety_config": {**{k: {f: v for f, v in out["config"][k].items() if f not in NOT_SAFETY_KEYS.get(k, ())}
+                                    for k in SAFETY_SECTIONS}, "lifter_model": out["lifter_model"]},
                "runs": {}}
     key = (f"{out['scenario']} {out['link']} {out['max_speed_mps']:g}mps {out['perception']} {out['camera_hz']:g}hz"
            f" {out['protection']}")

@@ -216,6 +216,23 @@ def test_pnp_ignores_the_lifters_depth_scale():
     assert np.linalg.norm(robot[HEAD] - truth[HEAD]) < 0.5 * np.linalg.norm(pnp.apply(lifted[HEAD]) - truth[HEAD])
 
 
+def test_a_marker_behind_another_is_fitted_from_the_rays_not_refused():
+    """Marker 3 nearly on marker 1's line of sight (a camera straight down the +z axis, 7 m out):
+    a lifter that takes depth from apparent body size sees the worker move 0.1 m where he walked
+    1 m. He did move (his rays did), so the fit falls back to the rays alone (pnp) instead of
+    refusing 'did not move' (hard:200 seed 1, hard_156); a worker who stays put is still refused."""
+    cam = camera(eye=(0.15, 0.5, 8.0))
+    heads, ankles = head_and_ankles(cam.to_camera(np.stack([standing(m) for m in MARKERS])))
+    for pts in (heads, ankles):  # the lifter's depth at marker 3: hardly nearer than at marker 1
+        pts[2] *= (pts[0, 2] - 0.1) / pts[2, 2]
+    assert np.linalg.norm(heads[2] - heads[0]) < CalibrationParams().min_move_m
+    cal = fit(heads, ankles)
+    assert cal.method == "pnp"
+    assert np.linalg.norm(cal.b - cam.position_m) < 0.3
+    with pytest.raises(CalibrationError, match="did not move from marker 1 to marker 3"):
+        fit(heads[[0, 1, 0]], ankles[[0, 1, 0]])
+
+
 # ------------------------------------------------------------------ ground anchoring
 
 def project(p):

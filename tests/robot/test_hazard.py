@@ -1,6 +1,7 @@
 """Head tracking, the two-level zones of Eq. 4-5, the state machine, the retraction (Eq. 6, its
 radius and height limits, the fallback toward the base and the tool's turn), and whole-body
 separation with speed and separation monitoring of edge_runtime.robot.hazard."""
+from dataclasses import replace
 import math
 
 import numpy as np
@@ -358,7 +359,7 @@ def settle(mon, body, t0=0.0, seconds=1.0):
 def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops():
     z = WHOLE_BODY
     scales, states = [], []
-    for sep in (4.0, 1.55, 1.45, 1.35, 1.2, 1.0):
+    for sep in (4.0, 1.55, 1.45, 1.35, 1.2, 1.1, 1.0):
         d = settle(ready_body(z), body_facing_arm(sep))
         scales.append(d.speed_scale)
         states.append(d.state)
@@ -366,11 +367,24 @@ def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops(
     working = [s for s, st in zip(scales, states) if st == State.NORMAL]
     assert all(a > b for a, b in zip(working, working[1:])) and len(working) >= 3   # slower as he is closer
     assert 0.0 < working[-1] < 0.5
-    assert states[-1] == State.LEVEL1                                  # within S_p of the slowest speed
-    assert State.LEVEL2 not in states                                  # standing: nobody to retract from
+    assert states[-2] == State.LEVEL1                                  # within S_p of the slowest speed
+    assert State.LEVEL2 not in states[:-1]                             # standing beyond reach: no retraction
+    assert states[-1] == State.LEVEL2                                  # standing within reach_retract_m: retract
     only = ZoneParams(speed_scaling=False)
     d = settle(ready_body(only), body_facing_arm(1.45))
     assert d.state == State.LEVEL1 and d.speed_scale == 1.0            # where the scaled arm still works
+
+
+def test_the_stopping_time_shrinks_with_the_arms_speed_when_asked():
+    z = replace(WHOLE_BODY, stop_time_scales=True)
+    assert z.stop_time_s(z.iso_robot_speed_mps) == z.iso_stop_time_s and z.stop_time_s(0.0) == 0.0
+    # at 10 % speed: S_p = 1.6 (0.15 + 0.03) + 0.06 (0.15 + 0.015) + 0.41 = 0.708 m; at full 1.31 m
+    assert z.body_protective_distance_m(0.06) == pytest.approx(1.6 * 0.18 + 0.06 * 0.165 + 0.41)
+    assert z.body_protective_distance_m(0.6) == pytest.approx(1.31)
+    fixed = WHOLE_BODY  # shipped: the full-speed T_s at every speed
+    assert fixed.body_protective_distance_m(0.06) == pytest.approx(1.6 * 0.45 + 0.06 * 0.3 + 0.41)
+    for v in (0.0, 0.06, 0.3, 0.6):  # the quadratic S_p is inverted too
+        assert z.allowed_speed_mps(z.body_protective_distance_m(v)) == pytest.approx(v)
 
 
 def test_a_worker_who_keeps_coming_makes_the_arm_retract():

@@ -102,11 +102,13 @@ def test_a_worker_walking_at_the_effector_stops_then_retracts_the_arm():
     first_move = names.index("move_to")
     assert names.index("stop", first_move) < names.index("retract")  # level 1 stopped the arm first
     retract = [c for c in link.calls if c[0] == "retract"]
-    assert len(retract) == 1  # once per entry, not once per frame
+    # once per entry, not once per frame; again (re_retract_m) only from the first one's target,
+    # once the worker has come 0.15 m closer (he slows to a stop 0.5 m out)
+    assert 1 <= len(retract) <= 2 and (len(retract) == 1 or retract[1][1] != retract[0][1])
     target = np.array(retract[0][1])
     # Eq. 6 for a head-on approach from +z: 0.3 m away from the worker and 0.2 m along his
     # walk, both roughly -z, from where the effector was when level 2 began
-    L = target - link.retract_from
+    L = target - link.retracts_from[0]
     assert L[1] == pytest.approx(0.0) and 0.1 < np.linalg.norm(L) <= 0.5 + 1e-9 and L[2] < -0.1 and abs(L[0]) < 0.1
     # never closer to the base's axis than retract_min_radius_m (the Sawyer cannot hold its tool
     # pointed at the base there): the step is shortened instead
@@ -119,7 +121,7 @@ def test_a_worker_walking_at_the_effector_stops_then_retracts_the_arm():
     # the frame that crossed into level 2 carried the command: measurable reaction time
     rec = frames[i2]
     assert rec.command == "retract" and rec.t_command_s is not None and rec.t_command_s >= rec.t_in_s
-    assert loop.status()["retracts"] == 1 and loop.status()["stops"] >= 2
+    assert loop.status()["retracts"] == len(retract) and loop.status()["stops"] >= 2
 
 
 def test_the_arm_returns_to_work_when_the_worker_leaves():

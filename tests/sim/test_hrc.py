@@ -31,6 +31,7 @@ from firmware_sim.scenarios.hrc_world import (
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "edge_runtime" / "box.example.toml"
 VALIDATED = ROOT / "reports" / "hrc" / "validated.json"
+ASSETS = ROOT / "edge_runtime" / "assets"
 CONTRACT_KEYS = ("scenarios", "collisions", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms")
 
 
@@ -216,10 +217,11 @@ def test_the_json_records_the_configuration_it_ran(tmp_path):
     d = json.loads(out.read_text())
     assert d["config"]["zones"]["retract_time_s"] == 1.5 and d["config"]["tracker"]["window_s"] == 0.4
     assert d["zones"]["r2_m"] == pytest.approx(1.4 * (1.5 - 0.5) + 0.3)
-    assert d["safety_sha256"] != hrc.config_sha256(hrc.load_box(), hrc.SAFETY_SECTIONS)
+    assert d["safety_sha256"] != hrc.safety_sha256(hrc.load_box())
     ran = hrc.load_box(str(box_toml))
     assert d["config_sha256"] == hrc.config_sha256(ran)
-    assert d["safety_sha256"] == hrc.config_sha256(ran, hrc.SAFETY_SECTIONS)
+    assert d["safety_sha256"] == hrc.safety_sha256(ran)
+    assert d["lifter_model"] == hrc.lifter_model(ran) and len(d["lifter_model"]["sha256"]) == 64
 
 
 def test_a_validation_record_is_kept_per_safety_configuration(tmp_path):
@@ -229,7 +231,8 @@ def test_a_validation_record_is_kept_per_safety_configuration(tmp_path):
                                                 "perception": "lifter", "camera_hz": 30.0,
                                                 "protection": "speed_scaled",
                                                 "config": hrc.config_dict(shipped),
-                                                "safety_sha256": hrc.config_sha256(shipped, hrc.SAFETY_SECTIONS)}
+                                                "lifter_model": hrc.lifter_model(shipped),
+                                                "safety_sha256": hrc.safety_sha256(shipped)}
     hrc.record_validation(out, rec_path, "cmd a")
     rec = hrc.record_validation({**out, "link": "mavlink"}, rec_path, "cmd b")
     assert len(rec["runs"]) == 2
@@ -237,15 +240,30 @@ def test_a_validation_record_is_kept_per_safety_configuration(tmp_path):
     assert list(other["runs"]) == ["front can 2mps lifter 30hz speed_scaled"]   # the old figures do not carry over
 
 
+def test_a_new_lifter_model_voids_the_validation(tmp_path):
+    """The safety hash covers the lifter the box runs (its manifest entry's sha256), not only the
+    settings: a retrained lifter behind an unchanged configuration is a new cell to validate."""
+    box = hrc.load_box()
+    shipped = json.loads((ASSETS / "manifest.json").read_text())
+    entry = next(m for m in shipped["models"] if m["name"] == hrc.lifter_model(box)["name"])
+    assert entry["sha256"] == hrc.lifter_model(box)["sha256"]
+    (tmp_path / "manifest.json").write_text(json.dumps(shipped))
+    assert hrc.safety_sha256(box, tmp_path) == hrc.safety_sha256(box)
+    entry["sha256"] = "0" * 64
+    (tmp_path / "manifest.json").write_text(json.dumps(shipped))
+    assert hrc.lifter_model(box, tmp_path)["sha256"] == "0" * 64
+    assert hrc.safety_sha256(box, tmp_path) != hrc.safety_sha256(box)
+
+
 def test_the_shipped_safety_defaults_are_the_validated_ones():
     """Fails when a default the cell's safety depends on changed since reports/hrc/validated.json was
     measured: re-run the commands it lists (each with --validated reports/hrc/validated.json)."""
     rec = json.loads(VALIDATED.read_text())
     box = hrc.load_box()
-    now = hrc.config_dict(box, hrc.SAFETY_SECTIONS)
+    now = hrc.safety_config(box)
     changed = [f"[{sec}] {k}: validated {v!r}, shipped {now[sec].get(k)!r}"
                for sec, table in rec["safety_config"].items() for k, v in table.items() if now[sec].get(k) != v]
-    assert rec["safety_sha256"] == hrc.config_sha256(box, hrc.SAFETY_SECTIONS), changed
+    assert rec["safety_sha256"] == hrc.safety_sha256(box), changed
     runs = rec["runs"].values()
     for need in ("random:200 can", "random:200 mavlink", "dissertation can", "dissertation mavlink"):
         assert any(f"{r['scenario']} {r['link']}" == need for r in runs), need

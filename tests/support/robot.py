@@ -84,6 +84,7 @@ class FakeLink(LinkInterface):
     def retract(self, position_m, pitch_rad, yaw_rad):
         seq = self._log("retract", tuple(position_m), pitch_rad, yaw_rad)
         self.retract_from = self._state.ee_position_m.copy()
+        self.retracts_from = [*getattr(self, "retracts_from", []), self.retract_from]
         self.stopped = False
         if self.unreachable_retract:
             self._answers[seq], self.target = "unreachable", None
