@@ -322,3 +322,28 @@ def test_preprocessed_inputs_predict_like_raw_windows(toy):
     np.testing.assert_array_equal(predict(model, pre), predict(model, toy.X))
     np.testing.assert_array_equal(predict_steps(model, pre), predict_steps(model, toy.X))
     np.testing.assert_array_equal(pre[5:9], preprocess_all(toy.X[5:9]).numpy())
+
+
+def test_report_compares_partial_runs_on_their_common_subjects(tmp_path):
+    """An architecture run on fewer folds is compared with every other on its own subjects: one table
+    per partial fold set, holding only the architectures that ran those folds."""
+    from models.report import same_folds_table
+
+    classes = ["A", "Other"]
+    subject = np.repeat([1, 2, 3], 4)
+    test = WindowSet(np.zeros((12, 700, 3), np.float32), np.tile([0, 1, 0, 1], 3), subject, classes,
+                     repeat=np.tile([0, 0, 1, 0], 3).astype(np.int8))
+    loso = {}
+    for arch, folds, wrong in (("convlstm", [1, 2, 3], 0), ("cnn", [1, 2], 1), ("lstm", [1], 2)):
+        keep = np.isin(subject, folds)
+        y_pred = test.y[keep].copy()
+        y_pred[:wrong] = 1 - y_pred[:wrong]  # the first `wrong` captures of subject 1 misclassified
+        d = tmp_path / arch / "loso"
+        d.mkdir(parents=True)
+        np.savez(d / "predictions.npz", y_true=test.y[keep], y_pred=y_pred, subject=subject[keep],
+                 classes=np.array(classes))
+        loso[arch] = {"folds": [f"s{s}" for s in folds], "all_folds": len(folds) == 3}
+    md = "\n".join(same_folds_table(loso, tmp_path, test))
+    two, one = md.split("On the same held-out subjects (1):")
+    assert "(1, 2):" in two and "| LSTM |" not in two and "| ConvLSTM | 1.000 |" in two and "| CNN |" in two
+    assert "| LSTM | 0.500 |" in one and "| ConvLSTM | 1.000 |" in one  # 2 of 4 wrong: F1 0.5 for both classes
