@@ -16,6 +16,7 @@ from support import REPO_ROOT
 from edge_runtime.__main__ import main as edge_main
 from edge_runtime.core.manifest import load_manifest
 from export.__main__ import main as export_main
+from export.box_files import UNITS
 from export.bundle import (
     SUMS_NAME,
     BundleError,
@@ -27,7 +28,6 @@ from export.bundle import (
     venv_python,
     write_box_files,
 )
-from export.box_files import UNITS
 
 ROOT = REPO_ROOT
 RUNTIME = ROOT / "edge_runtime"

@@ -1,8 +1,8 @@
 """Head tracking, the two-level zones of Eq. 4-5, the state machine, the retraction (Eq. 6, its
 radius and height limits, the fallback toward the base and the tool's turn), and whole-body
 separation with speed and separation monitoring of edge_runtime.robot.hazard."""
-from dataclasses import replace
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
