@@ -279,8 +279,12 @@ class ZoneParams:
         if self.stop_time_scales and self.iso_robot_speed_mps > 0:
             k = self.iso_stop_time_s / self.iso_robot_speed_mps      # T_s = k v_r
             a, b = 0.5 * k, v_h * k + self.iso_reaction_time_s          # S_p - S_p(0) = a v^2 + b v
-            v = (-b + math.sqrt(b * b + 4 * a * slack)) / (2 * a) if slack > 0 and a > 0 else (
-                slack / b if b > 0 else math.inf) if slack > 0 else 0.0
+            if slack <= 0:
+                v = 0.0
+            elif a > 0:
+                v = (-b + math.sqrt(b * b + 4 * a * slack)) / (2 * a)
+            else:
+                v = slack / b if b > 0 else math.inf
         else:
             per_mps = self.iso_reaction_time_s + 0.5 * self.iso_stop_time_s
             v = slack / per_mps if per_mps > 0 else (math.inf if slack >= 0 else 0.0)

@@ -114,10 +114,14 @@ def safety_config(box, assets_dir=None) -> dict:
     return {**config_dict(box, SAFETY_SECTIONS), "lifter_model": lifter_model(box, assets_dir)}
 
 
+def _json_sha256(value) -> str:
+    """sha256 of ``value``'s canonical JSON (sorted keys, no spaces): equal values, equal hash."""
+    return hashlib.sha256(json.dumps(value, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
 def safety_sha256(box, assets_dir=None) -> str:
     """sha256 of :func:`safety_config` (canonical JSON, sorted keys)."""
-    text = json.dumps(safety_config(box, assets_dir), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
+    return _json_sha256(safety_config(box, assets_dir))
 
 
 def config_dict(box, sections=None) -> dict:
@@ -131,8 +135,7 @@ def config_dict(box, sections=None) -> dict:
 
 def config_sha256(box, sections=None) -> str:
     """sha256 of the configuration's canonical JSON (sorted keys): equal values, equal hash."""
-    text = json.dumps(config_dict(box, sections), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
+    return _json_sha256(config_dict(box, sections))
 
 
 def load_box(path: str | None = None):
