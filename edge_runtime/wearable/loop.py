@@ -375,25 +375,39 @@ class WearableLoop:
         What a decision does never changes which captures the detector takes, nor their frames, so a
         block's captures are known before the first of them is decided; which steps each is decided
         at depends on the decisions before it: a capture that continues an alert event is decided at
-        S = 6 only. A capture triggered within ``event_hold_s`` of the end of the capture before it
-        (or of the event under way) may continue one and is classified at S = 6 here; should it open
-        its own, :meth:`_steps_of` classifies its early steps then. Each row is what the classifier
-        gives for that capture alone, so the decisions are those of one call per step."""
+        S = 6 only. So the full windows go first, and from them a guess at which captures may continue
+        an event: one triggered within ``event_hold_s`` of the end of the capture before it, when that
+        one may have continued an event itself or its full window is an alert (only then does an event
+        outlive it: one it opened with a preliminary alert is withdrawn otherwise). The early steps of
+        the others go second. The guess decides nothing: a capture that opens an event against it has
+        its early steps classified when it opens (:meth:`_steps_of`), and one that continues against
+        it leaves them unused. Each row is what the classifier gives for that capture alone, so the
+        decisions are those of one call per step."""
         st, ev = self._capture, self._event
+        first = [(c, tuple(st.steps) if st is not None and c.trigger_index == st.trigger else (N_SUBSEQ,))
+                 for c in captures]  # the capture opened in an earlier block: the steps it still has
+        self._classify_groups([([c.trigger_index for c, s in first if s == steps],
+                                np.stack([c.data for c, s in first if s == steps]), steps)
+                               for steps in dict.fromkeys(s for _, s in first)])
         hold_s = self.policy.event_hold_s + 1.0 / self.rate_hz  # a frame's margin: a guess, never a decision
-        last_end_s = ev.last_end_s if ev is not None and not ev.withdrawn else None
-        groups: dict[tuple[int, ...], list[Capture]] = {}
-        for cap in captures:
-            if st is not None and cap.trigger_index == st.trigger:  # opened in an earlier block
-                steps = tuple(st.steps)
-            elif last_end_s is not None and self._time_of(cap.trigger_index) <= last_end_s + hold_s:
-                steps = (N_SUBSEQ,)
-            else:
-                steps = self._early_steps
-            groups.setdefault(steps, []).append(cap)
-            last_end_s = self._time_of(cap.start_index + len(cap.data) - 1)
-        self._classify_groups([([c.trigger_index for c in caps], np.stack([c.data for c in caps]), steps)
-                               for steps, caps in groups.items() if steps])
+        threshold = self.policy.threshold(N_SUBSEQ, self._manifest_thresholds)
+        may_continue = ev is not None and not ev.withdrawn  # the event under way may outlive ...
+        last_end_s = ev.last_end_s if may_continue else None  # ... this end
+        early = []
+        for cap, _ in first:
+            opened = st is not None and cap.trigger_index == st.trigger
+            if not opened:
+                may_continue = last_end_s is not None and self._time_of(cap.trigger_index) <= last_end_s + hold_s
+                if not may_continue:
+                    early.append(cap)
+            values = self._ready[cap.trigger_index, N_SUBSEQ][0]
+            conf = max(values)
+            alerts = self.policy.status(self.classes[values.index(conf)], conf, threshold) == "alert"
+            may_continue = may_continue or alerts or opened
+            last_end_s = self._time_of(cap.start_index + len(cap.data) - 1) if may_continue else None
+        steps = tuple(s for s in self._early_steps if s != N_SUBSEQ)
+        if early and steps:
+            self._classify_groups([([c.trigger_index for c in early], np.stack([c.data for c in early]), steps)])
 
     def _classify_groups(self, groups: list[tuple[list[int], np.ndarray, tuple[int, ...]]]) -> None:
         """Into ``_ready``: for each group (triggers, their captures (N, 700, 3), steps), every step's
