@@ -68,6 +68,10 @@ class Classifier(Protocol):
         """A detector capture (700, 3) m/s^2 at 100 Hz -> (K,) class probabilities."""
 
 
+BATCH_CAPTURES = 64
+"""Captures classified together at most (:meth:`WearableLoop._classify_ahead`): a model run's cost per
+capture stops falling at about 16, and a recording handed over whole (``command.replay``) must not
+make onnxruntime hold every capture's intermediate tensors at once (about 50 KB each at S = 6)."""
 EARLY_MIN_CONFIDENCE = 0.9
 """The threshold of a preliminary alert at S < 6 when neither the configuration nor the model's
 manifest gives one: stricter than the full window's, since a wrong preliminary is a false alarm."""
@@ -361,11 +365,13 @@ class WearableLoop:
             return []
         out: list[Decision] = []
         captures = self.detector.push(acc)
-        if len(captures) > 1 and self._batch is not None:
-            self._classify_ahead(captures)
-        for cap in captures:  # completed in this block: every step still due, in order
-            out += self._steps_of(cap.trigger_index, cap.data)
-        self._ready = {}
+        for i in range(0, len(captures), BATCH_CAPTURES):
+            batch = captures[i:i + BATCH_CAPTURES]
+            if len(batch) > 1 and self._batch is not None:
+                self._classify_ahead(batch)
+            for cap in batch:  # completed in this block: every step still due, in order
+                out += self._steps_of(cap.trigger_index, cap.data)
+            self._ready = {}
         return out + self._early_due()
 
     def _classify_ahead(self, captures: list[Capture]) -> None:
