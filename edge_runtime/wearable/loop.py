@@ -176,7 +176,8 @@ class Verdict:
     an active event, never alerted. A :class:`Decision` whose frame did not go out says 'alert_not_sent'."""
     probs: dict[str, float]
     compute_us: float
-    """Wall time from the completed capture to the verdict (preprocessing + inference), microseconds."""
+    """Wall time from the completed capture to the verdict (preprocessing + inference), microseconds; for
+    captures classified together (a replay's block), the batch's time divided among its captures and steps."""
     rx_monotonic_s: float | None = None
     """Host ``time.monotonic()`` when the sample the decision waited for arrived (live sources only)."""
     steps: int = N_SUBSEQ
