@@ -68,10 +68,11 @@ class Classifier(Protocol):
         """A detector capture (700, 3) m/s^2 at 100 Hz -> (K,) class probabilities."""
 
 
-BATCH_CAPTURES = 64
+BATCH_CAPTURES = 20
 """Captures classified together at most (:meth:`WearableLoop._classify_ahead`): a model run's cost per
-capture stops falling at about 16, and a recording handed over whole (``command.replay``) must not
-make onnxruntime hold every capture's intermediate tensors at once (about 50 KB each at S = 6)."""
+capture stops falling at about 16, and onnxruntime's buffers grow with the batch (the day's replay:
+the same CPU time with 20, 32 or 64, peak memory 89, 92 and 98 MB); a recording handed over whole
+(``command.replay``) must not make it hold every capture's tensors at once (about 50 KB each at S = 6)."""
 EARLY_MIN_CONFIDENCE = 0.9
 """The threshold of a preliminary alert at S < 6 when neither the configuration nor the model's
 manifest gives one: stricter than the full window's, since a wrong preliminary is a false alarm."""
