@@ -49,8 +49,8 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
-from edge_runtime.wearable.classifier import N_SUBSEQ, needed_frames
-from edge_runtime.wearable.detector import DetectorConfig, StreamingDetector
+from edge_runtime.wearable.classifier import CAPTURE_FRAMES, N_SUBSEQ, needed_frames
+from edge_runtime.wearable.detector import Capture, DetectorConfig, StreamingDetector
 from edge_runtime.wearable.labels import CLASSES, OTHER
 from edge_runtime.wearable.sources import SAMPLE_RATE_HZ, ImuBlock
 
@@ -58,7 +58,9 @@ from edge_runtime.wearable.sources import SAMPLE_RATE_HZ, ImuBlock
 class Classifier(Protocol):
     """The classifier the loop asks: ``classify_capture`` always; a model that decides early also has
     ``early_steps`` (the sub-window counts S it accepts), ``classify_prefix(x, S)`` (calibrated
-    probabilities after S sub-windows) and ``early.min_confidence_by_steps`` (the manifest's thresholds)."""
+    probabilities after S sub-windows) and ``early.min_confidence_by_steps`` (the manifest's thresholds).
+    One that also has ``classify_capture_groups`` (the shipped Engine) is asked for the captures a
+    block completes together, which must give each what ``classify_prefix`` gives it alone."""
 
     classes: Sequence[str]
 
@@ -66,6 +68,11 @@ class Classifier(Protocol):
         """A detector capture (700, 3) m/s^2 at 100 Hz -> (K,) class probabilities."""
 
 
+BATCH_CAPTURES = 20
+"""Captures classified together at most (:meth:`WearableLoop._classify_ahead`): a model run's cost per
+capture stops falling at about 16, and onnxruntime's buffers grow with the batch (the day's replay:
+the same CPU time with 20, 32 or 64, peak memory 89, 92 and 98 MB); a recording handed over whole
+(``command.replay``) must not make it hold every capture's tensors at once (about 50 KB each at S = 6)."""
 EARLY_MIN_CONFIDENCE = 0.9
 """The threshold of a preliminary alert at S < 6 when neither the configuration nor the model's
 manifest gives one: stricter than the full window's, since a wrong preliminary is a false alarm."""
@@ -170,7 +177,8 @@ class Verdict:
     an active event, never alerted. A :class:`Decision` whose frame did not go out says 'alert_not_sent'."""
     probs: dict[str, float]
     compute_us: float
-    """Wall time from the completed capture to the verdict (preprocessing + inference), microseconds."""
+    """Wall time from the completed capture to the verdict (preprocessing + inference), microseconds; for
+    captures classified together (a replay's block), the batch's time divided among its captures and steps."""
     rx_monotonic_s: float | None = None
     """Host ``time.monotonic()`` when the sample the decision waited for arrived (live sources only)."""
     steps: int = N_SUBSEQ
@@ -294,6 +302,9 @@ class WearableLoop:
             else "full-window decisions" + (" (the model takes S = 6 only)" if offered == (N_SUBSEQ,) else
                                             " (every S < 6 has threshold 1)" if policy.decision == "early" else "")
         self._prefix = getattr(classifier, "classify_prefix", None)
+        # a block that completes several captures classifies them together (see _classify_ahead)
+        self._batch = getattr(classifier, "classify_capture_groups", None) if self._prefix is not None else None
+        self._ready: dict[tuple[int, int], tuple[list[float], float]] = {}
         self._capture: _CaptureState | None = None  # the capture being decided
         self._first_frames = needed_frames(self._early_steps[0])
         self._next_frames = self._first_frames  # frames the next early step needs
@@ -355,9 +366,67 @@ class WearableLoop:
         if not len(acc):
             return []
         out: list[Decision] = []
-        for cap in self.detector.push(acc):  # completed in this block: every step still due, in order
-            out += self._steps_of(cap.trigger_index, cap.data)
+        captures = self.detector.push(acc)
+        for i in range(0, len(captures), BATCH_CAPTURES):
+            batch = captures[i:i + BATCH_CAPTURES]
+            if len(batch) > 1 and self._batch is not None:
+                self._classify_ahead(batch)
+            for cap in batch:  # completed in this block: every step still due, in order
+                out += self._steps_of(cap.trigger_index, cap.data)
+            self._ready = {}
         return out + self._early_due()
+
+    def _classify_ahead(self, captures: list[Capture]) -> None:
+        """The probabilities of the steps the captures completed in one block will be decided at, with
+        one model run per step for all of them (``classify_capture_groups``), into ``_ready``.
+
+        What a decision does never changes which captures the detector takes, nor their frames, so a
+        block's captures are known before the first of them is decided; which steps each is decided
+        at depends on the decisions before it: a capture that continues an alert event is decided at
+        S = 6 only. So the full windows go first, and from them a guess at which captures may continue
+        an event: one triggered within ``event_hold_s`` of the end of the capture before it, when that
+        one may have continued an event itself or its full window is an alert (only then does an event
+        outlive it: one it opened with a preliminary alert is withdrawn otherwise). The early steps of
+        the others go second. The guess decides nothing: a capture that opens an event against it has
+        its early steps classified when it opens (:meth:`_steps_of`), and one that continues against
+        it leaves them unused. Each row is what the classifier gives for that capture alone, so the
+        decisions are those of one call per step."""
+        st, ev = self._capture, self._event
+        first = [(c, tuple(st.steps) if st is not None and c.trigger_index == st.trigger else (N_SUBSEQ,))
+                 for c in captures]  # the capture opened in an earlier block: the steps it still has
+        self._classify_groups([([c.trigger_index for c, s in first if s == steps],
+                                np.stack([c.data for c, s in first if s == steps]), steps)
+                               for steps in dict.fromkeys(s for _, s in first)])
+        hold_s = self.policy.event_hold_s + 1.0 / self.rate_hz  # a frame's margin: a guess, never a decision
+        threshold = self.policy.threshold(N_SUBSEQ, self._manifest_thresholds)
+        may_continue = ev is not None and not ev.withdrawn  # the event under way may outlive ...
+        last_end_s = ev.last_end_s if may_continue else None  # ... this end
+        early = []
+        for cap, _ in first:
+            opened = st is not None and cap.trigger_index == st.trigger
+            if not opened:
+                may_continue = last_end_s is not None and self._time_of(cap.trigger_index) <= last_end_s + hold_s
+                if not may_continue:
+                    early.append(cap)
+            values = self._ready[cap.trigger_index, N_SUBSEQ][0]
+            conf = max(values)
+            alerts = self.policy.status(self.classes[values.index(conf)], conf, threshold) == "alert"
+            may_continue = may_continue or alerts or opened
+            last_end_s = self._time_of(cap.start_index + len(cap.data) - 1) if may_continue else None
+        steps = tuple(s for s in self._early_steps if s != N_SUBSEQ)
+        if early and steps:
+            self._classify_groups([([c.trigger_index for c in early], np.stack([c.data for c in early]), steps)])
+
+    def _classify_groups(self, groups: list[tuple[list[int], np.ndarray, tuple[int, ...]]]) -> None:
+        """Into ``_ready``: for each group (triggers, their captures (N, 700, 3), steps), every step's
+        probabilities for every capture, and the compute time each one's share of the batch."""
+        t_start = time.perf_counter()
+        results = self._batch([(data, steps) for _, data, steps in groups])
+        compute_us = (time.perf_counter() - t_start) * 1e6 / sum(len(t) * len(s) for t, _, s in groups)
+        for (triggers, _, _), by_steps in zip(groups, results):
+            for steps, probs in by_steps.items():
+                for trigger, row in zip(triggers, probs.tolist()):
+                    self._ready[trigger, steps] = row, compute_us
 
     def _early_due(self) -> list[Decision]:
         """The early steps the capture still filling now holds the frames for."""
@@ -374,6 +443,10 @@ class WearableLoop:
         st = self._capture
         if st is None or st.trigger != trigger:
             st = self._capture = self._open_capture(trigger)
+        if len(st.steps) > 1 and len(data) == CAPTURE_FRAMES and self._batch is not None:
+            missing = tuple(s for s in st.steps if (trigger, s) not in self._ready)
+            if missing:  # a whole capture, not classified ahead (or not at these steps): its steps in one go
+                self._classify_groups([([trigger], data[None], missing)])
         out = []
         while st.steps and needed_frames(st.steps[0]) <= len(data):
             steps = st.steps.pop(0)
@@ -425,14 +498,18 @@ class WearableLoop:
             st.event.label = verdict.label
 
     def _classify(self, st: _CaptureState, data: np.ndarray, steps: int) -> Verdict | None:
-        t_start = time.perf_counter()
         full = steps == N_SUBSEQ
-        if self._prefix is not None:
-            probs = np.asarray(self._prefix(data[: needed_frames(steps)], steps))
+        ready = self._ready.pop((st.trigger, steps), None)
+        if ready is not None:  # classified with the other captures of its block
+            values, compute_us = ready
         else:
-            probs = np.asarray(self.classifier.classify_capture(data))
-        compute_us = (time.perf_counter() - t_start) * 1e6
-        values = probs.tolist()  # K Python floats: cheaper to pick from than numpy calls on K numbers
+            t_start = time.perf_counter()
+            if self._prefix is not None:
+                probs = np.asarray(self._prefix(data[: needed_frames(steps)], steps))
+            else:
+                probs = np.asarray(self.classifier.classify_capture(data))
+            compute_us = (time.perf_counter() - t_start) * 1e6
+            values = probs.tolist()  # K Python floats: cheaper to pick from than numpy calls on K numbers
         conf = max(values)
         k = values.index(conf)  # the first of equal maxima, as np.argmax
         label = self.classes[k]
