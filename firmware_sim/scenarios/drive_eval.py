@@ -26,7 +26,11 @@ end, as :mod:`firmware_sim.scenarios.scoring` matches):
   time) - the distraction's start, median and p95;
 * false alerts per driving hour: alerts that belong to no distraction (and how many of them the
   full window withdrew);
-* late alerts: first alerts whose frame went out after the distraction had ended.
+* late alerts: first alerts whose frame went out after the distraction had ended;
+* missed distractions by class and by where they were lost (:func:`miss_reason`): no trigger (the
+  motion stayed below the detector's threshold, or the detector was still paused by an earlier
+  capture), a capture that only continued an earlier event, a full window that said Other, or no
+  step confident enough.
 
 Writes ``OUT/drive_eval.json``, ``OUT/drive_eval.md`` and ``OUT/imu_trace.png`` (a distraction with
 its onset, end, the preliminary and final alert frames).
@@ -42,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from edge_runtime.cli import CliError, positive_float
+from edge_runtime.wearable.detector import DetectorConfig, p3_series
 from edge_runtime.wearable.labels import DISTRACTIONS
 from firmware_sim.scenarios.scoring import raises_alert
 
@@ -87,6 +92,28 @@ def held_out_drives(hours: float, seed: int, baseline_share: float = 0.3, drive_
 # ---------------------------------------------------------------------------- scoring
 
 
+def miss_reason(own: list[dict], acc_mps2: np.ndarray | None = None, event: dict | None = None,
+                detector_cfg=None) -> str:
+    """Where a distraction with no alert was lost, from the decisions whose trigger falls in it
+    (``own``). With the recording, its event and the detector's configuration, a distraction with no
+    trigger is told apart: the motion stayed below the threshold, or the detector was paused by the
+    capture of an earlier trigger (P3 crossed the threshold within the distraction)."""
+    if not own:
+        if acc_mps2 is None or event is None or detector_cfg is None:
+            return "no trigger"
+        lo = max(0, int((event["start_s"] - MATCH_BEFORE_S) * 100))
+        hi = max(lo, int(event["end_s"] * 100) + 1)
+        first = max(0, lo - detector_cfg.lag)  # P3 at frame lo needs the window behind it
+        p3 = p3_series(acc_mps2[first:hi, detector_cfg.axis], detector_cfg)[lo - first:]
+        with np.errstate(invalid="ignore"):
+            crossed = bool(np.any(p3 > detector_cfg.threshold_mps2))
+        return "no trigger: detector paused by an earlier capture" if crossed else "no trigger: below the threshold"
+    statuses = {d["status"] for d in own}
+    return ("continued an earlier event" if statuses == {"continued"}
+            else "full window said Other" if "not_alerted" in statuses
+            else "not confident at any step")
+
+
 @dataclass
 class ModeScore:
     """The event figures of one decision mode, accumulated over drives."""
@@ -103,6 +130,10 @@ class ModeScore:
     """Alerts for a distraction that had already been alerted (a second warning for one distraction)."""
     decisions: int = 0
     statuses: dict[str, int] = field(default_factory=dict)
+    by_class: dict[str, dict[str, int]] = field(default_factory=dict)
+    """Per distraction class: distractions, alerted, and the missed ones by :func:`miss_reason`."""
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    """The detector's configuration, to tell why a distraction got no trigger (default: the shipped one)."""
 
     def add(self, drive: Drive, decisions: list[dict]) -> list[tuple[dict, dict | None]]:
         """Score one drive; returns each distraction with its first alert (None: missed)."""
@@ -131,7 +162,13 @@ class ModeScore:
         for e in truth:
             first = firsts.get(id(e))
             self.distractions += 1
-            if first is not None:
+            row = self.by_class.setdefault(e["label"], {"distractions": 0, "alerted": 0})
+            row["distractions"] += 1
+            if first is None:
+                why = miss_reason([d for d in decisions if owner(d) is e], drive.acc_mps2, e, self.detector)
+                row[why] = row.get(why, 0) + 1
+            else:
+                row["alerted"] += 1
                 self.detected += 1
                 self.first_correct += first["label"] == e["label"]
                 self.onset_to_alert_s.append(first["t_alert_s"] - e["start_s"])
@@ -156,6 +193,7 @@ class ModeScore:
             "repeat_alerts": self.repeat_alerts,
             "decisions": self.decisions,
             "statuses": dict(sorted(self.statuses.items())),
+            "by_class": {k: self.by_class[k] for k in sorted(self.by_class)},
         }
 
 
@@ -185,7 +223,7 @@ def evaluate(drives, classifier, cfg, modes=MODES, progress=print) -> dict:
     from edge_runtime import config
     from edge_runtime.wearable.command import replay
 
-    scores = {m: ModeScore() for m in modes}
+    scores = {m: ModeScore(detector=cfg.detector) for m in modes}
     example: dict | None = None
     kinds: dict[str, float] = {}
     for drive in drives:
@@ -287,7 +325,17 @@ def to_markdown(report: dict) -> str:
         c = report["class_agreement"]
         lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} on every capture and sub-window count: "
                       f"**{c['agreement']}** over {c['decisions']} decisions (by S: {c['by_steps']})"]
-    lines += ["", "Distractions: " + ", ".join(f"{m} {report['scores'][m]['distractions']}" for m in modes)
+    lines += ["", "Where distractions are lost, per class (missed ones by where the runtime lost them: "
+                  "no trigger, a capture that only continued an earlier event, a full window that said Other, "
+                  "no step confident enough):", ""]
+    for m in modes:
+        by_class = report["scores"][m].get("by_class", {})
+        reasons = sorted({r for row in by_class.values() for r in row} - {"distractions", "alerted"})
+        lines += [f"| {m} | distractions | alerted | " + " | ".join(reasons) + " |", "|---|" + "---:|" * (2 + len(reasons))]
+        lines += [f"| {k} | {row['distractions']} | {row['alerted']} | " + " | ".join(str(row.get(r, 0)) for r in reasons)
+                  + " |" for k, row in by_class.items()]
+        lines.append("")
+    lines += ["Distractions: " + ", ".join(f"{m} {report['scores'][m]['distractions']}" for m in modes)
               + "; decisions by status: " + "; ".join(f"{m} {report['scores'][m]['statuses']}" for m in modes), ""]
     return "\n".join(lines)
 

@@ -44,6 +44,7 @@ from firmware_sim.scenarios.drive_eval import (
     _better_example,
     _section,
     held_out_drives,
+    miss_reason,
     plot_example,
 )
 from firmware_sim.scenarios.scoring import raises_alert
@@ -189,10 +190,7 @@ def breakdown(drives: list[Drive], decisions: list[list[dict]], pre_frames: int,
                            onset_to_alert_s=round(first["t_alert_s"] - e["start_s"], 3),
                            first_trigger_delay_s=round(first["t_trigger_s"] - e["start_s"], 3))
             else:
-                statuses = {d["status"] for d in own}
-                row["missed"] = ("no trigger" if not own else "continued an earlier event" if statuses == {"continued"}
-                                 else "full window said Other" if "not_alerted" in statuses
-                                 else "not confident at any step")
+                row["missed"] = miss_reason(own)
             events.append(row)
     return {"events": events, "false_alerts": false_alerts,
             "summary": summarise(events, false_alerts, pre_frames, rate_hz)}

@@ -94,3 +94,18 @@ def test_class_agreement_compares_two_models_at_every_step_on_every_capture():
     same = class_agreement([drive], phone, phone2, DetectorConfig())
     assert (same["agreement"], same["decisions"]) == (1.0, 3 * 6) and set(same["by_steps"]) == {"1", "2", "3", "4", "5", "6"}
     assert class_agreement([drive], phone, drink, DetectorConfig())["agreement"] == 0.0
+
+
+def test_missed_distractions_are_told_by_class_and_where_they_were_lost():
+    # a trigger at 10 s (Phone 9.5..10.2 s, alerted); a Drink 10.5..12 s whose motion came while the
+    # detector was paused by the Phone's capture; a Marker 30..32 s with no motion the detector sees
+    acc = step_signal(6000, [1000])
+    events = [{"start_s": 9.5, "end_s": 10.2, "label": "Phone"}, {"start_s": 10.5, "end_s": 12.0, "label": "Drink"},
+              {"start_s": 30.0, "end_s": 32.0, "label": "Marker"}]
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0)
+    res = evaluate([Drive("steps", acc, events, "distraction")], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}),
+                   cfg, modes=("early",), progress=lambda _: None)
+    assert res["scores"]["early"]["by_class"] == {
+        "Drink": {"distractions": 1, "alerted": 0, "no trigger: detector paused by an earlier capture": 1},
+        "Marker": {"distractions": 1, "alerted": 0, "no trigger: below the threshold": 1},
+        "Phone": {"distractions": 1, "alerted": 1}}

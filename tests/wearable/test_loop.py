@@ -389,3 +389,29 @@ def test_a_capture_cut_by_a_gap_gets_no_update_and_the_next_capture_decides_earl
         assert all(round((d.t_alert_s - 100.0) * 100) == a for d in got)
         ds += got
     assert _summary(ds) == [("preliminary", 1, "Phone", 1), ("confirmed", 6, "Phone", 1)]
+
+
+class _OtherOnStepDown(Scripted):
+    """A capture whose x steps down (the hand doing something else, say) is Other at the full window."""
+
+    def classify_prefix(self, x, steps):
+        if steps == 6 and x[-1, 0] < x[0, 0]:
+            self.seen.append((steps, np.array(x)))
+            return self._probs("Other", 0.9)
+        return super().classify_prefix(x, steps)
+
+
+def test_a_capture_of_an_active_event_that_says_other_ends_the_event():
+    # captures at 10 s (up: Phone), 20 s (down: Other, within the hold: continued) and 30 s (up again,
+    # within the hold of the second capture's end): the Other capture ended the event, so the third alerts
+    acc = _steps(8000, [1000, 2000, 3000])
+    answers = {2: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    ds, *_ = _early_run(answers, Policy(event_hold_s=10.0), acc, clf=_OtherOnStepDown(answers))
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("confirmed", 6, "Phone", 0),
+                            ("continued", 6, "Other", None),
+                            ("preliminary", 2, "Phone", 1), ("confirmed", 6, "Phone", 1)]
+    assert [d.event_start_s for d in ds] == [10.0, 10.0, 10.0, 30.0, 30.0]
+    # without the rule the Other capture extends the event and the third capture only continues it
+    ds, *_ = _early_run(answers, Policy(event_hold_s=10.0, event_ends_on_other=False), acc,
+                        clf=_OtherOnStepDown(answers))
+    assert [d.status for d in ds] == ["preliminary", "confirmed", "continued", "continued"]
