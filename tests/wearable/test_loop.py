@@ -185,8 +185,10 @@ def test_the_heartbeat_thread_reports_what_the_loop_counts():
 
 def Policy(**kw):
     """An early policy that alerts from S = 1 at the manifest's thresholds (else 0.9): the loop's mechanics,
-    not the shipped operating point (tests/sim/test_early_tuning.py pins that one to its validation report)."""
-    return AlertPolicy(**{"min_confidence_by_steps": (-1.0,) * 6, "earliest_alert_step": 1, **kw})
+    not the shipped operating point (tests/sim/test_early_tuning.py pins that one to its validation report),
+    with the model's own probabilities (no class weights)."""
+    return AlertPolicy(**{"min_confidence_by_steps": (-1.0,) * 6, "earliest_alert_step": 1,
+                          "class_weights": (1.0,) * len(CLASSES), **kw})
 
 
 def _early_run(answers, policy=Policy(), acc=None, split=None, clf=None, **kw):
@@ -415,3 +417,22 @@ def test_a_capture_of_an_active_event_that_says_other_ends_the_event():
     ds, *_ = _early_run(answers, Policy(event_hold_s=10.0, event_ends_on_other=False), acc,
                         clf=_OtherOnStepDown(answers))
     assert [d.status for d in ds] == ["preliminary", "confirmed", "continued", "continued"]
+
+
+def test_class_weights_reweigh_the_probabilities_before_every_decision():
+    # the full window says Other 0.5, Marker 0.3 (the rest 0.05 each): weighting Marker by 5 makes it
+    # Marker 1.5 / 2.2 = 0.68, an alert; the decision carries the weighted probabilities
+    class OtherOverMarker(Scripted):
+        def classify_prefix(self, x, steps):
+            probs = np.full(len(CLASSES), 0.05, np.float32)
+            probs[CLASSES.index("Other")], probs[CLASSES.index("Marker")] = 0.5, 0.3
+            return probs
+
+    ds, *_ = _early_run({}, Policy(), clf=OtherOverMarker({}))
+    assert [(d.status, d.label) for d in ds] == [("not_alerted", "Other")]
+    weights = tuple(5.0 if c == "Marker" else 1.0 for c in CLASSES)
+    ds, *_ = _early_run({}, Policy(class_weights=weights), clf=OtherOverMarker({}))
+    assert [(d.status, d.label) for d in ds] == [("alert", "Marker")]
+    assert ds[0].confidence == pytest.approx(1.5 / 2.2) and sum(ds[0].probs.values()) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="class_weights"):
+        AlertPolicy(class_weights=(1.0, 2.0))
