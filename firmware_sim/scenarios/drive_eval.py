@@ -83,7 +83,7 @@ def held_out_drives(hours: float, seed: int, baseline_share: float = 0.3, drive_
         rec = simulate_drive(drive_minutes, s)
         yield Drive(f"drive seed {s}", rec.acc_mps2, [e.to_json() for e in rec.events], "distraction")
     cohort_seed = BASELINE_COHORT0 + seed
-    for k, subj in enumerate(make_subjects(n_base, seed=cohort_seed)):
+    for k, subj in enumerate(make_subjects(n_base, seed=cohort_seed) if n_base else ()):
         rec = simulate_trial(subj, "baseline", cohort_seed, drive_minutes)
         yield Drive(f"baseline cohort {cohort_seed} subject {k + 1}", rec.acc_mps2, [e.to_json() for e in rec.events],
                     "baseline")
@@ -215,6 +215,39 @@ def class_agreement(drives, engine, other, detector_cfg) -> dict:
             "decisions": total, "by_steps": {str(s): round(a / n, 4) if n else None for s, (a, n) in same.items()}}
 
 
+def step_accuracy(drives, engine, detector_cfg, class_weights=None) -> dict:
+    """Per sub-window count S: the top class's accuracy on every detector capture of the drives (truth:
+    the distraction its trigger falls in, else Other), on the distraction captures alone, and when the
+    decision after S sub-windows can be made (its frame after the trigger, s). What the onset -> alert
+    latency can reach: a decision needs S sub-windows, whatever its threshold. ``class_weights``: the
+    policy's, in :data:`~edge_runtime.wearable.labels.CLASSES` order, as the loop applies them."""
+    from edge_runtime.wearable.classifier import needed_frames
+    from edge_runtime.wearable.detector import detect_triggers, extract_captures
+    from edge_runtime.wearable.labels import CLASSES, OTHER
+
+    classes = list(engine.classes)
+    w = np.ones(len(classes)) if class_weights is None else np.asarray(
+        [dict(zip(CLASSES, class_weights)).get(c, 1.0) for c in classes])
+    right = {s: [0, 0, 0, 0] for s in engine.early_steps}  # every capture: right, n; distraction captures: right, n
+    for drive in drives:
+        truth = [e for e in drive.events if e["label"] in DISTRACTIONS]
+        for cap in extract_captures(drive.acc_mps2, detect_triggers(drive.acc_mps2, detector_cfg), detector_cfg):
+            e = next((e for e in truth if e["start_s"] - MATCH_BEFORE_S <= cap.trigger_index / 100.0 <= e["end_s"]),
+                     None)
+            label = OTHER if e is None else e["label"]
+            for s in engine.early_steps:
+                ok = classes[int(np.argmax(engine.classify_prefix(cap.data[: needed_frames(s)], s) * w))] == label
+                r = right[s]
+                r[0], r[1] = r[0] + ok, r[1] + 1
+                if e is not None:
+                    r[2], r[3] = r[2] + ok, r[3] + 1
+    return {str(s): {"accuracy_every_capture": round(a / n, 4) if n else None, "captures": n,
+                     "accuracy_distraction_captures": round(ad / nd, 4) if nd else None,
+                     "decision_frame_after_trigger_s": round((needed_frames(s) - 1 - detector_cfg.pre_frames) / 100.0,
+                                                             2)}
+            for s, (a, n, ad, nd) in right.items()}
+
+
 # ---------------------------------------------------------------------------- running
 
 
@@ -325,6 +358,13 @@ def to_markdown(report: dict) -> str:
         c = report["class_agreement"]
         lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} on every capture and sub-window count: "
                       f"**{c['agreement']}** over {c['decisions']} decisions (by S: {c['by_steps']})"]
+    if "step_accuracy" in report:
+        lines += ["", "Top class after S sub-windows on every detector capture (class weights applied; truth: the "
+                      "distraction the trigger falls in, else Other): what an alert after S sub-windows can reach", "",
+                  "| S | decision frame after the trigger (s) | accuracy, every capture | accuracy, distraction captures |",
+                  "|---:|---:|---:|---:|"]
+        lines += [f"| {s} | {r['decision_frame_after_trigger_s']} | {r['accuracy_every_capture']} | "
+                  f"{r['accuracy_distraction_captures']} |" for s, r in report["step_accuracy"].items()]
     lines += ["", "Where distractions are lost, per class (missed ones by where the runtime lost them: "
                   "no trigger, a capture that only continued an earlier event, a full window that said Other, "
                   "no step confident enough):", ""]
@@ -355,6 +395,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--agreement", metavar="ENTRY",
                    help="also the top-class agreement with this manifest entry (e.g. fp32) on every capture, at "
                         "every sub-window count the model decides at")
+    p.add_argument("--step-accuracy", action="store_true",
+                   help="also the top class's accuracy after each sub-window count S on every capture (what an "
+                        "alert after S sub-windows can reach)")
 
 
 def cmd(a) -> int:
@@ -379,7 +422,7 @@ def cmd(a) -> int:
     print(f"drive-eval: {a.hours:g} h of held-out driving (seed {a.seed}), modes {', '.join(measured)}, model "
           f"{engine.name}" + ("" if early else " (fixed S = 6: early decisions are not measurable)"), flush=True)
     drives = held_out_drives(a.hours, a.seed, a.baseline_share, a.drive_minutes)
-    if a.agreement:
+    if a.agreement or a.step_accuracy:
         drives = list(drives)  # walked twice
     res = evaluate(drives, engine, cfg, measured, progress=lambda line: print(line, flush=True))
     described = {m: ("one decision per capture at T+599 (the dissertation's)" if m == "full_window" else
@@ -392,7 +435,7 @@ def cmd(a) -> int:
             f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()
             if k in ("hours", "seed", "out", "decision", "baseline_share", "drive_minutes", "config", "assets", "model",
                      "agreement")
-            and v is not None),
+            and v is not None) + (" --step-accuracy" if a.step_accuracy else ""),
         "hours": a.hours, "seed": a.seed, "model": f"{engine.name} ({engine.precision})",
         "early_steps": list(engine.early_steps), "decision_modes": described,
         "held_out": (f"distraction drives: seeds {DRIVE_SEED0 + 1000 * a.seed}+k (a new driver each); baseline "
@@ -404,6 +447,8 @@ def cmd(a) -> int:
     if a.agreement:
         other = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, a.agreement, threads=cfg.model.threads)
         report["class_agreement"] = class_agreement(drives, engine, other, cfg.detector)
+    if a.step_accuracy:
+        report["step_accuracy"] = step_accuracy(drives, engine, cfg.detector, cfg.alerts.class_weights)
     report["wall_s"] = round(time.perf_counter() - t_wall, 1)
     (out / "drive_eval.json").write_text(json.dumps(report, indent=1))
     (out / "drive_eval.md").write_text(to_markdown(report))

@@ -67,6 +67,9 @@ def test_the_command_writes_json_markdown_and_the_trace(tmp_path, capsys):
     assert set(report["scores"]) == {"full_window", "early"}  # the shipped model takes partial captures
     assert all(report["scores"][m]["driving_hours"] == pytest.approx(0.1) for m in report["scores"])
     assert "| event recall |" in (tmp_path / "drive_eval.md").read_text()
+    assert main(["drive-eval", "--hours", "0.05", "--drive-minutes", "3", "--seed", "5", "--out", str(tmp_path),
+                 "--decision", "early", "--step-accuracy"]) == 0
+    assert "| S | decision frame" in (tmp_path / "drive_eval.md").read_text()
     assert main(["drive-eval", "--hours", "1", "--decision", "late", "--out", str(tmp_path)]) == 2
     assert "--decision late" in capsys.readouterr().err
 
@@ -109,3 +112,18 @@ def test_missed_distractions_are_told_by_class_and_where_they_were_lost():
         "Drink": {"distractions": 1, "alerted": 0, "no trigger: detector paused by an earlier capture": 1},
         "Marker": {"distractions": 1, "alerted": 0, "no trigger: below the threshold": 1},
         "Phone": {"distractions": 1, "alerted": 1}}
+
+
+def test_step_accuracy_scores_every_capture_at_every_sub_window_count():
+    from firmware_sim.scenarios.drive_eval import step_accuracy
+
+    # triggers at 10 s (a Phone) and 40 s (nothing there: truth Other); the model says Phone throughout
+    drive = Drive("steps", step_signal(6000, [1000, 4000]), [{"start_s": 9.5, "end_s": 14.0, "label": "Phone"}],
+                  "distraction")
+    clf = Scripted({})
+    acc = step_accuracy([drive], clf, config.load(None).detector)
+    assert acc["2"] == {"accuracy_every_capture": 0.5, "captures": 2, "accuracy_distraction_captures": 1.0,
+                        "decision_frame_after_trigger_s": 1.62}
+    # weighting Other up makes the 40 s capture right and the Phone wrong
+    weights = (1.0, 1.0, 1.0, 1.0, 1.0, 10.0)
+    assert step_accuracy([drive], clf, config.load(None).detector, weights)["6"]["accuracy_distraction_captures"] == 0.0
