@@ -57,6 +57,8 @@ BASELINE_COHORT0 = 950_000
 MATCH_BEFORE_S = 1.0
 """A trigger up to 1 s before a distraction's start belongs to it (the capture starts 1 s before the trigger)."""
 MODES = ("full_window", "early")
+HELD_OUT_SEED = 2
+"""The held-out seed: never tuned on; every other seed is development (its report says so)."""
 
 
 @dataclass
@@ -348,7 +350,10 @@ def to_markdown(report: dict) -> str:
         v = s[key[0]][key[1]] if isinstance(key, tuple) else s[key]
         return "–" if v is None else f"{v:g}"
 
-    lines = [f"# Held-out simulated driving: {report['hours']:g} h", "",
+    held_out = report.get("seed", HELD_OUT_SEED) == HELD_OUT_SEED
+    lines = [f"# Held-out simulated driving: {report['hours']:g} h" if held_out else
+             f"# Development drives (seed {report['seed']}, not the held-out seed {HELD_OUT_SEED}): "
+             f"{report['hours']:g} h", "",
              f"`{report['command']}`", "",
              f"Model {report['model']}; " + "; ".join(f"{m}: {d}" for m, d in report["decision_modes"].items()), "",
              f"Drives: {report['hours_by_kind']} (hours by kind); {report['held_out']}", "",

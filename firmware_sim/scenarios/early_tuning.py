@@ -38,6 +38,7 @@ import numpy as np
 from edge_runtime.cli import CliError, positive_float
 from edge_runtime.wearable.labels import DISTRACTIONS, OTHER
 from firmware_sim.scenarios.drive_eval import (
+    HELD_OUT_SEED,
     MATCH_BEFORE_S,
     Drive,
     ModeScore,
@@ -49,8 +50,6 @@ from firmware_sim.scenarios.drive_eval import (
 )
 from firmware_sim.scenarios.scoring import raises_alert
 
-HELD_OUT_SEED = 2
-"""drive-eval's held-out seed: never tuned on."""
 AFTER_DISTRACTION_S = 3.0
 """A false alert triggered this soon after a distraction ended is put down to the hand returning."""
 RULE = ("first-alert class accuracy >= 0.90 (the must-hold), event recall >= the full window's and repeat alerts "

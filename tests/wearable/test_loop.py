@@ -6,7 +6,7 @@ import time
 import can
 import numpy as np
 import pytest
-from support.early_model import Scripted, step_signal
+from support.early_model import NEUTRAL_WEIGHTS, Scripted, step_signal
 
 from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher
 from edge_runtime.wearable.detector import DetectorConfig
@@ -52,7 +52,7 @@ def test_decisions_carry_stream_times_and_the_classifier_gets_the_capture():
 def test_policy_never_alerts_other_and_flags_low_confidence():
     acc = _steps(3000, [1000])
     other = WearableLoop(Fixed("Other", 0.99)).feed(ImuBlock(0.0, acc))[0]
-    unsure = WearableLoop(Fixed("Phone", 0.4), policy=AlertPolicy(min_confidence=0.5)).feed(ImuBlock(0.0, acc))[0]
+    unsure = WearableLoop(Fixed("Phone", 0.4), policy=AlertPolicy(min_confidence=0.5, class_weights=NEUTRAL_WEIGHTS)).feed(ImuBlock(0.0, acc))[0]
     assert (other.alerted, other.status) == (False, "not_alerted")
     assert (unsure.alerted, unsure.status) == (False, "uncertain")
 
@@ -188,7 +188,7 @@ def Policy(**kw):
     not the shipped operating point (tests/sim/test_early_tuning.py pins that one to its validation report),
     with the model's own probabilities (no class weights)."""
     return AlertPolicy(**{"min_confidence_by_steps": (-1.0,) * 6, "earliest_alert_step": 1,
-                          "class_weights": (1.0,) * len(CLASSES), **kw})
+                          "class_weights": NEUTRAL_WEIGHTS, **kw})
 
 
 def _early_run(answers, policy=Policy(), acc=None, split=None, clf=None, **kw):
