@@ -210,10 +210,11 @@ A module constant, not a [calibration] key: [calibration] is in the validated sa
 ANCHOR_LEVEL_FEET_M = 0.1
 """Both observed ankles within this height of each other (robot frame, the lifter's metres): both
 feet are on the floor and both rays count in :func:`anchor_factor` (geometric mean of the two)."""
-ANCHOR_GATE_M = 1.0
+ANCHOR_GATE_M = 0.5
 """:class:`FloorAnchor` matches a skeleton to the person whose last anchored pelvis is nearest when
 this skeleton is anchored with that person's factor, within this distance (m); farther, he is a
-new person. Walking, a person moves 5 cm per frame."""
+new person (anchored frame by frame until his window fills). Walking, a person moves 5 cm per
+frame; the gate bounds what taking another person's factor for a frame can cost."""
 
 
 @dataclass
@@ -221,6 +222,7 @@ class _AnchorTrack:
     factors: deque
     k: float
     root_m: np.ndarray
+    pid: object = None
     last_in: np.ndarray | None = None
     last_out: np.ndarray | None = None
     missed: int = 0
@@ -237,10 +239,10 @@ class FloorAnchor:
     move the median. The factor is relative to the lifter's depth, which follows the person's
     motion. Causal: each frame uses this frame and earlier ones only.
 
-    Frames come as the loop gives them, without ids: a skeleton belongs to the person whose last
-    anchored pelvis is nearest to it anchored with his factor (the pelvis's ray, not the ankles',
-    so a wild ankle does not make a new person), within :data:`ANCHOR_GATE_M`; one unseen for a
-    window is forgotten. A skeleton given again unchanged (a second look at the same frame) gets
+    The robot loop gives no ids (``ids``, when a caller has a tracker's, keys the people by them):
+    a skeleton belongs to the person whose last anchored pelvis is nearest to it anchored with his
+    factor (the pelvis's ray, not the ankles', so a wild ankle does not make a new person), within
+    :data:`ANCHOR_GATE_M`; one unseen for a window is forgotten. A skeleton given again unchanged (a second look at the same frame) gets
     the same answer and does not count twice.
     """
 
@@ -248,8 +250,10 @@ class FloorAnchor:
         self.calibration = calibration
         self.tracks: list[_AnchorTrack] = []
 
-    def __call__(self, joints_cam_m, observed=None) -> np.ndarray:
-        """Robot-frame joints (P, 17, 3) of one frame's camera-frame skeletons (P, 17, 3)."""
+    def __call__(self, joints_cam_m, observed=None, ids=None) -> np.ndarray:
+        """Robot-frame joints (P, 17, 3) of one frame's camera-frame skeletons (P, 17, 3);
+        ``ids`` (P,), when given, name the people (a tracker's ids) instead of the nearest-pelvis
+        match."""
         cal, p = self.calibration, self.calibration.params
         window = max(1, int(cal.anchor_window_frames))
         flat = np.asarray(joints_cam_m, float).reshape(-1, 17, 3)
@@ -264,8 +268,11 @@ class FloorAnchor:
             else:
                 out[i] = self.tracks[again].last_out
                 taken.add(again)
-        pairs = sorted((float(np.linalg.norm(cal.apply(t.k * flat[i][HIP]) - t.root_m)), i, n)
-                       for i in todo for n, t in enumerate(self.tracks) if n not in taken)
+        if ids is None:
+            pairs = sorted((float(np.linalg.norm(cal.apply(t.k * flat[i][HIP]) - t.root_m)), i, n)
+                           for i in todo for n, t in enumerate(self.tracks) if n not in taken)
+        else:
+            pairs = [(0.0, i, n) for i in todo for n, t in enumerate(self.tracks) if t.pid == ids[i]]
         matched = {}
         for d, i, n in pairs:
             if d <= ANCHOR_GATE_M and i not in matched and n not in taken:
@@ -278,7 +285,7 @@ class FloorAnchor:
             k, reason = anchor_factor(flat[i], cal.A, cal.b, p, seen[i])
             t = matched.get(i)
             if t is None:
-                t = _AnchorTrack(deque(maxlen=window), k, np.full(3, np.nan))
+                t = _AnchorTrack(deque(maxlen=window), k, np.full(3, np.nan), None if ids is None else ids[i])
                 self.tracks.append(t)
             if reason is None and p.anchor_min_scale < k < p.anchor_max_scale:
                 t.factors.append(k)
@@ -330,19 +337,21 @@ class Calibration:
         k, reason = anchor_factor(j, self.A, self.b, self.params, observed)
         return self.apply(k * j), reason is None
 
-    def to_robot(self, joints_cam_m, observed=None) -> np.ndarray:
+    def to_robot(self, joints_cam_m, observed=None, ids=None) -> np.ndarray:
         """Robot-frame joints of one frame's camera-frame skeletons (17, 3) or (P, 17, 3): each
         re-anchored on the floor when ``params.ground_anchor`` is on, else :meth:`apply`.
         Stateful: call it once per frame, frames in order; each person's anchoring factor is
         filtered over his recent frames (:class:`FloorAnchor`, ``anchor_window_frames``).
         ``observed`` ((17,) or (P, 17) bool, optional): the joints seen in this frame, so the
-        anchoring uses an observed ankle's ray (:func:`anchor_factor`)."""
+        anchoring uses an observed ankle's ray (:func:`anchor_factor`). ``ids`` ((P,), optional):
+        each person's tracker id, to keep his factor by id (without: by the nearest pelvis;
+        :class:`FloorAnchor`)."""
         j = np.asarray(joints_cam_m, float)
         if not self.params.ground_anchor or j.shape[-2:] != (17, 3):
             return self.apply(j)
         if self._anchor is None:
             self._anchor = FloorAnchor(self)
-        return self._anchor(j, observed).reshape(j.shape)
+        return self._anchor(j, observed, None if ids is None else list(np.atleast_1d(ids))).reshape(j.shape)
 
     @property
     def scale(self) -> float:

@@ -407,3 +407,16 @@ def test_each_person_keeps_his_own_anchoring_whatever_the_order():
         np.testing.assert_allclose(out[order.index(0)], near, atol=1e-6)
         np.testing.assert_allclose(out[order.index(1)], far, atol=1e-6)
     assert len(cal._anchor.tracks) == 2
+
+
+def test_a_trackers_ids_key_the_anchoring_when_given():
+    near, far = anchored_worker((0.5, 2.5)), anchored_worker((-1.0, 0.0))
+    lifted = np.stack([STREAM_CAMERA.to_camera(near) * 1.2, STREAM_CAMERA.to_camera(far) * 0.85])
+    cal = true_calibration(STREAM_CAMERA)
+    for t in range(10):
+        order = [0, 1] if t % 2 else [1, 0]
+        # new frames (a lifter never repeats itself exactly): 0.01 % steps in depth
+        out = cal.to_robot(lifted[order] * (1 + 1e-4 * t), ids=[("a", "b")[k] for k in order])
+        np.testing.assert_allclose(out[order.index(0)], near, atol=5e-3)
+        np.testing.assert_allclose(out[order.index(1)], far, atol=5e-3)
+    assert sorted(t.pid for t in cal._anchor.tracks) == ["a", "b"]
