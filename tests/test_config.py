@@ -33,7 +33,9 @@ def test_example_file_is_the_defaults_and_print_config_round_trips(tmp_path):
         ("[alerts]\nmin_confidence = 1.5\n", r"\[alerts\] min_confidence: must be a number in \[0, 1\]"),
         ("[model]\nthreads = 0\n", r"\[model\] threads: must be an integer of at least 1"),
         ("[imu]\nsample_rate_hz = 50\n", r"\[imu\] sample_rate_hz: must be 100"),
-        ("[detector]\npre_frames = 300\n", r"\[detector\] pre_frames: must be below window_frames"),
+        ("[detector]\npre_frames = 300\n", r"\[detector\] pre_frames: must be 100"),
+        ("[detector]\npost_frames = 700\n", r"\[detector\] post_frames: must be 600"),
+        ("[alerts]\nclass_weights = [5e-324, 1, 1, 1, 1, 1]\n", r"\[alerts\] class_weights: must be"),
         ("[can\n", r"box.toml: not valid TOML"),
         # the limits that README, the DBC and docs/integrator.md promise (issue 16)
         ("[imu]\nsilence_timeout_s = 3600\n", r"\[imu\] silence_timeout_s: must be a number in \[0.02, 0.15\] s"),

@@ -40,9 +40,13 @@ class DetectorConfig:
     """Trigger when |ax[T] - ax[T - window + 1]| exceeds this (m/s^2)."""
     window_frames: int = config.setting(200, ("an integer of at least 2", lambda v: v >= 2))
     """Length of the sliding window; P3 spans window_frames - 1 samples."""
-    pre_frames: int = config.setting(100, ("a non-negative integer", lambda v: v >= 0))
+    # A box's captures are the ConvLSTM's input (700 frames, sub-windows timed from the trigger), so
+    # its file may not move them; other lengths are for studying the detector alone (this class).
+    pre_frames: int = config.setting(100, ("100 (the model's capture starts 1 s before the trigger)",
+                                           lambda v: v == 100))
     """Frames captured before the trigger frame."""
-    post_frames: int = config.setting(600, ("a positive integer", lambda v: v > 0))
+    post_frames: int = config.setting(600, ("600 (the model's capture runs 6 s from the trigger)",
+                                            lambda v: v == 600))
     """Frames captured from the trigger frame on (T ... T+599)."""
     axis: int = config.setting(0, ("0, 1 or 2", lambda v: v in (0, 1, 2)))
     """Accelerometer axis watched (0 = x, roughly perpendicular to the wheel axis)."""

@@ -75,6 +75,9 @@ BATCH_CAPTURES = 20
 capture stops falling at about 16, and onnxruntime's buffers grow with the batch (the day's replay:
 the same CPU time with 20, 32 or 64, peak memory 89, 92 and 98 MB); a recording handed over whole
 (``command.replay``) must not make it hold every capture's tensors at once (about 50 KB each at S = 6)."""
+MIN_CLASS_WEIGHT, MAX_CLASS_WEIGHT = 1e-3, 1e3
+"""``AlertPolicy.class_weights``' range: a prior shift of up to 10^6 between two classes; beyond it a
+weighted sum can underflow to 0 or overflow (a decision divides by it)."""
 EARLY_MIN_CONFIDENCE = 0.9
 """The threshold of a preliminary alert at S < 6 when neither the configuration nor the model's
 manifest gives one: stricter than the full window's, since a wrong preliminary is a false alarm."""
@@ -123,8 +126,9 @@ class AlertPolicy:
     10 h each): event recall +0.008 on both, in both decision modes, at unchanged repeat alerts
     and false alerts +0.1 / 0 per hour (reports/drive_eval/development.md)."""
     class_weights: tuple[float, ...] = config.setting(
-        (1.0, 1.0, 1.0, 1.0, 8.0, 1.5), ("a list of one positive number per class",
-                                         lambda v: len(v) == len(CLASSES) and all(w > 0 for w in v)))
+        (1.0, 1.0, 1.0, 1.0, 8.0, 1.5), (f"a list of one number in [{MIN_CLASS_WEIGHT:g}, {MAX_CLASS_WEIGHT:g}] per class",
+                                         lambda v: len(v) == len(CLASSES) and all(
+                                             MIN_CLASS_WEIGHT <= w <= MAX_CLASS_WEIGHT for w in v)))
     """Weights of the classes (Phone, Texting, TouchScreen, Drink, Marker, Other) the classifier's
     probabilities are multiplied by, and renormalised, before every decision (a decision's probs and
     confidence are the weighted ones): a prior-shift correction of a model that under-calls a class
@@ -158,8 +162,10 @@ class AlertPolicy:
             raise ValueError("min_confidence must lie in [0, 1]")
         if self.decision not in DECISIONS:
             raise ValueError(f"decision must be one of {DECISIONS}")
-        if len(self.class_weights) != len(CLASSES) or not all(w > 0 for w in self.class_weights):
-            raise ValueError(f"class_weights: one positive number per class ({len(CLASSES)})")
+        if len(self.class_weights) != len(CLASSES) or not all(
+                MIN_CLASS_WEIGHT <= w <= MAX_CLASS_WEIGHT for w in self.class_weights):
+            raise ValueError(f"class_weights: one number in [{MIN_CLASS_WEIGHT:g}, {MAX_CLASS_WEIGHT:g}] per class "
+                             f"({len(CLASSES)})")
         if set(CLASSES) <= set(self.never_alert):
             raise ValueError(f"never_alert: {list(self.never_alert)} holds every class; nothing would ever be alerted")
 
