@@ -460,6 +460,8 @@ class WearableLoop:
             values = self._weighted(self._ready[cap.trigger_index, N_SUBSEQ][0])
             conf = max(values)
             label = self.classes[values.index(conf)]
+            # max_mean_other may still withhold this alert (it reads early steps not classified yet): the
+            # guess takes it as an alert, which at worst leaves the next capture's early steps to _steps_of
             alerts = self.policy.status(label, conf, threshold) == "alert"
             ends = (may_continue and not opened and self.policy.event_ends_on_other
                     and label in self.policy.never_alert)  # an Other capture ends the event it continues
