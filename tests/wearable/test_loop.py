@@ -436,3 +436,22 @@ def test_class_weights_reweigh_the_probabilities_before_every_decision():
     assert ds[0].confidence == pytest.approx(1.5 / 2.2) and sum(ds[0].probs.values()) == pytest.approx(1.0)
     with pytest.raises(ValueError, match="class_weights"):
         AlertPolicy(class_weights=(1.0, 2.0))
+
+
+def test_a_new_alert_needs_the_mean_p_other_of_its_later_steps_below_max_mean_other():
+    # S = 3..5 say Other 0.6, the full window Phone 0.7 (P(Other) 0.06): mean P(Other) over S = 3..6 0.465
+    answers = {3: ("Other", 0.6), 4: ("Other", 0.6), 5: ("Other", 0.6), 6: ("Phone", 0.7)}
+    ds, *_ = _early_run(answers, Policy(max_mean_other=1.0))
+    assert _summary(ds) == [("alert", 6, "Phone", 0)]
+    ds, pub, *_ = _early_run(answers, Policy(max_mean_other=0.47))
+    assert _summary(ds) == [("alert", 6, "Phone", 0)]
+    ds, pub, *_ = _early_run(answers, Policy(max_mean_other=0.46))
+    assert _summary(ds) == [("uncertain", 6, "Phone", None)] and pub.handed == []
+    # a preliminary alert at S = 4 reads S = 3 and 4 (Other 0.8, then 0.01): 0.405
+    early = {3: ("Other", 0.8), 4: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    assert _summary(_early_run(early, Policy(max_mean_other=0.41))[0])[0] == ("preliminary", 4, "Phone", 0)
+    assert _summary(_early_run(early, Policy(max_mean_other=0.4))[0]) == [("alert", 6, "Phone", 0)]
+    # S = 1 and 2 do not count, and an alert already open is confirmed whatever its steps said
+    opened = {2: ("Phone", 0.95), 3: ("Other", 0.9), 4: ("Other", 0.9), 5: ("Other", 0.9), 6: ("Phone", 0.7)}
+    assert _summary(_early_run(opened, Policy(max_mean_other=0.1))[0]) == [("preliminary", 2, "Phone", 0),
+                                                                          ("confirmed", 6, "Phone", 0)]
