@@ -32,9 +32,16 @@ Two ways to protect people (``[zones] separation``):
   ``lost_person_speed_mps`` x the time since closer to the arm. While that set stays outside
   the protective distance he is no reason to stop (the arm slows for it as for anyone); once
   it reaches it, the arm stops (``person_lost``) until he is seen again or, ``lost_hold_s``
-  after his last valid pose, he is forgotten. A person the lifter has never lifted validly
-  stops the arm (FAULT, ``person_unseen``) as long as he is in view unlifted. The camera or
-  lifter failing as a whole (stale or invalid frames) is still a fault stop.
+  after his last valid pose, he is forgotten. **People seen in 2D but never lifted validly**
+  (walking in, half out of the picture, partly hidden) are bounded by their keypoints' rays
+  (``ray_bound``, :func:`ray_separation_m`): with the calibrated camera, a seen ankle's ray meets
+  the floor within a range of distance (or the head's ray crosses the heights of a standing
+  person's head), and every joint he shows lies on its own ray near that range. That region
+  stops the arm (``person_unlifted``) once it comes within the protective distance; when his
+  rays stop bounding him, his last bound shrinks as a lost person's reachable set does. One
+  whose rays never bounded him stops the arm (FAULT, ``person_unseen``) as long as he is in
+  view unlifted. The camera or lifter failing as a whole (stale or invalid frames) is still a
+  fault stop.
 * **"head"**: the dissertation's zones around the end effector, below.
 
 * **Tracking and prediction (Eq. 3).** ``HeadTracker`` fits a straight line to the
@@ -99,6 +106,7 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.skeleton import HEAD as HEAD_JOINT
+from edge_runtime.core.skeleton import L_ANKLE, PARENTS, R_ANKLE
 
 GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
 
@@ -209,6 +217,11 @@ class ZoneParams:
     suite hard:60 seed 5: 0.9 m gave 1.29x stop-only's productive share, 0.75 m 1.36x, both without
     a collision); with the full-speed T_s (shipped) S_p at the slowest speed is 1.13 m and this only
     turns a stop into a retraction for someone standing within reach."""
+    escape_deg: float = config.setting(120.0, config.within(0, 180))
+    """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done makes it
+    turn about its base until the hand's bearing is this far from his (deg; 0: never): folded in
+    front of him the arm is within his reach (an arm reaching 0.75-1.05 m from a pelvis 1.4 m out),
+    beside or behind the base it is not."""
     approach_speed_mps: float = config.setting(0.3, config.NON_NEGATIVE)
     """whole_body: a person "keeps coming" when his head moves toward the end effector faster
     than this (m/s; above the tracker's 0.1 m/s of velocity noise)."""
@@ -237,6 +250,28 @@ class ZoneParams:
     valid pose, every joint of him (his reachable set grows this fast, or at his last tracked
     speed if that was faster): ISO 13855's 2.0 m/s for a hand or arm (K = 2000 mm/s, 6.2.3),
     above its 1.6 m/s walking, and the hard suite's running bursts."""
+    ray_bound: bool = True
+    """whole_body: a person the camera sees but the lifter has not (yet) lifted validly is bounded
+    by his keypoints' rays (:func:`ray_separation_m`: his feet on the floor along the ankles' rays,
+    or his head within ``ray_head_heights_m`` along its ray; every joint he shows on its own ray
+    within ``ray_body_extent_m`` of that), and stops the arm only when that region comes within the
+    protective distance (False: he stops it while he is in view, ``person_unseen``). Without a
+    usable ankle or head ray he stops it as before."""
+    ray_ankle_heights_m: tuple[float, float] = config.setting(
+        (0.0, 0.45), ("[low, high] heights (m) with 0 <= low < high", lambda v: len(v) == 2 and 0 <= v[0] < v[1]))
+    """whole_body ray bound: the height above the floor (m) of an ankle: a foot on the ground (0.04 x
+    body height) or in the air mid-stride or running, and the calibration's floor error."""
+    ray_stride_m: float = config.setting(1.0, config.POSITIVE)
+    """whole_body ray bound: how far apart (ground, m) the feet may be (a running stride): with one
+    ankle seen, the foot on the ground may be the other one."""
+    ray_head_heights_m: tuple[float, float] = config.setting(
+        (1.2, 2.05), ("[low, high] heights (m) with 0 < low < high", lambda v: len(v) == 2 and 0 < v[0] < v[1]))
+    """whole_body ray bound: the head joint's (the crown's) height above the floor (m): people 1.45-2.0
+    m tall, bending toward the work down to 1.2 m."""
+    ray_body_extent_m: float = config.setting(1.3, config.POSITIVE)
+    """whole_body ray bound: how far (ground distance, m) any joint of a person may be from his foot on
+    the ground (or, bounded by the head, from his head): a pelvis over the feet and an arm reaching
+    forward (the hard suite's reach: the wrists 0.75-1.05 m in front of the pelvis)."""
     retract_weight_away_m: float = config.setting(0.3, config.NON_NEGATIVE)
     """Eq. 6 weight factor 1: the step away from the head (m)."""
     retract_weight_path_m: float = config.setting(0.2, config.NON_NEGATIVE)
@@ -484,6 +519,9 @@ class HazardMonitor:
         """whole_body: each person's last valid pose (``_Seen``), kept ``lost_hold_s`` after it."""
         self._unseen: str | None = None  # this frame: a person lifted invalidly and never validly
         self._lost_stop: list = []  # this frame: the lost people whose reachable set stops the arm
+        self._unlifted_stop: list = []  # this frame: the people never lifted whose rays' bound stops the arm
+        self._bounded: dict = {}
+        """whole_body: each never-lifted person's last ray bound (time s, separation m, his point nearest the arm)."""
         self._coming = False  # this frame: someone keeps coming at the arm (the retraction rule)
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
@@ -492,10 +530,11 @@ class HazardMonitor:
     # -- inputs ---------------------------------------------------------------------------
 
     def observe(self, t_s: float, people: dict[int, np.ndarray], effector_m, arm_q_rad=None,
-                unseen: dict | None = None) -> Decision:
+                unseen: dict | None = None, rays: dict | None = None) -> Decision:
         """A valid pose frame: update the trackers and the zone level. ``unseen``: id -> reason for
         the people the camera reports in this frame but the lifter could not lift (whole_body: each
-        is judged from his last valid pose, :meth:`_lost`; "head": the frame is invalid)."""
+        is judged from his last valid pose, :meth:`_lost`, and by his keypoints' rays, ``rays``: id ->
+        :class:`PersonRays`, :meth:`_unlifted`; "head": the frame is invalid)."""
         unseen = dict(unseen or {})
         if unseen and self.zones.separation == "head":
             wid, why = next(iter(unseen.items()))
@@ -516,7 +555,7 @@ class HazardMonitor:
             d_exit = nearest[0]
         else:
             entry, exit_r, nearest, d_exit = self._speed_and_separation(t_s, people, ests, effector_m, arm_q_rad,
-                                                                        unseen)
+                                                                        unseen, rays or {})
         self._update_level(t_s, entry, d_exit, nearest[2], exit_r)
         if self._fault is not None and self._fault_clear.clear_for(t_s, True) >= self.zones.dwell_s:
             self._fault = None
@@ -537,7 +576,7 @@ class HazardMonitor:
         return entry, {State.LEVEL2: z.r2_m + z.hysteresis_m, State.LEVEL1: z.r1_m + z.hysteresis_m}, nearest
 
     def _speed_and_separation(self, t_s: float, people, ests: dict[int, HeadEstimate], effector_m, arm_q_rad,
-                              unseen: dict):
+                              unseen: dict, rays: dict):
         """Whole-body speed and separation monitoring (ISO/TS 15066). Per person: the smallest
         separation of his body now and predicted ``predict_s`` ahead (every joint moved with his
         head's velocity) from the arm's capsules; the robot speed that separation allows; and
@@ -584,15 +623,22 @@ class HazardMonitor:
                 nearest = (d, wid, est)
             if allowed < worst[0] or worst[1] is None:
                 worst = (allowed, speed, d)
-        self._unseen = next((f"person {w}: {why}" for w, why in unseen.items() if w not in self._seen), None)
-        self._lost_stop = []
-        for wid, d, speed in self._lost(t_s, set(ests), caps):
-            allowed = z.allowed_speed_mps(d, speed)
-            if allowed < v_stop - 1e-9:
-                entry = max(entry, State.LEVEL1)
-                self._lost_stop.append(wid)
-            if allowed < worst[0] or worst[1] is None:
-                worst = (allowed, speed, d)
+        bounds = {w: ray_separation_m(rays[w], caps, z) for w in unseen if z.ray_bound and w in rays}
+        self._lost_stop, self._unlifted_stop = [], []
+        for stops, judged in ((self._lost_stop, self._lost(t_s, set(ests), caps, bounds)),
+                              (self._unlifted_stop, self._unlifted(t_s, unseen, bounds, set(ests)))):
+            for wid, d, speed, point in judged:
+                allowed = z.allowed_speed_mps(d, speed)
+                if point is not None and d <= z.reach_retract_m:
+                    # within reach by his rays alone: retract, away from the point of him nearest the arm
+                    entry = State.LEVEL2
+                    if d < nearest[0]:
+                        nearest = (d, wid, HeadEstimate(t_s, point, np.zeros(3), point))
+                elif allowed < v_stop - 1e-9:
+                    entry = max(entry, State.LEVEL1)
+                    stops.append(wid)
+                if allowed < worst[0] or worst[1] is None:
+                    worst = (allowed, speed, d)
         human_speed = worst[1]
         exit_r = {State.LEVEL2: max(z.body_retract_distance_m, z.reach_retract_m) + z.hysteresis_m,
                   State.LEVEL1: z.body_protective_distance_m(v_stop, human_speed) + z.hysteresis_m}
@@ -600,14 +646,46 @@ class HazardMonitor:
         self._scale = 1.0 if worst[1] is None else self._speed_scale(worst[2], human_speed)
         return entry, exit_r, nearest, min(nearest[0], worst[2])
 
-    def _lost(self, t_s: float, seen_now: set, caps):
-        """(id, worst-case separation m, his speed m/s) of every person seen validly before but not
-        in this frame (hidden, out of view, or lifted invalidly), for ``lost_hold_s`` after his last
+    def _unlifted(self, t_s: float, unseen: dict, bounds: dict, lifted_now: set):
+        """(id, worst-case separation m, his speed m/s, the point of him nearest the arm or None) of
+        every person in view whom the lifter has
+        never lifted validly but whose keypoints' rays bound him (``bounds``: id -> the
+        :func:`ray_separation_m` of this frame, or None); such a person whose rays bound nothing
+        (no usable ankle or head ray) stops the arm (``person_unseen``), unless his rays bounded
+        him within the last ``lost_hold_s``: then, as for a lost person, that bound shrinks by his
+        speed (``lost_person_speed_mps``) and the arm's full speed times the time since, and so
+        does it while he is out of view, until he is forgotten."""
+        z = self.zones
+        speed = z.lost_person_speed_mps
+        self._unseen = None
+        out = []
+        for wid, why in unseen.items():
+            if wid in self._seen:
+                continue  # lifted validly before: judged by his reachable set (_lost)
+            bound = bounds.get(wid)
+            if bound is not None:
+                self._bounded[wid] = (t_s, *bound)
+            elif wid not in self._bounded and self._unseen is None:
+                self._unseen = f"person {wid}: {why}"
+        for wid, (t_b, d_b, point) in list(self._bounded.items()):
+            age = t_s - t_b
+            if wid in lifted_now or wid in self._seen or age > z.lost_hold_s or age < 0:
+                del self._bounded[wid]
+                continue
+            out.append((wid, d_b - (speed + z.iso_robot_speed_mps) * age, speed, point if age == 0 else None))
+        return out
+
+    def _lost(self, t_s: float, seen_now: set, caps, bounds: dict | None = None):
+        """(id, worst-case separation m, his speed m/s, None) of every person seen validly before but
+        not in this frame (hidden, out of view, or lifted invalidly), for ``lost_hold_s`` after his last
         valid pose, then forgotten. His reachable set: his last valid body, every joint come
         ``v (t - t_seen)`` closer, v = ``lost_person_speed_mps`` or his last tracked speed if faster
         (ISO 13855's approach speeds): nothing the camera lost is assumed to have stood still, and
-        once that set is within the protective distance the arm stops (``person_lost``)."""
+        once that set is within the protective distance the arm stops (``person_lost``). In view
+        with rays that bound him (``bounds``: id -> :func:`ray_separation_m`), the larger of the
+        two bounds counts: each holds on its own."""
         z = self.zones
+        bounds = bounds or {}
         out = []
         for wid, seen in list(self._seen.items()):
             if wid in seen_now:
@@ -619,7 +697,9 @@ class HazardMonitor:
                 continue
             speed = max(z.lost_person_speed_mps, seen.speed_mps)
             d = separation_m(*body_spheres(seen.person_m), caps) - speed * age
-            out.append((wid, d, speed))
+            if bounds.get(wid) is not None:
+                d = max(d, bounds[wid][0])
+            out.append((wid, d, speed, None))
         return out
 
     def _speed_scale(self, d: float, human_speed_mps: float | None) -> float:
@@ -635,6 +715,10 @@ class HazardMonitor:
 
         now = quantised(d)
         return now if now <= self._scale else max(self._scale, quantised(d - z.hysteresis_m))
+
+    def bodies(self) -> list[np.ndarray]:
+        """whole_body: every person accounted for, at his last valid body (robot frame)."""
+        return [seen.person_m for seen in self._seen.values()]
 
     def invalid(self, t_s: float, reason: str) -> Decision:
         """A frame the lifter (or the input) marked invalid: stop."""
@@ -702,6 +786,8 @@ class HazardMonitor:
             state, reason = self.level, "worker_lost"
         elif self._lost_stop and self.level == State.LEVEL1:
             state, reason = self.level, f"person_lost: {', '.join(str(w) for w in self._lost_stop)}"
+        elif self._unlifted_stop and self.level == State.LEVEL1:
+            state, reason = self.level, f"person_unlifted: {', '.join(str(w) for w in self._unlifted_stop)}"
         else:
             state, reason = self.level, ("level2_retract" if self.level == State.LEVEL2 else "level1_stop")
         if self._fault is not None and state == State.LEVEL2:
@@ -812,13 +898,18 @@ def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_
     shifts = np.asarray(shifts_s, float)
     n = len(centres_m)
     moved = (centres_m[None] + shifts[:, None, None] * np.asarray(velocity_mps, float)[None, None]).reshape(-1, 3)
+    d = point_clearance_m(moved, capsules) - np.tile(radii_m, len(shifts))
+    return d.reshape(len(shifts), n).min(axis=1)
+
+
+def point_clearance_m(points_m: np.ndarray, capsules) -> np.ndarray:
+    """Distance (m) of each point (N, 3) from the nearest capsule's surface: (N,)."""
     a, b, r = capsules
     ab = b - a
-    ap = moved[:, None, :] - a[None]
+    ap = np.asarray(points_m, float)[:, None, :] - a[None]
     den = np.maximum((ab * ab).sum(-1), 1e-12)
     t = np.clip((ap * ab[None]).sum(-1) / den, 0.0, 1.0)
-    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1) - r[None] - np.tile(radii_m, len(shifts))[:, None]
-    return d.min(axis=1).reshape(len(shifts), n).min(axis=1)
+    return (np.linalg.norm(ap - t[..., None] * ab[None], axis=-1) - r[None]).min(axis=1)
 
 
 def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
@@ -826,6 +917,146 @@ def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
     ``radii_m`` (N,)) and capsules (starts (K, 3), ends (K, 3), radii (K,)); negative when
     they overlap."""
     return float(separation_per_shift_m(centres_m, radii_m, np.zeros(3), (0.0,), capsules)[0])
+
+
+# ----------------------------------------------------------------------------------------------
+# People seen in 2D but not lifted: bounded by their keypoints' rays
+
+@dataclass(frozen=True)
+class PersonRays:
+    """What the camera shows of a person the lifter has not lifted validly: his keypoints' rays
+    in the robot frame (from the calibration's camera pose)."""
+
+    origin_m: np.ndarray
+    """(3,) the camera centre."""
+    directions: np.ndarray
+    """(17, 3) unit directions of his H36M keypoints; NaN rows for joints not seen."""
+    floor_y_m: float
+    """The floor's height in the robot frame (m)."""
+
+
+BONE_MAX_M = (0.2, 0.5, 0.5, 0.2, 0.5, 0.5, 0.3, 0.3, 0.2, 0.3, 0.25, 0.4, 0.32, 0.25, 0.4, 0.32)
+"""The longest bone (m) from each joint 1..16 to its parent (``skeleton.PARENTS``): a 2.0 m
+person's (edge_runtime/core/skeleton.py's proportions) with a margin. A joint not seen lies
+within the sum of the bones between it and a joint that is."""
+RAY_SAMPLE_M = 0.1
+"""Spacing (m) of the points a joint's ray segment is checked at (half of it is subtracted)."""
+RAY_MAX_RANGE_M = 30.0
+"""Ray segments end this far (ground distance, m) from the camera: further out nobody is near the arm."""
+RAY_MIN_SLOPE = math.sin(math.radians(2.0))
+"""A ray flatter than this (sine of its angle to the horizontal) bounds nothing: its floor or
+head-height crossing is too ill-conditioned."""
+
+
+def _joint_reach_m() -> np.ndarray:
+    """(17, 17) the longest possible distance between two joints along the skeleton (m)."""
+    d = np.full((17, 17), np.inf)
+    np.fill_diagonal(d, 0.0)
+    for child, parent in enumerate(PARENTS):
+        if parent >= 0:
+            d[child, parent] = d[parent, child] = BONE_MAX_M[child - 1]
+    for k in range(17):
+        d = np.minimum(d, d[:, k:k + 1] + d[k:k + 1, :])
+    return d
+
+
+JOINT_REACH_M = _joint_reach_m()
+
+
+def ray_ground_range_m(origin_m, direction, heights_m: tuple[float, float], floor_y_m: float):
+    """(near, far): the ground distances (m) from the camera at which the ray ``direction`` is
+    between ``heights_m`` above the floor, or None when it never is (or is too flat to say)."""
+    u = np.asarray(direction, float)
+    g = math.hypot(u[0], u[2])
+    if g < 1e-9 or abs(u[1]) < RAY_MIN_SLOPE:
+        return None
+    h_cam = float(origin_m[1]) - floor_y_m
+    near, far = sorted((h - h_cam) / (u[1] / g) for h in heights_m)
+    if far <= 0:
+        return None
+    return max(near, 0.0), far
+
+
+def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
+    """A lower bound of the separation (m) of a person from the arm's ``capsules`` from his
+    keypoints' rays alone, and the point of him that may be nearest (for Eq. 6), or None when
+    his rays bound nothing. Where he can be:
+
+    * each ankle he shows is on its ray between ``ray_ankle_heights_m`` above the floor (a foot
+      down or in the air), a range of ground distance from the camera (failing both ankles, his
+      head is on its ray between ``ray_head_heights_m``);
+    * every joint of him is within ``ray_body_extent_m`` (ground distance) of the foot on the
+      ground, and that foot within ``ray_stride_m`` of the other one when one ankle alone is seen:
+      so each joint he shows is on its own ray within that of the range above, and every joint
+      (shown or not) stands over the floor within that of the ankles' (or head's) floor points;
+    * two joints he shows are no further apart than the bones between them (``JOINT_REACH_M``):
+      the points of each joint's ray segment that no point of another's is that close to are
+      dropped (twice over every pair), and a joint he does not show is within its bones of one
+      he does.
+
+    The bound is the smallest of these regions' clearance from the capsules, less each joint's
+    body radius (``BODY_RADII_M``; limb midpoints too)."""
+    u, o = rays.directions, np.asarray(rays.origin_m, float)
+    seen = np.isfinite(u).all(axis=1)
+    anchors = [j for j in (L_ANKLE, R_ANKLE) if seen[j]]
+    heights, extent = zones.ray_ankle_heights_m, zones.ray_body_extent_m + (zones.ray_stride_m if len(anchors) == 1 else 0)
+    if not anchors and seen[HEAD_JOINT]:
+        anchors, heights, extent = [HEAD_JOINT], zones.ray_head_heights_m, zones.ray_body_extent_m
+    ranges = {j: ray_ground_range_m(o, u[j], heights, rays.floor_y_m) for j in anchors}
+    ranges = {j: r for j, r in ranges.items() if r is not None}
+    g = np.hypot(u[:, 0], u[:, 2])
+    if not ranges or (g[seen] < 1e-9).any():  # nothing crosses the floor or a head's height; a ray straight down
+        return None
+    near = max(min(r[0] for r in ranges.values()) - extent, 0.0)
+    far = min(max(r[1] for r in ranges.values()) + extent, RAY_MAX_RANGE_M)
+    pts, step = {}, {}
+    for j in np.flatnonzero(seen):
+        lo, hi = ranges.get(j, (near, far))  # an anchor on its own range, every other joint within the extent
+        t = np.linspace(lo / g[j], hi / g[j], max(2, int(math.ceil((hi - lo) / RAY_SAMPLE_M)) + 1))
+        pts[j], step[j] = o + t[:, None] * u[j], float(t[1] - t[0])
+    pruned = _consistent(pts, step)
+    if pruned is not None:
+        pts = pruned
+    flat = lambda p: p * (1.0, 0.0, 1.0)  # noqa: E731 - the floor's view: the arm seen from above
+    a, b, r = capsules
+    floor_caps = (flat(a), flat(b), r)
+    # every joint stands over the floor within the extent of where the anchors stand
+    column = float(min(point_clearance_m(flat(pts[j]), floor_caps).min() - 0.5 * step[j] for j in ranges)) - extent
+    clear = np.full(17, -np.inf)
+    best = (math.inf, None)
+    for j, p in pts.items():
+        c = point_clearance_m(p, capsules)
+        k = int(np.argmin(c))
+        clear[j] = float(c[k]) - 0.5 * step[j]  # every point of the segment is within half a step of one
+        if clear[j] < best[0]:
+            best = (clear[j], p[k])
+    joint = np.maximum((clear[None, :] - JOINT_REACH_M).max(axis=1), column)
+    a_, b_ = np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS])
+    limb = np.maximum(joint[a_], joint[b_]) - 0.5 * JOINT_REACH_M[a_, b_]  # a limb's midpoint: half a bone from either end
+    d = min(float((joint - BODY_RADII_M).min()),
+            float((limb - 0.5 * (BODY_RADII_M[a_] + BODY_RADII_M[b_])).min()))
+    return d, best[1]
+
+
+def _consistent(pts: dict, step: dict, passes: int = 2):
+    """Each seen joint's ray samples (``pts``: joint -> (N, 3), ``step``: their spacing along the
+    ray) without those no sample of another seen joint is within the bones between them of
+    (``JOINT_REACH_M``, plus half of both spacings); None when that leaves a joint nothing (the
+    keypoints contradict a body: a swapped or stray keypoint), and nothing is dropped."""
+    pts = dict(pts)
+    joints = sorted(pts)
+    for _ in range(passes):
+        for i in joints:
+            keep = np.ones(len(pts[i]), bool)
+            for k in joints:
+                if k == i:
+                    continue
+                gap = np.linalg.norm(pts[i][:, None, :] - pts[k][None, :, :], axis=-1).min(axis=1)
+                keep &= gap <= JOINT_REACH_M[i, k] + 0.5 * (step[i] + step[k])
+            if not keep.any():
+                return None
+            pts[i] = pts[i][keep]
+    return pts
 
 
 # ----------------------------------------------------------------------------------------------
@@ -911,6 +1142,28 @@ def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: Re
     if r > limits.max_radius_m:
         target[[0, 2]] *= limits.max_radius_m / r
     return _retraction(target, limits, tool_yaw_rad, held_yaw_rad)
+
+
+def escape_retraction(effector_m, head: HeadEstimate, tool_yaw_rad: float | None,
+                      escape_deg: float) -> Retraction | None:
+    """Someone stands within reach of an arm that has retracted as far as Eq. 6 takes it: the arm
+    turns about the base's axis, as a whole (the hand's target and the tool's yaw turned by the same
+    angle: for the arm, its first joint alone), until its hand's bearing is ``escape_deg`` from his,
+    on the side it is on already (never across in front of him). None when it is that far already
+    (within 15 deg) or where the tool points is unknown."""
+    eff = np.asarray(effector_m, float)
+    if tool_yaw_rad is None:
+        return None
+    g, p = ground(eff), ground(head.position_m)
+    bearing_e, bearing_p = math.atan2(g[0], g[1]), math.atan2(p[0], p[1])
+    off = math.remainder(bearing_e - bearing_p, 2 * math.pi)
+    turn = math.copysign(math.radians(escape_deg), off if off != 0 else 1.0) - off
+    if abs(turn) < math.radians(15.0):
+        return None
+    c, s_ = math.cos(turn), math.sin(turn)
+    target = eff.copy()
+    target[[0, 2]] = (c * g[0] + s_ * g[1], -s_ * g[0] + c * g[1])
+    return Retraction(target, tool_yaw_rad + turn)
 
 
 def radial_retraction(effector_m, zones: ZoneParams, limits: RetractLimits, tool_yaw_rad: float | None,
