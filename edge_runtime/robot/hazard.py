@@ -939,8 +939,9 @@ BONE_MAX_M = (0.2, 0.5, 0.5, 0.2, 0.5, 0.5, 0.3, 0.3, 0.2, 0.3, 0.25, 0.4, 0.32,
 """The longest bone (m) from each joint 1..16 to its parent (``skeleton.PARENTS``): a 2.0 m
 person's (edge_runtime/core/skeleton.py's proportions) with a margin. A joint not seen lies
 within the sum of the bones between it and a joint that is."""
-RAY_SAMPLE_M = 0.1
-"""Spacing (m) of the points a joint's ray segment is checked at (half of it is subtracted)."""
+RAY_MAX_SAMPLES = 48
+"""Points each joint's ray segment is checked at (half their spacing is subtracted): 0.1 m apart
+on a segment 4.7 m long."""
 RAY_MAX_RANGE_M = 30.0
 """Ray segments end this far (ground distance, m) from the camera: further out nobody is near the arm."""
 RAY_MIN_SLOPE = math.sin(math.radians(2.0))
@@ -990,8 +991,8 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
       so each joint he shows is on its own ray within that of the range above, and every joint
       (shown or not) stands over the floor within that of the ankles' (or head's) floor points;
     * two joints he shows are no further apart than the bones between them (``JOINT_REACH_M``):
-      the points of each joint's ray segment that no point of another's is that close to are
-      dropped (twice over every pair), and a joint he does not show is within its bones of one
+      the points of each joint's ray segment that no point of a related one's is that close to
+      are dropped (:func:`_consistent`), and a joint he does not show is within its bones of one
       he does.
 
     The bound is the smallest of these regions' clearance from the capsules, less each joint's
@@ -1009,54 +1010,74 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
         return None
     near = max(min(r[0] for r in ranges.values()) - extent, 0.0)
     far = min(max(r[1] for r in ranges.values()) + extent, RAY_MAX_RANGE_M)
-    pts, step = {}, {}
-    for j in np.flatnonzero(seen):
-        lo, hi = ranges.get(j, (near, far))  # an anchor on its own range, every other joint within the extent
-        t = np.linspace(lo / g[j], hi / g[j], max(2, int(math.ceil((hi - lo) / RAY_SAMPLE_M)) + 1))
-        pts[j], step[j] = o + t[:, None] * u[j], float(t[1] - t[0])
-    pruned = _consistent(pts, step)
-    if pruned is not None:
-        pts = pruned
-    flat = lambda p: p * (1.0, 0.0, 1.0)  # noqa: E731 - the floor's view: the arm seen from above
-    a, b, r = capsules
-    floor_caps = (flat(a), flat(b), r)
-    # every joint stands over the floor within the extent of where the anchors stand
-    column = float(min(point_clearance_m(flat(pts[j]), floor_caps).min() - 0.5 * step[j] for j in ranges)) - extent
+    # each seen joint's distance along its ray (m): an anchor on its own range, every other joint within the extent
+    span = {j: tuple(v / g[j] for v in ranges.get(j, (near, far))) for j in np.flatnonzero(seen)}
+    span = _consistent(span, u) or span
+    joints = np.array(sorted(span))
+    lo, hi = np.array([span[j] for j in joints]).T
+    t = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, RAY_MAX_SAMPLES)[None, :]    # (J, S)
+    half = 0.5 * (hi - lo) / (RAY_MAX_SAMPLES - 1)  # every point of a segment is within this of a sample
+    pts = o + t[..., None] * u[joints][:, None, :]                                             # (J, S, 3)
+    c = point_clearance_m(pts.reshape(-1, 3), capsules).reshape(t.shape) - half[:, None]
     clear = np.full(17, -np.inf)
-    best = (math.inf, None)
-    for j, p in pts.items():
-        c = point_clearance_m(p, capsules)
-        k = int(np.argmin(c))
-        clear[j] = float(c[k]) - 0.5 * step[j]  # every point of the segment is within half a step of one
-        if clear[j] < best[0]:
-            best = (clear[j], p[k])
+    clear[joints] = c.min(axis=1)
+    k = np.unravel_index(int(np.argmin(c)), c.shape)
+    # every joint stands over the floor within the extent of where the anchors stand (the arm seen from above)
+    flat = np.array([1.0, 0.0, 1.0])
+    a, b, r = capsules
+    on_floor = np.isin(joints, list(ranges))
+    column = float((point_clearance_m(pts[on_floor].reshape(-1, 3) * flat, (a * flat, b * flat, r))
+                    .reshape(-1, RAY_MAX_SAMPLES) - half[on_floor, None]).min()) - extent
     joint = np.maximum((clear[None, :] - JOINT_REACH_M).max(axis=1), column)
     a_, b_ = np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS])
     limb = np.maximum(joint[a_], joint[b_]) - 0.5 * JOINT_REACH_M[a_, b_]  # a limb's midpoint: half a bone from either end
     d = min(float((joint - BODY_RADII_M).min()),
             float((limb - 0.5 * (BODY_RADII_M[a_] + BODY_RADII_M[b_])).min()))
-    return d, best[1]
+    return d, pts[k]
 
 
-def _consistent(pts: dict, step: dict, passes: int = 2):
-    """Each seen joint's ray samples (``pts``: joint -> (N, 3), ``step``: their spacing along the
-    ray) without those no sample of another seen joint is within the bones between them of
-    (``JOINT_REACH_M``, plus half of both spacings); None when that leaves a joint nothing (the
-    keypoints contradict a body: a swapped or stray keypoint), and nothing is dropped."""
-    pts = dict(pts)
-    joints = sorted(pts)
+def _consistent(span: dict, u: np.ndarray, passes: int = 3) -> dict | None:
+    """Each seen joint's interval of distance along its ray (``span``: joint -> (lo, hi) m; ``u``
+    the rays' unit directions, all from the camera centre) narrowed to where a related seen joint
+    is within the bones between them (``JOINT_REACH_M``). Related: each seen joint and its nearest
+    seen ancestor in the skeleton (``PARENTS``), both ways, every pair at once, ``passes`` times: a
+    chain from the ankles up to the wrists. Within one ray's interval the points near enough to
+    another ray's segment are an interval again (the distance is convex), found on
+    ``RAY_MAX_SAMPLES`` samples and widened by half their spacing (the distance changes no faster
+    than the point moves). None when that leaves a joint nothing (the keypoints contradict a body:
+    a swapped or stray keypoint): nothing is narrowed then."""
+    joints = sorted(span)
+    first, second = [], []
+    for j in joints:
+        k = PARENTS[j]
+        while k >= 0 and k not in span:
+            k = PARENTS[k]
+        if k >= 0:
+            first += [j, k]
+            second += [k, j]
+    if not first:
+        return span
+    i_, k_ = np.array(first), np.array(second)
+    lo, hi = np.full(17, np.nan), np.full(17, np.nan)
+    lo[joints], hi[joints] = zip(*(span[j] for j in joints))
+    cos = (u[i_] * u[k_]).sum(axis=1)[:, None]
+    reach = JOINT_REACH_M[i_, k_][:, None]
+    frac = np.linspace(0.0, 1.0, RAY_MAX_SAMPLES)[None, :]
     for _ in range(passes):
-        for i in joints:
-            keep = np.ones(len(pts[i]), bool)
-            for k in joints:
-                if k == i:
-                    continue
-                gap = np.linalg.norm(pts[i][:, None, :] - pts[k][None, :, :], axis=-1).min(axis=1)
-                keep &= gap <= JOINT_REACH_M[i, k] + 0.5 * (step[i] + step[k])
-            if not keep.any():
-                return None
-            pts[i] = pts[i][keep]
-    return pts
+        t = lo[i_][:, None] + (hi[i_] - lo[i_])[:, None] * frac
+        s_ = np.clip(t * cos, lo[k_][:, None], hi[k_][:, None])   # the nearest point of the other's segment
+        gap = np.sqrt(np.maximum(t * t + s_ * s_ - 2 * t * s_ * cos, 0.0))
+        h = 0.5 * (t[:, 1] - t[:, 0])
+        keep = gap <= reach + h[:, None]
+        if not keep.any(axis=1).all():
+            return None
+        new_lo = np.where(keep, t, np.inf).min(axis=1) - h
+        new_hi = np.where(keep, t, -np.inf).max(axis=1) + h
+        np.maximum.at(lo, i_, new_lo)
+        np.minimum.at(hi, i_, new_hi)
+        if (lo[joints] > hi[joints]).any():
+            return None
+    return {j: (float(lo[j]), float(hi[j])) for j in joints}
 
 
 # ----------------------------------------------------------------------------------------------
