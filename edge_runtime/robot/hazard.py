@@ -106,7 +106,8 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.skeleton import HEAD as HEAD_JOINT
-from edge_runtime.core.skeleton import L_ANKLE, PARENTS, R_ANKLE
+from edge_runtime.core.skeleton import HIP as HIP_JOINT
+from edge_runtime.core.skeleton import L_ANKLE, L_HIP, PARENTS, R_ANKLE, R_HIP
 
 GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
 
@@ -264,6 +265,10 @@ class ZoneParams:
     ray_stride_m: float = config.setting(1.0, config.POSITIVE)
     """whole_body ray bound: how far apart (ground, m) the feet may be (a running stride): with one
     ankle seen, the foot on the ground may be the other one."""
+    ray_hip_heights_m: tuple[float, float] = config.setting(
+        (0.45, 1.15), ("[low, high] heights (m) with 0 < low < high", lambda v: len(v) == 2 and 0 < v[0] < v[1]))
+    """whole_body ray bound: the hip joints' (and pelvis's) height above the floor (m): 0.53 x body height
+    standing, lower bending or crouching."""
     ray_head_heights_m: tuple[float, float] = config.setting(
         (1.2, 2.05), ("[low, high] heights (m) with 0 < low < high", lambda v: len(v) == 2 and 0 < v[0] < v[1]))
     """whole_body ray bound: the head joint's (the crown's) height above the floor (m): people 1.45-2.0
@@ -984,12 +989,13 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     his rays bound nothing. Where he can be:
 
     * each ankle he shows is on its ray between ``ray_ankle_heights_m`` above the floor (a foot
-      down or in the air), a range of ground distance from the camera (failing both ankles, his
-      head is on its ray between ``ray_head_heights_m``);
+      down or in the air), a range of ground distance from the camera; so are his hips and pelvis
+      between ``ray_hip_heights_m`` and his head between ``ray_head_heights_m``;
     * every joint of him is within ``ray_body_extent_m`` (ground distance) of the foot on the
-      ground, and that foot within ``ray_stride_m`` of the other one when one ankle alone is seen:
-      so each joint he shows is on its own ray within that of the range above, and every joint
-      (shown or not) stands over the floor within that of the ankles' (or head's) floor points;
+      ground (and that foot within ``ray_stride_m`` of the other one when one ankle alone is
+      seen), of his hips and of his head: so each joint he shows is on its own ray within the
+      ranges above widened by that (where they all overlap), and every joint (shown or not)
+      stands over the floor within that of each such anchor's floor points;
     * two joints he shows are no further apart than the bones between them (``JOINT_REACH_M``):
       the points of each joint's ray segment that no point of a related one's is that close to
       are dropped (:func:`_consistent`), and a joint he does not show is within its bones of one
@@ -999,18 +1005,30 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     body radius (``BODY_RADII_M``; limb midpoints too)."""
     u, o = rays.directions, np.asarray(rays.origin_m, float)
     seen = np.isfinite(u).all(axis=1)
-    anchors = [j for j in (L_ANKLE, R_ANKLE) if seen[j]]
-    heights, extent = zones.ray_ankle_heights_m, zones.ray_body_extent_m + (zones.ray_stride_m if len(anchors) == 1 else 0)
-    if not anchors and seen[HEAD_JOINT]:
-        anchors, heights, extent = [HEAD_JOINT], zones.ray_head_heights_m, zones.ray_body_extent_m
-    ranges = {j: ray_ground_range_m(o, u[j], heights, rays.floor_y_m) for j in anchors}
-    ranges = {j: r for j, r in ranges.items() if r is not None}
     g = np.hypot(u[:, 0], u[:, 2])
-    if not ranges or (g[seen] < 1e-9).any():  # nothing crosses the floor or a head's height; a ray straight down
+    if (g[seen] < 1e-9).any():  # a ray straight down or up: that joint is anywhere below or above the camera
         return None
-    near = max(min(r[0] for r in ranges.values()) - extent, 0.0)
-    far = min(max(r[1] for r in ranges.values()) + extent, RAY_MAX_RANGE_M)
-    # each seen joint's distance along its ray (m): an anchor on its own range, every other joint within the extent
+    # anchors: joints whose height above the floor is known within a band, each group with the ground distance
+    # every joint of him is within of it
+    feet = [j for j in (L_ANKLE, R_ANKLE) if seen[j]]
+    groups = [(feet, zones.ray_ankle_heights_m, zones.ray_body_extent_m + (zones.ray_stride_m if len(feet) == 1 else 0)),
+              ([j for j in (HIP_JOINT, R_HIP, L_HIP) if seen[j]], zones.ray_hip_heights_m, zones.ray_body_extent_m),
+              ([HEAD_JOINT] if seen[HEAD_JOINT] else [], zones.ray_head_heights_m, zones.ray_body_extent_m)]
+    ranges, regions = {}, []
+    for joints_, heights, extent in groups:
+        got = {j: ray_ground_range_m(o, u[j], heights, rays.floor_y_m) for j in joints_}
+        got = {j: r for j, r in got.items() if r is not None}
+        if got:
+            ranges.update(got)
+            regions.append((min(r[0] for r in got.values()) - extent, max(r[1] for r in got.values()) + extent,
+                            list(got), extent))
+    if not regions:  # nothing crosses the floor or its band of heights
+        return None
+    near, far = max(r[0] for r in regions), min(r[1] for r in regions)  # each region holds all of him
+    if near > far:  # the anchors disagree (a stray keypoint): the loosest
+        near, far = min(r[0] for r in regions), max(r[1] for r in regions)
+    near, far = max(near, 0.0), min(far, RAY_MAX_RANGE_M)
+    # each seen joint's distance along its ray (m): an anchor on its own range, every other joint within the region
     span = {j: tuple(v / g[j] for v in ranges.get(j, (near, far))) for j in np.flatnonzero(seen)}
     span = _consistent(span, u) or span
     joints = np.array(sorted(span))
@@ -1022,12 +1040,11 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     clear = np.full(17, -np.inf)
     clear[joints] = c.min(axis=1)
     k = np.unravel_index(int(np.argmin(c)), c.shape)
-    # every joint stands over the floor within the extent of where the anchors stand (the arm seen from above)
+    # every joint stands over the floor within an anchor group's extent of where it stands (the arm seen from above)
     flat = np.array([1.0, 0.0, 1.0])
     a, b, r = capsules
-    on_floor = np.isin(joints, list(ranges))
-    column = float((point_clearance_m(pts[on_floor].reshape(-1, 3) * flat, (a * flat, b * flat, r))
-                    .reshape(-1, RAY_MAX_SAMPLES) - half[on_floor, None]).min()) - extent
+    over = point_clearance_m(pts.reshape(-1, 3) * flat, (a * flat, b * flat, r)).reshape(t.shape) - half[:, None]
+    column = max(float(over[np.isin(joints, members)].min()) - extent for _, _, members, extent in regions)
     joint = np.maximum((clear[None, :] - JOINT_REACH_M).max(axis=1), column)
     a_, b_ = np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS])
     limb = np.maximum(joint[a_], joint[b_]) - 0.5 * JOINT_REACH_M[a_, b_]  # a limb's midpoint: half a bone from either end

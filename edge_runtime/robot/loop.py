@@ -137,9 +137,10 @@ class LoopParams:
     """whole_body: a retraction under way that has brought the arm this much closer (m) to someone
     within the retraction's reach (``body_retract_distance_m`` + ``retract_lead_s`` x
     ``lost_person_speed_mps``), by its own motion (his body now against the arm where it is and
-    where the retraction began), is replaced by a stop: the controller moves its joints along a
-    straight line to its IK solution, and a far solution swings the hand through the cell (hard:200
-    seed 3, hard_109: toward a passing worker, 0.081 m)."""
+    where the retraction began), is replaced by the retraction straight toward the base, and that
+    one by a stop: the controller moves its joints along a straight line to its IK solution, and a
+    far solution swings the hand through the cell (hard:200 seed 3, hard_109: toward a passing
+    worker, 0.081 m)."""
     retract_max_radius_m: float = config.setting(0.7, config.POSITIVE)
     """Retraction targets further than this from the base's axis (ground distance, m) are
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
@@ -301,6 +302,7 @@ class RobotLoop:
         self._retract_fallback = False
         self._retract_distance_m = math.inf
         self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
+        self._escaped = False  # this level 2 has turned the arm about its base once already
         self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
@@ -606,20 +608,23 @@ class RobotLoop:
 
     def _desired_motion(self, state: State, decision: Decision) -> Motion:
         if state == State.NORMAL:
-            self._retract, self._retract_seq, self._unreachable = None, None, False
+            self._retract, self._retract_seq, self._unreachable, self._escaped = None, None, False, False
             return self._task_motion()
         if state == State.LEVEL2:
             escape = self._escape(decision)
             if escape is not None or self._retract is None or self._retract_again(decision):
+                self._escaped |= escape is not None
                 self._retract = escape or self._retract_motion(decision)
                 self._retract_fallback = False
                 self._retract_distance_m = decision.distance_m
                 self._retract_q0 = self._last_q
             elif self._retract_backfires():
+                # the straight way toward the base once (the unreachable retraction's fallback), then a stop
                 self.counters.backfired += 1
-                self._retract = STOP
+                self._retract = STOP if self._retract_fallback else self._radial_retract()
+                self._retract_fallback, self._retract_q0 = True, self._last_q
             return self._retract
-        self._retract, self._retract_seq, self._unreachable = None, None, False
+        self._retract, self._retract_seq, self._unreachable, self._escaped = None, None, False, False
         return STOP
 
     def _task_motion(self) -> Motion:
@@ -653,14 +658,18 @@ class RobotLoop:
 
     def _escape(self, decision: Decision) -> Motion | None:
         """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done (Eq. 6
-        takes it no further: it stops short of the base's axis) makes the arm turn about its base,
-        away from him (:func:`edge_runtime.robot.hazard.escape_retraction`): a worker who stands at
-        the cell and reaches for the tool reached the folded arm in front of him (hard:200 seed 3,
-        hard_101 0.033 m, hard_195 0.061 m). None otherwise."""
+        takes it no further: it stops short of the base's axis) or was stopped makes the arm turn
+        about its base, away from him (:func:`edge_runtime.robot.hazard.escape_retraction`), once
+        while in level 2: a worker who stands at the cell and reaches for the tool reached the
+        folded arm in front of him (hard:200 seed 3, hard_101 0.033 m, hard_195 0.061 m). None
+        otherwise."""
         r, z = self._retract, self.zones
-        if (z.separation != "whole_body" or z.escape_deg <= 0 or r is None or r.kind is not MotionKind.RETRACT
-                or self._last_effector is None or decision.head is None or decision.distance_m > z.reach_retract_m
-                or np.linalg.norm(self._last_effector - r.position_m) > self.params.waypoint_tolerance_m):
+        if (z.separation != "whole_body" or z.escape_deg <= 0 or r is None or self._escaped or self._unreachable
+                or self._last_effector is None or decision.head is None or decision.distance_m > z.reach_retract_m):
+            return None
+        # after a retraction that is done, or one that was stopped (it carried the arm toward someone)
+        if r.kind is MotionKind.RETRACT and np.linalg.norm(self._last_effector - r.position_m) \
+                > self.params.waypoint_tolerance_m:
             return None
         e = escape_retraction(self._last_effector, decision.head, self._last_yaw, z.escape_deg)
         return None if e is None else Motion(MotionKind.RETRACT, _vec3(e.position_m), self.params.task_pitch_rad,

@@ -542,20 +542,24 @@ def test_the_ray_bound_never_exceeds_the_true_separation():
     assert checked > 150
 
 
-def test_ankle_rays_bound_a_person_within_his_body_extent_of_where_he_stands():
+def test_anchored_rays_bound_a_person_within_his_body_extent_of_where_he_stands():
     caps = effector_capsule(EFF)
     body = body_facing_arm(4.0)
+    sep = separation_of(body)
     d, point = ray_separation_m(rays_of(body), caps, WHOLE_BODY)
-    # the region reaches toward the arm by about the body extent plus the ankle band's spread on the floor
-    assert separation_of(body) - 1.6 < d < separation_of(body) - WHOLE_BODY.ray_body_extent_m + 0.2
+    # the region reaches toward the arm by at most the body extent plus the ankle band's spread on the floor
+    assert sep - 1.6 < d < sep
     assert point is not None and point[2] > EFF[2]                     # the point of him nearest the arm is his side
-    # no ankle seen: the head's ray and the heights of a head bound him, more loosely
-    d_head, _ = ray_separation_m(rays_of(body, hide=(3, 6)), caps, WHOLE_BODY)
-    assert d_head < d
-    # nothing that crosses the floor or a head's height: no bound
-    assert ray_separation_m(rays_of(body, hide=(3, 6, 10)), caps, WHOLE_BODY) is None
+    # ankles alone (the rest hidden): looser; no ankle seen: his hips and head bound him
+    only_feet = [j for j in range(17) if j not in (3, 6)]
+    d_feet, _ = ray_separation_m(rays_of(body, hide=only_feet), caps, WHOLE_BODY)
+    assert sep - WHOLE_BODY.ray_body_extent_m - 0.6 < d_feet < d
+    d_upper, _ = ray_separation_m(rays_of(body, hide=(3, 6)), caps, WHOLE_BODY)
+    assert d_upper < sep
+    # nothing that crosses the floor or its band of heights (no ankle, hip, pelvis or head): no bound
+    assert ray_separation_m(rays_of(body, hide=(0, 1, 3, 4, 6, 10)), caps, WHOLE_BODY) is None
     level = np.array([0.0, body[10, 1], 8.0])                          # a camera at his head's height: a flat head ray
-    assert ray_separation_m(rays_of(body, level, hide=(3, 6)), caps, WHOLE_BODY) is None
+    assert ray_separation_m(rays_of(body, level, hide=(0, 1, 3, 4, 6)), caps, WHOLE_BODY) is None
 
 
 def test_a_person_never_lifted_far_along_his_rays_does_not_stop_the_arm():
@@ -575,7 +579,7 @@ def test_a_person_never_lifted_whose_ray_region_reaches_the_protective_distance_
     z = WHOLE_BODY
     v_stop = z.min_speed_fraction * z.iso_robot_speed_mps
     seen = set()
-    for sep in (1.5, 2.0, 2.5, 3.0, 4.0, 5.0):
+    for sep in (1.5, 2.0, 2.5, 2.6, 2.7, 2.8, 2.9, 3.0, 4.0, 5.0):
         mon = ready_body(z, 6.0)
         rays = rays_of(body_facing_arm(sep))
         bound = ray_separation_m(rays, effector_capsule(EFF), z)[0]

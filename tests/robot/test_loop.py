@@ -539,7 +539,7 @@ def test_a_person_never_lifted_validly_stops_the_arm_and_nobody_detected_does_no
     assert "stop" in link.names()
 
 
-def test_a_retraction_that_carries_the_arm_toward_someone_is_replaced_by_a_stop():
+def test_a_retraction_that_carries_the_arm_toward_someone_is_replaced_by_one_straight_to_the_base():
     from dataclasses import replace
 
     from edge_runtime.robot.hazard import arm_capsules, body_spheres, separation_m
@@ -562,7 +562,10 @@ def test_a_retraction_that_carries_the_arm_toward_someone_is_replaced_by_a_stop(
         n_retract = len(link.calls)
         if moves_toward_him:  # the controller's joint-space path swings the arm toward him
             link._state = replace(link._state, joint_positions_rad=q_near)
+        hand = link.state.ee_position_m.copy()
         frames = drive_poses(loop, link, clock, lambda t: [(0, lifted(person_at(z)))], 2.5)
-        after = [c[0] for c in link.calls[n_retract:]]
-        assert frames[-1].state == "LEVEL2"
-        assert ("stop" in after) == moves_toward_him and loop.status()["backfired"] == int(moves_toward_him)
+        assert frames[-1].state == "LEVEL2" and loop.status()["backfired"] == int(moves_toward_him)
+        if moves_toward_him:  # the straight retraction toward the base instead, from where the hand is
+            target = np.array(next(c for c in link.calls[n_retract:] if c[0] == "retract")[1])
+            assert np.linalg.norm(target[[0, 2]]) < np.linalg.norm(hand[[0, 2]]) - 0.1
+            assert abs(target[0] * hand[2] - target[2] * hand[0]) < 1e-6        # along the same bearing
