@@ -32,8 +32,11 @@ Two fits, both giving ``p_robot = A @ p_cam + b``:
 Ground anchoring (``ground_anchor``, :func:`anchor_factor`, :meth:`Calibration.to_robot`):
 the lifter's weak part is the root's depth (from apparent body size). Once the floor is
 known, each lifted skeleton is scaled about the camera centre (every 2D projection is
-kept) so that its lower ankle rests ``ankle_height_m`` above the floor; guarded against
-flat rays and low cameras, the factor clamped. reports/robot/head_error.md measures it.
+kept) so that its lower ankle rests ``ankle_height_m`` above the floor (both ankles' rays when
+both feet are down); guarded against flat rays and low cameras, the factor clamped. In a stream
+(:meth:`Calibration.to_robot`, :class:`FloorAnchor`) each person's factor is the median of his
+recent plausible ones: one ankle ray's floor crossing is noisy, his distance is not.
+reports/robot/head_error.md measures it.
 
 ``L_y`` is the height of the head joint above the ankle midpoint: the worker's height
 as the skeleton measures it (``worker_height_m``; 0 means: measure it from the
@@ -50,6 +53,7 @@ lifter's depth cannot tell those markers apart.
 from __future__ import annotations
 
 import json
+from collections import deque
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -57,7 +61,7 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core import strict_json
-from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, L_ANKLE, R_ANKLE
+from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, HIP, L_ANKLE, R_ANKLE
 from edge_runtime.errors import ConfigError, InputError
 
 FORMAT_VERSION = 1
@@ -166,6 +170,8 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     this slides the skeleton along the observed rays: the ankle's ray meets the floor, and the
     head stays on its own ray. ``observed`` (17,) bool, when given, restricts the choice to the
     ankles seen in this frame (a held ankle's ray is an old one); with none seen, both count.
+    When both ankles lie within :data:`ANCHOR_LEVEL_FEET_M` of each other in height (both feet on
+    the floor), ``k`` is the geometric mean of the two rays' factors.
 
     ``k`` is 1 with a reason when the anchoring cannot be trusted: ``no_ankle`` (no finite
     ankle), ``camera_low`` (camera centre less than ``anchor_min_camera_height_m`` above the
@@ -182,14 +188,113 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
         ok = seen if seen.any() else ok
     if not ok.any():
         return 1.0, ANCHOR_NO_ANKLE
-    ray = rays[ok][np.argmin(rays[ok, 1])]               # the lower ankle
+    rays = rays[ok]
+    lower = np.argmin(rays[:, 1])
+    # both feet down: two independent rays halve the floor crossing's variance; a raised foot's
+    # ray would put the skeleton too far, so only the lower ankle counts then
+    feet = rays if np.ptp(rays[:, 1]) <= ANCHOR_LEVEL_FEET_M else rays[[lower]]
     drop_m = b[1] - (params.floor_y_m + params.ankle_height_m)
     if not drop_m >= params.anchor_min_camera_height_m:
         return 1.0, ANCHOR_CAMERA_LOW
-    if -ray[1] < np.sin(np.radians(params.anchor_min_ray_deg)) * np.linalg.norm(ray):
+    if (-feet[:, 1] < np.sin(np.radians(params.anchor_min_ray_deg)) * np.linalg.norm(feet, axis=1)).any():
         return 1.0, ANCHOR_RAY_FLAT
-    k = drop_m / -ray[1]
+    k = float(np.exp(np.mean(np.log(drop_m / -feet[:, 1]))))
     return float(np.clip(k, params.anchor_min_scale, params.anchor_max_scale)), None
+
+
+ANCHOR_WINDOW_FRAMES = 15
+"""Each person's anchoring factor is the median of his last this many plausible per-frame factors
+(:class:`FloorAnchor`; 0.5 s at 30 Hz, the hazard monitor's head-fit span; 1 = each frame alone).
+A module constant, not a [calibration] key: [calibration] is in the validated safety hash
+(firmware_sim.scenarios.hrc), and making it configurable belongs with that re-validation."""
+ANCHOR_LEVEL_FEET_M = 0.1
+"""Both observed ankles within this height of each other (robot frame, the lifter's metres): both
+feet are on the floor and both rays count in :func:`anchor_factor` (geometric mean of the two)."""
+ANCHOR_GATE_M = 0.5
+""":class:`FloorAnchor` matches a skeleton to the person whose last anchored pelvis is nearest when
+this skeleton is anchored with that person's factor, within this distance (m); farther, he is a
+new person (anchored frame by frame until his window fills). Walking, a person moves 5 cm per
+frame; the gate bounds what taking another person's factor for a frame can cost."""
+
+
+@dataclass
+class _AnchorTrack:
+    factors: deque
+    k: float
+    root_m: np.ndarray
+    pid: object = None
+    last_in: np.ndarray | None = None
+    last_out: np.ndarray | None = None
+    missed: int = 0
+
+
+class FloorAnchor:
+    """The floor anchoring of a stream of frames, each person's factor filtered over time.
+
+    A person's distance from the camera does not jump between frames; the floor crossing of one
+    noisy ankle ray does (at a real detector's ankle noise, about 8 cm on the body, some 20 cm at
+    5 m; reports/robot/head_error.md). So each person's anchoring factor is the median of his last
+    ``calibration.anchor_window_frames`` plausible per-frame factors (:func:`anchor_factor`):
+    factors a guard refused or the clamp limited are left out, and a wild ankle frame does not
+    move the median. The factor is relative to the lifter's depth, which follows the person's
+    motion. Causal: each frame uses this frame and earlier ones only.
+
+    The robot loop gives no ids (``ids``, when a caller has a tracker's, keys the people by them):
+    a skeleton belongs to the person whose last anchored pelvis is nearest to it anchored with his
+    factor (the pelvis's ray, not the ankles', so a wild ankle does not make a new person), within
+    :data:`ANCHOR_GATE_M`; one unseen for a window is forgotten. A skeleton given again unchanged (a second look at the same frame) gets
+    the same answer and does not count twice.
+    """
+
+    def __init__(self, calibration: "Calibration"):
+        self.calibration = calibration
+        self.tracks: list[_AnchorTrack] = []
+
+    def __call__(self, joints_cam_m, observed=None, ids=None) -> np.ndarray:
+        """Robot-frame joints (P, 17, 3) of one frame's camera-frame skeletons (P, 17, 3);
+        ``ids`` (P,), when given, name the people (a tracker's ids) instead of the nearest-pelvis
+        match."""
+        cal, p = self.calibration, self.calibration.params
+        window = max(1, int(cal.anchor_window_frames))
+        flat = np.asarray(joints_cam_m, float).reshape(-1, 17, 3)
+        seen = [None] * len(flat) if observed is None else np.asarray(observed, bool).reshape(-1, 17)
+        out = np.empty_like(flat)
+        todo, taken = [], set()
+        for i, j in enumerate(flat):
+            again = next((n for n, t in enumerate(self.tracks) if t.last_in is not None
+                          and np.array_equal(t.last_in, j)), None)
+            if again is None:
+                todo.append(i)
+            else:
+                out[i] = self.tracks[again].last_out
+                taken.add(again)
+        if ids is None:
+            pairs = sorted((float(np.linalg.norm(cal.apply(t.k * flat[i][HIP]) - t.root_m)), i, n)
+                           for i in todo for n, t in enumerate(self.tracks) if n not in taken)
+        else:
+            pairs = [(0.0, i, n) for i in todo for n, t in enumerate(self.tracks) if t.pid == ids[i]]
+        matched = {}
+        for d, i, n in pairs:
+            if d <= ANCHOR_GATE_M and i not in matched and n not in taken:
+                matched[i] = self.tracks[n]
+                taken.add(n)
+        for n, t in enumerate(self.tracks):
+            t.missed = 0 if n in taken else t.missed + 1
+        self.tracks = [t for t in self.tracks if t.missed <= window]
+        for i in todo:
+            k, reason = anchor_factor(flat[i], cal.A, cal.b, p, seen[i])
+            t = matched.get(i)
+            if t is None:
+                t = _AnchorTrack(deque(maxlen=window), k, np.full(3, np.nan), None if ids is None else ids[i])
+                self.tracks.append(t)
+            if reason is None and p.anchor_min_scale < k < p.anchor_max_scale:
+                t.factors.append(k)
+            t.k = float(np.median(t.factors)) if t.factors else k
+            out[i] = cal.apply(t.k * flat[i])
+            if np.isfinite(out[i][HIP]).all():
+                t.root_m = out[i][HIP]
+            t.last_in, t.last_out = flat[i].copy(), out[i].copy()
+        return out
 
 
 @dataclass
@@ -206,6 +311,9 @@ class Calibration:
     """(3, 3) ankle midpoints at markers 1-3 (camera frame)."""
     params: CalibrationParams = field(default_factory=CalibrationParams)
     frames: tuple[int, ...] = ()
+    anchor_window_frames: int = field(default=ANCHOR_WINDOW_FRAMES, compare=False)
+    """:class:`FloorAnchor`'s window (frames) for this calibration's :meth:`to_robot`; not saved."""
+    _anchor: FloorAnchor | None = field(default=None, init=False, repr=False, compare=False)
 
     def apply(self, points_cam_m) -> np.ndarray:
         """Robot-frame positions of camera-frame points (..., 3)."""
@@ -229,17 +337,21 @@ class Calibration:
         k, reason = anchor_factor(j, self.A, self.b, self.params, observed)
         return self.apply(k * j), reason is None
 
-    def to_robot(self, joints_cam_m, observed=None) -> np.ndarray:
-        """Robot-frame joints of camera-frame skeletons (17, 3) or (P, 17, 3): each one
+    def to_robot(self, joints_cam_m, observed=None, ids=None) -> np.ndarray:
+        """Robot-frame joints of one frame's camera-frame skeletons (17, 3) or (P, 17, 3): each
         re-anchored on the floor when ``params.ground_anchor`` is on, else :meth:`apply`.
+        Stateful: call it once per frame, frames in order; each person's anchoring factor is
+        filtered over his recent frames (:class:`FloorAnchor`, ``anchor_window_frames``).
         ``observed`` ((17,) or (P, 17) bool, optional): the joints seen in this frame, so the
-        anchoring uses an observed ankle's ray (:func:`anchor_factor`)."""
+        anchoring uses an observed ankle's ray (:func:`anchor_factor`). ``ids`` ((P,), optional):
+        each person's tracker id, to keep his factor by id (without: by the nearest pelvis;
+        :class:`FloorAnchor`)."""
         j = np.asarray(joints_cam_m, float)
         if not self.params.ground_anchor or j.shape[-2:] != (17, 3):
             return self.apply(j)
-        flat = j.reshape(-1, 17, 3)
-        seen = [None] * len(flat) if observed is None else np.asarray(observed, bool).reshape(-1, 17)
-        return np.stack([self.anchor_to_floor(p, o)[0] for p, o in zip(flat, seen)]).reshape(j.shape)
+        if self._anchor is None:
+            self._anchor = FloorAnchor(self)
+        return self._anchor(j, observed, None if ids is None else list(np.atleast_1d(ids))).reshape(j.shape)
 
     @property
     def scale(self) -> float:

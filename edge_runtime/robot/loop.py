@@ -173,9 +173,10 @@ class LoopParams:
 class CameraToRobot(Protocol):
     """What the loop uses of :class:`edge_runtime.robot.calibration.Calibration`."""
 
-    def to_robot(self, joints_cam_m, observed=None) -> np.ndarray:
+    def to_robot(self, joints_cam_m, observed=None, ids=None) -> np.ndarray:
         """Robot-frame joints (P, 17, 3) of camera-frame ones (P, 17, 3); ``observed`` (P, 17)
-        the joints seen in this frame (the floor anchoring prefers their rays)."""
+        the joints seen in this frame (the floor anchoring prefers their rays); ``ids`` (P,) the
+        tracker's ids (the anchoring is filtered per person)."""
 
 
 class MotionKind(enum.Enum):
@@ -350,9 +351,10 @@ class RobotLoop:
             persons = persons[None]
         shaped = persons.ndim == 3 and persons.shape[1:] == (17, 3)
         if self.calibration is not None and shaped and len(persons):
-            # a stand-in calibration may take the joints only: pass the mask when there is one
-            persons = (self.calibration.to_robot(persons) if observed is None
-                       else self.calibration.to_robot(persons, observed))
+            # a stand-in calibration may take the joints only: pass the mask and the tracker's ids
+            # (each person keeps his own floor anchoring) when there are any
+            persons = (self.calibration.to_robot(persons) if observed is None and ids is None
+                       else self.calibration.to_robot(persons, observed, ids))
         keys = list(range(len(persons))) if ids is None else list(ids)
         people = []
         # whole-body separation needs every joint; the head zones only the head

@@ -174,27 +174,71 @@ def preprocess_prefix(x_prefix: np.ndarray, steps: int) -> np.ndarray:
     is one (66, 298) product instead of 198 rows against every frame, and the mean enters as
     ``M x + (1 - row sum) * mean`` rather than through a subtraction from every frame."""
     x = np.asarray(x_prefix, dtype=np.float32)
-    need, pairs, buf_frames, edge = _prefix_layout(steps)
-    n = len(x)
-    if x.ndim != 2 or x.shape[1] != N_CHANNELS or n < need or n > CAPTURE_FRAMES:
-        raise ValueError(f"a prefix for {steps} sub-windows needs {need}..{CAPTURE_FRAMES} frames "
+    if x.ndim != 2:
+        raise ValueError(f"a prefix for {steps} sub-windows needs {needed_frames(steps)}..{CAPTURE_FRAMES} frames "
                          f"of (n, 3), got {x.shape}")
+    return preprocess_prefixes(x[None], steps)[0]
+
+
+def preprocess_prefixes(x_prefixes: np.ndarray, steps: int) -> np.ndarray:
+    """:func:`preprocess_prefix` of N prefixes of one length at once, (N, n, 3) -> (N, steps, 33, 3) float32.
+    Each capture goes through the same BLAS calls as alone (one (66, W) product per pair of sub-windows,
+    one dot product for its sum), so its rows are :func:`preprocess_prefix`'s bit for bit, whatever N."""
+    x = np.asarray(x_prefixes, dtype=np.float32)
+    need = needed_frames(steps)
+    if x.ndim != 3 or x.shape[2] != N_CHANNELS or not need <= x.shape[1] <= CAPTURE_FRAMES:
+        raise ValueError(f"a prefix for {steps} sub-windows needs {need}..{CAPTURE_FRAMES} frames "
+                         f"of (n, 3), got {x.shape[1:]}")
+    return _prefix_inputs(x, ((steps, x.shape[1]),))[0]
+
+
+def preprocess_prefix_steps(captures: np.ndarray, steps: Sequence[int]) -> list[np.ndarray]:
+    """For N captures (N, n, 3) and each S of ``steps``, :func:`preprocess_prefixes` of their first
+    ``needed_frames(S)`` frames, bit for bit (``tests/wearable/test_classifier.py``), at about the cost of
+    the largest S alone: the resampler's product is computed once, on every frame. A row of it weighs
+    the frames after ``needed_frames(S)`` with exact zeros, so it is the same sum, in the same order,
+    as on a prefix whose buffer holds zeros there; only each prefix's mean is its own."""
+    x = np.asarray(captures, dtype=np.float32)
+    top = max(steps)
+    if x.ndim != 3 or x.shape[2] != N_CHANNELS or not needed_frames(top) <= x.shape[1] <= CAPTURE_FRAMES:
+        raise ValueError(f"captures for {top} sub-windows need {needed_frames(top)}..{CAPTURE_FRAMES} frames "
+                         f"of (n, 3), got {x.shape[1:]}")
+    return _prefix_inputs(x, tuple((s, needed_frames(s)) for s in steps))
+
+
+def _prefix_inputs(x: np.ndarray, prefixes: tuple[tuple[int, int], ...]) -> list[np.ndarray]:
+    """(N, n, 3) float32 -> for each (steps, frames) of ``prefixes``: the first ``steps`` sub-windows
+    (N, steps, 33, 3) of the captures of which only the first ``frames`` frames have arrived."""
+    count = len(x)
     first, block, _ = _pair_block()
-    buf = np.zeros((buf_frames, N_CHANNELS))  # the capture's frames from `first` on, 0 outside
-    m = min(n, buf_frames + first)
-    buf[-first:m - first] = x[:m]
-    # the edge-padded capture's mean: the frames' sum (their float64 copy in buf when it holds them all)
-    # and the last frame once for every missing one
-    if m == n:
-        mean = (_ones(buf_frames) @ buf + (CAPTURE_FRAMES - n) * buf[n - 1 - first]) / CAPTURE_FRAMES
-    else:
-        mean = (_ones(n) @ x.astype(np.float64) + (CAPTURE_FRAMES - n) * x[-1].astype(np.float64)) / CAPTURE_FRAMES
+    top = max(s for s, _ in prefixes)
+    _, pairs, buf_frames, _ = _prefix_layout(top)
+    buf = np.zeros((count, buf_frames, N_CHANNELS))  # each capture's frames from `first` on, 0 outside
+    m = min(x.shape[1], buf_frames + first)
+    buf[:, -first:m - first] = x[:, :m]
     # each pair's frames, a view 231 frames further on (ndarray() makes it without as_strided's Python layers)
-    windows = np.ndarray((pairs, block.shape[1], N_CHANNELS), buf.dtype, buf, 0,
-                         (PAIR_FRAMES * buf.strides[0], *buf.strides))
-    y = np.matmul(block, windows).reshape(-1, N_CHANNELS)[:len(edge)]
-    y += edge * mean
-    return y.astype(np.float32).reshape(steps, SUBSEQ_FRAMES, N_CHANNELS)
+    windows = np.ndarray((count, pairs, block.shape[1], N_CHANNELS), buf.dtype, buf, 0,
+                         (buf.strides[0], PAIR_FRAMES * buf.strides[1], *buf.strides[1:]))
+    product = np.matmul(block, windows).reshape(count, -1, N_CHANNELS)
+    out = []
+    for steps, n in prefixes:
+        _, _, frames_s, edge = _prefix_layout(steps)
+        m = min(n, frames_s + first)
+        # the edge-padded prefix's mean: its frames' sum (their float64 copy in a buffer of the prefix's own
+        # length when it holds them all: the sum of a prefix alone) and its last frame once for every missing one
+        if m == n:
+            if n == x.shape[1] and frames_s == buf_frames:  # the product's buffer is this prefix's
+                own = buf
+            else:
+                own = np.zeros((count, frames_s, N_CHANNELS))
+                own[:, -first:m - first] = x[:, :m]
+            mean = (_ones(frames_s) @ own + (CAPTURE_FRAMES - n) * own[:, n - 1 - first]) / CAPTURE_FRAMES
+        else:
+            xs = x[:, :n].astype(np.float64)
+            mean = (_ones(n) @ xs + (CAPTURE_FRAMES - n) * xs[:, -1]) / CAPTURE_FRAMES
+        y = product[:, :len(edge)] + edge * mean[:, None, :]
+        out.append(y.astype(np.float32).reshape(count, steps, SUBSEQ_FRAMES, N_CHANNELS))
+    return out
 
 
 @lru_cache(maxsize=None)
@@ -414,14 +458,51 @@ class Engine:
         ``needed_frames(steps)`` frames or more (:func:`preprocess_prefix`); the model's decision after
         S sub-windows, temperature-scaled by the manifest's ``temperature_by_steps`` when given.
         ``steps`` = 6 on a whole capture is :meth:`classify_capture`."""
-        if steps not in self.early.steps and not (steps == N_SUBSEQ and len(x_prefix) == CAPTURE_FRAMES):
+        return calibrate(self._prefix_probs(np.asarray(x_prefix)[None], steps)[0], self._temperature(steps))
+
+    def classify_prefixes(self, x_prefixes: np.ndarray, steps: int) -> np.ndarray:
+        """:meth:`classify_prefix` of N prefixes of one length (N, n, 3) at once -> (N, K), in one model run.
+        Each row is what :meth:`classify_prefix` gives for its prefix alone (onnxruntime computes each
+        item of a batch as it computes it alone: ``tests/wearable/test_classifier.py`` holds it to that)."""
+        return calibrate(self._prefix_probs(np.asarray(x_prefixes), steps), self._temperature(steps))
+
+    def classify_capture_groups(self, groups: Sequence[tuple[np.ndarray, Sequence[int]]]) -> list[dict[int, np.ndarray]]:
+        """For each group (captures (N, n, 3), sub-window counts): {S: :meth:`classify_prefixes` of the
+        captures' first ``needed_frames(S)`` frames}, with one model run per S for every group that
+        asks for it and the preprocessing of each group's steps shared (:func:`preprocess_prefix_steps`).
+        A replay's loop asks this for the captures a block completes."""
+        inputs = [dict(zip(steps, preprocess_prefix_steps(captures, steps))) for captures, steps in groups]
+        out: list[dict[int, np.ndarray]] = [{} for _ in groups]
+        for steps in sorted({s for g in inputs for s in g}):
+            asking = [k for k, g in enumerate(inputs) if steps in g]
+            a = inputs[asking[0]][steps] if len(asking) == 1 else np.concatenate([inputs[k][steps] for k in asking])
+            probs = calibrate(self._model_probs(a, steps), self._temperature(steps))
+            start = 0
+            for k in asking:
+                count = len(inputs[k][steps])
+                out[k][steps] = probs[start:start + count]
+                start += count
+        return out
+
+    def _check_steps(self, steps: int) -> None:
+        """S = 6 (the whole capture: needed_frames(6) = 700) is every model's; others, the manifest's."""
+        if steps not in self.early.steps and steps != N_SUBSEQ:
             raise ValueError(f"{self.name}: decides after {list(self.early.steps)} sub-windows, not {steps}")
-        a = preprocess_prefix(x_prefix, steps)  # (steps, 33, 3): the model's item shape, contiguous
+
+    def _temperature(self, steps: int) -> float:
+        return self.early.temperature_by_steps.get(steps, 1.0)
+
+    def _prefix_probs(self, x_prefixes: np.ndarray, steps: int) -> np.ndarray:
+        """The model's raw probabilities (N, K) for prefixes (N, n, 3) after ``steps`` sub-windows."""
+        return self._model_probs(preprocess_prefixes(x_prefixes, steps), steps)
+
+    def _model_probs(self, a: np.ndarray, steps: int) -> np.ndarray:
+        """The model's raw probabilities (N, K) for its inputs (N, steps, 33, 3), C-contiguous float32."""
+        self._check_steps(steps)
         if not np.isfinite(a).all():
             raise ValueError(f"{self.name}: input holds NaN or infinite values")
         # the checks of classify() hold by construction here; the loop asks this 18,000 times a day
-        probs = self._run(self._outputs, {self.input_name: a[None]}, self._run_options)[0][0]
-        return calibrate(probs, self.early.temperature_by_steps.get(steps, 1.0))
+        return self._run(self._outputs, {self.input_name: a}, self._run_options)[0]
 
     def predict(self, x: np.ndarray) -> list[str] | str:
         """Top class name(s) for model input(s)."""

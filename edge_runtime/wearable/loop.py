@@ -27,9 +27,11 @@ decision) or a model with a fixed S = 6 only the full window is decided.
 A distraction is one event (:class:`AlertEvent`): the first alert of a capture opens an
 event with a new AlertSeq; a capture whose trigger comes while the event is active (within
 ``event_hold_s`` of the end of the event's last capture: the hand returning, a second reach)
-belongs to it and raises no new alert (its decision says ``continued``); every such capture
-extends the event. The event ends when ``event_hold_s`` pass with no new trigger, or at
-once when its alert is withdrawn. Every decision carries its event's start.
+belongs to it and raises no new alert (its decision says ``continued``); such a capture
+extends the event, unless its full window says a never-alerted class (Other: the hand did
+something else, ``event_ends_on_other``), which ends it. The event ends when ``event_hold_s``
+pass with no new trigger, or at once when its alert is withdrawn. Every decision carries its
+event's start.
 
 Bad samples never stop the loop: non-finite samples are counted and the
 detector restarts after them (its window must not span a hole), and a block
@@ -49,8 +51,8 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
-from edge_runtime.wearable.classifier import N_SUBSEQ, needed_frames
-from edge_runtime.wearable.detector import DetectorConfig, StreamingDetector
+from edge_runtime.wearable.classifier import CAPTURE_FRAMES, N_SUBSEQ, needed_frames
+from edge_runtime.wearable.detector import Capture, DetectorConfig, StreamingDetector
 from edge_runtime.wearable.labels import CLASSES, OTHER
 from edge_runtime.wearable.sources import SAMPLE_RATE_HZ, ImuBlock
 
@@ -58,7 +60,9 @@ from edge_runtime.wearable.sources import SAMPLE_RATE_HZ, ImuBlock
 class Classifier(Protocol):
     """The classifier the loop asks: ``classify_capture`` always; a model that decides early also has
     ``early_steps`` (the sub-window counts S it accepts), ``classify_prefix(x, S)`` (calibrated
-    probabilities after S sub-windows) and ``early.min_confidence_by_steps`` (the manifest's thresholds)."""
+    probabilities after S sub-windows) and ``early.min_confidence_by_steps`` (the manifest's thresholds).
+    One that also has ``classify_capture_groups`` (the shipped Engine) is asked for the captures a
+    block completes together, which must give each what ``classify_prefix`` gives it alone."""
 
     classes: Sequence[str]
 
@@ -66,6 +70,11 @@ class Classifier(Protocol):
         """A detector capture (700, 3) m/s^2 at 100 Hz -> (K,) class probabilities."""
 
 
+BATCH_CAPTURES = 20
+"""Captures classified together at most (:meth:`WearableLoop._classify_ahead`): a model run's cost per
+capture stops falling at about 16, and onnxruntime's buffers grow with the batch (the day's replay:
+the same CPU time with 20, 32 or 64, peak memory 89, 92 and 98 MB); a recording handed over whole
+(``command.replay``) must not make it hold every capture's tensors at once (about 50 KB each at S = 6)."""
 EARLY_MIN_CONFIDENCE = 0.9
 """The threshold of a preliminary alert at S < 6 when neither the configuration nor the model's
 manifest gives one: stricter than the full window's, since a wrong preliminary is a false alarm."""
@@ -106,6 +115,28 @@ class AlertPolicy:
     repeat alerts 23 -> 1 at unchanged event recall (0.886); 10 s cost 0.03 of recall, 15 s 0.13. The
     early-decision sweep (``firmware_sim early-tune``) kept it: 3 s gained 0.01 of recall at 3.6 times
     the repeat alerts, 10 s cost 0.05 of recall."""
+    event_ends_on_other: bool = True
+    """A capture of an active event whose full window says a never-alerted class (Other: the hand
+    did something else in between) ends the event instead of extending it, so that the next
+    distraction alerts afresh rather than continuing an event opened long before (or by a false
+    alert). Chosen on development drives (``firmware_sim drive-eval --seed 5`` and ``--seed 1``,
+    10 h each): event recall +0.008 on both, in both decision modes, at unchanged repeat alerts
+    and false alerts +0.1 / 0 per hour (reports/drive_eval/development.md)."""
+    class_weights: tuple[float, ...] = config.setting(
+        (1.0, 1.0, 1.0, 1.0, 8.0, 1.5), ("a list of one positive number per class",
+                                         lambda v: len(v) == len(CLASSES) and all(w > 0 for w in v)))
+    """Weights of the classes (Phone, Texting, TouchScreen, Drink, Marker, Other) the classifier's
+    probabilities are multiplied by, and renormalised, before every decision (a decision's probs and
+    confidence are the weighted ones): a prior-shift correction of a model that under-calls a class
+    on the deployment's captures. 1 everywhere: the model's own probabilities. On development drives
+    (``firmware_sim drive-eval --seed 5`` and ``--seed 1``, 10 h each) Marker was most missed, its
+    full window calling it Other (the Marker reach to the passenger seat is Other's grab_from_seat
+    with a stop at the cup holder); other classes' misses gained less than they cost in false alerts.
+    Rule: the highest mean event recall (early decisions) over both seeds with false alerts per hour
+    on each no higher than with weights 1, over Marker 1..12 and Other 1..3: Marker 8, Other 1.5,
+    event recall +0.050 / +0.043, false alerts -0.2 / -0.1 per hour, class accuracy not lower
+    (reports/drive_eval/development.md). Fitted on simulated drives: refit on a deployment's own
+    validation drives."""
 
     earliest_alert_step: int = config.setting(2, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
     """No preliminary alert or revision before this many sub-windows (the full window, S = 6, always
@@ -127,6 +158,8 @@ class AlertPolicy:
             raise ValueError("min_confidence must lie in [0, 1]")
         if self.decision not in DECISIONS:
             raise ValueError(f"decision must be one of {DECISIONS}")
+        if len(self.class_weights) != len(CLASSES) or not all(w > 0 for w in self.class_weights):
+            raise ValueError(f"class_weights: one positive number per class ({len(CLASSES)})")
         if set(CLASSES) <= set(self.never_alert):
             raise ValueError(f"never_alert: {list(self.never_alert)} holds every class; nothing would ever be alerted")
 
@@ -170,7 +203,8 @@ class Verdict:
     an active event, never alerted. A :class:`Decision` whose frame did not go out says 'alert_not_sent'."""
     probs: dict[str, float]
     compute_us: float
-    """Wall time from the completed capture to the verdict (preprocessing + inference), microseconds."""
+    """Wall time from the completed capture to the verdict (preprocessing + inference), microseconds; for
+    captures classified together (a replay's block), the batch's time divided among its captures and steps."""
     rx_monotonic_s: float | None = None
     """Host ``time.monotonic()`` when the sample the decision waited for arrived (live sources only)."""
     steps: int = N_SUBSEQ
@@ -294,6 +328,12 @@ class WearableLoop:
             else "full-window decisions" + (" (the model takes S = 6 only)" if offered == (N_SUBSEQ,) else
                                             " (every S < 6 has threshold 1)" if policy.decision == "early" else "")
         self._prefix = getattr(classifier, "classify_prefix", None)
+        # a block that completes several captures classifies them together (see _classify_ahead)
+        self._batch = getattr(classifier, "classify_capture_groups", None) if self._prefix is not None else None
+        self._ready: dict[tuple[int, int], tuple[list[float], float]] = {}
+        weights = dict(zip(CLASSES, policy.class_weights))
+        self._weights = None if set(policy.class_weights) == {1.0} else [
+            weights.get(c, 1.0) for c in self.classes]  # in the model's class order
         self._capture: _CaptureState | None = None  # the capture being decided
         self._first_frames = needed_frames(self._early_steps[0])
         self._next_frames = self._first_frames  # frames the next early step needs
@@ -355,9 +395,79 @@ class WearableLoop:
         if not len(acc):
             return []
         out: list[Decision] = []
-        for cap in self.detector.push(acc):  # completed in this block: every step still due, in order
-            out += self._steps_of(cap.trigger_index, cap.data)
+        captures = self.detector.push(acc)
+        for i in range(0, len(captures), BATCH_CAPTURES):
+            batch = captures[i:i + BATCH_CAPTURES]
+            if len(batch) > 1 and self._batch is not None:
+                self._classify_ahead(batch)
+            for cap in batch:  # completed in this block: every step still due, in order
+                out += self._steps_of(cap.trigger_index, cap.data)
+            self._ready = {}
         return out + self._early_due()
+
+    def _classify_ahead(self, captures: list[Capture]) -> None:
+        """The probabilities of the steps the captures completed in one block will be decided at, with
+        one model run per step for all of them (``classify_capture_groups``), into ``_ready``.
+
+        What a decision does never changes which captures the detector takes, nor their frames, so a
+        block's captures are known before the first of them is decided; which steps each is decided
+        at depends on the decisions before it: a capture that continues an alert event is decided at
+        S = 6 only. So the full windows go first, and from them a guess at which captures may continue
+        an event: one triggered within ``event_hold_s`` of the end of the capture before it, when that
+        one may have continued an event itself or its full window is an alert (only then does an event
+        outlive it: one it opened with a preliminary alert is withdrawn otherwise). The early steps of
+        the others go second. The guess decides nothing: a capture that opens an event against it has
+        its early steps classified when it opens (:meth:`_steps_of`), and one that continues against
+        it leaves them unused. Each row is what the classifier gives for that capture alone, so the
+        decisions are those of one call per step."""
+        st, ev = self._capture, self._event
+        first = [(c, tuple(st.steps) if st is not None and c.trigger_index == st.trigger else (N_SUBSEQ,))
+                 for c in captures]  # the capture opened in an earlier block: the steps it still has
+        self._classify_groups([([c.trigger_index for c, s in first if s == steps],
+                                np.stack([c.data for c, s in first if s == steps]), steps)
+                               for steps in dict.fromkeys(s for _, s in first)])
+        hold_s = self.policy.event_hold_s + 1.0 / self.rate_hz  # a frame's margin: a guess, never a decision
+        threshold = self.policy.threshold(N_SUBSEQ, self._manifest_thresholds)
+        may_continue = ev is not None and not ev.withdrawn  # the event under way may outlive ...
+        last_end_s = ev.last_end_s if may_continue else None  # ... this end
+        early = []
+        for cap, _ in first:
+            opened = st is not None and cap.trigger_index == st.trigger
+            if not opened:
+                may_continue = last_end_s is not None and self._time_of(cap.trigger_index) <= last_end_s + hold_s
+                if not may_continue:
+                    early.append(cap)
+            values = self._weighted(self._ready[cap.trigger_index, N_SUBSEQ][0])
+            conf = max(values)
+            label = self.classes[values.index(conf)]
+            alerts = self.policy.status(label, conf, threshold) == "alert"
+            ends = (may_continue and not opened and self.policy.event_ends_on_other
+                    and label in self.policy.never_alert)  # an Other capture ends the event it continues
+            may_continue = (may_continue or alerts or opened) and not ends
+            last_end_s = self._time_of(cap.start_index + len(cap.data) - 1) if may_continue else None
+        steps = tuple(s for s in self._early_steps if s != N_SUBSEQ)
+        if early and steps:
+            self._classify_groups([([c.trigger_index for c in early], np.stack([c.data for c in early]), steps)])
+
+    def _weighted(self, values: list[float]) -> list[float]:
+        """The probabilities a decision reads: the model's, times the deployment's class weights
+        (``AlertPolicy.class_weights``) and renormalised; the model's own when every weight is 1."""
+        if self._weights is None:
+            return values
+        weighted = [p * w for p, w in zip(values, self._weights)]
+        total = sum(weighted)
+        return [p / total for p in weighted]
+
+    def _classify_groups(self, groups: list[tuple[list[int], np.ndarray, tuple[int, ...]]]) -> None:
+        """Into ``_ready``: for each group (triggers, their captures (N, 700, 3), steps), every step's
+        probabilities for every capture, and the compute time each one's share of the batch."""
+        t_start = time.perf_counter()
+        results = self._batch([(data, steps) for _, data, steps in groups])
+        compute_us = (time.perf_counter() - t_start) * 1e6 / sum(len(t) * len(s) for t, _, s in groups)
+        for (triggers, _, _), by_steps in zip(groups, results):
+            for steps, probs in by_steps.items():
+                for trigger, row in zip(triggers, probs.tolist()):
+                    self._ready[trigger, steps] = row, compute_us
 
     def _early_due(self) -> list[Decision]:
         """The early steps the capture still filling now holds the frames for."""
@@ -374,6 +484,10 @@ class WearableLoop:
         st = self._capture
         if st is None or st.trigger != trigger:
             st = self._capture = self._open_capture(trigger)
+        if len(st.steps) > 1 and len(data) == CAPTURE_FRAMES and self._batch is not None:
+            missing = tuple(s for s in st.steps if (trigger, s) not in self._ready)
+            if missing:  # a whole capture, not classified ahead (or not at these steps): its steps in one go
+                self._classify_groups([([trigger], data[None], missing)])
         out = []
         while st.steps and needed_frames(st.steps[0]) <= len(data):
             steps = st.steps.pop(0)
@@ -406,7 +520,10 @@ class WearableLoop:
         if steps == N_SUBSEQ:
             self.stats.captures += 1
             self.stats.labels[verdict.label] += 1
-            if st.event is not None:
+            if st.continues and self.policy.event_ends_on_other and verdict.label in self.policy.never_alert:
+                if self._event is st.event:
+                    self._event = None  # the hand did something else: the distraction is over
+            elif st.event is not None:
                 st.event.last_end_s = max(st.event.last_end_s, verdict.t_alert_s)
         self.stats.statuses[verdict.status] += 1  # what the policy said, sent or not
         if self.on_decision is not None:
@@ -425,14 +542,19 @@ class WearableLoop:
             st.event.label = verdict.label
 
     def _classify(self, st: _CaptureState, data: np.ndarray, steps: int) -> Verdict | None:
-        t_start = time.perf_counter()
         full = steps == N_SUBSEQ
-        if self._prefix is not None:
-            probs = np.asarray(self._prefix(data[: needed_frames(steps)], steps))
+        ready = self._ready.pop((st.trigger, steps), None)
+        if ready is not None:  # classified with the other captures of its block
+            values, compute_us = ready
         else:
-            probs = np.asarray(self.classifier.classify_capture(data))
-        compute_us = (time.perf_counter() - t_start) * 1e6
-        values = probs.tolist()  # K Python floats: cheaper to pick from than numpy calls on K numbers
+            t_start = time.perf_counter()
+            if self._prefix is not None:
+                probs = np.asarray(self._prefix(data[: needed_frames(steps)], steps))
+            else:
+                probs = np.asarray(self.classifier.classify_capture(data))
+            compute_us = (time.perf_counter() - t_start) * 1e6
+            values = probs.tolist()  # K Python floats: cheaper to pick from than numpy calls on K numbers
+        values = self._weighted(values)
         conf = max(values)
         k = values.index(conf)  # the first of equal maxima, as np.argmax
         label = self.classes[k]

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
@@ -60,18 +61,30 @@ def is_recording(path: str | Path) -> bool:
         return False  # the CSV reader names the file and the reason
 
 
+REPLAY_BLOCK_ROWS = MAX_RECORD_ROWS
+"""Samples ``--replay`` hands the loop at most in one block: records that continue one another are
+joined up to this many (11 min at 100 Hz, 786 KB), so that the loop classifies the captures a block
+completes together (``WearableLoop``: one model run per step for all of them, instead of one per
+capture) while a reader still holds a bounded amount, whatever the recording's length."""
+
+
 def open_replay(path: str | Path, stats: ReplayStats | None = None, range_mps2: float = ImuParams.range_mps2
                 ) -> Iterator[ImuBlock]:
-    """``--replay FILE``: a recording of this format or a CSV ``t,ax,ay,az``, as 100 Hz blocks, streamed."""
+    """``--replay FILE``: a recording of this format (records joined up to :data:`REPLAY_BLOCK_ROWS`)
+    or a CSV ``t,ax,ay,az``, as 100 Hz blocks, streamed."""
     if is_recording(path):
-        return read_recording(path, stats, range_mps2)
+        return read_recording(path, stats, range_mps2, join_rows=REPLAY_BLOCK_ROWS)
     return read_imu_csv(path, stats, range_mps2=range_mps2)
 
 
-def read_recording(path: str | Path, stats: ReplayStats | None = None, range_mps2: float = ImuParams.range_mps2
-                   ) -> Iterator[ImuBlock]:
+def read_recording(path: str | Path, stats: ReplayStats | None = None, range_mps2: float = ImuParams.range_mps2,
+                   join_rows: int = 0) -> Iterator[ImuBlock]:
     """The records of ``path`` as ImuBlocks; the header is checked at once (bad input is reported
-    before anything runs), a bad record further on ends the replay there with an InputError."""
+    before anything runs), a bad record further on ends the replay there with an InputError.
+    ``join_rows`` > 0: records that continue one another, with every sample inside the sensor's range,
+    go out as one block of up to that many samples (a record with a finding goes alone, and what
+    ``stats`` counts of a block is counted when it goes out, so that everything downstream reads the
+    counts it read with one block per record); 0: one block per record."""
     path = Path(path)
     stats = stats if stats is not None else ReplayStats()
     try:
@@ -93,10 +106,10 @@ def read_recording(path: str | Path, stats: ReplayStats | None = None, range_mps
     except BaseException:
         f.close()
         raise
-    return _records(f, path, stats, range_mps2)
+    return _joined(_records(f, path, range_mps2), path, stats, join_rows)
 
 
-def _records(f: BinaryIO, path: Path, stats: ReplayStats, range_mps2: float) -> Iterator[ImuBlock]:
+def _records(f: BinaryIO, path: Path, range_mps2: float) -> Iterator[_Record]:
     period_s = 1.0 / SAMPLE_RATE_HZ
     end_s: float | None = None  # when the next sample of the stream would be due
     offset = HEADER.size
@@ -119,17 +132,58 @@ def _records(f: BinaryIO, path: Path, stats: ReplayStats, range_mps2: float) -> 
                 raise InputError(f"{path}: byte {offset + RECORD.size}: truncated record ({len(body)} of "
                                  f"{n * SAMPLE_BYTES} bytes of samples)")
             acc, out_of_range, saturated = screen_samples(np.frombuffer(body, "<f4").reshape(n, 3), range_mps2)
-            stats.rows += n
-            stats.out_of_range += out_of_range
-            stats.saturated += saturated
             continuous = end_s is None or t0_s <= end_s + period_s / 2
-            if not continuous:
-                if not stats.gaps:
-                    stats.notices.append(f"{path}: gap(s) in time; the detector restarts after each (counted)")
-                stats.gaps += 1
-            yield ImuBlock(t0_s, acc, continuous=continuous)
+            yield _Record(t0_s, acc, continuous, out_of_range, saturated)
             end_s = t0_s + n * period_s
             offset += RECORD.size + n * SAMPLE_BYTES
+
+
+@dataclass
+class _Record:
+    t0_s: float
+    acc: np.ndarray
+    continuous: bool
+    out_of_range: int
+    saturated: int
+
+
+def _joined(records: Iterator[_Record], path: Path, stats: ReplayStats, join_rows: int) -> Iterator[ImuBlock]:
+    """The records as blocks (see :func:`read_recording`), each counted in ``stats`` as it goes out;
+    at a bad record the blocks before it go out first, then its InputError."""
+    held: list[_Record] = []
+    rows = 0
+    while True:
+        try:
+            rec = next(records, None)
+        except InputError:
+            if held:
+                yield _block(held, path, stats)
+            raise
+        if held and (rec is None or not rec.continuous or rec.out_of_range or rec.saturated
+                     or rows + len(rec.acc) > join_rows):
+            yield _block(held, path, stats)
+            held, rows = [], 0
+        if rec is None:
+            return
+        held.append(rec)
+        rows += len(rec.acc)
+        if rec.out_of_range or rec.saturated or rows >= join_rows:
+            yield _block(held, path, stats)
+            held, rows = [], 0
+
+
+def _block(held: list[_Record], path: Path, stats: ReplayStats) -> ImuBlock:
+    first = held[0]
+    for rec in held:
+        stats.rows += len(rec.acc)
+        stats.out_of_range += rec.out_of_range
+        stats.saturated += rec.saturated
+    if not first.continuous:
+        if not stats.gaps:
+            stats.notices.append(f"{path}: gap(s) in time; the detector restarts after each (counted)")
+        stats.gaps += 1
+    acc = first.acc if len(held) == 1 else np.concatenate([rec.acc for rec in held])
+    return ImuBlock(first.t0_s, acc, continuous=first.continuous)
 
 
 class RecordingWriter:

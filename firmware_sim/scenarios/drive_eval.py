@@ -26,7 +26,11 @@ end, as :mod:`firmware_sim.scenarios.scoring` matches):
   time) - the distraction's start, median and p95;
 * false alerts per driving hour: alerts that belong to no distraction (and how many of them the
   full window withdrew);
-* late alerts: first alerts whose frame went out after the distraction had ended.
+* late alerts: first alerts whose frame went out after the distraction had ended;
+* missed distractions by class and by where they were lost (:func:`miss_reason`): no trigger (the
+  motion stayed below the detector's threshold, or the detector was still paused by an earlier
+  capture), a capture that only continued an earlier event, a full window that said Other, or no
+  step confident enough.
 
 Writes ``OUT/drive_eval.json``, ``OUT/drive_eval.md`` and ``OUT/imu_trace.png`` (a distraction with
 its onset, end, the preliminary and final alert frames).
@@ -42,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from edge_runtime.cli import CliError, positive_float
+from edge_runtime.wearable.detector import DetectorConfig, p3_series
 from edge_runtime.wearable.labels import DISTRACTIONS
 from firmware_sim.scenarios.scoring import raises_alert
 
@@ -52,6 +57,8 @@ BASELINE_COHORT0 = 950_000
 MATCH_BEFORE_S = 1.0
 """A trigger up to 1 s before a distraction's start belongs to it (the capture starts 1 s before the trigger)."""
 MODES = ("full_window", "early")
+HELD_OUT_SEED = 2
+"""The held-out seed: never tuned on; every other seed is development (its report says so)."""
 
 
 @dataclass
@@ -78,13 +85,35 @@ def held_out_drives(hours: float, seed: int, baseline_share: float = 0.3, drive_
         rec = simulate_drive(drive_minutes, s)
         yield Drive(f"drive seed {s}", rec.acc_mps2, [e.to_json() for e in rec.events], "distraction")
     cohort_seed = BASELINE_COHORT0 + seed
-    for k, subj in enumerate(make_subjects(n_base, seed=cohort_seed)):
+    for k, subj in enumerate(make_subjects(n_base, seed=cohort_seed) if n_base else ()):
         rec = simulate_trial(subj, "baseline", cohort_seed, drive_minutes)
         yield Drive(f"baseline cohort {cohort_seed} subject {k + 1}", rec.acc_mps2, [e.to_json() for e in rec.events],
                     "baseline")
 
 
 # ---------------------------------------------------------------------------- scoring
+
+
+def miss_reason(own: list[dict], acc_mps2: np.ndarray | None = None, event: dict | None = None,
+                detector_cfg=None) -> str:
+    """Where a distraction with no alert was lost, from the decisions whose trigger falls in it
+    (``own``). With the recording, its event and the detector's configuration, a distraction with no
+    trigger is told apart: the motion stayed below the threshold, or the detector was paused by the
+    capture of an earlier trigger (P3 crossed the threshold within the distraction)."""
+    if not own:
+        if acc_mps2 is None or event is None or detector_cfg is None:
+            return "no trigger"
+        lo = max(0, int((event["start_s"] - MATCH_BEFORE_S) * 100))
+        hi = max(lo, int(event["end_s"] * 100) + 1)
+        first = max(0, lo - detector_cfg.lag)  # P3 at frame lo needs the window behind it
+        p3 = p3_series(acc_mps2[first:hi, detector_cfg.axis], detector_cfg)[lo - first:]
+        with np.errstate(invalid="ignore"):
+            crossed = bool(np.any(p3 > detector_cfg.threshold_mps2))
+        return "no trigger: detector paused by an earlier capture" if crossed else "no trigger: below the threshold"
+    statuses = {d["status"] for d in own}
+    return ("continued an earlier event" if statuses == {"continued"}
+            else "full window said Other" if "not_alerted" in statuses
+            else "not confident at any step")
 
 
 @dataclass
@@ -103,6 +132,10 @@ class ModeScore:
     """Alerts for a distraction that had already been alerted (a second warning for one distraction)."""
     decisions: int = 0
     statuses: dict[str, int] = field(default_factory=dict)
+    by_class: dict[str, dict[str, int]] = field(default_factory=dict)
+    """Per distraction class: distractions, alerted, and the missed ones by :func:`miss_reason`."""
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    """The detector's configuration, to tell why a distraction got no trigger (default: the shipped one)."""
 
     def add(self, drive: Drive, decisions: list[dict]) -> list[tuple[dict, dict | None]]:
         """Score one drive; returns each distraction with its first alert (None: missed)."""
@@ -131,7 +164,13 @@ class ModeScore:
         for e in truth:
             first = firsts.get(id(e))
             self.distractions += 1
-            if first is not None:
+            row = self.by_class.setdefault(e["label"], {"distractions": 0, "alerted": 0})
+            row["distractions"] += 1
+            if first is None:
+                why = miss_reason([d for d in decisions if owner(d) is e], drive.acc_mps2, e, self.detector)
+                row[why] = row.get(why, 0) + 1
+            else:
+                row["alerted"] += 1
                 self.detected += 1
                 self.first_correct += first["label"] == e["label"]
                 self.onset_to_alert_s.append(first["t_alert_s"] - e["start_s"])
@@ -156,6 +195,7 @@ class ModeScore:
             "repeat_alerts": self.repeat_alerts,
             "decisions": self.decisions,
             "statuses": dict(sorted(self.statuses.items())),
+            "by_class": {k: self.by_class[k] for k in sorted(self.by_class)},
         }
 
 
@@ -177,6 +217,39 @@ def class_agreement(drives, engine, other, detector_cfg) -> dict:
             "decisions": total, "by_steps": {str(s): round(a / n, 4) if n else None for s, (a, n) in same.items()}}
 
 
+def step_accuracy(drives, engine, detector_cfg, class_weights=None) -> dict:
+    """Per sub-window count S: the top class's accuracy on every detector capture of the drives (truth:
+    the distraction its trigger falls in, else Other), on the distraction captures alone, and when the
+    decision after S sub-windows can be made (its frame after the trigger, s). What the onset -> alert
+    latency can reach: a decision needs S sub-windows, whatever its threshold. ``class_weights``: the
+    policy's, in :data:`~edge_runtime.wearable.labels.CLASSES` order, as the loop applies them."""
+    from edge_runtime.wearable.classifier import needed_frames
+    from edge_runtime.wearable.detector import detect_triggers, extract_captures
+    from edge_runtime.wearable.labels import CLASSES, OTHER
+
+    classes = list(engine.classes)
+    w = np.ones(len(classes)) if class_weights is None else np.asarray(
+        [dict(zip(CLASSES, class_weights)).get(c, 1.0) for c in classes])
+    right = {s: [0, 0, 0, 0] for s in engine.early_steps}  # every capture: right, n; distraction captures: right, n
+    for drive in drives:
+        truth = [e for e in drive.events if e["label"] in DISTRACTIONS]
+        for cap in extract_captures(drive.acc_mps2, detect_triggers(drive.acc_mps2, detector_cfg), detector_cfg):
+            e = next((e for e in truth if e["start_s"] - MATCH_BEFORE_S <= cap.trigger_index / 100.0 <= e["end_s"]),
+                     None)
+            label = OTHER if e is None else e["label"]
+            for s in engine.early_steps:
+                ok = classes[int(np.argmax(engine.classify_prefix(cap.data[: needed_frames(s)], s) * w))] == label
+                r = right[s]
+                r[0], r[1] = r[0] + ok, r[1] + 1
+                if e is not None:
+                    r[2], r[3] = r[2] + ok, r[3] + 1
+    return {str(s): {"accuracy_every_capture": round(a / n, 4) if n else None, "captures": n,
+                     "accuracy_distraction_captures": round(ad / nd, 4) if nd else None,
+                     "decision_frame_after_trigger_s": round((needed_frames(s) - 1 - detector_cfg.pre_frames) / 100.0,
+                                                             2)}
+            for s, (a, n, ad, nd) in right.items()}
+
+
 # ---------------------------------------------------------------------------- running
 
 
@@ -185,7 +258,7 @@ def evaluate(drives, classifier, cfg, modes=MODES, progress=print) -> dict:
     from edge_runtime import config
     from edge_runtime.wearable.command import replay
 
-    scores = {m: ModeScore() for m in modes}
+    scores = {m: ModeScore(detector=cfg.detector) for m in modes}
     example: dict | None = None
     kinds: dict[str, float] = {}
     for drive in drives:
@@ -277,7 +350,10 @@ def to_markdown(report: dict) -> str:
         v = s[key[0]][key[1]] if isinstance(key, tuple) else s[key]
         return "–" if v is None else f"{v:g}"
 
-    lines = [f"# Held-out simulated driving: {report['hours']:g} h", "",
+    held_out = report.get("seed", HELD_OUT_SEED) == HELD_OUT_SEED
+    lines = [f"# Held-out simulated driving: {report['hours']:g} h" if held_out else
+             f"# Development drives (seed {report['seed']}, not the held-out seed {HELD_OUT_SEED}): "
+             f"{report['hours']:g} h", "",
              f"`{report['command']}`", "",
              f"Model {report['model']}; " + "; ".join(f"{m}: {d}" for m, d in report["decision_modes"].items()), "",
              f"Drives: {report['hours_by_kind']} (hours by kind); {report['held_out']}", "",
@@ -287,7 +363,24 @@ def to_markdown(report: dict) -> str:
         c = report["class_agreement"]
         lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} on every capture and sub-window count: "
                       f"**{c['agreement']}** over {c['decisions']} decisions (by S: {c['by_steps']})"]
-    lines += ["", "Distractions: " + ", ".join(f"{m} {report['scores'][m]['distractions']}" for m in modes)
+    if "step_accuracy" in report:
+        lines += ["", "Top class after S sub-windows on every detector capture (class weights applied; truth: the "
+                      "distraction the trigger falls in, else Other): what an alert after S sub-windows can reach", "",
+                  "| S | decision frame after the trigger (s) | accuracy, every capture | accuracy, distraction captures |",
+                  "|---:|---:|---:|---:|"]
+        lines += [f"| {s} | {r['decision_frame_after_trigger_s']} | {r['accuracy_every_capture']} | "
+                  f"{r['accuracy_distraction_captures']} |" for s, r in report["step_accuracy"].items()]
+    lines += ["", "Where distractions are lost, per class (missed ones by where the runtime lost them: "
+                  "no trigger, a capture that only continued an earlier event, a full window that said Other, "
+                  "no step confident enough):", ""]
+    for m in modes:
+        by_class = report["scores"][m].get("by_class", {})
+        reasons = sorted({r for row in by_class.values() for r in row} - {"distractions", "alerted"})
+        lines += [f"| {m} | distractions | alerted | " + " | ".join(reasons) + " |", "|---|" + "---:|" * (2 + len(reasons))]
+        lines += [f"| {k} | {row['distractions']} | {row['alerted']} | " + " | ".join(str(row.get(r, 0)) for r in reasons)
+                  + " |" for k, row in by_class.items()]
+        lines.append("")
+    lines += ["Distractions: " + ", ".join(f"{m} {report['scores'][m]['distractions']}" for m in modes)
               + "; decisions by status: " + "; ".join(f"{m} {report['scores'][m]['statuses']}" for m in modes), ""]
     return "\n".join(lines)
 
@@ -307,6 +400,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--agreement", metavar="ENTRY",
                    help="also the top-class agreement with this manifest entry (e.g. fp32) on every capture, at "
                         "every sub-window count the model decides at")
+    p.add_argument("--step-accuracy", action="store_true",
+                   help="also the top class's accuracy after each sub-window count S on every capture (what an "
+                        "alert after S sub-windows can reach)")
 
 
 def cmd(a) -> int:
@@ -331,7 +427,7 @@ def cmd(a) -> int:
     print(f"drive-eval: {a.hours:g} h of held-out driving (seed {a.seed}), modes {', '.join(measured)}, model "
           f"{engine.name}" + ("" if early else " (fixed S = 6: early decisions are not measurable)"), flush=True)
     drives = held_out_drives(a.hours, a.seed, a.baseline_share, a.drive_minutes)
-    if a.agreement:
+    if a.agreement or a.step_accuracy:
         drives = list(drives)  # walked twice
     res = evaluate(drives, engine, cfg, measured, progress=lambda line: print(line, flush=True))
     described = {m: ("one decision per capture at T+599 (the dissertation's)" if m == "full_window" else
@@ -344,7 +440,7 @@ def cmd(a) -> int:
             f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()
             if k in ("hours", "seed", "out", "decision", "baseline_share", "drive_minutes", "config", "assets", "model",
                      "agreement")
-            and v is not None),
+            and v is not None) + (" --step-accuracy" if a.step_accuracy else ""),
         "hours": a.hours, "seed": a.seed, "model": f"{engine.name} ({engine.precision})",
         "early_steps": list(engine.early_steps), "decision_modes": described,
         "held_out": (f"distraction drives: seeds {DRIVE_SEED0 + 1000 * a.seed}+k (a new driver each); baseline "
@@ -356,6 +452,8 @@ def cmd(a) -> int:
     if a.agreement:
         other = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, a.agreement, threads=cfg.model.threads)
         report["class_agreement"] = class_agreement(drives, engine, other, cfg.detector)
+    if a.step_accuracy:
+        report["step_accuracy"] = step_accuracy(drives, engine, cfg.detector, cfg.alerts.class_weights)
     report["wall_s"] = round(time.perf_counter() - t_wall, 1)
     (out / "drive_eval.json").write_text(json.dumps(report, indent=1))
     (out / "drive_eval.md").write_text(to_markdown(report))

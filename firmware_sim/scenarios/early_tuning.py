@@ -38,18 +38,18 @@ import numpy as np
 from edge_runtime.cli import CliError, positive_float
 from edge_runtime.wearable.labels import DISTRACTIONS, OTHER
 from firmware_sim.scenarios.drive_eval import (
+    HELD_OUT_SEED,
     MATCH_BEFORE_S,
     Drive,
     ModeScore,
     _better_example,
     _section,
     held_out_drives,
+    miss_reason,
     plot_example,
 )
 from firmware_sim.scenarios.scoring import raises_alert
 
-HELD_OUT_SEED = 2
-"""drive-eval's held-out seed: never tuned on."""
 AFTER_DISTRACTION_S = 3.0
 """A false alert triggered this soon after a distraction ended is put down to the hand returning."""
 RULE = ("first-alert class accuracy >= 0.90 (the must-hold), event recall >= the full window's and repeat alerts "
@@ -189,10 +189,7 @@ def breakdown(drives: list[Drive], decisions: list[list[dict]], pre_frames: int,
                            onset_to_alert_s=round(first["t_alert_s"] - e["start_s"], 3),
                            first_trigger_delay_s=round(first["t_trigger_s"] - e["start_s"], 3))
             else:
-                statuses = {d["status"] for d in own}
-                row["missed"] = ("no trigger" if not own else "continued an earlier event" if statuses == {"continued"}
-                                 else "full window said Other" if "not_alerted" in statuses
-                                 else "not confident at any step")
+                row["missed"] = miss_reason(own)
             events.append(row)
     return {"events": events, "false_alerts": false_alerts,
             "summary": summarise(events, false_alerts, pre_frames, rate_hz)}

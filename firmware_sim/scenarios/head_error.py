@@ -15,8 +15,10 @@ from the cell, 1-3 m high, canonical intrinsics, 30 Hz):
 2. another worker (another height) walks between random points 3-8 m from the camera and
    works ``WORK_S`` at each; the lifter runs on, and each valid frame's head is mapped to the
    robot frame twice: ``off`` -- ``Calibration.apply`` of the lifted head; ``on`` --
-   ``Calibration.anchor_to_floor`` (the skeleton scaled about the camera centre so its lower
-   ankle rests on the floor, guards as in ``CalibrationParams``).
+   ``Calibration.to_robot`` as the robot loop calls it (every valid frame in order, warm-up
+   frames too, with the observed-joint mask): the skeleton scaled about the camera centre so
+   its ankles rest on the floor, each person's factor filtered over his recent frames
+   (``FloorAnchor``, causal), guards as in ``CalibrationParams``. Warm-up frames are not scored.
 
 Errors (m) against the true head: 3-D, ground-projected (x-z: what the hazard zones use)
 and height (y), median and p95, overall and binned by the true ground distance from the
@@ -73,6 +75,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--assets", metavar="DIR", help="lifter models (manifest.json) to measure; default: the shipped")
     parser.add_argument("--ray-tolerance-px", type=float, default=None,
                         help="the lifter's [lifter] ray_tolerance_px (default: its default)")
+    parser.add_argument("--anchor-window-frames", type=positive_int, default=None,
+                        help="the floor anchoring's window (default: calibration.ANCHOR_WINDOW_FRAMES; 1 = each frame alone)")
     parser.add_argument("--json", required=True, metavar="OUT.json", help="write the figures here")
     parser.add_argument("--plot", metavar="OUT.png", help="error vs distance, both methods")
 
@@ -123,15 +127,18 @@ def work_motion(body: Body, camera: Camera, rng: np.random.Generator):
     return motions.concat(parts, blend_s=0.3)
 
 
-def lift(lifter, keypoints: np.ndarray, t0_s: float) -> np.ndarray:
+def lift(lifter, keypoints: np.ndarray, t0_s: float, warm: bool = False):
     """(T, 17, 3) camera-frame joints of detector output (T, 17, 3) at RATE_HZ from ``t0_s``;
-    NaN where the lifter is invalid or still warming up."""
+    NaN where the lifter is invalid or (unless ``warm``) still warming up. With ``warm``:
+    (joints, observed (T, 17) bool, warming_up (T,) bool), every valid frame kept, as the robot
+    loop gets them."""
     out = np.full((len(keypoints), 17, 3), np.nan)
+    observed, warming = np.zeros((len(keypoints), 17), bool), np.zeros(len(keypoints), bool)
     for k, kp in enumerate(keypoints):
         pose = lifter.push(t0_s + k / RATE_HZ, kp if np.isfinite(kp[:, :2]).any() else None)
-        if pose.valid and not pose.warming_up:
-            out[k] = pose.joints_cam_m
-    return out
+        if pose.valid and (warm or not pose.warming_up):
+            out[k], observed[k], warming[k] = pose.joints_cam_m, pose.observed, pose.warming_up
+    return (out, observed, warming) if warm else out
 
 
 def true_calibration(camera: Camera, params: CalibrationParams = CalibrationParams()) -> Calibration:
@@ -142,7 +149,7 @@ def true_calibration(camera: Camera, params: CalibrationParams = CalibrationPara
 
 def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
                   params: CalibrationParams = CalibrationParams(), truth: bool = False,
-                  noise: DetectorNoise = DetectorNoise()) -> dict:
+                  noise: DetectorNoise = DetectorNoise(), anchor_window_frames: int | None = None) -> dict:
     """One camera placement: calibrate (``truth``: take the true extrinsics instead; the
     calibration walk is still simulated, so the random streams match), then the worker's
     frames. Returns per-frame arrays (``distance_m``, per method ``err`` (T, 3) rows of 3-D,
@@ -155,21 +162,30 @@ def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
                                                                              marker=labels)
     except CalibrationError as e:
         return {"camera": camera.to_dict(), "refused": str(e)}
+    if anchor_window_frames is not None:
+        cal.anchor_window_frames = anchor_window_frames
     work = work_motion(_body(rng), camera, rng)
     t0 = len(cal_mot) / RATE_HZ + 2.0                     # a gap: the lifter restarts its buffer
-    joints = lift(lifter, detect(camera, work.joints_m, rng, noise), t0)
-    ok = np.isfinite(joints).all(axis=(1, 2))
-    joints, truth = joints[ok], work.joints_m[ok, HEAD]
+    joints, observed, warming = lift(lifter, detect(camera, work.joints_m, rng, noise), t0, warm=True)
+    valid = np.isfinite(joints).all(axis=(1, 2))
+    # the robot loop's path: every valid frame, in order, through the (stateful) to_robot
+    anchored = np.full_like(joints, np.nan)
+    if "on" in methods:
+        for k in np.flatnonzero(valid):
+            anchored[k] = cal.to_robot(joints[k][None], observed[k][None])[0]
+    ok = valid & ~warming                                  # warm-up frames are fed, not scored
+    joints, anchored, truth = joints[ok], anchored[ok], work.joints_m[ok, HEAD]
     cam = camera.position_m
     dist = np.hypot(*(work.joints_m[ok, HIP][:, [0, 2]] - cam[[0, 2]]).T)
     res = {"camera": camera.to_dict(), "calibration_scale": cal.scale, "distance_m": dist}
     for m in methods:
         if m == "on":
-            ks = np.array([anchor_factor(j, cal.A, cal.b, cal.params) for j in joints], dtype=object)
-            k = ks[:, 0].astype(float) if len(ks) else np.ones(0)
-            res["applied"] = np.array([r is None for r in ks[:, 1]]) if len(ks) else np.zeros(0, bool)
+            head = anchored[:, HEAD]
+            # the factor the anchoring applied: it scales about the camera centre
+            k = np.linalg.norm(head - cal.b, axis=1) / np.linalg.norm(cal.apply(joints[:, HEAD]) - cal.b, axis=1)
+            res["applied"] = np.array([anchor_factor(j, cal.A, cal.b, cal.params, o)[1] is None
+                                       for j, o in zip(joints, observed[ok])], bool)
             res["factor"] = k
-            head = cal.apply(k[:, None] * joints[:, HEAD])
         else:
             head = cal.apply(joints[:, HEAD])
         d = head - truth
@@ -200,7 +216,9 @@ def summarise(results: list[dict], methods, args) -> dict:
                        + (f" --plot {args.plot}" if args.plot else "")
                        + (f" --assets {args.assets}" if getattr(args, "assets", None) else "")
                        + (f" --ray-tolerance-px {args.ray_tolerance_px:g}"
-                          if getattr(args, "ray_tolerance_px", None) is not None else "")),
+                          if getattr(args, "ray_tolerance_px", None) is not None else "")
+                       + (f" --anchor-window-frames {args.anchor_window_frames}"
+                          if getattr(args, "anchor_window_frames", None) is not None else "")),
            "lifter_precision": args.precision, "calibration_method": args.calibration_method, "placements": args.placements,
            "calibrations_refused": [r["refused"] for r in results if "refused" in r],
            "frames": int(len(dist)), "methods": {}}
@@ -283,7 +301,7 @@ def cmd(args) -> int:
     for s in it:
         lifter.restart()
         results.append(run_placement(lifter, np.random.default_rng(int(s)), methods, params, truth,
-                                     NOISES[args.noise]))
+                                     NOISES[args.noise], args.anchor_window_frames))
     summary = summarise(results, methods, args)
     Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
     if args.plot:

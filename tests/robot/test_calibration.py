@@ -266,7 +266,8 @@ def test_anchors_on_an_observed_ankle_not_a_held_one():
     observed[L_ANKLE] = False
     robot = cal.to_robot(lifted, observed)
     np.testing.assert_allclose(robot[R_ANKLE], truth[R_ANKLE], atol=1e-6)
-    assert np.abs(cal.to_robot(lifted)[R_ANKLE] - truth[R_ANKLE]).max() > 0.05  # the held one would move it
+    unmasked = true_calibration(cam).to_robot(lifted)  # a new stream: to_robot remembers each person
+    assert np.abs(unmasked[R_ANKLE] - truth[R_ANKLE]).max() > 0.05  # the held one would move it
 
 
 def test_uses_the_lower_ankle_of_a_stride():
@@ -348,3 +349,74 @@ def test_pnp_measures_the_worker_from_the_rays_not_the_lifters_depth():
     np.testing.assert_allclose(cal.b, cam.position_m, atol=0.02)  # the camera centre, from the rays alone
     r = cal.residuals_m()  # across the rays: the lifter's wrong depths are no residual of a ray fit
     assert max(r["head"] + r["ankle"]) < 0.02
+
+
+# ------------------------------------------------------------------ anchoring over time (FloorAnchor)
+STREAM_CAMERA = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))
+
+
+def noisy_ankle_stream(rng, frames=90, ankle_sd_m=0.08, scale=1.15):
+    """A worker standing still, lifted at a wrong depth, whose ankle keypoints err by ``ankle_sd_m``
+    across the line of sight each frame (a real detector's ankle noise): (truth, camera frames)."""
+    truth = anchored_worker((0.5, 1.5))
+    lifted = STREAM_CAMERA.to_camera(truth) * scale
+    frames_cam = np.repeat(lifted[None], frames, axis=0)
+    frames_cam[:, [L_ANKLE, R_ANKLE], :2] += rng.normal(0.0, ankle_sd_m, (frames, 2, 2)) * scale
+    return truth, frames_cam
+
+
+def ankle_ground(robot):
+    return head_and_ankles(robot)[1][..., [0, 2]]
+
+
+def test_a_noisy_ankle_stream_is_anchored_steadier_than_each_frame_alone():
+    truth, frames_cam = noisy_ankle_stream(np.random.default_rng(3))
+    per_frame = np.stack([true_calibration(STREAM_CAMERA).anchor_to_floor(j)[0] for j in frames_cam])
+    cal = true_calibration(STREAM_CAMERA)
+    streamed = np.stack([cal.to_robot(j) for j in frames_cam])
+    settled = slice(cal.anchor_window_frames, None)             # once the window is full
+    err_frame = np.linalg.norm(ankle_ground(per_frame) - ankle_ground(truth), axis=1)[settled]
+    err_stream = np.linalg.norm(ankle_ground(streamed) - ankle_ground(truth), axis=1)[settled]
+    assert np.ptp(ankle_ground(streamed)[settled], axis=0).max() < 0.5 * np.ptp(ankle_ground(per_frame)[settled],
+                                                                                   axis=0).max()
+    assert np.percentile(err_stream, 95) < 0.6 * np.percentile(err_frame, 95)
+    # the skeleton is only scaled about the camera centre: every joint stays on its ray
+    back = np.stack([STREAM_CAMERA.to_camera(r) for r in streamed])
+    np.testing.assert_allclose(project(back), project(frames_cam), atol=1e-9)
+
+
+def test_one_wild_ankle_frame_does_not_move_the_anchoring():
+    truth, frames_cam = noisy_ankle_stream(np.random.default_rng(4), frames=30, ankle_sd_m=0.002)
+    frames_cam[20, [L_ANKLE, R_ANKLE], 1] += 0.4                 # both ankle keypoints far below the feet
+    cal = true_calibration(STREAM_CAMERA)
+    streamed = np.stack([cal.to_robot(j) for j in frames_cam])
+    alone = true_calibration(STREAM_CAMERA).anchor_to_floor(frames_cam[20])[0]
+    assert np.linalg.norm(ankle_ground(alone) - ankle_ground(truth)) > 0.3
+    assert np.linalg.norm(streamed[20, HEAD] - truth[HEAD]) < 0.02
+    # a second look at the same frame (a monitor reading what the loop saw) gets the same answer
+    np.testing.assert_allclose(cal.to_robot(frames_cam[29]), streamed[29], atol=0)
+
+
+def test_each_person_keeps_his_own_anchoring_whatever_the_order():
+    near, far = anchored_worker((0.5, 2.5)), anchored_worker((-1.0, 0.0))
+    lifted = np.stack([STREAM_CAMERA.to_camera(near) * 1.2, STREAM_CAMERA.to_camera(far) * 0.85])
+    cal = true_calibration(STREAM_CAMERA)
+    for t in range(20):
+        order = [0, 1] if t % 2 else [1, 0]                    # the loop gives no ids
+        out = cal.to_robot(lifted[order])
+        np.testing.assert_allclose(out[order.index(0)], near, atol=1e-6)
+        np.testing.assert_allclose(out[order.index(1)], far, atol=1e-6)
+    assert len(cal._anchor.tracks) == 2
+
+
+def test_a_trackers_ids_key_the_anchoring_when_given():
+    near, far = anchored_worker((0.5, 2.5)), anchored_worker((-1.0, 0.0))
+    lifted = np.stack([STREAM_CAMERA.to_camera(near) * 1.2, STREAM_CAMERA.to_camera(far) * 0.85])
+    cal = true_calibration(STREAM_CAMERA)
+    for t in range(10):
+        order = [0, 1] if t % 2 else [1, 0]
+        # new frames (a lifter never repeats itself exactly): 0.01 % steps in depth
+        out = cal.to_robot(lifted[order] * (1 + 1e-4 * t), ids=[("a", "b")[k] for k in order])
+        np.testing.assert_allclose(out[order.index(0)], near, atol=5e-3)
+        np.testing.assert_allclose(out[order.index(1)], far, atol=5e-3)
+    assert sorted(t.pid for t in cal._anchor.tracks) == ["a", "b"]

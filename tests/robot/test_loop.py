@@ -258,6 +258,21 @@ def test_camera_frame_joints_go_through_the_calibration():
     assert frames[-1].state == "LEVEL1" and frames[-1].distance_m == pytest.approx(3.0, abs=0.05)
 
 
+def test_the_calibration_gets_each_persons_tracker_id():
+    """The floor anchoring is filtered per person: it must get the tracker's ids, not the order."""
+    seen = []
+
+    class Recording:
+        def to_robot(self, p, observed=None, ids=None):
+            seen.append(ids)
+            return np.asarray(p)
+
+    clock, link = Clock(), FakeLink()
+    loop = RobotLoop(link, calibration=Recording(), zones=HEAD_ZONES, clock=clock)
+    loop.feed_poses([(7, lifted(worker(0.0, 4.0))), (3, lifted(worker(1.0, 5.0)))])
+    assert seen and list(seen[-1]) == [7, 3]
+
+
 @pytest.mark.parametrize("anchor", [True, False])
 def test_the_robot_loop_anchors_camera_frame_joints_when_the_calibration_says_so(anchor):
     cam = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))

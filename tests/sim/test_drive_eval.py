@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from support.early_model import Scripted, step_signal, write_assets
+from support.early_model import NEUTRAL_WEIGHTS, Scripted, step_signal, write_assets
 
 from edge_runtime import config
 from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
@@ -22,7 +22,7 @@ def _drive():
 
 
 def test_each_mode_is_scored_from_its_first_alerts():
-    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0)
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS)
     res = evaluate([_drive()], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), cfg, progress=lambda _: None)
     early, full = res["scores"]["early"], res["scores"]["full_window"]
     for s in (early, full):
@@ -38,7 +38,7 @@ def test_each_mode_is_scored_from_its_first_alerts():
 
 
 def test_a_withdrawn_false_alert_and_a_repeat_alert_are_counted(tmp_path):
-    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0)
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS)
     acc = step_signal(9000, [1000, 1700, 4000])  # 17 s: the hand returns during the Phone event (9.5..20 s)
     drive = Drive("steps", acc, [{"start_s": 9.5, "end_s": 20.0, "label": "Phone"}], "distraction")
     res = evaluate([drive], Scripted({2: ("Phone", 0.95), 6: ("Other", 0.9)}), cfg, modes=("early",),
@@ -48,7 +48,7 @@ def test_a_withdrawn_false_alert_and_a_repeat_alert_are_counted(tmp_path):
     plot_example(res["example"], tmp_path / "trace.png")
     assert (tmp_path / "trace.png").stat().st_size > 10_000
     # with the event tracker, the hand returning continues the event: no repeat alert
-    held = config.override(config.load(None), "alerts", event_hold_s=10.0)
+    held = config.override(config.load(None), "alerts", event_hold_s=10.0, class_weights=NEUTRAL_WEIGHTS)
     res = evaluate([drive], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), held, modes=("early",),
                    progress=lambda _: None)
     assert res["scores"]["early"]["repeat_alerts"] == 0 and res["scores"]["early"]["statuses"]["continued"] == 1
@@ -67,6 +67,9 @@ def test_the_command_writes_json_markdown_and_the_trace(tmp_path, capsys):
     assert set(report["scores"]) == {"full_window", "early"}  # the shipped model takes partial captures
     assert all(report["scores"][m]["driving_hours"] == pytest.approx(0.1) for m in report["scores"])
     assert "| event recall |" in (tmp_path / "drive_eval.md").read_text()
+    assert main(["drive-eval", "--hours", "0.05", "--drive-minutes", "3", "--seed", "5", "--out", str(tmp_path),
+                 "--decision", "early", "--step-accuracy"]) == 0
+    assert "| S | decision frame" in (tmp_path / "drive_eval.md").read_text()
     assert main(["drive-eval", "--hours", "1", "--decision", "late", "--out", str(tmp_path)]) == 2
     assert "--decision late" in capsys.readouterr().err
 
@@ -94,3 +97,33 @@ def test_class_agreement_compares_two_models_at_every_step_on_every_capture():
     same = class_agreement([drive], phone, phone2, DetectorConfig())
     assert (same["agreement"], same["decisions"]) == (1.0, 3 * 6) and set(same["by_steps"]) == {"1", "2", "3", "4", "5", "6"}
     assert class_agreement([drive], phone, drink, DetectorConfig())["agreement"] == 0.0
+
+
+def test_missed_distractions_are_told_by_class_and_where_they_were_lost():
+    # a trigger at 10 s (Phone 9.5..10.2 s, alerted); a Drink 10.5..12 s whose motion came while the
+    # detector was paused by the Phone's capture; a Marker 30..32 s with no motion the detector sees
+    acc = step_signal(6000, [1000])
+    events = [{"start_s": 9.5, "end_s": 10.2, "label": "Phone"}, {"start_s": 10.5, "end_s": 12.0, "label": "Drink"},
+              {"start_s": 30.0, "end_s": 32.0, "label": "Marker"}]
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS)
+    res = evaluate([Drive("steps", acc, events, "distraction")], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}),
+                   cfg, modes=("early",), progress=lambda _: None)
+    assert res["scores"]["early"]["by_class"] == {
+        "Drink": {"distractions": 1, "alerted": 0, "no trigger: detector paused by an earlier capture": 1},
+        "Marker": {"distractions": 1, "alerted": 0, "no trigger: below the threshold": 1},
+        "Phone": {"distractions": 1, "alerted": 1}}
+
+
+def test_step_accuracy_scores_every_capture_at_every_sub_window_count():
+    from firmware_sim.scenarios.drive_eval import step_accuracy
+
+    # triggers at 10 s (a Phone) and 40 s (nothing there: truth Other); the model says Phone throughout
+    drive = Drive("steps", step_signal(6000, [1000, 4000]), [{"start_s": 9.5, "end_s": 14.0, "label": "Phone"}],
+                  "distraction")
+    clf = Scripted({})
+    acc = step_accuracy([drive], clf, config.load(None).detector)
+    assert acc["2"] == {"accuracy_every_capture": 0.5, "captures": 2, "accuracy_distraction_captures": 1.0,
+                        "decision_frame_after_trigger_s": 1.62}
+    # weighting Other up makes the 40 s capture right and the Phone wrong
+    weights = (1.0, 1.0, 1.0, 1.0, 1.0, 10.0)
+    assert step_accuracy([drive], clf, config.load(None).detector, weights)["6"]["accuracy_distraction_captures"] == 0.0

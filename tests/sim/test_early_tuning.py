@@ -2,7 +2,7 @@
 model outputs, the sweep and the rule that picks the operating point (a scripted classifier on step
 signals: known answers)."""
 import pytest
-from support.early_model import Scripted, step_signal
+from support.early_model import NEUTRAL_WEIGHTS, Scripted, step_signal
 
 from edge_runtime import config
 from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
@@ -43,7 +43,7 @@ def _drive():
 
 
 def _cfg(**alerts):
-    return config.override(config.load(None), "alerts", **{"event_hold_s": 0.0, **alerts})
+    return config.override(config.load(None), "alerts", **{"event_hold_s": 0.0, "class_weights": NEUTRAL_WEIGHTS, **alerts})
 
 
 def test_decide_is_the_runtime_replay_and_the_cache_asks_the_model_once():

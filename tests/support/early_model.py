@@ -94,3 +94,8 @@ def step_signal(n: int, at, rest_mps2: float = 9.81) -> np.ndarray:
     for i, t in enumerate(at):
         acc[t:, 0] += 6.0 if i % 2 == 0 else -6.0
     return acc
+
+
+NEUTRAL_WEIGHTS = (1.0,) * len(CLASSES)
+"""[alerts] class_weights that leave a stand-in model's probabilities as scripted: the loop's mechanics,
+not the shipped operating point (whose weights would reshuffle a stand-in's evenly spread remainder)."""

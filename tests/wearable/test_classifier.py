@@ -30,6 +30,8 @@ from edge_runtime.wearable.classifier import (
     needed_frames,
     preprocess,
     preprocess_prefix,
+    preprocess_prefix_steps,
+    preprocess_prefixes,
     resample_capture,
     resample_matrix,
     resample_poly,
@@ -331,3 +333,48 @@ def test_calibrating_one_decision_gives_the_batch_path_s_float32_values():
         logp = np.log(np.clip(probs.astype(np.float64), 1e-12, 1.0)) / t
         want = np.exp(logp - logp.max(1, keepdims=True))
         np.testing.assert_allclose(batch, want / want.sum(1, keepdims=True), rtol=1e-6, atol=1e-30)
+
+
+def _drive_captures(minutes: float = 6.0, seed: int = 3) -> np.ndarray:
+    """Every detector capture of a simulated drive (N, 700, 3): real motions, real gravity."""
+    from edge_runtime.wearable.detector import StreamingDetector
+    from firmware_sim.devices.wrist import simulate_drive
+
+    acc = np.ascontiguousarray(simulate_drive(minutes, seed=seed).acc_mps2, dtype=np.float32)
+    return np.stack([c.data for c in StreamingDetector().push(acc)])
+
+
+def test_prefixes_preprocessed_together_are_each_one_preprocessed_alone_bit_for_bit():
+    """The replay preprocesses the captures of a block together, every step from one product of the
+    resampler; each prefix's model input must be exactly what the per-capture path gives it."""
+    caps = _drive_captures()
+    assert len(caps) >= 20
+    steps = (1, 2, 3, 4, 5, 6)
+    together = preprocess_prefix_steps(caps, steps)
+    for s, got in zip(steps, together):
+        n = needed_frames(s)
+        alone = np.stack([preprocess_prefix(c[:n], s) for c in caps])
+        np.testing.assert_array_equal(got, alone)
+        np.testing.assert_array_equal(preprocess_prefixes(caps[:, :n], s), alone)
+    for s, got in zip((2, 5), preprocess_prefix_steps(caps[:3], (2, 5))):  # any subset of steps
+        np.testing.assert_array_equal(got, together[s - 1][:3])
+    longer = np.stack([preprocess_prefix(c[:650], 4) for c in caps[:4]])  # a prefix longer than it needs
+    np.testing.assert_array_equal(preprocess_prefixes(caps[:4, :650], 4), longer)
+    with pytest.raises(ValueError):
+        preprocess_prefix_steps(caps[:, :600], (2, 6))  # S = 6 needs every frame
+
+
+def test_the_shipped_model_classifies_a_batch_as_each_capture_alone():
+    """One model run for many captures (a replay's block) gives each the probabilities it gets alone,
+    to the last bit: onnxruntime computes each item of a batch as it computes it alone."""
+    eng = Engine.from_manifest(ASSETS_DIR, "int8")
+    caps = _drive_captures()
+    groups = [(caps[:-3], (2, 3, 4, 5, 6)), (caps[-3:], (6,)), (caps[:1], (3, 6))]
+    got = eng.classify_capture_groups(groups)
+    for (captures, steps), by_steps in zip(groups, got):
+        assert sorted(by_steps) == list(steps)
+        for s in steps:
+            n = needed_frames(s)
+            alone = np.stack([eng.classify_prefix(c[:n], s) for c in captures])
+            np.testing.assert_array_equal(by_steps[s], alone)
+            np.testing.assert_array_equal(eng.classify_prefixes(captures[:, :n], s), alone)

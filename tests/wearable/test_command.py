@@ -19,7 +19,7 @@ from edge_runtime.errors import InputError, LinkError, ModelIntegrityError
 from edge_runtime.wearable import command
 from edge_runtime.wearable.alerts import AlertEncoder, WearableStatus
 from edge_runtime.wearable.labels import CLASSES
-from edge_runtime.wearable.loop import WearableLoop
+from edge_runtime.wearable.loop import BATCH_CAPTURES, WearableLoop
 from edge_runtime.wearable.mavlink_source import SourceStatus
 from edge_runtime.wearable.sources import ImuBlock, ReplayStats
 
@@ -265,3 +265,49 @@ def test_a_recording_fed_in_blocks_decides_as_sample_by_sample_and_beats_as_in_h
         return [(t, d[1:4] + d[6:8]) for t, i, d in frames if i == 0x3A0]
 
     assert alerts(fast_frames) == alerts(piece_frames)
+
+
+class _PerCapture:
+    """The shipped classifier without its batch call: the loop asks it once per capture and step, as
+    a live box does."""
+
+    def __init__(self, engine):
+        self.engine, self.classes, self.early = engine, engine.classes, engine.early
+        self.early_steps, self.entry = engine.early_steps, engine.entry
+        self.classify_prefix, self.classify_capture = engine.classify_prefix, engine.classify_capture
+
+
+def test_a_replay_classifies_a_block_s_captures_together_and_decides_as_one_call_per_capture(tmp_path, monkeypatch):
+    """``--replay FILE.imu`` hands the loop blocks of many captures and the loop classifies them in
+    one model run per step; its --alerts lines (without the wall-clock fields) are those of the
+    per-capture path on the same recording, every probability included."""
+    from edge_runtime.wearable.classifier import Engine
+    from edge_runtime.wearable.recording import RecordingWriter
+    from firmware_sim.devices.wrist import simulate_drive
+
+    acc = np.ascontiguousarray(simulate_drive(30.0, seed=11).acc_mps2, dtype=np.float32)
+    imu = tmp_path / "d.imu"
+    w = RecordingWriter(imu)
+    w.write(ImuBlock(0.0, acc))
+    w.close()
+    batches = []
+    groups = Engine.classify_capture_groups
+
+    def counted(self, asked):
+        batches.append(sum(len(captures) for captures, _ in asked))
+        return groups(self, asked)
+
+    monkeypatch.setattr(Engine, "classify_capture_groups", counted)
+    assert table.main(["wearable", "--replay", str(imu), "--alerts", str(tmp_path / "a.jsonl"), "--quiet"]) == 0
+    replayed = [json.loads(line) for line in (tmp_path / "a.jsonl").read_text().splitlines()]
+    monkeypatch.undo()
+    cfg = command.effective_config(argparse.Namespace(config=None, assets=None, model=None, threads=None,
+                                                      min_confidence=None, decision=None, threshold=None))
+    per_capture = []
+    command.replay(cfg, _PerCapture(command._load_classifier(cfg)), acc, [lambda d: per_capture.append(d.to_json())])
+    for d in replayed + per_capture:
+        d.pop("compute_us"), d.pop("latency_ms")
+    steps = {d["steps"] for d in replayed}
+    assert len(replayed) >= 100 and {"preliminary", "continued", "confirmed"} <= {d["status"] for d in replayed}
+    assert steps >= {2, 6} and max(batches) == BATCH_CAPTURES  # many captures in one run
+    assert replayed == per_capture

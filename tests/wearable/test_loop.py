@@ -6,7 +6,7 @@ import time
 import can
 import numpy as np
 import pytest
-from support.early_model import Scripted, step_signal
+from support.early_model import NEUTRAL_WEIGHTS, Scripted, step_signal
 
 from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher
 from edge_runtime.wearable.detector import DetectorConfig
@@ -52,7 +52,7 @@ def test_decisions_carry_stream_times_and_the_classifier_gets_the_capture():
 def test_policy_never_alerts_other_and_flags_low_confidence():
     acc = _steps(3000, [1000])
     other = WearableLoop(Fixed("Other", 0.99)).feed(ImuBlock(0.0, acc))[0]
-    unsure = WearableLoop(Fixed("Phone", 0.4), policy=AlertPolicy(min_confidence=0.5)).feed(ImuBlock(0.0, acc))[0]
+    unsure = WearableLoop(Fixed("Phone", 0.4), policy=AlertPolicy(min_confidence=0.5, class_weights=NEUTRAL_WEIGHTS)).feed(ImuBlock(0.0, acc))[0]
     assert (other.alerted, other.status) == (False, "not_alerted")
     assert (unsure.alerted, unsure.status) == (False, "uncertain")
 
@@ -185,8 +185,10 @@ def test_the_heartbeat_thread_reports_what_the_loop_counts():
 
 def Policy(**kw):
     """An early policy that alerts from S = 1 at the manifest's thresholds (else 0.9): the loop's mechanics,
-    not the shipped operating point (tests/sim/test_early_tuning.py pins that one to its validation report)."""
-    return AlertPolicy(**{"min_confidence_by_steps": (-1.0,) * 6, "earliest_alert_step": 1, **kw})
+    not the shipped operating point (tests/sim/test_early_tuning.py pins that one to its validation report),
+    with the model's own probabilities (no class weights)."""
+    return AlertPolicy(**{"min_confidence_by_steps": (-1.0,) * 6, "earliest_alert_step": 1,
+                          "class_weights": NEUTRAL_WEIGHTS, **kw})
 
 
 def _early_run(answers, policy=Policy(), acc=None, split=None, clf=None, **kw):
@@ -389,3 +391,48 @@ def test_a_capture_cut_by_a_gap_gets_no_update_and_the_next_capture_decides_earl
         assert all(round((d.t_alert_s - 100.0) * 100) == a for d in got)
         ds += got
     assert _summary(ds) == [("preliminary", 1, "Phone", 1), ("confirmed", 6, "Phone", 1)]
+
+
+class _OtherOnStepDown(Scripted):
+    """A capture whose x steps down (the hand doing something else, say) is Other at the full window."""
+
+    def classify_prefix(self, x, steps):
+        if steps == 6 and x[-1, 0] < x[0, 0]:
+            self.seen.append((steps, np.array(x)))
+            return self._probs("Other", 0.9)
+        return super().classify_prefix(x, steps)
+
+
+def test_a_capture_of_an_active_event_that_says_other_ends_the_event():
+    # captures at 10 s (up: Phone), 20 s (down: Other, within the hold: continued) and 30 s (up again,
+    # within the hold of the second capture's end): the Other capture ended the event, so the third alerts
+    acc = _steps(8000, [1000, 2000, 3000])
+    answers = {2: ("Phone", 0.95), 6: ("Phone", 0.9)}
+    ds, *_ = _early_run(answers, Policy(event_hold_s=10.0), acc, clf=_OtherOnStepDown(answers))
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("confirmed", 6, "Phone", 0),
+                            ("continued", 6, "Other", None),
+                            ("preliminary", 2, "Phone", 1), ("confirmed", 6, "Phone", 1)]
+    assert [d.event_start_s for d in ds] == [10.0, 10.0, 10.0, 30.0, 30.0]
+    # without the rule the Other capture extends the event and the third capture only continues it
+    ds, *_ = _early_run(answers, Policy(event_hold_s=10.0, event_ends_on_other=False), acc,
+                        clf=_OtherOnStepDown(answers))
+    assert [d.status for d in ds] == ["preliminary", "confirmed", "continued", "continued"]
+
+
+def test_class_weights_reweigh_the_probabilities_before_every_decision():
+    # the full window says Other 0.5, Marker 0.3 (the rest 0.05 each): weighting Marker by 5 makes it
+    # Marker 1.5 / 2.2 = 0.68, an alert; the decision carries the weighted probabilities
+    class OtherOverMarker(Scripted):
+        def classify_prefix(self, x, steps):
+            probs = np.full(len(CLASSES), 0.05, np.float32)
+            probs[CLASSES.index("Other")], probs[CLASSES.index("Marker")] = 0.5, 0.3
+            return probs
+
+    ds, *_ = _early_run({}, Policy(), clf=OtherOverMarker({}))
+    assert [(d.status, d.label) for d in ds] == [("not_alerted", "Other")]
+    weights = tuple(5.0 if c == "Marker" else 1.0 for c in CLASSES)
+    ds, *_ = _early_run({}, Policy(class_weights=weights), clf=OtherOverMarker({}))
+    assert [(d.status, d.label) for d in ds] == [("alert", "Marker")]
+    assert ds[0].confidence == pytest.approx(1.5 / 2.2) and sum(ds[0].probs.values()) == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="class_weights"):
+        AlertPolicy(class_weights=(1.0, 2.0))

@@ -108,3 +108,24 @@ def test_a_record_path_that_cannot_be_written_is_one_line_and_exit_2(tmp_path, c
                        "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--record" in err and "cannot write" in err and "Traceback" not in err
+
+
+def test_replay_joins_records_that_continue_one_another_and_counts_each_block_as_it_goes_out(tmp_path):
+    w = RecordingWriter(tmp_path / "r.imu", record_rows=1000)
+    acc = np.tile(np.float32([0.0, 0.0, 9.81]), (5500, 1))
+    acc[2500, 0] = 156.9  # at full scale: saturated, its record goes alone
+    w.write(ImuBlock(0.0, acc))
+    w.write(ImuBlock(100.0, acc[:700], continuous=False))
+    w.close()
+    stats = ReplayStats()
+    blocks = open_replay(tmp_path / "r.imu", stats)
+    seen = []
+    for b in blocks:
+        seen.append((round(b.t0_s, 2), len(b.acc_mps2), b.continuous, stats.saturated, stats.gaps, stats.rows))
+    assert seen == [(0.0, 2000, True, 0, 0, 2000), (20.0, 1000, True, 1, 0, 3000), (30.0, 2500, True, 1, 0, 5500),
+                      (100.0, 700, False, 1, 1, 6200)]
+    assert [len(b.acc_mps2) for b in read_recording(tmp_path / "r.imu")] == [1000] * 5 + [500, 700]  # as written
+    few = RecordingWriter(tmp_path / "s.imu", record_rows=4)
+    few.write(ImuBlock(0.0, acc[:10]))
+    few.close()
+    assert [len(b.acc_mps2) for b in recording.read_recording(tmp_path / "s.imu", join_rows=8)] == [8, 2]
