@@ -584,3 +584,20 @@ def test_a_retraction_that_carries_the_arm_toward_someone_is_replaced_by_one_str
             target = np.array(next(c for c in link.calls[n_retract:] if c[0] == "retract")[1])
             assert np.linalg.norm(target[[0, 2]]) < np.linalg.norm(hand[[0, 2]]) - 0.1
             assert abs(target[0] * hand[2] - target[2] * hand[0]) < 1e-6        # along the same bearing
+
+
+def test_someone_within_reach_of_a_finished_retraction_turns_the_arm_about_its_base_away_from_him():
+    import math
+
+    loop, link, clock = make_whole_body()
+    # he walks up to the tool and stays within reach of it (nothing further toward the base helps)
+    where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else max(0.3, 3.0 - 1.5 * (t - 2))))  # noqa: E731
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(where(t)))], 5.0)
+    retracts = [np.array(c[1]) for c in link.calls if c[0] == "retract"]
+    assert len(retracts) >= 2
+    bearing = lambda p: math.degrees(math.atan2(p[0], p[2]))  # noqa: E731
+    first, turned = retracts[0], retracts[1]
+    assert abs(bearing(first)) < 1.0                                    # Eq. 6: straight back from him, toward the base
+    assert abs(abs(bearing(turned) - bearing(where(5.0)[0])) - ZoneParams().escape_deg) < 1.0  # then 120 deg from him
+    assert np.linalg.norm(turned[[0, 2]]) == pytest.approx(np.linalg.norm(first[[0, 2]]), abs=1e-6)
+    assert loop.status()["backfired"] == 0
