@@ -26,7 +26,10 @@ Two ways to protect people (``[zones] separation``):
   within ``reach_retract_m`` and for a person who keeps coming (toward the arm faster than
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
   ``retract_lead_s``. After a retraction the arm works again once the person has been
-  beyond both exit distances for ``dwell_s``.
+  beyond both exit distances for ``dwell_s``. Someone still within ``reach_retract_m`` of a
+  finished retraction turns the arm about its base, away from him (``escape_deg``,
+  :func:`escape_retraction`); a retraction whose joint motion carries the arm toward someone is
+  replaced (:class:`edge_runtime.robot.loop.RobotLoop`, ``retract_backfire_m``).
   **People the camera loses** (hidden, out of view, or lifted invalidly while others are
   lifted): each is judged by his reachable set, his last valid body with every joint
   ``lost_person_speed_mps`` x the time since closer to the arm. While that set stays outside
