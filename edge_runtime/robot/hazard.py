@@ -638,7 +638,7 @@ class HazardMonitor:
             for wid, d, speed, point in judged:
                 allowed = z.allowed_speed_mps(d, speed)
                 if point is not None and d <= z.reach_retract_m:
-                    # within reach by his rays alone: retract, away from the point of him nearest the arm
+                    # within reach by what is known of him, in view: retract, away from where his rays say he stands
                     entry = State.LEVEL2
                     if d < nearest[0]:
                         nearest = (d, wid, HeadEstimate(t_s, point, np.zeros(3), point))
@@ -655,7 +655,7 @@ class HazardMonitor:
         return entry, exit_r, nearest, min(nearest[0], worst[2])
 
     def _unlifted(self, t_s: float, unseen: dict, bounds: dict, lifted_now: set):
-        """(id, worst-case separation m, his speed m/s, the point of him nearest the arm or None) of
+        """(id, worst-case separation m, his speed m/s, where his rays say he stands or None) of
         every person in view whom the lifter has
         never lifted validly but whose keypoints' rays bound him (``bounds``: id -> the
         :func:`ray_separation_m` of this frame, or None); such a person whose rays bound nothing
@@ -684,8 +684,8 @@ class HazardMonitor:
         return out
 
     def _lost(self, t_s: float, seen_now: set, caps, bounds: dict | None = None):
-        """(id, worst-case separation m, his speed m/s, None) of every person seen validly before but
-        not in this frame (hidden, out of view, or lifted invalidly), for ``lost_hold_s`` after his last
+        """(id, worst-case separation m, his speed m/s, where his rays say he stands or None) of
+        every person seen validly before but not in this frame (hidden, out of view, or lifted invalidly), for ``lost_hold_s`` after his last
         valid pose, then forgotten. His reachable set: his last valid body, every joint come
         ``v (t - t_seen)`` closer, v = ``lost_person_speed_mps`` or his last tracked speed if faster
         (ISO 13855's approach speeds): nothing the camera lost is assumed to have stood still, and
@@ -705,9 +705,10 @@ class HazardMonitor:
                 continue
             speed = max(z.lost_person_speed_mps, seen.speed_mps)
             d = separation_m(*body_spheres(seen.person_m), caps) - speed * age
-            if bounds.get(wid) is not None:
-                d = max(d, bounds[wid][0])
-            out.append((wid, d, speed, None))
+            point = None
+            if bounds.get(wid) is not None:  # in view: where his rays say he stands (retract away from it)
+                d, point = max(d, bounds[wid][0]), bounds[wid][1]
+            out.append((wid, d, speed, point))
         return out
 
     def _speed_scale(self, d: float, human_speed_mps: float | None) -> float:
@@ -988,8 +989,8 @@ def ray_ground_range_m(origin_m, direction, heights_m: tuple[float, float], floo
 
 def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     """A lower bound of the separation (m) of a person from the arm's ``capsules`` from his
-    keypoints' rays alone, and the point of him that may be nearest (for Eq. 6), or None when
-    his rays bound nothing. Where he can be:
+    keypoints' rays alone, and where he stands (the middle of his anchors' segments, for Eq. 6's
+    direction), or None when his rays bound nothing. Where he can be:
 
     * each ankle he shows is on its ray between ``ray_ankle_heights_m`` above the floor (a foot
       down or in the air), a range of ground distance from the camera; so are his hips and pelvis
@@ -1042,7 +1043,10 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     c = point_clearance_m(pts.reshape(-1, 3), capsules).reshape(t.shape) - half[:, None]
     clear = np.full(17, -np.inf)
     clear[joints] = c.min(axis=1)
-    k = np.unravel_index(int(np.argmin(c)), c.shape)
+    # where he stands, for the retraction's direction: the middle of his anchors' segments (the point of his
+    # segments nearest the arm may lie beyond it, the far end of a ray that passes the arm)
+    anchored = np.isin(joints, list(ranges))
+    stands = (o + 0.5 * (lo + hi)[anchored, None] * u[joints[anchored]]).mean(axis=0)
     # every joint stands over the floor within an anchor group's extent of where it stands (the arm seen from above)
     flat = np.array([1.0, 0.0, 1.0])
     a, b, r = capsules
@@ -1053,7 +1057,7 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     limb = np.maximum(joint[a_], joint[b_]) - 0.5 * JOINT_REACH_M[a_, b_]  # a limb's midpoint: half a bone from either end
     d = min(float((joint - BODY_RADII_M).min()),
             float((limb - 0.5 * (BODY_RADII_M[a_] + BODY_RADII_M[b_])).min()))
-    return d, pts[k]
+    return d, stands
 
 
 def _consistent(span: dict, u: np.ndarray, passes: int = 3) -> dict | None:
@@ -1186,19 +1190,20 @@ def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: Re
 
 
 def escape_retraction(effector_m, head: HeadEstimate, tool_yaw_rad: float | None,
-                      escape_deg: float) -> Retraction | None:
+                      escape_deg: float, side: float | None = None) -> Retraction | None:
     """Someone stands within reach of an arm that has retracted as far as Eq. 6 takes it: the arm
     turns about the base's axis, as a whole (the hand's target and the tool's yaw turned by the same
     angle: for the arm, its first joint alone), until its hand's bearing is ``escape_deg`` from his,
-    on the side it is on already (never across in front of him). None when it is that far already
-    (within 15 deg) or where the tool points is unknown."""
+    on the side it is on already (never across in front of him), or on ``side`` (+1 or -1: the
+    sign of the hand's bearing less his). None when it is that far already (within 15 deg) or
+    where the tool points is unknown."""
     eff = np.asarray(effector_m, float)
     if tool_yaw_rad is None:
         return None
     g, p = ground(eff), ground(head.position_m)
     bearing_e, bearing_p = math.atan2(g[0], g[1]), math.atan2(p[0], p[1])
     off = math.remainder(bearing_e - bearing_p, 2 * math.pi)
-    turn = math.copysign(math.radians(escape_deg), off if off != 0 else 1.0) - off
+    turn = math.copysign(math.radians(escape_deg), side if side else off if off != 0 else 1.0) - off
     if abs(turn) < math.radians(15.0):
         return None
     c, s_ = math.cos(turn), math.sin(turn)

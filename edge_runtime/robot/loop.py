@@ -87,6 +87,7 @@ from edge_runtime.robot.hazard import (
     body_spheres,
     eq6_retraction,
     escape_retraction,
+    ground,
     radial_retraction,
     separation_m,
 )
@@ -673,9 +674,18 @@ class RobotLoop:
         if r.kind is MotionKind.RETRACT and np.linalg.norm(self._last_effector - r.position_m) \
                 > self.params.waypoint_tolerance_m:
             return None
-        e = escape_retraction(self._last_effector, decision.head, self._last_yaw, z.escape_deg)
-        return None if e is None else Motion(MotionKind.RETRACT, _vec3(e.position_m), self.params.task_pitch_rad,
-                                             e.yaw_rad)
+        # either way round, whichever takes the hand furthest from everyone (on the ground); never one that
+        # takes it nearer anyone than it is (a colleague on the other side: hard:200 seed 1, hard_163)
+        people = [ground(decision.head.position_m)[None], *(ground(np.asarray(b, float)).reshape(-1, 2)
+                                                              for b in self.monitor.bodies())]
+        gap = lambda p: min(float(np.linalg.norm(q - ground(p), axis=1).min()) for q in people)  # noqa: E731
+        best, here = None, gap(self._last_effector)
+        for side in (1.0, -1.0):
+            e = escape_retraction(self._last_effector, decision.head, self._last_yaw, z.escape_deg, side)
+            if e is not None and gap(e.position_m) > here and (best is None or gap(e.position_m) > gap(best.position_m)):
+                best = e
+        return None if best is None else Motion(MotionKind.RETRACT, _vec3(best.position_m),
+                                                self.params.task_pitch_rad, best.yaw_rad)
 
     def _retract_backfires(self) -> bool:
         """Has the retraction under way brought the arm ``retract_backfire_m`` closer to anyone

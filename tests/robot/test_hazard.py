@@ -549,7 +549,7 @@ def test_anchored_rays_bound_a_person_within_his_body_extent_of_where_he_stands(
     d, point = ray_separation_m(rays_of(body), caps, WHOLE_BODY)
     # the region reaches toward the arm by at most the body extent plus the ankle band's spread on the floor
     assert sep - 1.6 < d < sep
-    assert point is not None and point[2] > EFF[2]                     # the point of him nearest the arm is his side
+    assert point is not None and point[2] > EFF[2]                     # where he stands: his side
     # ankles alone (the rest hidden): looser; no ankle seen: his hips and head bound him
     only_feet = [j for j in range(17) if j not in (3, 6)]
     d_feet, _ = ray_separation_m(rays_of(body, hide=only_feet), caps, WHOLE_BODY)
@@ -627,3 +627,12 @@ def test_the_escape_turns_the_folded_arm_about_its_base_away_from_the_person():
     assert e.yaw_rad == pytest.approx(0.2 + turn)                     # the whole arm turns: the tool with it
     assert escape_retraction(e.position_m, person, e.yaw_rad, 120.0) is None   # there already
     assert escape_retraction(hand, person, None, 120.0) is None      # where the tool points is unknown
+
+
+def test_a_lost_person_in_view_within_reach_by_his_rays_makes_the_arm_retract_away_from_him():
+    z = WHOLE_BODY
+    mon = ready_body(z, 3.0)
+    settle(mon, body_facing_arm(3.0))
+    # his lift goes invalid while he walks up to the tool: 1.5 s later his rays show him within reach
+    d = mon.observe(2.5, {}, EFF, unseen={0: "missing_joints: left_wrist"}, rays={0: rays_of(body_facing_arm(0.6))})
+    assert d.state == State.LEVEL2 and d.worker == 0 and d.head.position_m[2] > EFF[2]
