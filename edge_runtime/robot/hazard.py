@@ -26,15 +26,25 @@ Two ways to protect people (``[zones] separation``):
   within ``reach_retract_m`` and for a person who keeps coming (toward the arm faster than
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
   ``retract_lead_s``. After a retraction the arm works again once the person has been
-  beyond both exit distances for ``dwell_s``.
+  beyond both exit distances for ``dwell_s``. Someone still within ``reach_retract_m`` of a
+  finished retraction turns the arm about its base, away from him (``escape_deg``,
+  :func:`escape_retraction`); a retraction whose joint motion carries the arm toward someone is
+  replaced (:class:`edge_runtime.robot.loop.RobotLoop`, ``retract_backfire_m``).
   **People the camera loses** (hidden, out of view, or lifted invalidly while others are
   lifted): each is judged by his reachable set, his last valid body with every joint
   ``lost_person_speed_mps`` x the time since closer to the arm. While that set stays outside
   the protective distance he is no reason to stop (the arm slows for it as for anyone); once
   it reaches it, the arm stops (``person_lost``) until he is seen again or, ``lost_hold_s``
-  after his last valid pose, he is forgotten. A person the lifter has never lifted validly
-  stops the arm (FAULT, ``person_unseen``) as long as he is in view unlifted. The camera or
-  lifter failing as a whole (stale or invalid frames) is still a fault stop.
+  after his last valid pose, he is forgotten. **People seen in 2D but never lifted validly**
+  (walking in, half out of the picture, partly hidden) are bounded by their keypoints' rays
+  (``ray_bound``, :func:`ray_separation_m`): with the calibrated camera, a seen ankle's ray meets
+  the floor within a range of distance (or the head's ray crosses the heights of a standing
+  person's head), and every joint he shows lies on its own ray near that range. That region
+  stops the arm (``person_unlifted``) once it comes within the protective distance; when his
+  rays stop bounding him, his last bound shrinks as a lost person's reachable set does. One
+  whose rays never bounded him stops the arm (FAULT, ``person_unseen``) as long as he is in
+  view unlifted. The camera or lifter failing as a whole (stale or invalid frames) is still a
+  fault stop.
 * **"head"**: the dissertation's zones around the end effector, below.
 
 * **Tracking and prediction (Eq. 3).** ``HeadTracker`` fits a straight line to the
@@ -99,6 +109,8 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.skeleton import HEAD as HEAD_JOINT
+from edge_runtime.core.skeleton import HIP as HIP_JOINT
+from edge_runtime.core.skeleton import L_ANKLE, L_HIP, PARENTS, R_ANKLE, R_HIP
 
 GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
 
@@ -209,6 +221,11 @@ class ZoneParams:
     suite hard:60 seed 5: 0.9 m gave 1.29x stop-only's productive share, 0.75 m 1.36x, both without
     a collision); with the full-speed T_s (shipped) S_p at the slowest speed is 1.13 m and this only
     turns a stop into a retraction for someone standing within reach."""
+    escape_deg: float = config.setting(120.0, config.within(0, 180))
+    """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done makes it
+    turn about its base until the hand's bearing is this far from his (deg; 0: never): folded in
+    front of him the arm is within his reach (an arm reaching 0.75-1.05 m from a pelvis 1.4 m out),
+    beside or behind the base it is not."""
     approach_speed_mps: float = config.setting(0.3, config.NON_NEGATIVE)
     """whole_body: a person "keeps coming" when his head moves toward the end effector faster
     than this (m/s; above the tracker's 0.1 m/s of velocity noise)."""
@@ -237,6 +254,32 @@ class ZoneParams:
     valid pose, every joint of him (his reachable set grows this fast, or at his last tracked
     speed if that was faster): ISO 13855's 2.0 m/s for a hand or arm (K = 2000 mm/s, 6.2.3),
     above its 1.6 m/s walking, and the hard suite's running bursts."""
+    ray_bound: bool = True
+    """whole_body: a person the camera sees but the lifter has not (yet) lifted validly is bounded
+    by his keypoints' rays (:func:`ray_separation_m`: his feet on the floor along the ankles' rays,
+    or his head within ``ray_head_heights_m`` along its ray; every joint he shows on its own ray
+    within ``ray_body_extent_m`` of that), and stops the arm only when that region comes within the
+    protective distance (False: he stops it while he is in view, ``person_unseen``). Without a
+    usable ankle or head ray he stops it as before."""
+    ray_ankle_heights_m: tuple[float, float] = config.setting(
+        (0.0, 0.45), ("[low, high] heights (m) with 0 <= low < high", lambda v: len(v) == 2 and 0 <= v[0] < v[1]))
+    """whole_body ray bound: the height above the floor (m) of an ankle: a foot on the ground (0.04 x
+    body height) or in the air mid-stride or running, and the calibration's floor error."""
+    ray_stride_m: float = config.setting(1.0, config.POSITIVE)
+    """whole_body ray bound: how far apart (ground, m) the feet may be (a running stride): with one
+    ankle seen, the foot on the ground may be the other one."""
+    ray_hip_heights_m: tuple[float, float] = config.setting(
+        (0.45, 1.15), ("[low, high] heights (m) with 0 < low < high", lambda v: len(v) == 2 and 0 < v[0] < v[1]))
+    """whole_body ray bound: the hip joints' (and pelvis's) height above the floor (m): 0.53 x body height
+    standing, lower bending or crouching."""
+    ray_head_heights_m: tuple[float, float] = config.setting(
+        (1.2, 2.05), ("[low, high] heights (m) with 0 < low < high", lambda v: len(v) == 2 and 0 < v[0] < v[1]))
+    """whole_body ray bound: the head joint's (the crown's) height above the floor (m): people 1.45-2.0
+    m tall, bending toward the work down to 1.2 m."""
+    ray_body_extent_m: float = config.setting(1.3, config.POSITIVE)
+    """whole_body ray bound: how far (ground distance, m) any joint of a person may be from his foot on
+    the ground (or, bounded by the head, from his head): a pelvis over the feet and an arm reaching
+    forward (the hard suite's reach: the wrists 0.75-1.05 m in front of the pelvis)."""
     retract_weight_away_m: float = config.setting(0.3, config.NON_NEGATIVE)
     """Eq. 6 weight factor 1: the step away from the head (m)."""
     retract_weight_path_m: float = config.setting(0.2, config.NON_NEGATIVE)
@@ -484,6 +527,9 @@ class HazardMonitor:
         """whole_body: each person's last valid pose (``_Seen``), kept ``lost_hold_s`` after it."""
         self._unseen: str | None = None  # this frame: a person lifted invalidly and never validly
         self._lost_stop: list = []  # this frame: the lost people whose reachable set stops the arm
+        self._unlifted_stop: list = []  # this frame: the people never lifted whose rays' bound stops the arm
+        self._bounded: dict = {}
+        """whole_body: each never-lifted person's last ray bound (time s, separation m, his point nearest the arm)."""
         self._coming = False  # this frame: someone keeps coming at the arm (the retraction rule)
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
@@ -492,10 +538,11 @@ class HazardMonitor:
     # -- inputs ---------------------------------------------------------------------------
 
     def observe(self, t_s: float, people: dict[int, np.ndarray], effector_m, arm_q_rad=None,
-                unseen: dict | None = None) -> Decision:
+                unseen: dict | None = None, rays: dict | None = None) -> Decision:
         """A valid pose frame: update the trackers and the zone level. ``unseen``: id -> reason for
         the people the camera reports in this frame but the lifter could not lift (whole_body: each
-        is judged from his last valid pose, :meth:`_lost`; "head": the frame is invalid)."""
+        is judged from his last valid pose, :meth:`_lost`, and by his keypoints' rays, ``rays``: id ->
+        :class:`PersonRays`, :meth:`_unlifted`; "head": the frame is invalid)."""
         unseen = dict(unseen or {})
         if unseen and self.zones.separation == "head":
             wid, why = next(iter(unseen.items()))
@@ -516,7 +563,7 @@ class HazardMonitor:
             d_exit = nearest[0]
         else:
             entry, exit_r, nearest, d_exit = self._speed_and_separation(t_s, people, ests, effector_m, arm_q_rad,
-                                                                        unseen)
+                                                                        unseen, rays or {})
         self._update_level(t_s, entry, d_exit, nearest[2], exit_r)
         if self._fault is not None and self._fault_clear.clear_for(t_s, True) >= self.zones.dwell_s:
             self._fault = None
@@ -537,7 +584,7 @@ class HazardMonitor:
         return entry, {State.LEVEL2: z.r2_m + z.hysteresis_m, State.LEVEL1: z.r1_m + z.hysteresis_m}, nearest
 
     def _speed_and_separation(self, t_s: float, people, ests: dict[int, HeadEstimate], effector_m, arm_q_rad,
-                              unseen: dict):
+                              unseen: dict, rays: dict):
         """Whole-body speed and separation monitoring (ISO/TS 15066). Per person: the smallest
         separation of his body now and predicted ``predict_s`` ahead (every joint moved with his
         head's velocity) from the arm's capsules; the robot speed that separation allows; and
@@ -584,15 +631,22 @@ class HazardMonitor:
                 nearest = (d, wid, est)
             if allowed < worst[0] or worst[1] is None:
                 worst = (allowed, speed, d)
-        self._unseen = next((f"person {w}: {why}" for w, why in unseen.items() if w not in self._seen), None)
-        self._lost_stop = []
-        for wid, d, speed in self._lost(t_s, set(ests), caps):
-            allowed = z.allowed_speed_mps(d, speed)
-            if allowed < v_stop - 1e-9:
-                entry = max(entry, State.LEVEL1)
-                self._lost_stop.append(wid)
-            if allowed < worst[0] or worst[1] is None:
-                worst = (allowed, speed, d)
+        bounds = {w: ray_separation_m(rays[w], caps, z) for w in unseen if z.ray_bound and w in rays}
+        self._lost_stop, self._unlifted_stop = [], []
+        for stops, judged in ((self._lost_stop, self._lost(t_s, set(ests), caps, bounds)),
+                              (self._unlifted_stop, self._unlifted(t_s, unseen, bounds, set(ests)))):
+            for wid, d, speed, point in judged:
+                allowed = z.allowed_speed_mps(d, speed)
+                if point is not None and d <= z.reach_retract_m:
+                    # within reach by what is known of him, in view: retract, away from where his rays say he stands
+                    entry = State.LEVEL2
+                    if d < nearest[0]:
+                        nearest = (d, wid, HeadEstimate(t_s, point, np.zeros(3), point))
+                elif allowed < v_stop - 1e-9:
+                    entry = max(entry, State.LEVEL1)
+                    stops.append(wid)
+                if allowed < worst[0] or worst[1] is None:
+                    worst = (allowed, speed, d)
         human_speed = worst[1]
         exit_r = {State.LEVEL2: max(z.body_retract_distance_m, z.reach_retract_m) + z.hysteresis_m,
                   State.LEVEL1: z.body_protective_distance_m(v_stop, human_speed) + z.hysteresis_m}
@@ -600,14 +654,46 @@ class HazardMonitor:
         self._scale = 1.0 if worst[1] is None else self._speed_scale(worst[2], human_speed)
         return entry, exit_r, nearest, min(nearest[0], worst[2])
 
-    def _lost(self, t_s: float, seen_now: set, caps):
-        """(id, worst-case separation m, his speed m/s) of every person seen validly before but not
-        in this frame (hidden, out of view, or lifted invalidly), for ``lost_hold_s`` after his last
+    def _unlifted(self, t_s: float, unseen: dict, bounds: dict, lifted_now: set):
+        """(id, worst-case separation m, his speed m/s, where his rays say he stands or None) of
+        every person in view whom the lifter has
+        never lifted validly but whose keypoints' rays bound him (``bounds``: id -> the
+        :func:`ray_separation_m` of this frame, or None); such a person whose rays bound nothing
+        (no usable ankle or head ray) stops the arm (``person_unseen``), unless his rays bounded
+        him within the last ``lost_hold_s``: then, as for a lost person, that bound shrinks by his
+        speed (``lost_person_speed_mps``) and the arm's full speed times the time since, and so
+        does it while he is out of view, until he is forgotten."""
+        z = self.zones
+        speed = z.lost_person_speed_mps
+        self._unseen = None
+        out = []
+        for wid, why in unseen.items():
+            if wid in self._seen:
+                continue  # lifted validly before: judged by his reachable set (_lost)
+            bound = bounds.get(wid)
+            if bound is not None:
+                self._bounded[wid] = (t_s, *bound)
+            elif wid not in self._bounded and self._unseen is None:
+                self._unseen = f"person {wid}: {why}"
+        for wid, (t_b, d_b, point) in list(self._bounded.items()):
+            age = t_s - t_b
+            if wid in lifted_now or wid in self._seen or age > z.lost_hold_s or age < 0:
+                del self._bounded[wid]
+                continue
+            out.append((wid, d_b - (speed + z.iso_robot_speed_mps) * age, speed, point if age == 0 else None))
+        return out
+
+    def _lost(self, t_s: float, seen_now: set, caps, bounds: dict | None = None):
+        """(id, worst-case separation m, his speed m/s, where his rays say he stands or None) of
+        every person seen validly before but not in this frame (hidden, out of view, or lifted invalidly), for ``lost_hold_s`` after his last
         valid pose, then forgotten. His reachable set: his last valid body, every joint come
         ``v (t - t_seen)`` closer, v = ``lost_person_speed_mps`` or his last tracked speed if faster
         (ISO 13855's approach speeds): nothing the camera lost is assumed to have stood still, and
-        once that set is within the protective distance the arm stops (``person_lost``)."""
+        once that set is within the protective distance the arm stops (``person_lost``). In view
+        with rays that bound him (``bounds``: id -> :func:`ray_separation_m`), the larger of the
+        two bounds counts: each holds on its own."""
         z = self.zones
+        bounds = bounds or {}
         out = []
         for wid, seen in list(self._seen.items()):
             if wid in seen_now:
@@ -619,7 +705,10 @@ class HazardMonitor:
                 continue
             speed = max(z.lost_person_speed_mps, seen.speed_mps)
             d = separation_m(*body_spheres(seen.person_m), caps) - speed * age
-            out.append((wid, d, speed))
+            point = None
+            if bounds.get(wid) is not None:  # in view: where his rays say he stands (retract away from it)
+                d, point = max(d, bounds[wid][0]), bounds[wid][1]
+            out.append((wid, d, speed, point))
         return out
 
     def _speed_scale(self, d: float, human_speed_mps: float | None) -> float:
@@ -635,6 +724,10 @@ class HazardMonitor:
 
         now = quantised(d)
         return now if now <= self._scale else max(self._scale, quantised(d - z.hysteresis_m))
+
+    def bodies(self) -> list[np.ndarray]:
+        """whole_body: every person accounted for, at his last valid body (robot frame)."""
+        return [seen.person_m for seen in self._seen.values()]
 
     def invalid(self, t_s: float, reason: str) -> Decision:
         """A frame the lifter (or the input) marked invalid: stop."""
@@ -702,6 +795,8 @@ class HazardMonitor:
             state, reason = self.level, "worker_lost"
         elif self._lost_stop and self.level == State.LEVEL1:
             state, reason = self.level, f"person_lost: {', '.join(str(w) for w in self._lost_stop)}"
+        elif self._unlifted_stop and self.level == State.LEVEL1:
+            state, reason = self.level, f"person_unlifted: {', '.join(str(w) for w in self._unlifted_stop)}"
         else:
             state, reason = self.level, ("level2_retract" if self.level == State.LEVEL2 else "level1_stop")
         if self._fault is not None and state == State.LEVEL2:
@@ -812,13 +907,18 @@ def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_
     shifts = np.asarray(shifts_s, float)
     n = len(centres_m)
     moved = (centres_m[None] + shifts[:, None, None] * np.asarray(velocity_mps, float)[None, None]).reshape(-1, 3)
+    d = point_clearance_m(moved, capsules) - np.tile(radii_m, len(shifts))
+    return d.reshape(len(shifts), n).min(axis=1)
+
+
+def point_clearance_m(points_m: np.ndarray, capsules) -> np.ndarray:
+    """Distance (m) of each point (N, 3) from the nearest capsule's surface: (N,)."""
     a, b, r = capsules
     ab = b - a
-    ap = moved[:, None, :] - a[None]
+    ap = np.asarray(points_m, float)[:, None, :] - a[None]
     den = np.maximum((ab * ab).sum(-1), 1e-12)
     t = np.clip((ap * ab[None]).sum(-1) / den, 0.0, 1.0)
-    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1) - r[None] - np.tile(radii_m, len(shifts))[:, None]
-    return d.min(axis=1).reshape(len(shifts), n).min(axis=1)
+    return (np.linalg.norm(ap - t[..., None] * ab[None], axis=-1) - r[None]).min(axis=1)
 
 
 def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
@@ -826,6 +926,182 @@ def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
     ``radii_m`` (N,)) and capsules (starts (K, 3), ends (K, 3), radii (K,)); negative when
     they overlap."""
     return float(separation_per_shift_m(centres_m, radii_m, np.zeros(3), (0.0,), capsules)[0])
+
+
+# ----------------------------------------------------------------------------------------------
+# People seen in 2D but not lifted: bounded by their keypoints' rays
+
+@dataclass(frozen=True)
+class PersonRays:
+    """What the camera shows of a person the lifter has not lifted validly: his keypoints' rays
+    in the robot frame (from the calibration's camera pose)."""
+
+    origin_m: np.ndarray
+    """(3,) the camera centre."""
+    directions: np.ndarray
+    """(17, 3) unit directions of his H36M keypoints; NaN rows for joints not seen."""
+    floor_y_m: float
+    """The floor's height in the robot frame (m)."""
+
+
+BONE_MAX_M = (0.2, 0.5, 0.5, 0.2, 0.5, 0.5, 0.3, 0.3, 0.2, 0.3, 0.25, 0.4, 0.32, 0.25, 0.4, 0.32)
+"""The longest bone (m) from each joint 1..16 to its parent (``skeleton.PARENTS``): a 2.0 m
+person's (edge_runtime/core/skeleton.py's proportions) with a margin. A joint not seen lies
+within the sum of the bones between it and a joint that is."""
+RAY_MAX_SAMPLES = 48
+"""Points each joint's ray segment is checked at (half their spacing is subtracted): 0.1 m apart
+on a segment 4.7 m long."""
+RAY_MAX_RANGE_M = 30.0
+"""Ray segments end this far (ground distance, m) from the camera: further out nobody is near the arm."""
+RAY_MIN_SLOPE = math.sin(math.radians(2.0))
+"""A ray flatter than this (sine of its angle to the horizontal) bounds nothing: its floor or
+head-height crossing is too ill-conditioned."""
+
+
+def _joint_reach_m() -> np.ndarray:
+    """(17, 17) the longest possible distance between two joints along the skeleton (m)."""
+    d = np.full((17, 17), np.inf)
+    np.fill_diagonal(d, 0.0)
+    for child, parent in enumerate(PARENTS):
+        if parent >= 0:
+            d[child, parent] = d[parent, child] = BONE_MAX_M[child - 1]
+    for k in range(17):
+        d = np.minimum(d, d[:, k:k + 1] + d[k:k + 1, :])
+    return d
+
+
+JOINT_REACH_M = _joint_reach_m()
+
+
+def ray_ground_range_m(origin_m, direction, heights_m: tuple[float, float], floor_y_m: float):
+    """(near, far): the ground distances (m) from the camera at which the ray ``direction`` is
+    between ``heights_m`` above the floor, or None when it never is (or is too flat to say)."""
+    u = np.asarray(direction, float)
+    g = math.hypot(u[0], u[2])
+    if g < 1e-9 or abs(u[1]) < RAY_MIN_SLOPE:
+        return None
+    h_cam = float(origin_m[1]) - floor_y_m
+    near, far = sorted((h - h_cam) / (u[1] / g) for h in heights_m)
+    if far <= 0:
+        return None
+    return max(near, 0.0), far
+
+
+def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
+    """A lower bound of the separation (m) of a person from the arm's ``capsules`` from his
+    keypoints' rays alone, and where he stands (the middle of his anchors' segments, for Eq. 6's
+    direction), or None when his rays bound nothing. Where he can be:
+
+    * each ankle he shows is on its ray between ``ray_ankle_heights_m`` above the floor (a foot
+      down or in the air), a range of ground distance from the camera; so are his hips and pelvis
+      between ``ray_hip_heights_m`` and his head between ``ray_head_heights_m``;
+    * every joint of him is within ``ray_body_extent_m`` (ground distance) of the foot on the
+      ground (and that foot within ``ray_stride_m`` of the other one when one ankle alone is
+      seen), of his hips and of his head: so each joint he shows is on its own ray within the
+      ranges above widened by that (where they all overlap), and every joint (shown or not)
+      stands over the floor within that of each such anchor's floor points;
+    * two joints he shows are no further apart than the bones between them (``JOINT_REACH_M``):
+      the points of each joint's ray segment that no point of a related one's is that close to
+      are dropped (:func:`_consistent`), and a joint he does not show is within its bones of one
+      he does.
+
+    The bound is the smallest of these regions' clearance from the capsules, less each joint's
+    body radius (``BODY_RADII_M``; limb midpoints too)."""
+    u, o = rays.directions, np.asarray(rays.origin_m, float)
+    seen = np.isfinite(u).all(axis=1)
+    g = np.hypot(u[:, 0], u[:, 2])
+    if (g[seen] < 1e-9).any():  # a ray straight down or up: that joint is anywhere below or above the camera
+        return None
+    # anchors: joints whose height above the floor is known within a band, each group with the ground distance
+    # every joint of him is within of it
+    feet = [j for j in (L_ANKLE, R_ANKLE) if seen[j]]
+    groups = [(feet, zones.ray_ankle_heights_m, zones.ray_body_extent_m + (zones.ray_stride_m if len(feet) == 1 else 0)),
+              ([j for j in (HIP_JOINT, R_HIP, L_HIP) if seen[j]], zones.ray_hip_heights_m, zones.ray_body_extent_m),
+              ([HEAD_JOINT] if seen[HEAD_JOINT] else [], zones.ray_head_heights_m, zones.ray_body_extent_m)]
+    ranges, regions = {}, []
+    for joints_, heights, extent in groups:
+        got = {j: ray_ground_range_m(o, u[j], heights, rays.floor_y_m) for j in joints_}
+        got = {j: r for j, r in got.items() if r is not None}
+        if got:
+            ranges.update(got)
+            regions.append((min(r[0] for r in got.values()) - extent, max(r[1] for r in got.values()) + extent,
+                            list(got), extent))
+    if not regions:  # nothing crosses the floor or its band of heights
+        return None
+    near, far = max(r[0] for r in regions), min(r[1] for r in regions)  # each region holds all of him
+    if near > far:  # the anchors disagree (a stray keypoint): the loosest
+        near, far = min(r[0] for r in regions), max(r[1] for r in regions)
+    near, far = max(near, 0.0), min(far, RAY_MAX_RANGE_M)
+    # each seen joint's distance along its ray (m): an anchor on its own range, every other joint within the region
+    span = {j: tuple(v / g[j] for v in ranges.get(j, (near, far))) for j in np.flatnonzero(seen)}
+    span = _consistent(span, u) or span
+    joints = np.array(sorted(span))
+    lo, hi = np.array([span[j] for j in joints]).T
+    t = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, RAY_MAX_SAMPLES)[None, :]    # (J, S)
+    half = 0.5 * (hi - lo) / (RAY_MAX_SAMPLES - 1)  # every point of a segment is within this of a sample
+    pts = o + t[..., None] * u[joints][:, None, :]                                             # (J, S, 3)
+    c = point_clearance_m(pts.reshape(-1, 3), capsules).reshape(t.shape) - half[:, None]
+    clear = np.full(17, -np.inf)
+    clear[joints] = c.min(axis=1)
+    # where he stands, for the retraction's direction: the middle of his anchors' segments (the point of his
+    # segments nearest the arm may lie beyond it, the far end of a ray that passes the arm)
+    anchored = np.isin(joints, list(ranges))
+    stands = (o + 0.5 * (lo + hi)[anchored, None] * u[joints[anchored]]).mean(axis=0)
+    # every joint stands over the floor within an anchor group's extent of where it stands (the arm seen from above)
+    flat = np.array([1.0, 0.0, 1.0])
+    a, b, r = capsules
+    over = point_clearance_m(pts.reshape(-1, 3) * flat, (a * flat, b * flat, r)).reshape(t.shape) - half[:, None]
+    column = max(float(over[np.isin(joints, members)].min()) - extent for _, _, members, extent in regions)
+    joint = np.maximum((clear[None, :] - JOINT_REACH_M).max(axis=1), column)
+    a_, b_ = np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS])
+    limb = np.maximum(joint[a_], joint[b_]) - 0.5 * JOINT_REACH_M[a_, b_]  # a limb's midpoint: half a bone from either end
+    d = min(float((joint - BODY_RADII_M).min()),
+            float((limb - 0.5 * (BODY_RADII_M[a_] + BODY_RADII_M[b_])).min()))
+    return d, stands
+
+
+def _consistent(span: dict, u: np.ndarray, passes: int = 3) -> dict | None:
+    """Each seen joint's interval of distance along its ray (``span``: joint -> (lo, hi) m; ``u``
+    the rays' unit directions, all from the camera centre) narrowed to where a related seen joint
+    is within the bones between them (``JOINT_REACH_M``). Related: each seen joint and its nearest
+    seen ancestor in the skeleton (``PARENTS``), both ways, every pair at once, ``passes`` times: a
+    chain from the ankles up to the wrists. Within one ray's interval the points near enough to
+    another ray's segment are an interval again (the distance is convex), found on
+    ``RAY_MAX_SAMPLES`` samples and widened by half their spacing (the distance changes no faster
+    than the point moves). None when that leaves a joint nothing (the keypoints contradict a body:
+    a swapped or stray keypoint): nothing is narrowed then."""
+    joints = sorted(span)
+    first, second = [], []
+    for j in joints:
+        k = PARENTS[j]
+        while k >= 0 and k not in span:
+            k = PARENTS[k]
+        if k >= 0:
+            first += [j, k]
+            second += [k, j]
+    if not first:
+        return span
+    i_, k_ = np.array(first), np.array(second)
+    lo, hi = np.full(17, np.nan), np.full(17, np.nan)
+    lo[joints], hi[joints] = zip(*(span[j] for j in joints))
+    cos = (u[i_] * u[k_]).sum(axis=1)[:, None]
+    reach = JOINT_REACH_M[i_, k_][:, None]
+    frac = np.linspace(0.0, 1.0, RAY_MAX_SAMPLES)[None, :]
+    for _ in range(passes):
+        t = lo[i_][:, None] + (hi[i_] - lo[i_])[:, None] * frac
+        s_ = np.clip(t * cos, lo[k_][:, None], hi[k_][:, None])   # the nearest point of the other's segment
+        gap = np.sqrt(np.maximum(t * t + s_ * s_ - 2 * t * s_ * cos, 0.0))
+        h = 0.5 * (t[:, 1] - t[:, 0])
+        keep = gap <= reach + h[:, None]
+        if not keep.any(axis=1).all():
+            return None
+        new_lo = np.where(keep, t, np.inf).min(axis=1) - h
+        new_hi = np.where(keep, t, -np.inf).max(axis=1) + h
+        np.maximum.at(lo, i_, new_lo)
+        np.minimum.at(hi, i_, new_hi)
+        if (lo[joints] > hi[joints]).any():
+            return None
+    return {j: (float(lo[j]), float(hi[j])) for j in joints}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -911,6 +1187,29 @@ def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: Re
     if r > limits.max_radius_m:
         target[[0, 2]] *= limits.max_radius_m / r
     return _retraction(target, limits, tool_yaw_rad, held_yaw_rad)
+
+
+def escape_retraction(effector_m, head: HeadEstimate, tool_yaw_rad: float | None,
+                      escape_deg: float, side: float | None = None) -> Retraction | None:
+    """Someone stands within reach of an arm that has retracted as far as Eq. 6 takes it: the arm
+    turns about the base's axis, as a whole (the hand's target and the tool's yaw turned by the same
+    angle: for the arm, its first joint alone), until its hand's bearing is ``escape_deg`` from his,
+    on the side it is on already (never across in front of him), or on ``side`` (+1 or -1: the
+    sign of the hand's bearing less his). None when it is that far already (within 15 deg) or
+    where the tool points is unknown."""
+    eff = np.asarray(effector_m, float)
+    if tool_yaw_rad is None:
+        return None
+    g, p = ground(eff), ground(head.position_m)
+    bearing_e, bearing_p = math.atan2(g[0], g[1]), math.atan2(p[0], p[1])
+    off = math.remainder(bearing_e - bearing_p, 2 * math.pi)
+    turn = math.copysign(math.radians(escape_deg), side if side else off if off != 0 else 1.0) - off
+    if abs(turn) < math.radians(15.0):
+        return None
+    c, s_ = math.cos(turn), math.sin(turn)
+    target = eff.copy()
+    target[[0, 2]] = (c * g[0] + s_ * g[1], -s_ * g[0] + c * g[1])
+    return Retraction(target, tool_yaw_rad + turn)
 
 
 def radial_retraction(effector_m, zones: ZoneParams, limits: RetractLimits, tool_yaw_rad: float | None,

@@ -77,14 +77,21 @@ from edge_runtime.core.skeleton import HEAD, JOINTS
 from edge_runtime.robot.hazard import (
     Decision,
     HazardMonitor,
+    PersonRays,
     Retraction,
     RetractLimits,
     State,
     TrackerParams,
     ZoneParams,
+    arm_capsules,
+    body_spheres,
     eq6_retraction,
+    escape_retraction,
+    ground,
     radial_retraction,
+    separation_m,
 )
+from edge_runtime.robot.rays import lifter_rays
 
 if TYPE_CHECKING:  # the caller makes the lifter (onnxruntime) and the link (python-can, pymavlink): the
     # loop only calls them, so importing it (as the box configuration does) stays light
@@ -127,6 +134,14 @@ class LoopParams:
     at most this much (deg); 180 turns it all the way. A large turn makes the hand swing
     through joint space: in the simulated Sawyer a full turn swept it 0.3 m toward the
     worker, which 45 deg avoids."""
+    retract_backfire_m: float = config.setting(0.1, config.POSITIVE)
+    """whole_body: a retraction under way that has brought the arm this much closer (m) to someone
+    within the retraction's reach (``body_retract_distance_m`` + ``retract_lead_s`` x
+    ``lost_person_speed_mps``), by its own motion (his body now against the arm where it is and
+    where the retraction began), is replaced by the retraction straight toward the base, and that
+    one by a stop: the controller moves its joints along a straight line to its IK solution, and a
+    far solution swings the hand through the cell (hard:200 seed 3, hard_109: toward a passing
+    worker, 0.081 m)."""
     retract_max_radius_m: float = config.setting(0.7, config.POSITIVE)
     """Retraction targets further than this from the base's axis (ground distance, m) are
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
@@ -227,6 +242,8 @@ class LoopCounters:
     """Speed overrides sent (whole-body speed scaling)."""
     unseen: int = 0
     """People in a frame whose lift was invalid (each judged from his last valid pose)."""
+    backfired: int = 0
+    """Retractions replaced by a stop because they carried the arm toward someone (``retract_backfire_m``)."""
 
 
 @dataclass
@@ -286,6 +303,8 @@ class RobotLoop:
         self._retract_seq: int | None = None
         self._retract_fallback = False
         self._retract_distance_m = math.inf
+        self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
+        self._escaped = False  # this level 2 has turned the arm about its base once already
         self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
@@ -311,7 +330,8 @@ class RobotLoop:
     # -- inputs ---------------------------------------------------------------------------
 
     def feed_joints(self, joints_m, valid: bool = True, reason: str = "", ids=None,
-                    t_in_s: float | None = None, observed=None, unseen: dict | None = None) -> FrameRecord:
+                    t_in_s: float | None = None, observed=None, unseen: dict | None = None,
+                    rays: dict | None = None) -> FrameRecord:
         """One frame of 3D joints: (17, 3) for one worker, (P, 17, 3) for several, (0, 17, 3)
         or None for nobody seen. ``valid``/``reason``: the lifter's verdict; an invalid frame
         stops the arm, except ``no_person`` (nobody detected): that is an empty scene, judged
@@ -319,7 +339,9 @@ class RobotLoop:
         a stable id per person (default: their index) so each keeps his own tracker.
         ``t_in_s``: when the frame's input arrived (default: now). ``observed`` ((P, 17) bool,
         optional): the joints seen in this frame, for the floor anchoring. ``unseen``: id -> reason
-        for people in this frame whose lift is invalid (``HazardMonitor.observe``)."""
+        for people in this frame whose lift is invalid (``HazardMonitor.observe``); ``rays``: id ->
+        (17, 3) camera-frame rays of such a person's keypoints (:mod:`edge_runtime.robot.rays`), which
+        bound where he is once the calibration puts them in the robot frame."""
         t_in = self.clock() if t_in_s is None else t_in_s
         if not valid and reason.split(":", 1)[0] == NO_PERSON:
             joints_m, valid = None, True
@@ -345,7 +367,7 @@ class RobotLoop:
         else:
             self.counters.unseen += len(unseen or ())
             decision = self.monitor.observe(t_in, dict(zip(keys, persons)), self.effector_m(), self._last_q,
-                                            unseen)
+                                            unseen, self._robot_rays(rays))
             people = self._people(keys, persons)
         return self._act(t_in, decision, record=True, people=people)
 
@@ -354,21 +376,42 @@ class RobotLoop:
         ``keypoints.PersonTracker``), each lifted with his own window by ``lifter`` and judged by
         :meth:`feed_poses`. ``t_in_s`` is taken before lifting."""
         t_in = self.clock()
-        return self.feed_poses(lifter.push(t_frame_s, people), t_in_s=t_in)
+        poses = lifter.push(t_frame_s, people)
+        rays = {pid: lifter_rays(lifter.template, person.keypoints)
+                for (pid, pose), person in zip(poses, people) if not pose.valid}
+        return self.feed_poses(poses, t_in_s=t_in, rays=rays)
 
-    def feed_poses(self, poses, t_in_s: float | None = None) -> FrameRecord:
+    def feed_poses(self, poses, t_in_s: float | None = None, rays: dict | None = None) -> FrameRecord:
         """One frame of lifted people, ``[(id, LiftedPose)]``. The valid ones are judged; one lifted
         invalidly (hidden joints, a lift out of range) is ``unseen`` in this frame: judged by his
-        reachable set from his last valid pose, or, never lifted validly, a stop (the hazard
-        module). ``no_person`` (nothing of him detected) is simply not there. An empty list is an
-        empty scene."""
+        reachable set from his last valid pose and by his keypoints' rays (``rays``: id -> (17, 3)
+        camera-frame rays, :func:`edge_runtime.robot.rays.lifter_rays`), or, never lifted validly and
+        without rays that bound him, a stop (the hazard module). ``no_person`` (nothing of him
+        detected) is simply not there. An empty list is an empty scene."""
         valid = [(pid, p) for pid, p in poses if p.valid]
         unseen = {pid: str(p.reason or "invalid") for pid, p in poses
                   if not p.valid and str(p.reason or "").split(":", 1)[0] != NO_PERSON}
         if not valid:
-            return self.feed_joints(None, t_in_s=t_in_s, unseen=unseen)
+            return self.feed_joints(None, t_in_s=t_in_s, unseen=unseen, rays=rays)
         return self.feed_joints(np.stack([p.joints_cam_m for _, p in valid]), ids=[pid for pid, _ in valid],
-                                t_in_s=t_in_s, observed=np.stack([p.observed for _, p in valid]), unseen=unseen)
+                                t_in_s=t_in_s, observed=np.stack([p.observed for _, p in valid]), unseen=unseen,
+                                rays=rays)
+
+    def _robot_rays(self, rays: dict | None) -> dict:
+        """Camera-frame keypoint rays (id -> (17, 3)) as :class:`PersonRays` in the robot frame,
+        through the calibration (its camera centre, its rotation, and its floor); none without a
+        calibration that gives them (the joints are in the robot frame already: no camera known)."""
+        cal = self.calibration
+        floor = getattr(getattr(cal, "params", None), "floor_y_m", None)
+        if not rays or cal is None or floor is None or not hasattr(cal, "apply"):
+            return {}
+        origin = np.asarray(cal.apply(np.zeros(3)), float)
+        out = {}
+        for pid, r in rays.items():
+            d = np.asarray(cal.apply(np.asarray(r, float)), float) - origin
+            n = np.linalg.norm(d, axis=1, keepdims=True)
+            out[pid] = PersonRays(origin, d / np.where(n > 1e-12, n, np.nan), float(floor))
+        return out
 
     def _people(self, keys, persons: np.ndarray) -> list[dict]:
         """What the runtime believes about each person (robot frame): FrameRecord.people."""
@@ -568,15 +611,23 @@ class RobotLoop:
 
     def _desired_motion(self, state: State, decision: Decision) -> Motion:
         if state == State.NORMAL:
-            self._retract, self._retract_seq, self._unreachable = None, None, False
+            self._retract, self._retract_seq, self._unreachable, self._escaped = None, None, False, False
             return self._task_motion()
         if state == State.LEVEL2:
-            if self._retract is None or self._retract_again(decision):
-                self._retract = self._retract_motion(decision)
+            escape = self._escape(decision)
+            if escape is not None or self._retract is None or self._retract_again(decision):
+                self._escaped |= escape is not None
+                self._retract = escape or self._retract_motion(decision)
                 self._retract_fallback = False
                 self._retract_distance_m = decision.distance_m
+                self._retract_q0 = self._last_q
+            elif self._retract_backfires():
+                # the straight way toward the base once (the unreachable retraction's fallback), then a stop
+                self.counters.backfired += 1
+                self._retract = STOP if self._retract_fallback else self._radial_retract()
+                self._retract_fallback, self._retract_q0 = True, self._last_q
             return self._retract
-        self._retract, self._retract_seq, self._unreachable = None, None, False
+        self._retract, self._retract_seq, self._unreachable, self._escaped = None, None, False, False
         return STOP
 
     def _task_motion(self) -> Motion:
@@ -607,6 +658,51 @@ class RobotLoop:
             return False
         nxt = self._retract_motion(decision)
         return nxt.kind is MotionKind.RETRACT and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
+
+    def _escape(self, decision: Decision) -> Motion | None:
+        """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done (Eq. 6
+        takes it no further: it stops short of the base's axis) or was stopped makes the arm turn
+        about its base, away from him (:func:`edge_runtime.robot.hazard.escape_retraction`), once
+        while in level 2: a worker who stands at the cell and reaches for the tool reached the
+        folded arm in front of him (hard:200 seed 3, hard_101 0.033 m, hard_195 0.061 m). None
+        otherwise."""
+        r, z = self._retract, self.zones
+        if (z.separation != "whole_body" or z.escape_deg <= 0 or r is None or self._escaped or self._unreachable
+                or self._last_effector is None or decision.head is None or decision.distance_m > z.reach_retract_m):
+            return None
+        # after a retraction that is done, or one that was stopped (it carried the arm toward someone)
+        if r.kind is MotionKind.RETRACT and np.linalg.norm(self._last_effector - r.position_m) \
+                > self.params.waypoint_tolerance_m:
+            return None
+        # either way round, whichever takes the hand furthest from everyone (on the ground); never one that
+        # takes it nearer anyone than it is (a colleague on the other side: hard:200 seed 1, hard_163)
+        people = [ground(decision.head.position_m)[None], *(ground(np.asarray(b, float)).reshape(-1, 2)
+                                                              for b in self.monitor.bodies())]
+        gap = lambda p: min(float(np.linalg.norm(q - ground(p), axis=1).min()) for q in people)  # noqa: E731
+        best, here = None, gap(self._last_effector)
+        for side in (1.0, -1.0):
+            e = escape_retraction(self._last_effector, decision.head, self._last_yaw, z.escape_deg, side)
+            if e is not None and gap(e.position_m) > here and (best is None or gap(e.position_m) > gap(best.position_m)):
+                best = e
+        return None if best is None else Motion(MotionKind.RETRACT, _vec3(best.position_m),
+                                                self.params.task_pitch_rad, best.yaw_rad)
+
+    def _retract_backfires(self) -> bool:
+        """Has the retraction under way brought the arm ``retract_backfire_m`` closer to anyone
+        within the retraction's reach, by its own motion? (Everyone the monitor accounts for, at his
+        last valid body, against the arm where it is now and where the retraction began.)"""
+        r, q0, q = self._retract, self._retract_q0, self._last_q
+        z = self.zones
+        if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None or z.separation != "whole_body":
+            return False
+        reach = z.body_retract_distance_m + z.retract_lead_s * z.lost_person_speed_mps
+        now_caps, start_caps = arm_capsules(q), arm_capsules(q0)
+        for body in self.monitor.bodies():
+            centres, radii = body_spheres(body)
+            now = separation_m(centres, radii, now_caps)
+            if now < reach and now < separation_m(centres, radii, start_caps) - self.params.retract_backfire_m:
+                return True
+        return False
 
     def _retract_motion(self, decision: Decision) -> Motion:
         """Eq. 6's retraction from the effector (:func:`edge_runtime.robot.hazard.eq6_retraction`)."""

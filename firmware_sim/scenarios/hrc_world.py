@@ -74,6 +74,7 @@ from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD
 from edge_runtime.robot.hazard import State, arm_capsules, body_spheres, ground, separation_m
 from edge_runtime.robot.lifter import MISSING_JOINTS, NO_PERSON, LiftedPose
 from edge_runtime.robot.loop import RobotLoop
+from edge_runtime.robot.rays import lifter_rays
 from firmware_sim.devices.camera import CANONICAL, Camera, DetectorNoise, detect, resample
 from firmware_sim.people import motions
 from firmware_sim.people.human import Body, heading_towards
@@ -512,7 +513,7 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
                         _occlude(percepts, frame_i, camera, Jc, sim.controller.arm)
                     w0 = time.perf_counter()
                     outs = [p.push(frame_i, t_cap[frame_i]) for p in percepts]
-                    rec = _feed(loop, outs)
+                    rec = _feed(loop, outs, percepts, frame_i)
                     w1 = time.perf_counter()
                     frame_s += w1 - w0
                     for w, out in enumerate(outs):  # the head the runtime saw, robot frame, against the truth
@@ -644,11 +645,14 @@ def _occlude(percepts, k: int, camera: Camera, Jc: np.ndarray, arm) -> None:
         kp[behind[w], 2] = np.minimum(kp[behind[w], 2], HardNoise().self_occluded_score)
 
 
-def _feed(loop: RobotLoop, outs: list):
-    """One camera frame of every worker's perception into the loop, with his worker index as his
-    id (the simulator knows who is who: it stands in for ``keypoints.PersonTracker``), the way the
-    product feeds its tracked people (``RobotLoop.feed_poses``)."""
-    return loop.feed_poses(list(enumerate(outs)))
+def _feed(loop: RobotLoop, outs: list, percepts: list, k: int):
+    """One camera frame (``k``) of every worker's perception into the loop, with his worker index
+    as his id (the simulator knows who is who: it stands in for ``keypoints.PersonTracker``), the
+    way the product feeds its tracked people (``RobotLoop.feed_people``): a worker lifted invalidly
+    comes with his keypoints' rays through the lifter's camera."""
+    rays = {w: lifter_rays(p.lifter, p.keypoints[k]) for w, (p, out) in enumerate(zip(percepts, outs))
+            if not out.valid and isinstance(p, LifterPerception)}
+    return loop.feed_poses(list(enumerate(outs)), rays=rays)
 
 
 def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult:

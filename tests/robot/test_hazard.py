@@ -13,6 +13,7 @@ from edge_runtime.robot.hazard import (
     HazardMonitor,
     HeadEstimate,
     HeadTracker,
+    PersonRays,
     RetractLimits,
     State,
     TrackerParams,
@@ -22,8 +23,10 @@ from edge_runtime.robot.hazard import (
     body_spheres,
     effector_capsule,
     eq6_retraction,
+    escape_retraction,
     limit_turn,
     radial_retraction,
+    ray_separation_m,
     retract_direction,
     separation_m,
     step_outside_radius,
@@ -497,3 +500,139 @@ def test_head_zones_treat_a_person_lifted_invalidly_as_an_invalid_frame():
     mon = ready()
     d = mon.observe(1.0, {0: head_at(6.0)}, EFF, unseen={1: "missing_joints: head"})
     assert d.state == State.FAULT and d.reason.startswith("pose_invalid: person 1")
+
+
+# -- people seen in 2D but not lifted: bounded by their keypoints' rays (whole body) -------------
+
+CAMERA_M = np.array([0.0, 1.6, 8.0])
+"""A camera 2.5 m above the floor, 8 m out on the +z side, behind the workers facing the arm."""
+FLOOR_Y = -0.914
+
+
+def rays_of(body, camera_m=CAMERA_M, hide=()):
+    """PersonRays of a body's joints seen from ``camera_m`` (the joints in ``hide`` not seen)."""
+    d = np.asarray(body, float) - camera_m
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[list(hide)] = np.nan
+    return PersonRays(np.asarray(camera_m, float), d, FLOOR_Y)
+
+
+def test_the_ray_bound_never_exceeds_the_true_separation():
+    from firmware_sim.people import human
+
+    rng = np.random.default_rng(3)
+    caps = effector_capsule(EFF)
+    checked = 0
+    for _ in range(200):
+        h = rng.uniform(1.5, 2.0)
+        bearing, dist = rng.uniform(-1.2, 1.2), rng.uniform(1.2, 5.0)
+        posture = human.Posture(trunk_flexion_deg=rng.uniform(0, 40),   # leaning and reaching toward the arm
+                                shoulder_flexion_deg=tuple(rng.uniform(0, 110, 2)),
+                                knee_flexion_deg=tuple(rng.uniform(0, 30, 2))) if rng.random() < 0.5 else \
+            human.Posture(hip_flexion_deg=(rng.uniform(0, 45), 0.0), knee_flexion_deg=(rng.uniform(0, 60), 0.0))  # a step
+        body = human.joints(human.Body.from_height(h), posture,
+                            pelvis_xz_m=(EFF[0] + dist * math.sin(bearing), EFF[2] + dist * math.cos(bearing)),
+                            heading_rad=math.atan2(-math.sin(bearing), -math.cos(bearing)) + rng.uniform(-1, 1))
+        cam = np.array([rng.uniform(-4, 4), rng.uniform(0.1, 2.1), rng.uniform(4, 9)])
+        hide = rng.choice(17, size=int(rng.integers(0, 5)), replace=False)
+        bound = ray_separation_m(rays_of(body, cam, hide), caps, WHOLE_BODY)
+        if bound is not None:
+            checked += 1
+            assert bound[0] <= separation_of(body) + 1e-9
+    assert checked > 150
+
+
+def test_anchored_rays_bound_a_person_within_his_body_extent_of_where_he_stands():
+    caps = effector_capsule(EFF)
+    body = body_facing_arm(4.0)
+    sep = separation_of(body)
+    d, point = ray_separation_m(rays_of(body), caps, WHOLE_BODY)
+    # the region reaches toward the arm by at most the body extent plus the ankle band's spread on the floor
+    assert sep - 1.6 < d < sep
+    assert point is not None and point[2] > EFF[2]                     # where he stands: his side
+    # ankles alone (the rest hidden): looser; no ankle seen: his hips and head bound him
+    only_feet = [j for j in range(17) if j not in (3, 6)]
+    d_feet, _ = ray_separation_m(rays_of(body, hide=only_feet), caps, WHOLE_BODY)
+    assert sep - WHOLE_BODY.ray_body_extent_m - 0.6 < d_feet < d
+    d_upper, _ = ray_separation_m(rays_of(body, hide=(3, 6)), caps, WHOLE_BODY)
+    assert d_upper < sep
+    # nothing that crosses the floor or its band of heights (no ankle, hip, pelvis or head): no bound
+    assert ray_separation_m(rays_of(body, hide=(0, 1, 3, 4, 6, 10)), caps, WHOLE_BODY) is None
+    level = np.array([0.0, body[10, 1], 8.0])                          # a camera at his head's height: a flat head ray
+    assert ray_separation_m(rays_of(body, level, hide=(0, 1, 3, 4, 6)), caps, WHOLE_BODY) is None
+
+
+def test_a_person_never_lifted_far_along_his_rays_does_not_stop_the_arm():
+    z = WHOLE_BODY
+    mon = ready_body(z, 6.0)
+    d = mon.observe(1.0, {0: body_facing_arm(6.0)}, EFF, unseen={1: "missing_joints: right_wrist"},
+                    rays={1: rays_of(body_facing_arm(4.0), hide=(16,))})
+    assert d.state == State.NORMAL
+    # without the ray bound (or without rays) he stops it, as before
+    mon = ready_body(replace(z, ray_bound=False), 6.0)
+    d = mon.observe(1.0, {0: body_facing_arm(6.0)}, EFF, unseen={1: "missing_joints: right_wrist"},
+                    rays={1: rays_of(body_facing_arm(4.0), hide=(16,))})
+    assert d.state == State.FAULT and d.reason.startswith("person_unseen: person 1")
+
+
+def test_a_person_never_lifted_whose_ray_region_reaches_the_protective_distance_stops_the_arm():
+    z = WHOLE_BODY
+    v_stop = z.min_speed_fraction * z.iso_robot_speed_mps
+    seen = set()
+    for sep in (1.5, 2.0, 2.5, 2.6, 2.7, 2.8, 2.9, 3.0, 4.0, 5.0):
+        mon = ready_body(z, 6.0)
+        rays = rays_of(body_facing_arm(sep))
+        bound = ray_separation_m(rays, effector_capsule(EFF), z)[0]
+        stops = z.allowed_speed_mps(bound, z.lost_person_speed_mps) < v_stop
+        d = mon.observe(1.0, {0: body_facing_arm(6.0)}, EFF, unseen={1: "missing_joints: right_wrist"}, rays={1: rays})
+        if not stops:
+            assert d.state == State.NORMAL, sep
+        elif bound > z.reach_retract_m:
+            assert d.state == State.LEVEL1 and d.reason.startswith("person_unlifted: 1"), sep
+        else:
+            assert d.state == State.LEVEL2, sep
+        seen.add(d.state)
+    assert seen == {State.NORMAL, State.LEVEL1, State.LEVEL2}           # every case met, far ones work on
+    # close enough to reach the arm by his rays alone: the arm retracts away from him
+    mon = ready_body(z, 6.0)
+    d = mon.observe(1.0, {0: body_facing_arm(6.0)}, EFF, unseen={1: "x"}, rays={1: rays_of(body_facing_arm(0.9))})
+    assert d.state == State.LEVEL2 and d.worker == 1 and d.head.position_m[2] > EFF[2]
+
+
+def test_a_ray_bound_shrinks_like_a_lost_persons_reachable_set_when_his_rays_stop_bounding_him():
+    z = WHOLE_BODY
+    mon = ready_body(z, 6.0)
+    rays = rays_of(body_facing_arm(4.0))
+    bound = ray_separation_m(rays, effector_capsule(EFF), z)[0]
+    assert mon.observe(1.0, {}, EFF, unseen={1: "x"}, rays={1: rays}).state == State.NORMAL
+    # then he is out of view (or shows no usable ankle or head): the bound shrinks at his and the arm's speed
+    slack = bound - z.body_protective_distance_m(z.min_speed_fraction * z.iso_robot_speed_mps, z.lost_person_speed_mps)
+    grow_s = slack / (z.lost_person_speed_mps + z.iso_robot_speed_mps)
+    assert 0.05 < grow_s < z.lost_hold_s
+    assert mon.observe(1.0 + grow_s - 0.04, {}, EFF, unseen={1: "x"}).state == State.NORMAL
+    d = mon.observe(1.0 + grow_s + 0.04, {}, EFF)
+    assert d.state == State.LEVEL1 and d.reason.startswith("person_unlifted: 1")
+
+
+def test_the_escape_turns_the_folded_arm_about_its_base_away_from_the_person():
+    person = HeadEstimate(0.0, np.array([0.3, HEAD_Y, 1.4]), np.zeros(3), np.zeros(3))
+    hand = np.array([0.05, 0.14, 0.35])
+    e = escape_retraction(hand, person, 0.2, 120.0)
+    bearing = lambda p: math.degrees(math.atan2(p[0], p[2]))  # noqa: E731
+    off = bearing(e.position_m) - bearing(person.position_m)
+    assert off == pytest.approx(-120.0)                               # on the side the hand was on (left of him)
+    assert np.linalg.norm(e.position_m[[0, 2]]) == pytest.approx(np.linalg.norm(hand[[0, 2]]))
+    assert e.position_m[1] == hand[1]
+    turn = math.radians(bearing(e.position_m) - bearing(hand))
+    assert e.yaw_rad == pytest.approx(0.2 + turn)                     # the whole arm turns: the tool with it
+    assert escape_retraction(e.position_m, person, e.yaw_rad, 120.0) is None   # there already
+    assert escape_retraction(hand, person, None, 120.0) is None      # where the tool points is unknown
+
+
+def test_a_lost_person_in_view_within_reach_by_his_rays_makes_the_arm_retract_away_from_him():
+    z = WHOLE_BODY
+    mon = ready_body(z, 3.0)
+    settle(mon, body_facing_arm(3.0))
+    # his lift goes invalid while he walks up to the tool: 1.5 s later his rays show him within reach
+    d = mon.observe(2.5, {}, EFF, unseen={0: "missing_joints: left_wrist"}, rays={0: rays_of(body_facing_arm(0.6))})
+    assert d.state == State.LEVEL2 and d.worker == 0 and d.head.position_m[2] > EFF[2]

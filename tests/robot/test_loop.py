@@ -552,3 +552,52 @@ def test_a_person_never_lifted_validly_stops_the_arm_and_nobody_detected_does_no
     assert frames[int(1.9 * 30)].state == "NORMAL"
     assert frames[-1].state == "FAULT" and frames[-1].reason.startswith("person_unseen: person 0")
     assert "stop" in link.names()
+
+
+def test_a_retraction_that_carries_the_arm_toward_someone_is_replaced_by_one_straight_to_the_base():
+    from dataclasses import replace
+
+    from edge_runtime.robot.hazard import arm_capsules, body_spheres, separation_m
+
+    person_at = lambda z: at_tool_height(z)  # noqa: E731
+    qs = [np.array([a, -0.5, 0.0, 1.2, 0.0, 0.4, 0.0]) for a in np.linspace(-2.0, 2.0, 17)]
+    sep = lambda q, z: separation_m(*body_spheres(person_at(z)), arm_capsules(q))  # noqa: E731
+    q_far = max(qs, key=lambda q: sep(q, 2.0))
+    q_near = min(qs, key=lambda q: sep(q, 2.0))
+    # where he stands within reach_retract_m of the arm at q_far (the arm retracts), and the arm at q_near is
+    # well over retract_backfire_m closer to him
+    z = next(z for z in np.arange(3.0, 0.5, -0.02) if sep(q_far, z) < 0.8)
+    assert sep(q_near, z) < sep(q_far, z) - 0.3
+    for moves_toward_him in (False, True):
+        loop, link, clock = make_whole_body()
+        link._state = replace(link._state, joint_positions_rad=q_far)
+        drive_poses(loop, link, clock, lambda t: [(0, lifted(person_at(8.0)))], 2.0)
+        drive_poses(loop, link, clock, lambda t: [(0, lifted(person_at(z)))], 2.3)
+        assert link.names()[-1] == "retract" or "retract" in link.names()
+        n_retract = len(link.calls)
+        if moves_toward_him:  # the controller's joint-space path swings the arm toward him
+            link._state = replace(link._state, joint_positions_rad=q_near)
+        hand = link.state.ee_position_m.copy()
+        frames = drive_poses(loop, link, clock, lambda t: [(0, lifted(person_at(z)))], 2.5)
+        assert frames[-1].state == "LEVEL2" and loop.status()["backfired"] == int(moves_toward_him)
+        if moves_toward_him:  # the straight retraction toward the base instead, from where the hand is
+            target = np.array(next(c for c in link.calls[n_retract:] if c[0] == "retract")[1])
+            assert np.linalg.norm(target[[0, 2]]) < np.linalg.norm(hand[[0, 2]]) - 0.1
+            assert abs(target[0] * hand[2] - target[2] * hand[0]) < 1e-6        # along the same bearing
+
+
+def test_someone_within_reach_of_a_finished_retraction_turns_the_arm_about_its_base_away_from_him():
+    import math
+
+    loop, link, clock = make_whole_body()
+    # he walks up to the tool and stays within reach of it (nothing further toward the base helps)
+    where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else max(0.3, 3.0 - 1.5 * (t - 2))))  # noqa: E731
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(where(t)))], 5.0)
+    retracts = [np.array(c[1]) for c in link.calls if c[0] == "retract"]
+    assert len(retracts) >= 2
+    bearing = lambda p: math.degrees(math.atan2(p[0], p[2]))  # noqa: E731
+    first, turned = retracts[0], retracts[1]
+    assert abs(bearing(first)) < 1.0                                    # Eq. 6: straight back from him, toward the base
+    assert abs(abs(bearing(turned) - bearing(where(5.0)[0])) - ZoneParams().escape_deg) < 1.0  # then 120 deg from him
+    assert np.linalg.norm(turned[[0, 2]]) == pytest.approx(np.linalg.norm(first[[0, 2]]), abs=1e-6)
+    assert loop.status()["backfired"] == 0

@@ -372,3 +372,32 @@ def test_productivity_counts_work_and_the_stops_of_walk_by_traffic():
     assert p["walkby_scenarios"] == 1 and p["false_stops_per_worker_hour"] == pytest.approx(1 / (20 / 3600), rel=1e-3)
     assert p["worker_kinds"] == {"stop": 1, "walkby": 2}
     assert p["walkby_stops_by_reason"] == {"person_unseen": 1}                # walk-by halts only, by cause
+
+
+@pytest.mark.skipif(not __import__("firmware_sim.scenarios.hrc_world", fromlist=["x"]).lifter_available(),
+                    reason="no lifter in edge_runtime/assets/manifest.json")
+def test_a_worker_lifted_invalidly_reaches_the_runtime_with_his_keypoints_rays():
+    """The world feeds the loop as the product does (``RobotLoop.feed_people``): a worker the lifter
+    cannot lift comes with the rays of the keypoints he shows, so the runtime can bound him."""
+    from firmware_sim.scenarios.hrc_world import LifterPerception, _feed, make_lifter
+
+    class Loop:
+        def feed_poses(self, poses, rays=None):
+            self.poses, self.rays = poses, rays
+
+    lifter = make_lifter()
+    cam = lifter.canonical_camera
+    kp = np.zeros((1, 17, 3))
+    kp[0, :, :2] = (cam.cx_px, cam.cy_px)
+    kp[0, :, 2] = 0.9
+    kp[0, 16] = (np.nan, np.nan, 0.0)                                  # his right wrist is not seen
+    p = LifterPerception(lifter, kp)
+    out = p.push(0, 0.0)
+    assert not out.valid                                               # never seen whole: no valid lift yet
+    loop = Loop()
+    _feed(loop, [out], [p], 0)
+    r = loop.rays[0]
+    assert np.allclose(r[:16], (0.0, 0.0, 1.0)) and np.isnan(r[16]).all()
+    # a validly lifted worker needs none
+    _feed(loop, [replace(out, valid=True, reason=None)], [p], 0)
+    assert loop.rays == {}
