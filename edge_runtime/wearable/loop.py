@@ -463,9 +463,7 @@ class WearableLoop:
                 may_continue = last_end_s is not None and self._time_of(cap.trigger_index) <= last_end_s + hold_s
                 if not may_continue:
                     early.append(cap)
-            values = self._weighted(self._ready[cap.trigger_index, N_SUBSEQ][0])
-            conf = max(values)
-            label = self.classes[values.index(conf)]
+            label, conf = self._top(self._weighted(self._ready[cap.trigger_index, N_SUBSEQ][0]))
             # max_mean_other may still withhold this alert (it reads early steps not classified yet): the
             # guess takes it as an alert, which at worst leaves the next capture's early steps to _steps_of
             alerts = self.policy.status(label, conf, threshold) == "alert"
@@ -476,6 +474,12 @@ class WearableLoop:
         steps = tuple(s for s in self._early_steps if s != N_SUBSEQ)
         if early and steps:
             self._classify_groups([([c.trigger_index for c in early], np.stack([c.data for c in early]), steps)])
+
+    def _top(self, values: list[float]) -> tuple[str, float]:
+        """The top class and its probability; the first of equal maxima, as ``np.argmax`` (the guess of
+        ``_classify_ahead`` and the decision must break ties alike)."""
+        conf = max(values)
+        return self.classes[values.index(conf)], conf
 
     def _weighted(self, values: list[float]) -> list[float]:
         """The probabilities a decision reads: the model's, times the deployment's class weights
@@ -583,9 +587,7 @@ class WearableLoop:
             compute_us = (time.perf_counter() - t_start) * 1e6
             values = probs.tolist()  # K Python floats: cheaper to pick from than numpy calls on K numbers
         values = self._weighted(values)
-        conf = max(values)
-        k = values.index(conf)  # the first of equal maxima, as np.argmax
-        label = self.classes[k]
+        label, conf = self._top(values)
         st.agreeing = st.agreeing + 1 if label == st.last_label else 1
         st.last_label = label
         threshold = self.policy.threshold(steps, self._manifest_thresholds)

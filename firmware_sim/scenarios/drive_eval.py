@@ -48,6 +48,7 @@ import numpy as np
 from edge_runtime.cli import CliError, positive_float
 from edge_runtime.wearable.detector import DetectorConfig, p3_series
 from edge_runtime.wearable.labels import DISTRACTIONS
+from edge_runtime.wearable.sources import SAMPLE_RATE_HZ
 from firmware_sim.scenarios.scoring import raises_alert
 
 DRIVE_SEED0 = 900_000
@@ -71,7 +72,7 @@ class Drive:
 
     @property
     def hours(self) -> float:
-        return len(self.acc_mps2) / 100.0 / 3600.0
+        return len(self.acc_mps2) / SAMPLE_RATE_HZ / 3600.0
 
 
 def held_out_drives(hours: float, seed: int, baseline_share: float = 0.3, drive_minutes: float = 30.0):
@@ -103,8 +104,8 @@ def miss_reason(own: list[dict], acc_mps2: np.ndarray | None = None, event: dict
     if not own:
         if acc_mps2 is None or event is None or detector_cfg is None:
             return "no trigger"
-        lo = max(0, int((event["start_s"] - MATCH_BEFORE_S) * 100))
-        hi = max(lo, int(event["end_s"] * 100) + 1)
+        lo = max(0, int((event["start_s"] - MATCH_BEFORE_S) * SAMPLE_RATE_HZ))
+        hi = max(lo, int(event["end_s"] * SAMPLE_RATE_HZ) + 1)
         first = max(0, lo - detector_cfg.lag)  # P3 at frame lo needs the window behind it
         p3 = p3_series(acc_mps2[first:hi, detector_cfg.axis], detector_cfg)[lo - first:]
         with np.errstate(invalid="ignore"):
@@ -234,7 +235,7 @@ def step_accuracy(drives, engine, detector_cfg, class_weights=None) -> dict:
     for drive in drives:
         truth = [e for e in drive.events if e["label"] in DISTRACTIONS]
         for cap in extract_captures(drive.acc_mps2, detect_triggers(drive.acc_mps2, detector_cfg), detector_cfg):
-            e = next((e for e in truth if e["start_s"] - MATCH_BEFORE_S <= cap.trigger_index / 100.0 <= e["end_s"]),
+            e = next((e for e in truth if e["start_s"] - MATCH_BEFORE_S <= cap.trigger_index / SAMPLE_RATE_HZ <= e["end_s"]),
                      None)
             label = OTHER if e is None else e["label"]
             for s in engine.early_steps:
@@ -245,7 +246,7 @@ def step_accuracy(drives, engine, detector_cfg, class_weights=None) -> dict:
                     r[2], r[3] = r[2] + ok, r[3] + 1
     return {str(s): {"accuracy_every_capture": round(a / n, 4) if n else None, "captures": n,
                      "accuracy_distraction_captures": round(ad / nd, 4) if nd else None,
-                     "decision_frame_after_trigger_s": round((needed_frames(s) - 1 - detector_cfg.pre_frames) / 100.0,
+                     "decision_frame_after_trigger_s": round((needed_frames(s) - 1 - detector_cfg.pre_frames) / SAMPLE_RATE_HZ,
                                                              2)}
             for s, (a, n, ad, nd) in right.items()}
 
@@ -286,10 +287,10 @@ def _better_example(best: dict | None, mode: str, drive: Drive, decisions: list[
         rank = (first["status"] == "preliminary" and first["t_alert_s"] < e["end_s"], first["label"] == e["label"],
                 all(d["status"] != "withdrawn" for d in related), -(first["t_alert_s"] - e["start_s"]))
         if best is None or rank > best["rank"]:
-            lo = max(0, int((e["start_s"] - 4.0) * 100))
-            hi = min(len(drive.acc_mps2), int((max(e["end_s"], related[-1]["t_alert_s"]) + 3.0) * 100))
+            lo = max(0, int((e["start_s"] - 4.0) * SAMPLE_RATE_HZ))
+            hi = min(len(drive.acc_mps2), int((max(e["end_s"], related[-1]["t_alert_s"]) + 3.0) * SAMPLE_RATE_HZ))
             best = {"rank": rank, "mode": mode, "drive": drive.name, "event": e, "decisions": related,
-                    "t0_s": lo / 100.0, "acc": drive.acc_mps2[lo:hi]}
+                    "t0_s": lo / SAMPLE_RATE_HZ, "acc": drive.acc_mps2[lo:hi]}
     return best
 
 
@@ -300,7 +301,7 @@ def plot_example(ex: dict, out_png: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t = ex["t0_s"] + np.arange(len(ex["acc"])) / 100.0
+    t = ex["t0_s"] + np.arange(len(ex["acc"])) / SAMPLE_RATE_HZ
     e = ex["event"]
     fig, ax = plt.subplots(figsize=(11, 4.2))
     for k, name in enumerate("xyz"):
