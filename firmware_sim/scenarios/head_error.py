@@ -24,6 +24,12 @@ Errors (m) against the true head: 3-D, ground-projected (x-z: what the hazard zo
 and height (y), median and p95, overall and binned by the true ground distance from the
 camera to the worker's pelvis (3-4, 4-5, ..., 7-8 m). Placements whose calibration is
 refused are counted and skipped.
+
+Where the error comes from: ``calibration_pose_error`` (the fitted camera pose against the
+simulated camera's: rotation angle, camera-centre distance) and ``true_depth`` (the head error
+when each lifted skeleton is put at its true distance: the lifter's shape and the calibration's
+pose alone). With ``--calibration-method truth`` the gap between ``true_depth`` and ``on`` is the
+floor anchoring's depth error.
 """
 from __future__ import annotations
 
@@ -147,6 +153,17 @@ def true_calibration(camera: Camera, params: CalibrationParams = CalibrationPara
     return Calibration(camera.R.T, camera.position_m, TRUTH, 0.0, zero, zero, params)
 
 
+def calibration_error(cal: Calibration, camera: Camera) -> dict:
+    """How far a fitted calibration's camera pose is from the simulated camera's: the angle (deg) of
+    the rotation between the two camera -> robot rotations, the camera centre's distance (m) and its
+    height error (m, signed), and the fit's scale."""
+    R = cal.A / cal.scale
+    cos = (np.trace(R.T @ camera.R.T) - 1.0) / 2.0
+    return {"rotation_deg": float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))),
+            "camera_position_m": float(np.linalg.norm(cal.b - camera.position_m)),
+            "camera_height_m": float(cal.b[1] - camera.position_m[1]), "scale": cal.scale}
+
+
 def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
                   params: CalibrationParams = CalibrationParams(), truth: bool = False,
                   noise: DetectorNoise = DetectorNoise(), anchor_window_frames: int | None = None) -> dict:
@@ -177,7 +194,15 @@ def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
     joints, anchored, truth = joints[ok], anchored[ok], work.joints_m[ok, HEAD]
     cam = camera.position_m
     dist = np.hypot(*(work.joints_m[ok, HIP][:, [0, 2]] - cam[[0, 2]]).T)
-    res = {"camera": camera.to_dict(), "calibration_scale": cal.scale, "distance_m": dist}
+    res = {"camera": camera.to_dict(), "calibration_scale": cal.scale, "distance_m": dist,
+           "calibration_error": calibration_error(cal, camera)}
+    # the lifter's skeleton alone: each frame scaled about the camera centre so that its pelvis lies at
+    # the true pelvis's distance (a perfect depth); what is left is the lifter's shape and the fit's pose
+    raw = cal.apply(joints)
+    k_depth = (np.linalg.norm(work.joints_m[ok, HIP] - cal.b, axis=1)
+               / np.linalg.norm(raw[:, HIP] - cal.b, axis=1))
+    d = cal.b + k_depth[:, None] * (raw[:, HEAD] - cal.b) - truth
+    res["true_depth"] = np.stack([np.linalg.norm(d, axis=1), np.hypot(d[:, 0], d[:, 2]), d[:, 1]], axis=1)
     for m in methods:
         if m == "on":
             head = anchored[:, HEAD]
@@ -226,6 +251,15 @@ def summarise(results: list[dict], methods, args) -> dict:
         err = np.concatenate([r[m] for r in done]) if done else np.zeros((0, 3))
         bins = {f"{lo}-{lo + 1}m": _stats(err[(dist >= lo) & (dist < lo + 1)]) for lo in BINS_M[:-1]}
         out["methods"][m] = {"all": _stats(err), "by_distance": bins}
+    if done:
+        err = np.concatenate([r["true_depth"] for r in done])
+        pose = {k: np.array([r["calibration_error"][k] for r in done]) for k in ("rotation_deg", "camera_position_m")}
+        q = lambda x, p: round(float(np.percentile(x, p)), 4)  # noqa: E731
+        out["true_depth"] = {"what": "the lifted skeleton scaled about the camera centre so that its pelvis lies at "
+                                     "the true distance: the error left by the lifter's shape and the calibration's "
+                                     "pose when the depth is perfect", "all": _stats(err)}
+        out["calibration_pose_error"] = {k: {"median": q(v, 50), "p90": q(v, 90), "max": q(v, 100)}
+                                         for k, v in pose.items()}
     if "on" in methods and done:
         applied = np.concatenate([r["applied"] for r in done])
         k = np.concatenate([r["factor"] for r in done])
@@ -238,6 +272,7 @@ def summarise(results: list[dict], methods, args) -> dict:
         {"camera_position_m": np.round(r["camera"]["position_m"], 3).tolist(),
          **({"refused": r["refused"]} if "refused" in r else
             {"calibration_scale": round(r["calibration_scale"], 4), "frames": int(len(r["distance_m"])),
+             **{k: round(v, 4) for k, v in r["calibration_error"].items() if k != "scale"},
              **{f"median_error_3d_m_{m}": round(float(np.median(r[m][:, 0])), 4) if len(r[m]) else None
                 for m in methods}})}
         for r in results]
@@ -312,4 +347,10 @@ def cmd(args) -> int:
             print(f"{m:>3}: 3-D median {a['error_3d_m']['median']:.3f} p95 {a['error_3d_m']['p95']:.3f} m; "
                   f"ground median {a['error_ground_m']['median']:.3f} p95 {a['error_ground_m']['p95']:.3f} m "
                   f"({a['n']} frames)")
+    if "calibration_pose_error" in summary:
+        pe, td = summary["calibration_pose_error"], summary["true_depth"]["all"]
+        print(f"calibration pose: rotation median {pe['rotation_deg']['median']:.2f} deg (p90 "
+              f"{pe['rotation_deg']['p90']:.2f}), camera centre median {pe['camera_position_m']['median']:.3f} m; "
+              f"with the true depth: ground median {td['error_ground_m']['median']:.3f} p95 "
+              f"{td['error_ground_m']['p95']:.3f} m")
     return 0

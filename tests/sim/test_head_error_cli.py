@@ -31,6 +31,9 @@ def test_a_tiny_run_writes_the_figures(tmp_path):
         assert a["error_3d_m"]["median"] <= a["error_3d_m"]["p95"]
         assert sum(b["n"] for b in m["by_distance"].values()) <= a["n"]
     assert 0 <= data["anchoring"]["applied_fraction"] <= 1
+    assert data["true_depth"]["all"]["n"] == data["frames"]
+    assert data["calibration_pose_error"]["rotation_deg"]["median"] > 0  # a fit from noisy keypoints is not exact
+    assert all("rotation_deg" in p and "camera_position_m" in p for p in data["per_placement"])
     assert (tmp_path / "he.png").stat().st_size > 1000
 
 
@@ -44,3 +47,21 @@ def test_bad_arguments_are_one_line_and_exit_2(tmp_path, args, word):
         args = [*args, "--json", str(tmp_path / "x.json")]
     r = run(*args)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and word in r.stderr
+
+
+def test_the_pose_error_of_a_calibration_is_its_rotation_and_camera_offset():
+    import numpy as np
+
+    from firmware_sim.devices.camera import random_placement
+    from firmware_sim.scenarios.head_error import calibration_error, true_calibration
+
+    camera = random_placement(np.random.default_rng(3))
+    cal = true_calibration(camera)
+    e = calibration_error(cal, camera)
+    assert e["rotation_deg"] < 1e-4 and e["camera_position_m"] < 1e-9
+    turn = np.radians(5.0)  # the fit turned 5 deg about the vertical, the camera 0.2 m too high, scale 1.1
+    Ry = np.array([[np.cos(turn), 0, np.sin(turn)], [0, 1, 0], [-np.sin(turn), 0, np.cos(turn)]])
+    cal.A, cal.b = 1.1 * Ry @ cal.A, cal.b + [0.0, 0.2, 0.0]
+    e = calibration_error(cal, camera)
+    assert abs(e["rotation_deg"] - 5.0) < 1e-6 and abs(e["camera_height_m"] - 0.2) < 1e-9
+    assert abs(e["camera_position_m"] - 0.2) < 1e-9 and abs(e["scale"] - 1.1) < 1e-9
