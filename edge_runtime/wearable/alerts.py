@@ -156,6 +156,12 @@ class WearableStatus:
             self._samples += n
             self._non_finite += non_finite
 
+    def count_sample(self) -> None:
+        """One finite sample, the live loop's call at 100 Hz: without the lock. Only the loop's thread
+        writes the counts, and a reader gets the int whole (before or after this sample), so the
+        lock would protect nothing here; its acquire and release on cold caches cost microseconds."""
+        self._samples += 1
+
     def count_detector_restart(self) -> None:
         with self._lock:
             self._restarts += 1
