@@ -203,9 +203,11 @@ class MavlinkImuSource:
     def __init__(self, path: str, baud: int = 921600, signing_key: bytes | None = None,
                  silence_timeout_s: float = 0.2, range_mps2: float = ImuParams.range_mps2,
                  on_status: Callable[[SourceStatus], None] | None = None,
-                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S):
+                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S,
+                 read_period_s: float = 0.0):
         self.path = path
         self.silence_timeout_s = float(silence_timeout_s)
+        self.read_period_s = min(max(float(read_period_s), 0.0), READ_TIMEOUT_S)
         self.on_status = on_status
         self.read_timeout_s = min(float(read_timeout_s), READ_TIMEOUT_S)
         self.decoder = ImuPacketDecoder(signing_key, range_mps2, block_samples)
@@ -235,15 +237,23 @@ class MavlinkImuSource:
         """ImuBlocks and SourceStatus events until close() (or ``duration_s`` of wall time)."""
         end = None if duration_s is None else time.monotonic() + duration_s
         out: list[Event] = []
+        last_read_s = time.monotonic()  # when the previous read returned
         while not self._closed:
             if end is not None and time.monotonic() >= end:
                 break
+            # ``read_period_s``: let the line's buffer gather what arrives until the period is over
+            wait_s = last_read_s + self.read_period_s - time.monotonic()
+            if wait_s > 0:
+                time.sleep(wait_s)
             got = self._read()
-            if got:
-                self.decoder.feed(got, time.monotonic(), out)
-            # hand over at once what this read brought: a capture's last sample waits for nothing
-            self.decoder.flush(out)
             now = time.monotonic()
+            if got:
+                # after a wait the bytes arrived at some time since the previous read returned: stamped
+                # then, never later than they arrived (a latency counts their wait, silence is not late)
+                self.decoder.feed(got, last_read_s if wait_s > 0 else now, out)
+            last_read_s = now
+            # hand over at once what this read brought: a capture's last sample waits for nothing more
+            self.decoder.flush(out)
             last_rx = self.decoder.last_sample_monotonic_s or self._opened_s
             if now - last_rx >= self.silence_timeout_s and not out:
                 # repeated every read timeout while silent, so that the caller keeps control

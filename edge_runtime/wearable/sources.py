@@ -51,6 +51,15 @@ class ImuParams:
     """No sample for this long: the sensor is silent. WEARABLE_STATUS says so at once (an
     extra heartbeat on every change of state), so within 200 ms of the last sample: the
     source looks every 50 ms, hence at most 0.15 s (and at least two sample periods)."""
+    read_period_s: float = config.setting(0.05, config.within(0.0, 0.05, "s"))
+    """A live source reads the serial line at most this often and hands over everything that
+    arrived meanwhile as one block (the line's buffer holds it), instead of waking for every sample:
+    the box's wake-ups, not its arithmetic, were most of the 100 Hz loop's CPU (python -m bench,
+    wearable_100hz: 1.4-1.8 % of a core waking per sample, 0.6 % of it for the wake-up alone, against
+    about 0.6 % in blocks of 5). The price is latency: a sample waits up to this long before the loop
+    sees it (alert latencies are measured from the start of that wait), and a silent sensor may be
+    reported up to this much early. 0: read every sample as it arrives. At most 0.05 s: the source
+    still looks at the line every 50 ms."""
 
 
 @dataclass

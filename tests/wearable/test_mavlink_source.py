@@ -85,6 +85,20 @@ def test_highres_roundtrip_exact_in_order(pty):
     assert src.stats.heartbeats >= 1
 
 
+def test_a_read_period_hands_over_what_arrived_meanwhile(pty):
+    """[imu] read_period_s: the line is read at most every period, the samples that arrived meanwhile
+    go out as one block (the same samples, in order), each stamped no later than it arrived: with the
+    previous read's time, before the wait began."""
+    acc = ramp(100)
+    fw, src, events, arrival = stream(acc, pty, read_period_s=0.05)
+    blocks, t, a = samples(events)
+    assert np.array_equal(a, acc) and np.allclose(np.diff(t), 0.01)
+    assert len(blocks) <= 40 and np.median([len(b.acc_mps2) for b in blocks]) >= 3  # about 5 per read at 100 Hz
+    got = [when for e, when in zip(events, arrival) if isinstance(e, ImuBlock)]
+    waited = [when - b.rx_monotonic_s for b, when in zip(blocks, got)]
+    assert min(waited) >= 0 and np.median(waited) >= 0.04  # stamped before the wait (a late loop waits less)
+
+
 def test_scaled_roundtrip_within_quantisation(pty):
     acc = ramp()
     fw, src, events, _ = stream(acc, pty, message="scaled")
