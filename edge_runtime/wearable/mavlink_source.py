@@ -1,11 +1,15 @@
 """Live wrist-IMU source: MAVLink 2 HIGHRES_IMU / SCALED_IMU over a serial line.
 
 ``MavlinkImuSource(path).blocks()`` yields :class:`ImuBlock` objects -- whatever
-arrived in one read of the serial line (usually one sample at 100 Hz, at most
-``block_samples``), stamped with the host arrival time -- and :class:`SourceStatus` events (the sensor went silent / came
-back). It never blocks for longer than the read timeout (50 ms), so a silent
-sensor is reported within ``silence_timeout_s`` + 50 ms, and the "silent" status is
-repeated every read timeout while it lasts (the caller keeps control for its heartbeat).
+arrived in one read of the serial line (at most ``block_samples``), stamped with the host arrival
+time -- and :class:`SourceStatus` events (the sensor went silent / came back). With ``read_period_s``
+(the box's ``[imu] read_period_s``, 0.05 s) it reads at most that often, so a read brings the
+samples that arrived meanwhile (5 at 100 Hz) and the process wakes 20 times a second instead of
+100; their stamp is then the previous read's time, a bound the samples arrived after. Without it
+(0, the class's default) a read usually brings one sample. It never blocks for longer than the
+read timeout (50 ms), so a silent sensor is reported within ``silence_timeout_s`` + 50 ms of its
+last sample, and the "silent" status is repeated every read timeout while it lasts (the caller
+keeps control for its heartbeat).
 
 Bad input is counted in :attr:`MavlinkImuSource.stats` and handled:
 
@@ -237,12 +241,15 @@ class MavlinkImuSource:
         """ImuBlocks and SourceStatus events until close() (or ``duration_s`` of wall time)."""
         end = None if duration_s is None else time.monotonic() + duration_s
         out: list[Event] = []
-        last_read_s = time.monotonic()  # when the previous read returned
+        last_read_s = time.monotonic()  # when the previous read returned ...
+        flowing = False  # ... with bytes
         while not self._closed:
             if end is not None and time.monotonic() >= end:
                 break
-            # ``read_period_s``: let the line's buffer gather what arrives until the period is over
-            wait_s = last_read_s + self.read_period_s - time.monotonic()
+            # ``read_period_s``: while bytes flow, let the line's buffer gather them until the period is
+            # over; after an empty read the next one waits for the line itself (a silent sensor is still
+            # looked at every read timeout)
+            wait_s = last_read_s + self.read_period_s - time.monotonic() if flowing else 0.0
             if wait_s > 0:
                 time.sleep(wait_s)
             got = self._read()
@@ -251,7 +258,7 @@ class MavlinkImuSource:
                 # after a wait the bytes arrived at some time since the previous read returned: stamped
                 # then, never later than they arrived (a latency counts their wait, silence is not late)
                 self.decoder.feed(got, last_read_s if wait_s > 0 else now, out)
-            last_read_s = now
+            last_read_s, flowing = now, bool(got)
             # hand over at once what this read brought: a capture's last sample waits for nothing more
             self.decoder.flush(out)
             last_rx = self.decoder.last_sample_monotonic_s or self._opened_s

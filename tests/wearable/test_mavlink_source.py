@@ -97,6 +97,9 @@ def test_a_read_period_hands_over_what_arrived_meanwhile(pty):
     got = [when for e, when in zip(events, arrival) if isinstance(e, ImuBlock)]
     waited = [when - b.rx_monotonic_s for b, when in zip(blocks, got)]
     assert min(waited) >= 0 and np.median(waited) >= 0.04  # stamped before the wait (a late loop waits less)
+    # the line fell silent at the end: reported as promised, from the stamp of the last samples
+    silent = next(e for e in events if isinstance(e, SourceStatus) and e.state == "silent")
+    assert src.silence_timeout_s <= silent.since_s < src.silence_timeout_s + 0.1
 
 
 def test_scaled_roundtrip_within_quantisation(pty):
