@@ -62,6 +62,8 @@ class WearableConfig:
     """Manifest entry: a name or a precision."""
     threads: int = 1
     """onnxruntime intra-op threads."""
+    read_period_s: float | None = None
+    """The live source's read period the real-time stretch is fed at (None: the box's default)."""
 
 
 def prepare_drive(minutes: float, seed: int, out_npy: str | Path) -> tuple[Path, int]:
@@ -115,16 +117,17 @@ class _Wearable:
         self.loop.feed(ImuBlock(i / SAMPLE_RATE_HZ, acc[i : i + n], i > 0, self.t_fed))
 
 
-def source_block_samples() -> int:
-    """Samples per block of the box's live source: what arrives at 100 Hz in its default ``[imu]
-    read_period_s`` (at least one)."""
+def source_block_samples(read_period_s: float | None = None) -> int:
+    """Samples per block of the box's live source: what arrives at 100 Hz in its ``[imu]
+    read_period_s`` (None: the default; at least one)."""
     from edge_runtime.wearable.sources import ImuParams
 
-    return max(1, round(ImuParams().read_period_s * SAMPLE_RATE_HZ))
+    period_s = ImuParams().read_period_s if read_period_s is None else read_period_s
+    return max(1, round(period_s * SAMPLE_RATE_HZ))
 
 
-def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float) -> dict:
-    per = source_block_samples()
+def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float, read_period_s: float | None = None) -> dict:
+    per = source_block_samples(read_period_s)
     blocks = min(int(seconds * SAMPLE_RATE_HZ), len(acc) - start) // per
     period = per / SAMPLE_RATE_HZ
     busy = np.empty(blocks, np.float64)
@@ -187,7 +190,7 @@ def measure_wearable(cfg: WearableConfig) -> list[dict]:
     acc = np.load(cfg.drive_npy).astype(np.float32)
     w = _Wearable(cfg)
     try:
-        rows = [_realtime(w, acc, cfg.start_index, cfg.realtime_s)]
+        rows = [_realtime(w, acc, cfg.start_index, cfg.realtime_s, cfg.read_period_s)]
         rows += _detector(acc)
         rows += _latency(w, acc)
     finally:
