@@ -282,3 +282,27 @@ def test_a_stray_start_byte_loses_no_good_packet():
     dec.feed(stream[:cut] + b"\xfd" + stream[cut:], 0.0, events)
     dec.flush(events)
     assert dec.stats.samples == 100
+
+
+
+def test_samples_inside_the_range_pass_as_screen_samples_would_pass_them():
+    """The decoder skips screen_samples for a sample well inside the range: around the range's limit
+    (just inside, at it, within the tolerance, beyond), with NaN and infinities among them, every
+    value and count is what screen_samples makes of the whole stream."""
+    from edge_runtime.wearable.mavlink_source import ImuPacketDecoder
+    from edge_runtime.wearable.sources import screen_samples
+    from fuzz.seeds import firmware_bytes
+
+    range_mps2 = 100.0
+    acc = np.random.default_rng(3).uniform(-99.0, 99.0, (60, 3)).astype(np.float32)
+    acc[5:19, 1] = [99.9999, 99.99995, 100.0, 100.00005, 100.1, -100.0, -99.99995, 150.0, np.nan, np.inf,
+                    -np.inf, 99.9, -99.9, 0.0]
+    dec = ImuPacketDecoder(range_mps2=range_mps2)
+    events: list = []
+    dec.feed(firmware_bytes(acc, "highres", None, 2.0, 0), 0.0, events)
+    dec.flush(events)
+    got = np.concatenate([e.acc_mps2 for e in events if isinstance(e, ImuBlock)])
+    want, out_of_range, saturated = screen_samples(acc, range_mps2)
+    assert np.array_equal(got, want, equal_nan=True)
+    assert (dec.stats.samples, dec.stats.out_of_range, dec.stats.saturated) == (len(acc), out_of_range, saturated)
+    assert out_of_range == 4 and saturated == 6  # beyond: 100.1, 150, +-inf; at scale: 99.9999 .. 100.00005, -100, -99.99995
