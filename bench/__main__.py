@@ -52,6 +52,9 @@ def build_parser() -> OneLineParser:
     p.add_argument("--no-loops", action="store_true", help="skip the loop costs")
     p.add_argument("--realtime", type=positive_float, default=None, metavar="S",
                    help="seconds of the real-time wearable and robot loops (default 15 and 10)")
+    p.add_argument("--read-period", type=float, default=None, metavar="S",
+                   help="feed the real-time wearable loop in the blocks a live IMU source read every S seconds "
+                        "hands over (default: the box's [imu] read_period_s; 0: one sample at a time)")
     p.add_argument("--seed", type=int, default=1, help="seed of the simulated drive and the inputs (default 1)")
     p.add_argument("--json", default=None, metavar="OUT.json", help="write the report here")
     p.add_argument("--markdown", default=None, metavar="OUT.md", help="write the README tables here")
@@ -94,6 +97,7 @@ def cmd(a) -> int:
         sizes.update(realtime_s=a.realtime, robot_s=a.realtime)
     opts = BenchOptions(assets=a.assets or "", threads=tuple(a.threads), use_torch=not a.no_torch,
                         use_openvino=not a.no_openvino, models=a.models, loops=not a.no_loops, seed=a.seed,
+                        read_period_s=a.read_period,
                         command="python -m bench " + " ".join(sys.argv[1:]), **sizes)
     with busy:
         report = run_bench(opts)

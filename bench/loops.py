@@ -9,12 +9,16 @@ parent (:func:`prepare_drive`, firmware_sim) and handed over as a ``.npy`` file.
 ``wearable_100hz``
     ``edge_runtime.wearable.loop.WearableLoop`` with the int8 model on 1 thread and an
     ``AlertPublisher`` (alerts + the 10 Hz WEARABLE_STATUS heartbeat thread) on an
-    in-process python-can ``virtual`` bus, fed one sample at a time at a real
-    100 Hz on absolute deadlines (sleeping in between) for ``realtime_s``
-    seconds. The stretch starts 2.5 s before a detector trigger of the drive so
+    in-process python-can ``virtual`` bus, fed 100 Hz samples in real time on absolute
+    deadlines (sleeping in between) for ``realtime_s`` seconds, in the blocks the box's
+    live source hands over: it reads the serial line every ``[imu] read_period_s``
+    (``edge_runtime.wearable.mavlink_source.MavlinkImuSource.blocks``, default 0.05 s) and
+    hands over what arrived meanwhile, so a block of ``read_period_s`` x 100 Hz samples
+    (5) every ``read_period_s`` (one sample every 10 ms with ``read_period_s`` = 0).
+    The stretch starts 2.5 s before a detector trigger of the drive so
     that a capture is classified inside it. CPU share = process CPU time (all
-    threads) / wall time, in % of one core. A deadline miss is a sample whose
-    processing ends after the next sample is due (10 ms).
+    threads) / wall time, in % of one core. A deadline miss is a block whose
+    processing ends after the next block is due.
 ``detector``
     ``edge_runtime.wearable.detector.StreamingDetector.push`` of one sample, timed per call
     over the drive (captures included, classification not).
@@ -58,6 +62,8 @@ class WearableConfig:
     """Manifest entry: a name or a precision."""
     threads: int = 1
     """onnxruntime intra-op threads."""
+    read_period_s: float | None = None
+    """The live source's read period the real-time stretch is fed at (None: the box's default)."""
 
 
 def prepare_drive(minutes: float, seed: int, out_npy: str | Path) -> tuple[Path, int]:
@@ -105,35 +111,47 @@ class _Wearable:
                 self.alert_s.append(self._since_rx(d))
         self.decision_s.append(self._since_rx(d))
 
-    def feed_one(self, i: int, acc: np.ndarray) -> None:
-        self.t_fed = time.monotonic()  # the sample "arrives" now
-        self.loop.feed(ImuBlock(i / SAMPLE_RATE_HZ, acc[i : i + 1], i > 0, self.t_fed))
+    def feed(self, i: int, n: int, acc: np.ndarray) -> None:
+        """Samples i .. i + n - 1 as one block, as the live source hands them over."""
+        self.t_fed = time.monotonic()  # the block "arrives" now
+        self.loop.feed(ImuBlock(i / SAMPLE_RATE_HZ, acc[i : i + n], i > 0, self.t_fed))
 
 
-def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float) -> dict:
-    n = min(int(seconds * SAMPLE_RATE_HZ), len(acc) - start)
-    period = 1.0 / SAMPLE_RATE_HZ
-    busy = np.empty(n, np.float64)
-    late = np.empty(n, np.float64)
+def source_block_samples(read_period_s: float | None = None) -> int:
+    """Samples per block of the box's live source: what arrives at 100 Hz in its ``[imu]
+    read_period_s`` (None: the default; at least one)."""
+    from edge_runtime.wearable.sources import ImuParams
+
+    period_s = ImuParams().read_period_s if read_period_s is None else read_period_s
+    return max(1, round(period_s * SAMPLE_RATE_HZ))
+
+
+def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float, read_period_s: float | None = None) -> dict:
+    per = source_block_samples(read_period_s)
+    blocks = min(int(seconds * SAMPLE_RATE_HZ), len(acc) - start) // per
+    period = per / SAMPLE_RATE_HZ
+    busy = np.empty(blocks, np.float64)
+    late = np.empty(blocks, np.float64)
     misses = 0
     captures0 = w.loop.stats.captures
     w.pub.start()
     with CpuShare() as cpu:
         t_start = time.perf_counter()
-        for k in range(n):
+        for k in range(blocks):
             due = t_start + k * period
             sleep_until(due)
             t0 = time.perf_counter()
-            w.feed_one(start + k, acc)
+            w.feed(start + k * per, per, acc)
             t1 = time.perf_counter()
             busy[k], late[k] = t1 - t0, t0 - due
             misses += t1 > due + period
-    return {"name": "wearable_100hz", "rate_hz": SAMPLE_RATE_HZ, "seconds": round(cpu.wall_s, 2), "samples": n,
+    return {"name": "wearable_100hz", "rate_hz": SAMPLE_RATE_HZ, "seconds": round(cpu.wall_s, 2),
+            "samples": blocks * per, "block_samples": per,
             "captures": w.loop.stats.captures - captures0, "cpu_share_pct": cpu.pct,
             "deadline_misses": int(misses), "start_late_p99_us": round(float(np.percentile(late, 99)) * 1e6, 1),
             **summarize(busy * 1e9), "peak_rss_mb": peak_rss_mb(),
-            "what": "per-sample feed (detector + classify on capture + CAN), real time, int8 1 thread, "
-                    "heartbeat thread running"}
+            "what": f"per-block feed of {per} sample(s) every {period * 1e3:g} ms, as the live source hands them "
+                    "over (detector + classify on capture + CAN), real time, int8 1 thread, heartbeat thread running"}
 
 
 def _detector(acc: np.ndarray) -> list[dict]:
@@ -158,7 +176,7 @@ def _latency(w: _Wearable, acc: np.ndarray) -> list[dict]:
     w.alert_s.clear()
     w.loop = type(w.loop)(w.engine, on_decision=w._handle)
     for i in range(len(acc)):
-        w.feed_one(i, acc)
+        w.feed(i, 1, acc)
     what = "from handing a capture's last sample to the loop to "
     return [{"name": "alert_latency", **summarize(np.asarray(w.alert_s) * 1e9),
              "what": what + "the DISTRACTION_ALERT frame handed to the CAN bus (alerted decisions)"},
@@ -172,7 +190,7 @@ def measure_wearable(cfg: WearableConfig) -> list[dict]:
     acc = np.load(cfg.drive_npy).astype(np.float32)
     w = _Wearable(cfg)
     try:
-        rows = [_realtime(w, acc, cfg.start_index, cfg.realtime_s)]
+        rows = [_realtime(w, acc, cfg.start_index, cfg.realtime_s, cfg.read_period_s)]
         rows += _detector(acc)
         rows += _latency(w, acc)
     finally:

@@ -83,7 +83,8 @@ def _loop_figure(lp: dict) -> str:
         return "no samples"
     s = f"p50 {lp['p50_us']:,.1f} us, p99 {lp['p99_us']:,.1f} us, mean {lp['mean_us']:,.1f} us (n {lp['n']:,})"
     if "cpu_share_pct" in lp:
-        s += (f"; CPU {lp['cpu_share_pct']:.2f} % of one core at {lp['rate_hz']:g} Hz over {lp['seconds']:g} s, "
+        blocks = f" in blocks of {lp['block_samples']}" if lp.get("block_samples", 1) > 1 else ""
+        s += (f"; CPU {lp['cpu_share_pct']:.2f} % of one core at {lp['rate_hz']:g} Hz{blocks} over {lp['seconds']:g} s, "
               f"{lp['deadline_misses']} deadline misses")
     if "captures" in lp:
         s += f", {lp['captures']} capture(s)"

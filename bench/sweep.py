@@ -50,6 +50,9 @@ class BenchOptions:
     """Length of the real-time 100 Hz wearable stretch (s)."""
     robot_s: float = 10.0
     """Length of the real-time 30 Hz robot stretch (s)."""
+    read_period_s: float | None = None
+    """The live IMU source's read period the 100 Hz wearable stretch is fed at (None: the box's
+    ``[imu] read_period_s``; 0: one sample at a time)."""
     seed: int = 1
     """Seed of the simulated drive and of the input values."""
     command: str = field(default="python -m bench", compare=False)
@@ -60,6 +63,8 @@ class BenchOptions:
             raise ValueError(f"threads: each must be at least 1, got {list(self.threads)}")
         if self.n < 1 or self.rounds < 1 or self.warmup < 0:
             raise ValueError("n and rounds must be at least 1, warmup at least 0")
+        if self.read_period_s is not None and not 0.0 <= self.read_period_s <= 1.0:
+            raise ValueError(f"--read-period: {self.read_period_s} s; give 0 .. 1 s")
 
 
 def _entries(assets: Path, only: tuple[str, ...]) -> list[dict]:
@@ -130,7 +135,7 @@ def _loops(opts: BenchOptions, assets: Path, entries: list[dict], log: Callable[
         log(f"simulating a {opts.drive_minutes:g} min drive (seed {opts.seed}) ...")
         npy, start = prepare_drive(opts.drive_minutes, opts.seed, Path(tmp) / "drive.npy")
         log(f"wearable loop: {opts.realtime_s:g} s at 100 Hz in real time, then the drive sample by sample ...")
-        cfg = WearableConfig(str(npy), start, opts.realtime_s, assets=str(assets))
+        cfg = WearableConfig(str(npy), start, opts.realtime_s, assets=str(assets), read_period_s=opts.read_period_s)
         try:
             loops = run_child("wearable", asdict(cfg))
         except ChildFailed as e:

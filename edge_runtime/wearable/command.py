@@ -154,7 +154,8 @@ def _open_live_source(spec: str, cfg) -> MavlinkImuSource:
         from edge_runtime.wearable.sim_source import SimImuSource, SimSourceError
 
         try:
-            return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s, range_mps2=cfg.imu.range_mps2)
+            return SimImuSource(spec, silence_timeout_s=cfg.imu.silence_timeout_s, range_mps2=cfg.imu.range_mps2,
+                                read_period_s=cfg.imu.read_period_s)
         except SimSourceError as e:
             raise CliError(str(e)) from None
     from edge_runtime.core.serial_line import KEY_FORMS, parse_link_spec
@@ -175,7 +176,7 @@ def _open_live_source(spec: str, cfg) -> MavlinkImuSource:
 
     try:
         return MavlinkImuSource(line.path, signing_key=line.key, silence_timeout_s=cfg.imu.silence_timeout_s,
-                                range_mps2=cfg.imu.range_mps2)
+                                range_mps2=cfg.imu.range_mps2, read_period_s=cfg.imu.read_period_s)
     except ValueError as e:
         raise CliError(str(e)) from None
 

@@ -158,6 +158,7 @@ class StreamingDetector:
         """The history buffers for ``rows`` frames: Python arrays that :meth:`push_sample` writes one
         float at a time (no numpy call per sample: in a 100 Hz loop each costs microseconds on cold
         caches), and numpy views of the same memory for blocks."""
+        self._rows = rows  # len(self._buf), without a numpy call per sample
         self._buf_a = array("f", bytes(4 * 3 * rows))
         self._ax_a = array("d", bytes(8 * rows))
         self._buf = np.frombuffer(self._buf_a, np.float32).reshape(rows, 3)
@@ -216,7 +217,7 @@ class StreamingDetector:
         """:meth:`push` of one finite sample given as three floats, the 100 Hz loop's call: the same
         triggers and captures, written into the buffers element by element (the capture it
         completes, if any)."""
-        if self._len == len(self._buf):
+        if self._len == self._rows:
             self._append(np.array([[x, y, z]], np.float32))  # compaction: rare, the block path does it
         else:
             i = self._len

@@ -1,11 +1,15 @@
 """Live wrist-IMU source: MAVLink 2 HIGHRES_IMU / SCALED_IMU over a serial line.
 
 ``MavlinkImuSource(path).blocks()`` yields :class:`ImuBlock` objects -- whatever
-arrived in one read of the serial line (usually one sample at 100 Hz, at most
-``block_samples``), stamped with the host arrival time -- and :class:`SourceStatus` events (the sensor went silent / came
-back). It never blocks for longer than the read timeout (50 ms), so a silent
-sensor is reported within ``silence_timeout_s`` + 50 ms, and the "silent" status is
-repeated every read timeout while it lasts (the caller keeps control for its heartbeat).
+arrived in one read of the serial line (at most ``block_samples``), stamped with the host arrival
+time -- and :class:`SourceStatus` events (the sensor went silent / came back). With ``read_period_s``
+(the box's ``[imu] read_period_s``, 0.05 s) it reads at most that often, so a read brings the
+samples that arrived meanwhile (5 at 100 Hz) and the process wakes 20 times a second instead of
+100; their stamp is then the previous read's time, a bound the samples arrived after. Without it
+(0, the class's default) a read usually brings one sample. It never blocks for longer than the
+read timeout (50 ms), so a silent sensor is reported within ``silence_timeout_s`` + 50 ms of its
+last sample, and the "silent" status is repeated every read timeout while it lasts (the caller
+keeps control for its heartbeat).
 
 Bad input is counted in :attr:`MavlinkImuSource.stats` and handled:
 
@@ -37,7 +41,14 @@ import numpy as np
 import serial
 
 from edge_runtime.core.mavlink import make_mavlink, signature_failure
-from edge_runtime.wearable.sources import MAX_GAP_PERIODS, SAMPLE_RATE_HZ, ImuBlock, ImuParams, screen_samples
+from edge_runtime.wearable.sources import (
+    MAX_GAP_PERIODS,
+    SAMPLE_RATE_HZ,
+    SATURATION_TOLERANCE,
+    ImuBlock,
+    ImuParams,
+    screen_samples,
+)
 
 MG_TO_MPS2 = 9.80665e-3
 G_MPS2 = 9.80665
@@ -95,6 +106,7 @@ class ImuPacketDecoder:
     def __init__(self, signing_key: bytes | None = None, range_mps2: float = ImuParams.range_mps2,
                  block_samples: int = BLOCK_SAMPLES, stats: SourceStats | None = None):
         self.range_mps2 = float(range_mps2)
+        self._inside_mps2 = self.range_mps2 * (1 - SATURATION_TOLERANCE)  # below it, an axis is neither clipped nor saturated
         self.block_samples = int(block_samples)
         self.stats = stats if stats is not None else SourceStats()
         # The robot link's endpoint: it checks a signature before any timestamp state changes
@@ -149,6 +161,11 @@ class ImuPacketDecoder:
         else:
             return
         nan = any(v != v for v in acc)
+        if not nan and max(map(abs, acc)) < self._inside_mps2:
+            # well inside the range, the common case: what screen_samples returns for it (the values
+            # as they are, nothing counted), without its numpy calls for every sample
+            self._sample(t, acc, int16_sat, False, out)
+            return
         screened, out_of_range, at_scale = screen_samples(np.asarray(acc), self.range_mps2)
         self.stats.out_of_range += out_of_range
         self._sample(t, tuple(screened[0]), int16_sat or at_scale > 0, nan, out)
@@ -203,9 +220,11 @@ class MavlinkImuSource:
     def __init__(self, path: str, baud: int = 921600, signing_key: bytes | None = None,
                  silence_timeout_s: float = 0.2, range_mps2: float = ImuParams.range_mps2,
                  on_status: Callable[[SourceStatus], None] | None = None,
-                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S):
+                 block_samples: int = BLOCK_SAMPLES, read_timeout_s: float = READ_TIMEOUT_S,
+                 read_period_s: float = 0.0):
         self.path = path
         self.silence_timeout_s = float(silence_timeout_s)
+        self.read_period_s = min(max(float(read_period_s), 0.0), READ_TIMEOUT_S)
         self.on_status = on_status
         self.read_timeout_s = min(float(read_timeout_s), READ_TIMEOUT_S)
         self.decoder = ImuPacketDecoder(signing_key, range_mps2, block_samples)
@@ -235,15 +254,26 @@ class MavlinkImuSource:
         """ImuBlocks and SourceStatus events until close() (or ``duration_s`` of wall time)."""
         end = None if duration_s is None else time.monotonic() + duration_s
         out: list[Event] = []
+        last_read_s = time.monotonic()  # when the previous read returned ...
+        flowing = False  # ... with bytes
         while not self._closed:
             if end is not None and time.monotonic() >= end:
                 break
+            # ``read_period_s``: while bytes flow, let the line's buffer gather them until the period is
+            # over; after an empty read the next one waits for the line itself (a silent sensor is still
+            # looked at every read timeout)
+            wait_s = last_read_s + self.read_period_s - time.monotonic() if flowing else 0.0
+            if wait_s > 0:
+                time.sleep(wait_s)
             got = self._read()
-            if got:
-                self.decoder.feed(got, time.monotonic(), out)
-            # hand over at once what this read brought: a capture's last sample waits for nothing
-            self.decoder.flush(out)
             now = time.monotonic()
+            if got:
+                # after a wait the bytes arrived at some time since the previous read returned: stamped
+                # then, never later than they arrived (a latency counts their wait, silence is not late)
+                self.decoder.feed(got, last_read_s if wait_s > 0 else now, out)
+            last_read_s, flowing = now, bool(got)
+            # hand over at once what this read brought: a capture's last sample waits for nothing more
+            self.decoder.flush(out)
             last_rx = self.decoder.last_sample_monotonic_s or self._opened_s
             if now - last_rx >= self.silence_timeout_s and not out:
                 # repeated every read timeout while silent, so that the caller keeps control

@@ -62,7 +62,8 @@ def firmware_command(opts: dict[str, str]) -> list[str]:
 class SimImuSource(MavlinkImuSource):
     """A :class:`MavlinkImuSource` on the pseudo-terminal of a simulated IMU child process."""
 
-    def __init__(self, spec: str, silence_timeout_s: float = 0.15, range_mps2: float = ImuParams.range_mps2):
+    def __init__(self, spec: str, silence_timeout_s: float = 0.15, range_mps2: float = ImuParams.range_mps2,
+                 read_period_s: float = 0.0):
         opts = parse_sim_spec(spec)
         if importlib.util.find_spec("firmware_sim") is None:
             raise SimSourceError("--imu sim: the simulated IMU firmware (package firmware_sim) is not installed "
@@ -78,7 +79,8 @@ class SimImuSource(MavlinkImuSource):
                                      text=True, bufsize=1)
         path = self._first_line()
         try:
-            super().__init__(path, signing_key=key, silence_timeout_s=silence_timeout_s, range_mps2=range_mps2)
+            super().__init__(path, signing_key=key, silence_timeout_s=silence_timeout_s, range_mps2=range_mps2,
+                             read_period_s=read_period_s)
         except ValueError:
             self._stop_child()
             raise

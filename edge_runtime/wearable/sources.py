@@ -51,6 +51,16 @@ class ImuParams:
     """No sample for this long: the sensor is silent. WEARABLE_STATUS says so at once (an
     extra heartbeat on every change of state), so within 200 ms of the last sample: the
     source looks every 50 ms, hence at most 0.15 s (and at least two sample periods)."""
+    read_period_s: float = config.setting(0.05, config.within(0.0, 0.05, "s"))
+    """A live source reads the serial line at most this often and hands over everything that
+    arrived meanwhile as one block (the line's buffer holds it), instead of waking for every sample:
+    the wake-ups, not the loop's arithmetic, were most of its CPU (``python -m bench --cpus 0
+    --busy-cpus 1``, wearable_100hz, 2026-11-26: fed one sample every 10 ms (``--read-period 0``)
+    1.27 % of a core, of which the feed calls 0.54 % (p50 54 us, on caches a 10 ms sleep leaves
+    cold); in blocks of 5 every 50 ms 0.56 %). The price is latency: a sample waits up to this long
+    before the loop sees it (alert latencies are measured from the start of that wait), and a silent
+    sensor may be reported up to this much early. 0: read every sample as it arrives. At most 0.05 s:
+    the source still looks at a silent line every 50 ms."""
 
 
 @dataclass

@@ -104,7 +104,8 @@ def test_loops(quick):
     loops = {lp["name"]: lp for lp in report["loops"]}
     assert {"wearable_100hz", "detector", "alert_latency", "decision_latency", "robot_30hz"} <= set(loops)
     w = loops["wearable_100hz"]
-    assert w["samples"] == w["n"] == 100 and 0 < w["cpu_share_pct"] and w["deadline_misses"] >= 0
+    # fed in the blocks the live source hands over (one per read period): every sample, n blocks
+    assert w["samples"] == w["n"] * w["block_samples"] == 100 and 0 < w["cpu_share_pct"] and w["deadline_misses"] >= 0
     assert w["peak_rss_mb"] > 0
     d = loops["detector"]
     assert d["samples"] == d["n"] == DRIVE_SAMPLES and d["triggers"] >= 1

@@ -311,3 +311,19 @@ def test_a_replay_classifies_a_block_s_captures_together_and_decides_as_one_call
     assert len(replayed) >= 100 and {"preliminary", "continued", "confirmed"} <= {d["status"] for d in replayed}
     assert steps >= {2, 6} and max(batches) == BATCH_CAPTURES  # many captures in one run
     assert replayed == per_capture
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("given", [None, "3"])
+def test_the_wearable_keeps_openblas_on_one_thread_unless_told(given):
+    """The wearable package sets OPENBLAS_NUM_THREADS=1 before numpy loads (its products are small, a
+    thread pool only costs CPU); a value the environment gives is kept."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = ("import sys, edge_runtime.wearable.command, os; "
+            "print(os.environ['OPENBLAS_NUM_THREADS'], 'numpy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split() == [given or "1", "False"]  # set before numpy was imported

@@ -85,6 +85,23 @@ def test_highres_roundtrip_exact_in_order(pty):
     assert src.stats.heartbeats >= 1
 
 
+def test_a_read_period_hands_over_what_arrived_meanwhile(pty):
+    """[imu] read_period_s: the line is read at most every period, the samples that arrived meanwhile
+    go out as one block (the same samples, in order), each stamped no later than it arrived: with the
+    previous read's time, before the wait began."""
+    acc = ramp(100)
+    fw, src, events, arrival = stream(acc, pty, read_period_s=0.05)
+    blocks, t, a = samples(events)
+    assert np.array_equal(a, acc) and np.allclose(np.diff(t), 0.01)
+    assert len(blocks) <= 40 and np.median([len(b.acc_mps2) for b in blocks]) >= 3  # about 5 per read at 100 Hz
+    got = [when for e, when in zip(events, arrival) if isinstance(e, ImuBlock)]
+    waited = [when - b.rx_monotonic_s for b, when in zip(blocks, got)]
+    assert min(waited) >= 0 and np.median(waited) >= 0.04  # stamped before the wait (a late loop waits less)
+    # the line fell silent at the end: reported as promised, from the stamp of the last samples
+    silent = next(e for e in events if isinstance(e, SourceStatus) and e.state == "silent")
+    assert src.silence_timeout_s <= silent.since_s < src.silence_timeout_s + 0.1
+
+
 def test_scaled_roundtrip_within_quantisation(pty):
     acc = ramp()
     fw, src, events, _ = stream(acc, pty, message="scaled")
@@ -265,3 +282,27 @@ def test_a_stray_start_byte_loses_no_good_packet():
     dec.feed(stream[:cut] + b"\xfd" + stream[cut:], 0.0, events)
     dec.flush(events)
     assert dec.stats.samples == 100
+
+
+
+def test_samples_inside_the_range_pass_as_screen_samples_would_pass_them():
+    """The decoder skips screen_samples for a sample well inside the range: around the range's limit
+    (just inside, at it, within the tolerance, beyond), with NaN and infinities among them, every
+    value and count is what screen_samples makes of the whole stream."""
+    from edge_runtime.wearable.mavlink_source import ImuPacketDecoder
+    from edge_runtime.wearable.sources import screen_samples
+    from fuzz.seeds import firmware_bytes
+
+    range_mps2 = 100.0
+    acc = np.random.default_rng(3).uniform(-99.0, 99.0, (60, 3)).astype(np.float32)
+    acc[5:19, 1] = [99.9999, 99.99995, 100.0, 100.00005, 100.1, -100.0, -99.99995, 150.0, np.nan, np.inf,
+                    -np.inf, 99.9, -99.9, 0.0]
+    dec = ImuPacketDecoder(range_mps2=range_mps2)
+    events: list = []
+    dec.feed(firmware_bytes(acc, "highres", None, 2.0, 0), 0.0, events)
+    dec.flush(events)
+    got = np.concatenate([e.acc_mps2 for e in events if isinstance(e, ImuBlock)])
+    want, out_of_range, saturated = screen_samples(acc, range_mps2)
+    assert np.array_equal(got, want, equal_nan=True)
+    assert (dec.stats.samples, dec.stats.out_of_range, dec.stats.saturated) == (len(acc), out_of_range, saturated)
+    assert out_of_range == 4 and saturated == 6  # beyond: 100.1, 150, +-inf; at scale: 99.9999 .. 100.00005, -100, -99.99995
