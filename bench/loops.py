@@ -123,13 +123,13 @@ def source_block_samples(read_period_s: float | None = None) -> int:
     from edge_runtime.wearable.sources import ImuParams
 
     period_s = ImuParams().read_period_s if read_period_s is None else read_period_s
-    return max(1, round(period_s * SAMPLE_RATE_HZ))
+    return max(1, int(period_s * SAMPLE_RATE_HZ + 0.5))  # half up: 0.025 s is 3 samples, not round()'s 2
 
 
 def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float, read_period_s: float | None = None) -> dict:
-    per = source_block_samples(read_period_s)
-    blocks = min(int(seconds * SAMPLE_RATE_HZ), len(acc) - start) // per
-    period = per / SAMPLE_RATE_HZ
+    block_samples = source_block_samples(read_period_s)
+    blocks = min(int(seconds * SAMPLE_RATE_HZ), len(acc) - start) // block_samples
+    period_s = block_samples / SAMPLE_RATE_HZ
     busy = np.empty(blocks, np.float64)
     late = np.empty(blocks, np.float64)
     misses = 0
@@ -138,19 +138,19 @@ def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float, read_pe
     with CpuShare() as cpu:
         t_start = time.perf_counter()
         for k in range(blocks):
-            due = t_start + k * period
-            sleep_until(due)
+            due_s = t_start + k * period_s
+            sleep_until(due_s)
             t0 = time.perf_counter()
-            w.feed(start + k * per, per, acc)
+            w.feed(start + k * block_samples, block_samples, acc)
             t1 = time.perf_counter()
-            busy[k], late[k] = t1 - t0, t0 - due
-            misses += t1 > due + period
+            busy[k], late[k] = t1 - t0, t0 - due_s
+            misses += t1 > due_s + period_s
     return {"name": "wearable_100hz", "rate_hz": SAMPLE_RATE_HZ, "seconds": round(cpu.wall_s, 2),
-            "samples": blocks * per, "block_samples": per,
+            "samples": blocks * block_samples, "block_samples": block_samples,
             "captures": w.loop.stats.captures - captures0, "cpu_share_pct": cpu.pct,
             "deadline_misses": int(misses), "start_late_p99_us": round(float(np.percentile(late, 99)) * 1e6, 1),
             **summarize(busy * 1e9), "peak_rss_mb": peak_rss_mb(),
-            "what": f"per-block feed of {per} sample(s) every {period * 1e3:g} ms, as the live source hands them "
+            "what": f"block_samples-block feed of {block_samples} sample(s) every {period_s * 1e3:g} ms, as the live source hands them "
                     "over (detector + classify on capture + CAN), real time, int8 1 thread, heartbeat thread running"}
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.timing import interleaved_calls, summarize
-from edge_runtime.cli import OneLineParser, positive_int, run
+from edge_runtime.cli import CliError, OneLineParser, positive_int, run
 
 ARCH = "convlstm"
 
@@ -115,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
 
         from edge_runtime.core.manifest import ASSETS_DIR
 
+        if a.json and not Path(a.json).resolve().parent.is_dir():  # before minutes of measuring, not after
+            raise CliError(f"--json {a.json}: directory {Path(a.json).parent} does not exist")
         rows = measure(Path(a.assets) if a.assets else ASSETS_DIR, a.n)
         print(f"load average {[round(v, 2) for v in os.getloadavg()]}; p50/p99 us of session.run, 1 thread, batch 1")
         for r in rows:
@@ -124,7 +126,10 @@ def main(argv: list[str] | None = None) -> int:
                                                 "load_average": os.getloadavg(), "rows": rows}, indent=2))
         return 0
 
-    return run(cmd, what="bench.model_parts", extra="export")
+    from edge_runtime.errors import ManifestError, ModelIntegrityError
+
+    return run(cmd, bad_input=(ManifestError, ModelIntegrityError, ValueError), what="bench.model_parts",
+               extra="export")
 
 
 if __name__ == "__main__":

@@ -63,8 +63,11 @@ class BenchOptions:
             raise ValueError(f"threads: each must be at least 1, got {list(self.threads)}")
         if self.n < 1 or self.rounds < 1 or self.warmup < 0:
             raise ValueError("n and rounds must be at least 1, warmup at least 0")
-        if self.read_period_s is not None and not 0.0 <= self.read_period_s <= 1.0:
-            raise ValueError(f"--read-period: {self.read_period_s} s; give 0 .. 1 s")
+        from edge_runtime.wearable.mavlink_source import READ_TIMEOUT_S
+
+        if self.read_period_s is not None and not 0.0 <= self.read_period_s <= READ_TIMEOUT_S:
+            # the product's limits: [imu] read_period_s never exceeds the source's read timeout
+            raise ValueError(f"--read-period: {self.read_period_s} s; give 0 .. {READ_TIMEOUT_S:g} s")
 
 
 def _entries(assets: Path, only: tuple[str, ...]) -> list[dict]:

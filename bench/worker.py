@@ -29,9 +29,9 @@ TASKS = {"inference": ("bench.inference", "InferenceConfig", "measure"),
          "wearable": ("bench.loops", "WearableConfig", "measure_wearable"),
          "robot": ("bench.robot_cycle", "RobotConfig", "measure_robot")}
 """task -> (module, config dataclass, function); only the task's module is imported in the child."""
-PRODUCT_FIRST = {"wearable": "edge_runtime.wearable"}
-"""task -> the product package imported before anything else, as its command imports it first: its
-process settings (``edge_runtime.wearable``: OpenBLAS on one thread) apply before numpy loads."""
+PRODUCT_FIRST = {"wearable": ("edge_runtime.wearable", "limit_blas_threads")}
+"""task -> the product's process settings, applied before anything imports numpy as its command applies
+them (``edge_runtime.wearable.limit_blas_threads``: OpenBLAS on one thread)."""
 
 
 def run_child(task: str, config: dict, timeout_s: float = 900.0) -> dict:
@@ -53,7 +53,8 @@ def main(argv: list[str]) -> int:
     task, cfg_path, out_path = argv
     module, cfg_name, func_name = TASKS[task]
     if task in PRODUCT_FIRST:
-        importlib.import_module(PRODUCT_FIRST[task])
+        package, setting = PRODUCT_FIRST[task]
+        getattr(importlib.import_module(package), setting)()
     mod = importlib.import_module(module)
     result = getattr(mod, func_name)(getattr(mod, cfg_name)(**json.loads(Path(cfg_path).read_text())))
     Path(out_path).write_text(json.dumps(result))

@@ -52,6 +52,10 @@ def load_all_sections() -> None:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     named = argv[0] if argv and argv[0] in {c[0] for c in COMMANDS} else None
+    if named == "wearable":  # before anything imports numpy
+        from edge_runtime.wearable import limit_blas_threads
+
+        limit_blas_threads()
     return run_command(build_parser(named).parse_args(argv))
 
 

@@ -156,12 +156,6 @@ class WearableStatus:
             self._samples += n
             self._non_finite += non_finite
 
-    def count_sample(self) -> None:
-        """One finite sample, the live loop's call at 100 Hz: without the lock. Only the loop's thread
-        writes the counts, and a reader gets the int whole (before or after this sample), so the
-        lock would protect nothing here; its acquire and release on cold caches cost microseconds."""
-        self._samples += 1
-
     def count_detector_restart(self) -> None:
         with self._lock:
             self._restarts += 1
@@ -498,13 +492,13 @@ class AlertPublisher:
         nobody to hear them, they are counted together (:meth:`_send_alert_frame`'s way, one call)."""
         if self.clock is Clock.DATA and not self._heard():
             with self._copies_lock:
-                due = 0
+                n_due = 0
                 while self._copies and self._copies[0].due_s <= now_s:
                     heapq.heappop(self._copies)
-                    due += 1
-            if due:
-                self._count_unheard_alerts(due)
-                self.alert_copies_sent += due
+                    n_due += 1
+            if n_due:
+                self._count_unheard_alerts(n_due)
+                self.alert_copies_sent += n_due
             return
         while True:
             with self._copies_lock:

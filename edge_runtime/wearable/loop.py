@@ -399,7 +399,7 @@ class WearableLoop:
             # finite: v - v is 0 for a finite v, NaN for NaN or an infinity (arithmetic: no call per sample,
             # and every call costs microseconds on the caches a 10 ms sleep leaves cold)
             if x - x == 0.0 and y - y == 0.0 and z - z == 0.0:
-                self.status.count_sample()
+                self.status.count_samples(1)
                 cap = self.detector.push_sample(x, y, z)
                 if cap is None:
                     return self._early_due() if self._early else []

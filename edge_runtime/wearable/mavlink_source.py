@@ -1,15 +1,27 @@
 """Live wrist-IMU source: MAVLink 2 HIGHRES_IMU / SCALED_IMU over a serial line.
 
 ``MavlinkImuSource(path).blocks()`` yields :class:`ImuBlock` objects -- whatever
-arrived in one read of the serial line (at most ``block_samples``), stamped with the host arrival
-time -- and :class:`SourceStatus` events (the sensor went silent / came back). With ``read_period_s``
-(the box's ``[imu] read_period_s``, 0.05 s) it reads at most that often, so a read brings the
+arrived in one read of the serial line (at most ``block_samples``) -- and :class:`SourceStatus`
+events (the sensor went silent / came back). With ``read_period_s`` (the box's ``[imu]
+read_period_s``, 0.05 s) it reads at most that often while samples flow, so a read brings the
 samples that arrived meanwhile (5 at 100 Hz) and the process wakes 20 times a second instead of
-100; their stamp is then the previous read's time, a bound the samples arrived after. Without it
-(0, the class's default) a read usually brings one sample. It never blocks for longer than the
-read timeout (50 ms), so a silent sensor is reported within ``silence_timeout_s`` + 50 ms of its
-last sample, and the "silent" status is repeated every read timeout while it lasts (the caller
-keeps control for its heartbeat).
+100. Without it (0, the class's default) a read usually brings one sample.
+
+Two clocks, each a bound on the right side:
+
+* a block's ``rx_monotonic_s`` is never later than its samples arrived: the time the previous
+  read returned when its bytes were already waiting as this read began (they came after it), else
+  this read's own time (it waited for them). Alert latencies measured from it count the buffer's
+  wait, so they are never flattering;
+* silence is measured from the time of the read that brought the last sample, never earlier than
+  its arrival: "silent" means no sample for at least ``silence_timeout_s``, never a shorter gap.
+
+A silent line is looked at at least every read timeout (50 ms): after the period's sleep only
+what is already waiting is read, and a read that waits for the line waits at most that long. So
+silence is reported within ``silence_timeout_s + read_period_s + 50 ms`` of the last sample's
+arrival (the box's limits keep that within 200 ms, :class:`~edge_runtime.wearable.sources.ImuParams`),
+and the "silent" status is repeated every read timeout while it lasts (the caller keeps control for
+its heartbeat).
 
 Bad input is counted in :attr:`MavlinkImuSource.stats` and handled:
 
@@ -64,7 +76,8 @@ class SourceStatus:
     state: str
     """"silent" (no sample for silence_timeout_s), "ok" (samples again), "disconnected"."""
     since_s: float
-    """Seconds since the last sample (monotonic clock) when the event was raised."""
+    """Seconds since the read that brought the last sample (monotonic clock) when the event was raised:
+    the sensor has been silent at least this long."""
     last_t_s: float | None = None
     """Stream time of the last sample received, if any."""
 
@@ -120,8 +133,6 @@ class ImuPacketDecoder:
         self._pending_continuous = False  # the first block of a stream is not continuous
         self._next_continuous = False
         self._rx: float | None = None
-        self.last_sample_monotonic_s: float | None = None
-        """Arrival time of the last sample accepted (None before the first)."""
         self.silent = False
         """Set by the owner when the sensor went silent; the next sample reports "ok"."""
 
@@ -185,7 +196,6 @@ class ImuPacketDecoder:
                 self.stats.dropped += max(0, int(round(dt / self._period)) - 1)
                 self.flush(out)
                 self._next_continuous = False
-        self.last_sample_monotonic_s = self._rx
         if self.silent:
             self.silent = False
             out.append(SourceStatus("ok", 0.0, self._last_t))
@@ -224,9 +234,12 @@ class MavlinkImuSource:
                  read_period_s: float = 0.0):
         self.path = path
         self.silence_timeout_s = float(silence_timeout_s)
-        self.read_period_s = min(max(float(read_period_s), 0.0), READ_TIMEOUT_S)
         self.on_status = on_status
         self.read_timeout_s = min(float(read_timeout_s), READ_TIMEOUT_S)
+        self.read_period_s = float(read_period_s)
+        if not 0.0 <= self.read_period_s <= self.read_timeout_s:
+            # longer, and a line that just fell silent would go unlooked-at for longer than a read timeout
+            raise ValueError(f"read_period_s: {read_period_s!r} is outside [0, {self.read_timeout_s:g}] s")
         self.decoder = ImuPacketDecoder(signing_key, range_mps2, block_samples)
         self.stats = self.decoder.stats
         try:
@@ -256,32 +269,37 @@ class MavlinkImuSource:
         out: list[Event] = []
         last_read_s = time.monotonic()  # when the previous read returned ...
         flowing = False  # ... with bytes
+        seen_s = self._opened_s  # when the read that brought the last sample returned
         while not self._closed:
             if end is not None and time.monotonic() >= end:
                 break
             # ``read_period_s``: while bytes flow, let the line's buffer gather them until the period is
-            # over; after an empty read the next one waits for the line itself (a silent sensor is still
-            # looked at every read timeout)
+            # over, then take only what is waiting (a second, blocking read after the sleep would leave a
+            # line that just fell silent unlooked-at for two read timeouts); after an empty read the next
+            # one waits for the line itself, at most a read timeout
             wait_s = last_read_s + self.read_period_s - time.monotonic() if flowing else 0.0
             if wait_s > 0:
                 time.sleep(wait_s)
-            got = self._read()
+            waiting = self._waiting()
+            got = self._read(waiting) if waiting or wait_s <= 0 else b""
             now = time.monotonic()
             if got:
-                # after a wait the bytes arrived at some time since the previous read returned: stamped
-                # then, never later than they arrived (a latency counts their wait, silence is not late)
-                self.decoder.feed(got, last_read_s if wait_s > 0 else now, out)
+                # bytes already waiting came after the previous read returned: stamped then, never later
+                # than they arrived; bytes this read waited for arrived as it returned
+                samples = self.stats.samples
+                self.decoder.feed(got, last_read_s if waiting else now, out)
+                if self.stats.samples != samples:
+                    seen_s = now
             last_read_s, flowing = now, bool(got)
             # hand over at once what this read brought: a capture's last sample waits for nothing more
             self.decoder.flush(out)
-            last_rx = self.decoder.last_sample_monotonic_s or self._opened_s
-            if now - last_rx >= self.silence_timeout_s and not out:
+            if now - seen_s >= self.silence_timeout_s and not out:
                 # repeated every read timeout while silent, so that the caller keeps control
                 # (heartbeats); silent_events counts the transitions only
                 if not self.decoder.silent:
                     self.decoder.silent = True
                     self.stats.silent_events += 1
-                out.append(SourceStatus("silent", now - last_rx, self.decoder.last_t_s))
+                out.append(SourceStatus("silent", now - seen_s, self.decoder.last_t_s))
             while out:
                 event = out.pop(0)
                 if self.on_status is not None and isinstance(event, SourceStatus):
@@ -291,12 +309,19 @@ class MavlinkImuSource:
         yield from out
 
     # -- internals -----------------------------------------------------------------------
-    def _read(self) -> bytes:
+    def _waiting(self) -> int:
+        """Bytes in the line's buffer now (0 when the line cannot say: the read finds out)."""
         try:
-            return self.ser.read(max(1, self.ser.in_waiting))
+            return self.ser.in_waiting
+        except (serial.SerialException, OSError):
+            return 0
+
+    def _read(self, waiting: int) -> bytes:
+        """What is waiting, or (nothing waiting) the first byte to come within the read timeout."""
+        try:
+            return self.ser.read(max(1, waiting))
         except (serial.SerialException, OSError):
             # e.g. the writer closed the pty: wait a read timeout, never spin
             self.stats.read_errors += 1
             time.sleep(self.read_timeout_s)
             return b""
-

@@ -32,6 +32,9 @@ MAX_TIME_S = 1e10
 """A recording's times are seconds (of a session, or since 1970: 1.7e9 now); beyond this
 (about 300 years) a time is not one, and every sample after it would be dropped as going
 back in time, so the line is refused."""
+SILENCE_BUDGET_S = 0.15
+"""``[imu] silence_timeout_s + read_period_s`` at most: with the 50 ms a silent line may wait to be
+looked at, a silent sensor is reported within 200 ms of its last sample (docs/integrator.md)."""
 MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 10_000.0
 """Recording rates the replay resamples from; outside, the timestamps are not a sample clock."""
 
@@ -47,20 +50,27 @@ class ImuParams:
     range_mps2: float = config.setting(156.9, config.within(19.6, 1000, "m/s^2"))
     """Accelerometer full scale (m/s^2, 16 g); readings at or beyond it count as saturated and
     are clipped to it before the model sees them."""
-    silence_timeout_s: float = config.setting(0.15, config.within(0.02, 0.15, "s"))
-    """No sample for this long: the sensor is silent. WEARABLE_STATUS says so at once (an
-    extra heartbeat on every change of state), so within 200 ms of the last sample: the
-    source looks every 50 ms, hence at most 0.15 s (and at least two sample periods)."""
+    silence_timeout_s: float = config.setting(0.1, config.within(0.02, 0.15, "s"))
+    """No sample for at least this long: the sensor is silent (a shorter gap never is). WEARABLE_STATUS
+    says so at once (an extra heartbeat on every change of state), within 200 ms of the last sample's
+    arrival: the source reports it within ``silence_timeout_s + read_period_s`` + 50 ms (it may have
+    read the last sample up to a read period after it arrived, and it looks at a silent line every
+    50 ms), so the two add up to at most 0.15 s; at least two sample periods."""
     read_period_s: float = config.setting(0.05, config.within(0.0, 0.05, "s"))
-    """A live source reads the serial line at most this often and hands over everything that
-    arrived meanwhile as one block (the line's buffer holds it), instead of waking for every sample:
-    the wake-ups, not the loop's arithmetic, were most of its CPU (``python -m bench --cpus 0
-    --busy-cpus 1``, wearable_100hz, 2026-11-26: fed one sample every 10 ms (``--read-period 0``)
-    1.27 % of a core, of which the feed calls 0.54 % (p50 54 us, on caches a 10 ms sleep leaves
+    """A live source reads the serial line at most this often while samples flow and hands over
+    everything that arrived meanwhile as one block (the line's buffer holds it), instead of waking for
+    every sample: the wake-ups, not the loop's arithmetic, were most of its CPU (``python -m bench
+    --cpus 0 --busy-cpus 1``, wearable_100hz, 2026-11-26: fed one sample every 10 ms (``--read-period
+    0``) 1.27 % of a core, of which the feed calls 0.54 % (p50 54 us, on caches a 10 ms sleep leaves
     cold); in blocks of 5 every 50 ms 0.56 %). The price is latency: a sample waits up to this long
-    before the loop sees it (alert latencies are measured from the start of that wait), and a silent
-    sensor may be reported up to this much early. 0: read every sample as it arrives. At most 0.05 s:
-    the source still looks at a silent line every 50 ms."""
+    before the loop sees it (alert latencies are measured from the start of that wait), and the
+    silence timeout must leave room for it (``silence_timeout_s``). 0: read every sample as it
+    arrives."""
+
+    def __post_init__(self):
+        if self.silence_timeout_s + self.read_period_s > SILENCE_BUDGET_S + 1e-9:
+            raise ValueError(f"silence_timeout_s + read_period_s: {self.silence_timeout_s:g} + {self.read_period_s:g} s "
+                             f"is over {SILENCE_BUDGET_S:g} s (a silent sensor must be reported within 200 ms)")
 
 
 @dataclass
@@ -72,8 +82,9 @@ class ImuBlock:
     continuous: bool = True
     """False when this block does not follow the previous one without a gap."""
     rx_monotonic_s: float | None = None
-    """Host ``time.monotonic()`` when the block's last sample arrived (live sources; None for a
-    file). The loop carries it to the decision so alert latency is measured from arrival."""
+    """Host ``time.monotonic()`` no later than the block's samples arrived (live sources; None for a
+    file): the read that brought them, or the previous one when they waited in the line's buffer. The
+    loop carries it to the decision so alert latency is measured from arrival, the wait included."""
 
 
 @dataclass

@@ -65,8 +65,11 @@ def strategy() -> st.SearchStrategy[bytes]:
 
 PROMISES = (
     # README / docs/integrator.md: the sensor going silent is on the bus within 200 ms of its last
-    # sample; the source notices silence at silence_timeout_s plus one 50 ms read.
-    ("[imu] silence_timeout_s", lambda c: 0 < c.imu.silence_timeout_s <= 0.15),
+    # sample's arrival; the source notices silence at silence_timeout_s after the read that brought
+    # it (up to read_period_s after it arrived) plus one 50 ms read.
+    ("[imu] silence_timeout_s + read_period_s",
+     lambda c: 0 < c.imu.silence_timeout_s and 0 <= c.imu.read_period_s
+     and c.imu.silence_timeout_s + c.imu.read_period_s <= 0.15 + 1e-9),
     ("[imu] range_mps2", lambda c: 0 < c.imu.range_mps2 < float("inf")),
     # vehicle_alerts.dbc: WEARABLE_STATUS every 100 ms; missing for 300 ms = wearable unavailable
     ("[can] heartbeat_period_s", lambda c: 0 < c.can.heartbeat_period_s <= 0.1),

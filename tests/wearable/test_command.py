@@ -315,15 +315,27 @@ def test_a_replay_classifies_a_block_s_captures_together_and_decides_as_one_call
 
 @pytest.mark.slow
 @pytest.mark.parametrize("given", [None, "3"])
-def test_the_wearable_keeps_openblas_on_one_thread_unless_told(given):
-    """The wearable package sets OPENBLAS_NUM_THREADS=1 before numpy loads (its products are small, a
-    thread pool only costs CPU); a value the environment gives is kept."""
+def test_the_wearable_command_keeps_openblas_on_one_thread_unless_told(given):
+    """The wearable command sets OPENBLAS_NUM_THREADS=1 before numpy loads (its products are small, a
+    thread pool only costs CPU); a value the environment gives is kept; a process that merely imports
+    the wearable's modules (the bench's parent, an evaluation) is left alone and passes nothing on."""
     import os
 
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     if given is not None:
         env["OPENBLAS_NUM_THREADS"] = given
-    code = ("import sys, edge_runtime.wearable.command, os; "
-            "print(os.environ['OPENBLAS_NUM_THREADS'], 'numpy' in sys.modules)")
+    code = ("import builtins, os, sys\n"
+            "seen, real = [], builtins.__import__\n"
+            "def spy(name, *a, **k):\n"
+            "    if name == 'numpy' and 'numpy' not in sys.modules and not seen:\n"
+            "        seen.append(os.environ.get('OPENBLAS_NUM_THREADS'))\n"
+            "    return real(name, *a, **k)\n"
+            "builtins.__import__ = spy\n"
+            "from edge_runtime.__main__ import main\n"
+            "main(['wearable', '--print-config'])\n"
+            "print(seen[0])\n")
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
-    assert out.split() == [given or "1", "False"]  # set before numpy was imported
+    assert out.split()[-1] == (given or "1")  # set before numpy was imported
+    code = "import os, edge_runtime.wearable.sources; print(os.environ.get('OPENBLAS_NUM_THREADS'))"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split() == [str(given)]
