@@ -52,6 +52,7 @@ lifter's depth cannot tell those markers apart.
 """
 from __future__ import annotations
 
+import itertools
 import json
 from collections import deque
 from dataclasses import asdict, dataclass, field, replace
@@ -604,6 +605,23 @@ def _fit_similarity(src, dst, with_scale: bool) -> tuple[np.ndarray, np.ndarray]
     return A, mu_d - A @ mu_s
 
 
+STAND_GAP_S = 1.0
+"""Standing pieces at most this far apart in time whose rays agree are one stand (:func:`segment_stands`):
+a glitch of a quarter second leaves a hole about this long in the half-second medians. The walk between
+two markers 1 m apart moves the rays far more, so different markers are never joined."""
+MAX_UNLABELLED_RESIDUAL_M = {"pnp": 0.12, "rigid": 0.6}
+"""An unlabelled calibration (:func:`from_recording` without ``marker``) is refused when its largest residual
+at the markers (:meth:`Calibration.residuals_m`: pnp the target's distance from its ray, rigid the 3-D
+distance) exceeds this, per method: the stands found are then not the markers. Development seed 4 of
+``firmware_sim head-error``'s calibration walks at a real detector's noise: right fits 0.016-0.066 m (pnp,
+labelled, 10 placements), 0.10-0.37 m (rigid); fits to the wrong stands 0.13-0.197 m (pnp; a 0.15 m limit let
+one through, turned by 130 degrees), 0.88-1.04 m (rigid). eq2 is exact
+at the markers (no residual to judge by). A module constant, not a [calibration] key, like the
+anchoring's: [calibration] is in the validated safety hash, and the labelled path the hrc suites
+calibrate by does not use it.
+"""
+
+
 def segment_stands(t_s, ankle_cam_m, params: CalibrationParams = CalibrationParams()) -> list[np.ndarray]:
     """Index arrays of the standing periods of a calibration recording, in time order.
 
@@ -614,6 +632,9 @@ def segment_stands(t_s, ankle_cam_m, params: CalibrationParams = CalibrationPara
     ray (the ankle's direction, (x/z, y/z), times its median depth): the lifter's depth
     jitters by decimetres from frame to frame at a real detector's noise, its rays do not
     (they are the keypoints), and a worker walking between markers moves across the image.
+    Pieces of standing at most :data:`STAND_GAP_S` apart whose rays agree (within the same
+    distance) are joined first, leaving out a short piece between them that does not agree: a real
+    detector's noise breaks a stand now and then.
     """
     t = np.asarray(t_s, float)
     a = np.asarray(ankle_cam_m, float)
@@ -634,10 +655,24 @@ def segment_stands(t_s, ankle_cam_m, params: CalibrationParams = CalibrationPara
         if s and start is None:
             start = i
         elif not s and start is not None:
-            if t[i - 1] - t[start] >= params.still_min_s:
-                runs.append(np.arange(start, i))
+            runs.append(np.arange(start, i))
             start = None
-    return runs
+    # a real detector's noise breaks one stand into pieces now and then (frames whose medians moved
+    # past the threshold, a glitch the medians straddle): pieces close in time whose rays agree are one
+    # stand; a short piece between them that does not agree (the glitch itself) is left out
+    merged: list[np.ndarray] = []
+    for run in runs:
+        if merged and t[run[0]] - t[merged[-1][-1]] <= STAND_GAP_S:
+            both = np.r_[merged[-1], run]
+            depth_m = float(np.median(a[both[ok[both]], 2]))
+            apart = np.linalg.norm(np.median(ray[run[ok[run]]], axis=0) - np.median(ray[merged[-1][ok[merged[-1]]]], axis=0))
+            if apart * depth_m < params.still_speed_mps * half:
+                merged[-1] = both
+                continue
+            if t[run[-1]] - t[run[0]] < params.still_min_s:
+                continue
+        merged.append(run)
+    return [r for r in merged if t[r[-1]] - t[r[0]] >= params.still_min_s]
 
 
 def from_recording(t_s, joints_cam_m, params: CalibrationParams = CalibrationParams(),
@@ -645,23 +680,62 @@ def from_recording(t_s, joints_cam_m, params: CalibrationParams = CalibrationPar
     """Calibrate from a recording of the worker standing on markers 1, 2, 3 in turn.
 
     ``joints_cam_m`` is (N, 17, 3). ``marker`` (N,) may label each frame 1, 2, 3 (0 or
-    negative: walking); without it the first three standing periods are taken as
-    markers 1, 2 and 3.
+    negative: walking); without it the standing periods are found (:func:`segment_stands`) and
+    the three in time order that fit the marker layout best are taken as markers 1, 2 and 3, or
+    the recording is refused when none fit (:func:`_fit_stands`).
     """
     heads, ankles = head_and_ankles(joints_cam_m)
     if marker is not None:
         marker = np.asarray(marker)
         groups = [np.flatnonzero(marker == k) for k in (1, 2, 3)]
     else:
-        groups = segment_stands(t_s, ankles, params)
-        if len(groups) < 3:
-            raise CalibrationError(f"found {len(groups)} standing period(s) of at least {params.still_min_s} s; "
+        stands = segment_stands(t_s, ankles, params)
+        if len(stands) < 3:
+            raise CalibrationError(f"found {len(stands)} standing period(s) of at least {params.still_min_s} s; "
                                    "need 3 (markers 1, 2, 3) -- did the worker move between markers?")
-        groups = groups[:3]
+        return _fit_stands(heads, ankles, stands, params)
+    _check_frames(heads, groups, params)
+    h = np.stack([robust_mean(heads[g]) for g in groups])
+    a = np.stack([robust_mean(ankles[g]) for g in groups])
+    return fit(h, a, params, frames=tuple(len(g) for g in groups))
+
+
+def _check_frames(heads, groups, params: CalibrationParams) -> None:
     for k, g in enumerate(groups, 1):
         n_ok = int(np.isfinite(heads[g]).all(axis=1).sum()) if len(g) else 0
         if n_ok < params.min_frames:
             raise CalibrationError(f"marker {k}: {n_ok} usable frames, need {params.min_frames}")
-    h = np.stack([robust_mean(heads[g]) for g in groups])
-    a = np.stack([robust_mean(ankles[g]) for g in groups])
-    return fit(h, a, params, frames=tuple(len(g) for g in groups))
+
+
+def _fit_stands(heads, ankles, stands: list[np.ndarray], params: CalibrationParams) -> Calibration:
+    """The calibration from standing periods found without labels: of every three of them in time
+    order (markers 1, 2, 3), the one whose fit leaves the smallest residual at the markers; refused
+    when even that one does not fit the marker layout (:data:`MAX_UNLABELLED_RESIDUAL_M`).
+
+    Without labels nothing says which stands are the markers: a stand the detector's noise broke in
+    two, or a pause on the way, makes a fourth one, and taking the first three then fits a layout the
+    worker never walked (on development seed 4 of ``firmware_sim head-error``, 2 of 10 such fits were
+    turned by 22 and 88 degrees with nothing to show it). The marker layout is the check: three
+    stands that are not the markers cannot put a worker on all three."""
+    best, why = None, "no three standing periods in time order fit"
+    for trio in itertools.combinations(range(len(stands)), 3):
+        groups = [stands[i] for i in trio]
+        try:
+            _check_frames(heads, groups, params)
+            cal = fit(np.stack([robust_mean(heads[g]) for g in groups]),
+                      np.stack([robust_mean(ankles[g]) for g in groups]), params,
+                      frames=tuple(len(g) for g in groups))
+        except CalibrationError as e:
+            why = str(e)
+            continue
+        residual_m = max(max(v) for v in cal.residuals_m().values())
+        if best is None or residual_m < best[0]:
+            best = (residual_m, cal)
+    if best is None:
+        raise CalibrationError(f"{len(stands)} standing periods, none three of them calibrate: {why}")
+    limit_m = MAX_UNLABELLED_RESIDUAL_M.get(best[1].method)
+    if limit_m is not None and best[0] > limit_m:
+        raise CalibrationError(f"the standing periods found do not fit the marker layout (residual {best[0]:.2f} m, "
+                               f"at most {limit_m} m for {best[1].method}): record the walk again, standing still "
+                               "on each marker, or label the frames by marker")
+    return best[1]

@@ -83,6 +83,9 @@ def add_arguments(parser) -> None:
                         help="the lifter's [lifter] ray_tolerance_px (default: its default)")
     parser.add_argument("--anchor-window-frames", type=positive_int, default=None,
                         help="the floor anchoring's window (default: calibration.ANCHOR_WINDOW_FRAMES; 1 = each frame alone)")
+    parser.add_argument("--unlabelled", action="store_true",
+                        help="calibrate as the runtime's --calibrate does: find the stands in the walk itself "
+                             "(no marker labels; the lifter's warm-up frames included)")
     parser.add_argument("--json", required=True, metavar="OUT.json", help="write the figures here")
     parser.add_argument("--plot", metavar="OUT.png", help="error vs distance, both methods")
 
@@ -166,17 +169,21 @@ def calibration_error(cal: Calibration, camera: Camera) -> dict:
 
 def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
                   params: CalibrationParams = CalibrationParams(), truth: bool = False,
-                  noise: DetectorNoise = DetectorNoise(), anchor_window_frames: int | None = None) -> dict:
+                  noise: DetectorNoise = DetectorNoise(), anchor_window_frames: int | None = None,
+                  labelled: bool = True) -> dict:
     """One camera placement: calibrate (``truth``: take the true extrinsics instead; the
     calibration walk is still simulated, so the random streams match), then the worker's
     frames. Returns per-frame arrays (``distance_m``, per method ``err`` (T, 3) rows of 3-D,
-    ground, height errors) or ``{"refused": reason}``."""
+    ground, height errors) or ``{"refused": reason}``. ``labelled``: the calibration frames carry
+    the simulator's marker labels (warm-up frames left out); else the runtime finds the stands
+    itself in every valid frame, as ``edge_runtime robot --calibrate --keypoints`` does."""
     camera = random_placement(rng)
     cal_mot, labels = calibration_motion(_body(rng), rng)
-    cal_joints = lift(lifter, detect(camera, cal_mot.joints_m, rng, noise), 0.0)
+    cal_joints = lift(lifter, detect(camera, cal_mot.joints_m, rng, noise), 0.0, warm=not labelled)
+    cal_joints = cal_joints if labelled else cal_joints[0]
     try:
         cal = true_calibration(camera, params) if truth else from_recording(cal_mot.t_s, cal_joints, params,
-                                                                             marker=labels)
+                                                                             marker=labels if labelled else None)
     except CalibrationError as e:
         return {"camera": camera.to_dict(), "refused": str(e)}
     if anchor_window_frames is not None:
@@ -242,9 +249,11 @@ def summarise(results: list[dict], methods, args) -> dict:
                        + (f" --assets {args.assets}" if getattr(args, "assets", None) else "")
                        + (f" --ray-tolerance-px {args.ray_tolerance_px:g}"
                           if getattr(args, "ray_tolerance_px", None) is not None else "")
+                       + (" --unlabelled" if getattr(args, "unlabelled", False) else "")
                        + (f" --anchor-window-frames {args.anchor_window_frames}"
                           if getattr(args, "anchor_window_frames", None) is not None else "")),
            "lifter_precision": args.precision, "calibration_method": args.calibration_method, "placements": args.placements,
+           "labelled_calibration": not getattr(args, "unlabelled", False),
            "calibrations_refused": [r["refused"] for r in results if "refused" in r],
            "frames": int(len(dist)), "methods": {}}
     for m in methods:
@@ -260,6 +269,8 @@ def summarise(results: list[dict], methods, args) -> dict:
                                      "pose when the depth is perfect", "all": _stats(err)}
         out["calibration_pose_error"] = {k: {"median": q(v, 50), "p90": q(v, 90), "max": q(v, 100)}
                                          for k, v in pose.items()}
+        # a fit turned this far is not a noisy calibration but a wrong one (the markers mistaken)
+        out["calibration_pose_error"]["over_10_deg"] = int(np.sum(pose["rotation_deg"] > 10.0))
     if "on" in methods and done:
         applied = np.concatenate([r["applied"] for r in done])
         k = np.concatenate([r["factor"] for r in done])
@@ -336,7 +347,7 @@ def cmd(args) -> int:
     for s in it:
         lifter.restart()
         results.append(run_placement(lifter, np.random.default_rng(int(s)), methods, params, truth,
-                                     NOISES[args.noise], args.anchor_window_frames))
+                                     NOISES[args.noise], args.anchor_window_frames, not args.unlabelled))
     summary = summarise(results, methods, args)
     Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
     if args.plot:
@@ -349,6 +360,8 @@ def cmd(args) -> int:
                   f"({a['n']} frames)")
     if "calibration_pose_error" in summary:
         pe, td = summary["calibration_pose_error"], summary["true_depth"]["all"]
+        print(f"calibrations: {len(summary['per_placement']) - len(summary['calibrations_refused'])} made, "
+              f"{len(summary['calibrations_refused'])} refused, {pe['over_10_deg']} turned by more than 10 deg")
         print(f"calibration pose: rotation median {pe['rotation_deg']['median']:.2f} deg (p90 "
               f"{pe['rotation_deg']['p90']:.2f}), camera centre median {pe['camera_position_m']['median']:.3f} m; "
               f"with the true depth: ground median {td['error_ground_m']['median']:.3f} p95 "

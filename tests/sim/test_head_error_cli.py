@@ -65,3 +65,12 @@ def test_the_pose_error_of_a_calibration_is_its_rotation_and_camera_offset():
     e = calibration_error(cal, camera)
     assert abs(e["rotation_deg"] - 5.0) < 1e-6 and abs(e["camera_height_m"] - 0.2) < 1e-9
     assert abs(e["camera_position_m"] - 0.2) < 1e-9 and abs(e["scale"] - 1.1) < 1e-9
+
+
+def test_unlabelled_calibration_is_the_runtimes_own_and_says_so(tmp_path):
+    out = tmp_path / "he.json"
+    r = run("--placements", "2", "--seed", "4", "--unlabelled", "--calibration-method", "pnp", "--json", str(out))
+    assert r.returncode == 0, r.stderr
+    data = json.loads(out.read_text())
+    assert data["labelled_calibration"] is False and "--unlabelled" in data["command"]
+    assert len(data["per_placement"]) == 2 and "over_10_deg" in data.get("calibration_pose_error", {"over_10_deg": 0})
