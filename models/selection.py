@@ -79,6 +79,15 @@ LOSS_CANDIDATES = (
     {"rot_deg": 15.0},  # a looser strap: sensor tilt up to 15 degrees (8 before)
     {"label_smoothing": 0.1, "focal_gamma": 2.0},
 )
+LOSS_CANDIDATES_2 = (
+    {},  # the current recipe again (same folds, same seed: the same figures as in round 1)
+    {"time_warp": 0.2},  # drivers dwell and move at their own pace: the motion up to 1.2x faster or slower
+    {"time_warp": 0.2, "label_smoothing": 0.1},
+    {"label_smoothing": 0.1, "rot_deg": 15.0},  # round 1's two best changes together
+)
+"""Stage 3, round 2 (``--stage loss2``): after round 1 kept the current recipe, other generalisation
+aids across drivers, by the same rule against the current recipe."""
+LOSS_ROUNDS = {"loss": ("loss_stage", LOSS_CANDIDATES), "loss2": ("loss_stage_2", LOSS_CANDIDATES_2)}
 LOSS_FOLDS = 3
 LOSS_EARLY_TOLERANCE = 0.01
 LOSS_MARGIN = 0.01
@@ -250,7 +259,7 @@ def _write(out: Path, sel: dict) -> None:
     (out / "selection.md").write_text("\n".join(_markdown(sel)) + "\n")
 
 
-LOSS_KEYS = ("label_smoothing", "focal_gamma", "rot_deg")
+LOSS_KEYS = ("label_smoothing", "focal_gamma", "rot_deg", "time_warp")
 """The recipe keys stage 3 compares (absent: :func:`models.train.fit`'s defaults)."""
 
 
@@ -289,13 +298,14 @@ def choose_loss(results: list[dict]) -> tuple[int, dict, dict]:
     return 0, base_h, base_h
 
 
-def run_loss_selection(out: str | Path, *, jobs: int = 1, log=print) -> dict:
+def run_loss_selection(out: str | Path, *, jobs: int = 1, log=print, stage: str = "loss") -> dict:
     """Stage 3: on top of stages 1-2's recipe, train every ``LOSS_CANDIDATES`` change on each of the
     ``LOSS_FOLDS`` folds of the selection cohort and keep a new one only by ``LOSS_RULE``. Rewrites
     OUT/selection.json (its recipe gains the winner's keys and epochs only when a new one wins) and
     OUT/selection.md."""
     out = Path(out)
     t0 = time.time()
+    key, candidates = LOSS_ROUNDS[stage]
     sel = json.loads((out / "selection.json").read_text())
     current = {k: v for k, v in sel["recipe"].items() if k not in LOSS_KEYS}
     data = out / "data"
@@ -311,10 +321,10 @@ def run_loss_selection(out: str | Path, *, jobs: int = 1, log=print) -> dict:
     job_list = [{"recipe": {**fit_keys, **change}, "epochs": current["schedule_epochs"], "seed": seed,
                  "train": str(data / "train.npz"), "test": str(data / "test.npz"),
                  "train_subjects": [x for x in ids if x not in val], "val_subjects": val}
-                for change in LOSS_CANDIDATES for val in folds]
+                for change in candidates for val in folds]
     flat = _train_candidates(job_list, jobs)
     results = [{"change": dict(change), "folds": flat[i * len(folds):(i + 1) * len(folds)]}
-               for i, change in enumerate(LOSS_CANDIDATES)]
+               for i, change in enumerate(candidates)]
     for r in results:
         r["cv"] = cv_history(r["folds"])
     i, win_h, base_h = choose_loss(results)
@@ -322,13 +332,13 @@ def run_loss_selection(out: str | Path, *, jobs: int = 1, log=print) -> dict:
     if i:
         recipe.update(results[i]["change"], epochs=win_h["epochs"], validation_cv_macro_f1_every_capture=win_h["full"])
     sel["recipe"] = recipe
-    sel["loss_stage"] = {"command": f"python -m models select --out {out} --stage loss --jobs {jobs}",
+    sel[key] = {"command": f"python -m models select --out {out} --stage {stage} --jobs {jobs}",
                          "rule": LOSS_RULE, "folds": folds, "new_recipe_won": bool(i),
                          "candidates": [{"change": r["change"], "cv": r["cv"]} for r in results],
                          "baseline": base_h, "chosen": {"change": results[i]["change"], **win_h},
                          "wall_s": round(time.time() - t0, 1)}
     _write(out, sel)
-    log(f"stage 3: {'new' if i else 'kept'} {results[i]['change'] or 'current recipe'}, {win_h['epochs']} epochs, "
+    log(f"stage 3 ({stage}): {'new' if i else 'kept'} {results[i]['change'] or 'current recipe'}, {win_h['epochs']} epochs, "
         f"in {time.time() - t0:.0f} s")
     return sel
 
@@ -337,10 +347,11 @@ def _change_name(change: dict) -> str:
     return ", ".join(f"{k.replace('_', ' ')} {v:g}" for k, v in change.items()) or "current recipe"
 
 
-def _loss_markdown(sel: dict) -> list[str]:
-    e = sel["loss_stage"]
+def _loss_markdown(sel: dict, key: str) -> list[str]:
+    e = sel[key]
     classes = list(e["baseline"]["per_class_full"])
-    lines = ["", "## Stage 3: loss and augmentation, cross-validated on the whole selection cohort (issue 12)", "",
+    title = "Stage 3" + (", round 2" if key != "loss_stage" else "")
+    lines = ["", f"## {title}: loss and augmentation, cross-validated on the whole selection cohort (issue 12)", "",
              f"Command: `{e['command']}` ({e['wall_s']:.0f} s). Validation folds (subjects): "
              + "; ".join(", ".join(map(str, f)) for f in e["folds"]) + ".", "",
              f"**Rule** (stated before the run): {e['rule']}.", "",
@@ -376,7 +387,7 @@ def _markdown(sel: dict) -> list[str]:
     lines += ["", f"**Chosen:** captures in training {'yes' if r['captures'] else 'no'}, shift forward "
                   f"{r['shift_fwd']} frames, {r['epochs']} epochs (cosine schedule over {r['schedule_epochs']})."]
     return (lines + (_early_markdown(sel) if "early_stage" in sel else [])
-            + (_loss_markdown(sel) if "loss_stage" in sel else []))
+            + [x for key, _ in LOSS_ROUNDS.values() if key in sel for x in _loss_markdown(sel, key)])
 
 
 def _early_markdown(sel: dict) -> list[str]:
