@@ -330,7 +330,10 @@ def run_loss_selection(out: str | Path, *, jobs: int = 1, log=print, stage: str 
     i, win_h, base_h = choose_loss(results)
     recipe = dict(current)
     if i:
-        recipe.update(results[i]["change"], epochs=win_h["epochs"], validation_cv_macro_f1_every_capture=win_h["full"])
+        recipe.pop("validation_macro_f1_every_capture", None)  # stage 1's, of another recipe and epoch count
+        recipe.update(results[i]["change"], epochs=win_h["epochs"], validation_cv_macro_f1_every_capture=win_h["full"],
+                      chosen_on=f"{current['chosen_on']}; then its loss, augmentation and epochs by {LOSS_FOLDS}-fold "
+                                f"cross-validation over all {len(ids)} subjects of that cohort (--stage {stage})")
     sel["recipe"] = recipe
     sel[key] = {"command": f"python -m models select --out {out} --stage {stage} --jobs {jobs}",
                          "rule": LOSS_RULE, "folds": folds, "new_recipe_won": bool(i),
