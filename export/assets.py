@@ -341,7 +341,7 @@ def _train(train, test, recipe: dict, *, epochs: int, seed: int, work: Path, dat
     ``work``. The recipe (models.selection) says whether the detector captures join the
     ground-truth windows, how far the time shift reaches, and the schedule's length."""
     from models.selection import training_arrays
-    from models.train import fit, save_checkpoint
+    from models.train import fit, recipe_fit_kwargs, save_checkpoint
 
     subjects = np.unique(train.subject)
     X, y = training_arrays(train, test if recipe["captures"] else None, subjects)
@@ -349,8 +349,7 @@ def _train(train, test, recipe: dict, *, epochs: int, seed: int, work: Path, dat
         f"{epochs} epochs of a {recipe['schedule_epochs']}-epoch schedule, seed {seed})")
     t = time.time()
     model = fit(ARCH, X, y, len(train.classes), epochs=epochs, seed=seed, progress=progress,
-                desc=f"{ARCH} assets", shift_fwd=recipe["shift_fwd"], schedule_epochs=recipe["schedule_epochs"],
-                step_loss_weights=recipe.get("step_loss_weights"))
+                desc=f"{ARCH} assets", **recipe_fit_kwargs(recipe))
     train_s = time.time() - t
     save_checkpoint(work / ARCH, model, arch=ARCH, classes=list(train.classes), seed=seed, epochs=epochs, metrics={},
                     data=data)

@@ -12,6 +12,7 @@
   select    --out reports/wearable/selection --seed 0 [--subjects 12] [--minutes 10] [--epochs 24] [--jobs 2]
             -> the training recipe chosen on a separate simulated cohort (models/selection.py)
             [--stage early]: then the step-loss weights for early decisions, on top of stage 1's recipe
+            [--stage loss]: then label smoothing / focal term / rotation, cross-validated (stage 3)
   report    --out reports/wearable --seed 0 [--subjects 20] [--epochs N] [--archs convlstm,cnn,lstm,lda]
             [--data TRAIN.npz --test TEST.npz] [--minutes 15] [--jobs 2] [--no-within] [--reuse | --reuse-only]
 
@@ -70,9 +71,10 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--epochs", type=int, default=24, help="the longest candidate run (checkpoints every 3 epochs)")
     c.add_argument("--train-subjects", type=int, default=8, help="selection subjects that train; the rest validate")
     c.add_argument("--jobs", type=int, default=2)
-    c.add_argument("--stage", choices=("recipe", "early"), default="recipe",
+    c.add_argument("--stage", choices=("recipe", "early", "loss", "loss2"), default="recipe",
                    help="recipe: captures, time shift, epochs (stage 1); early: the step-loss weights on top of "
-                        "OUT/selection.json's stage 1 (models/selection.py, EARLY_RULE)")
+                        "OUT/selection.json's stage 1 (models/selection.py, EARLY_RULE); loss: label smoothing, focal "
+                        "term, rotation, cross-validated over the whole cohort (LOSS_RULE); loss2: its round 2 (time warp)")
 
     r = sub.add_parser("report", help="simulate the cohort, LOSO + within for every arch, tables")
     r.add_argument("--out", default="reports/wearable")
@@ -191,10 +193,13 @@ def cmd_import(a) -> int:
 
 def cmd_select(a) -> int:
     from models.dataset import DataError
-    from models.selection import run_early_selection, run_selection
+    from models.selection import run_early_selection, run_loss_selection, run_selection
 
-    if a.stage == "early":
-        run_early_selection(a.out, jobs=a.jobs)
+    if a.stage != "recipe":  # a later stage, on top of OUT/selection.json
+        if a.stage == "early":
+            run_early_selection(a.out, jobs=a.jobs)
+        else:
+            run_loss_selection(a.out, jobs=a.jobs, stage=a.stage)
         print(f"wrote {Path(a.out) / 'selection.json'}")
         return 0
     if a.subjects < 2 or not (1 <= a.train_subjects < a.subjects):

@@ -40,7 +40,15 @@ import numpy as np
 from models.calibration import expected_calibration_error, temper
 from models.dataset import DataError, WindowSet, load_npz
 from models.evaluate import compute_metrics, predict, predict_steps, save_confusion_png
-from models.train import DEFAULT_EPOCHS, LDA_FEATURES, SHIFT_FWD, fit, is_main_process, preprocess_all, save_checkpoint
+from models.train import (
+    DEFAULT_EPOCHS,
+    LDA_FEATURES,
+    fit,
+    is_main_process,
+    preprocess_all,
+    recipe_fit_kwargs,
+    save_checkpoint,
+)
 
 
 def _json(path: Path, obj) -> None:
@@ -222,8 +230,7 @@ def _fold(job: dict) -> dict:
     X, y = _training_set(job, train, key, test)
     model = fit(job["arch"], X, y, len(train.classes), epochs=job["epochs"], seed=job["seed"],
                 progress=job["progress"], threads=job["threads"], desc=job["desc"],
-                shift_fwd=job["recipe"].get("shift_fwd", SHIFT_FWD),
-                schedule_epochs=job["recipe"].get("schedule_epochs"))
+                **recipe_fit_kwargs(job["recipe"]))
     ev_inputs = _model_inputs(src, job["arch"])[job["eval_idx"]]
     probs = predict(model, ev_inputs) if len(ev) else np.zeros((0, len(train.classes)))
     res = {"name": job["name"], "y_true": ev.y, "y_pred": probs.argmax(1) if len(ev) else ev.y[:0],
@@ -379,8 +386,7 @@ def run_loso(arch: str, train: WindowSet, test: WindowSet | None, out_dir, *, ep
         job = {"arch": arch, "train_idx": np.arange(len(train)), "recipe": recipe}
         X, y = _training_set(job, train, id(train), test)
         model = fit(arch, X, y, len(train.classes), epochs=epochs, seed=seed, progress=progress,
-                    desc=f"{arch} final", shift_fwd=recipe.get("shift_fwd", SHIFT_FWD),
-                    schedule_epochs=recipe.get("schedule_epochs"))
+                    desc=f"{arch} final", **recipe_fit_kwargs(recipe))
         if is_main_process():
             save_checkpoint(out, model, arch=arch, classes=train.classes, seed=seed, epochs=epochs,
                             metrics=_summary(m) | {"per_subject_mean": m.get("per_subject_mean")},

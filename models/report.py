@@ -21,6 +21,7 @@ import numpy as np
 
 from models.dataset import build_cohort_datasets, load_npz
 from models.experiments import run_loso, run_within
+from models.selection import LOSS_KEYS
 from models.train import DEFAULT_EPOCHS
 
 SUBWINDOW_S = 33 * 7 / 200
@@ -181,12 +182,15 @@ def summary_table(loso: dict[str, dict], within: dict[str, dict]) -> list[str]:
 
 def _selection_lines(loso: dict) -> list[str]:
     recipe = next((m.get("recipe") for m in loso.values() if m.get("recipe")), None) or {}
+    extra = "".join(f"; {k.replace('_', ' ')} {recipe[k]:g}" for k in LOSS_KEYS if recipe.get(k) is not None)
+    others = [NAMES[a] for a in ("cnn", "lstm") if a in loso]
     return [f"- **Training recipe** (detector captures of the training subjects in training: "
-            f"{'yes' if recipe.get('captures') else 'no'}; time shift up to {recipe.get('shift_fwd')} frames forward; "
-            f"ConvLSTM epochs {recipe.get('epochs')} of a {recipe.get('schedule_epochs')}-epoch schedule): chosen on "
-            f"{recipe.get('chosen_on', 'nothing (defaults)')} "
-            "([selection/selection.md](selection/selection.md)). CNN and LSTM take the same recipe, with the "
-            "epochs in the table above (not selected for them); the LDAs have nothing to choose.",
+            f"{'yes' if recipe.get('captures') else 'no'}; time shift up to {recipe.get('shift_fwd')} frames forward"
+            f"{extra}; ConvLSTM epochs {recipe.get('epochs')} of a {recipe.get('schedule_epochs')}-epoch schedule): "
+            f"chosen on {recipe.get('chosen_on', 'nothing (defaults)')} "
+            "([selection/selection.md](selection/selection.md))."
+            + (f" {' and '.join(others)} take the same recipe, with the epochs in the table above (not selected "
+               "for them)." if others else "") + " The LDAs have nothing to choose.",
             "- **Temperatures per step** (ECE rows): per fold, on every capture of the selection cohort.",
             "- **Held-out subjects**: touched once, for the figures above."]
 

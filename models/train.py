@@ -7,7 +7,9 @@
   preprocessing path the product also runs (700 -> 200 frames, 6 x 33 x 3),
   once per run (or pass ``X`` already preprocessed, (N, 6, 33, 3)).
 * Loss: cross-entropy with class-balanced weights (N / (K * count)), so the
-  rare "Other" class counts as much as a distraction. The ConvLSTM is trained
+  rare "Other" class counts as much as a distraction; optionally with label
+  smoothing or a focal term (``label_smoothing``, ``focal_gamma``: recipe
+  choices compared on the selection cohort, :mod:`models.selection` stage 3). The ConvLSTM is trained
   with deep supervision over prefixes (issue 12): the same head reads the
   LSTM's state after every one of the 6 sub-windows and the loss is the
   ``STEP_LOSS_WEIGHTS``-weighted mean of the six cross-entropies, so one model
@@ -30,7 +32,11 @@
       an earlier version chose the shift on held-out subjects' figures);
     - gain x U(1 - GAIN, 1 + GAIN) (sensor scale error);
     - rotation by up to ``ROT_DEG`` degrees about a random axis (strap fit);
-    - Gaussian noise ``NOISE_MPS2``.
+    - Gaussian noise ``NOISE_MPS2``;
+    - optionally (``time_warp``) the motion played faster or slower by a factor
+      up to 1 + time_warp either way, about the trigger (people differ in how
+      long they dwell and move: the simulator draws per-subject dwell factors
+      with a log-normal sd of 0.25 and movement-time factors with sd 0.12).
   Rotation and gain commute with the (linear, per-axis) resampler, so they
   are exactly what the same change of the raw stream would give.
 * Determinism: for a given seed and thread count, two runs give identical
@@ -118,7 +124,55 @@ def class_weights(y: np.ndarray, n_classes: int) -> torch.Tensor:
     return torch.tensor(w, dtype=torch.float32)
 
 
-def augment(x: torch.Tensor, rng: np.random.Generator, shift_fwd: int = SHIFT_FWD) -> torch.Tensor:
+RECIPE_FIT_KEYS = ("shift_fwd", "schedule_epochs", "step_loss_weights", "label_smoothing", "focal_gamma", "rot_deg",
+                   "time_warp")
+TRIGGER_FRAME = 100 * 200 / 700
+"""The trigger's place in the 198 resampled frames (a capture starts 1 s = 100 raw frames before it)."""
+"""The keys of a selection recipe (models.selection) that are arguments of :func:`fit`."""
+
+
+def recipe_fit_kwargs(recipe: dict) -> dict:
+    """The :func:`fit` keyword arguments a recipe sets (absent keys keep fit's defaults), so that the
+    selection, the LOSO folds and the shipped assets train one recipe the same way."""
+    return {k: recipe[k] for k in RECIPE_FIT_KEYS if recipe.get(k) is not None}
+
+
+class WeightedLoss(nn.Module):
+    """Class-weighted cross-entropy, with optional label smoothing and focal term (Lin et al. 2017:
+    the loss of an example is scaled by (1 - p_true)^gamma, so that the hard, confusable captures
+    weigh more than the many easy ones). gamma = 0 is torch's weighted cross-entropy (with its label
+    smoothing); with gamma > 0 the smoothed target of an example is weighted by its own class's weight."""
+
+    def __init__(self, weight: torch.Tensor, label_smoothing: float = 0.0, focal_gamma: float = 0.0):
+        super().__init__()
+        self.register_buffer("weight", weight)
+        self.smoothing, self.gamma = float(label_smoothing), float(focal_gamma)
+
+    def forward(self, logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        if self.gamma == 0.0:
+            return nn.functional.cross_entropy(logits, target, weight=self.weight, label_smoothing=self.smoothing)
+        logp = torch.log_softmax(logits, dim=1)
+        k = logits.shape[1]
+        soft = torch.full_like(logp, self.smoothing / k).scatter_(1, target[:, None], 1 - self.smoothing + self.smoothing / k)
+        focal = (1 - logp.gather(1, target[:, None]).exp()).pow(self.gamma)
+        w = self.weight[target]
+        return (w * focal[:, 0] * -(soft * logp).sum(1)).sum() / w.sum()
+
+
+def time_warped(seq: torch.Tensor, factor: np.ndarray) -> torch.Tensor:
+    """(B, n, 3) frames played ``factor`` (B,) times as fast about ``TRIGGER_FRAME`` (linear
+    interpolation; frames past either end repeat the edge frame, as the time shift's do)."""
+    n = seq.shape[1]
+    pos = np.clip(TRIGGER_FRAME + (np.arange(n)[None, :] - TRIGGER_FRAME) * factor[:, None], 0, n - 1)
+    lo = np.floor(pos).astype(np.int64)
+    hi = np.minimum(lo + 1, n - 1)
+    w = torch.from_numpy((pos - lo).astype(np.float32))[:, :, None]
+    take = lambda i: torch.gather(seq, 1, torch.from_numpy(i)[:, :, None].expand(-1, -1, 3))  # noqa: E731
+    return take(lo) * (1 - w) + take(hi) * w
+
+
+def augment(x: torch.Tensor, rng: np.random.Generator, shift_fwd: int = SHIFT_FWD,
+            rot_deg: float = ROT_DEG, time_warp: float = 0.0) -> torch.Tensor:
     """Random shift / gain / rotation / noise of model inputs (B, 6, 33, 3) (see the module docstring)."""
     b = x.shape[0]
     seq = x.reshape(b, -1, 3)  # (B, 198, 3): the resampled frames in time order
@@ -126,9 +180,11 @@ def augment(x: torch.Tensor, rng: np.random.Generator, shift_fwd: int = SHIFT_FW
     shift = rng.integers(-SHIFT_BACK, shift_fwd + 1, size=b)
     idx = torch.from_numpy(np.clip(np.arange(n)[None, :] + shift[:, None], 0, n - 1))
     seq = torch.gather(seq, 1, idx[:, :, None].expand(b, n, 3))
+    if time_warp > 0:  # drawn only when asked, so that the other draws stay those of earlier recipes
+        seq = time_warped(seq, np.exp(rng.uniform(-np.log1p(time_warp), np.log1p(time_warp), size=b)))
     axis = rng.normal(size=(b, 3))
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    angle = np.deg2rad(rng.uniform(-ROT_DEG, ROT_DEG, size=(b, 1)))
+    angle = np.deg2rad(rng.uniform(-rot_deg, rot_deg, size=(b, 1)))
     rot = Rotation.from_rotvec(axis * angle).as_matrix() * rng.uniform(1 - GAIN, 1 + GAIN, size=(b, 1, 1))
     seq = seq @ torch.from_numpy(rot.transpose(0, 2, 1).astype(np.float32))
     seq = seq + torch.from_numpy(rng.normal(scale=NOISE_MPS2, size=seq.shape).astype(np.float32))
@@ -148,13 +204,15 @@ def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int,
         batch_size: int = 64, lr: float | None = None, val: tuple[np.ndarray, np.ndarray] | None = None,
         progress: bool = True, augmentation: bool = True, threads: int | None = 1, desc: str = "",
         shift_fwd: int = SHIFT_FWD, schedule_epochs: int | None = None, on_epoch=None,
-        step_loss_weights=None):
+        step_loss_weights=None, label_smoothing: float = 0.0, focal_gamma: float = 0.0,
+        rot_deg: float = ROT_DEG, time_warp: float = 0.0):
     """Train ``arch`` on windows X (N, 700, 3) m/s^2 (or already preprocessed, (N, 6, 33, 3)) with labels
     y; returns the model in eval mode. ``lr`` defaults to ``DEFAULT_LR[arch]``. The cosine decay
     spans ``schedule_epochs`` (default ``epochs``): stopping at an epoch the validation chose keeps
     the schedule it was chosen under. ``on_epoch(epoch, model)`` is called after every epoch.
     ``step_loss_weights``: the ConvLSTM's weight of the decision after 1..6 sub-windows (default
-    ``STEP_LOSS_WEIGHTS``; the selection compares others)."""
+    ``STEP_LOSS_WEIGHTS``; the selection compares others). ``label_smoothing``, ``focal_gamma``: see
+    :class:`WeightedLoss`; ``rot_deg``: the rotation augmentation's reach; ``time_warp``: see :func:`augment`."""
     y = np.asarray(y, dtype=np.int64)
     if arch in LDA_FEATURES:
         return LDAClassifier(n_classes, LDA_FEATURES[arch]).fit(X, y)
@@ -168,7 +226,7 @@ def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int,
     model = build(arch, n_classes)  # same init on every rank (same seed); DDP also broadcasts it
     net = DDP(model) if distributed else model
     opt = torch.optim.Adam(model.parameters(), lr=DEFAULT_LR[arch] if lr is None else lr)
-    loss_fn = nn.CrossEntropyLoss(weight=class_weights(y, n_classes))
+    loss_fn = WeightedLoss(class_weights(y, n_classes), label_smoothing, focal_gamma)
     sw = STEP_LOSS_WEIGHTS if step_loss_weights is None else tuple(float(w) for w in step_loss_weights)
     step_w = torch.tensor(sw) / sum(sw) if arch == "convlstm" else None
     sampler = DistributedSampler(range(len(y)), num_replicas=world, rank=rank, shuffle=True, seed=seed)
@@ -189,7 +247,7 @@ def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int,
             ti = torch.from_numpy(idx)
             xb, yb = inputs[ti], labels[ti]
             if augmentation:
-                xb = augment(xb, rng, shift_fwd)
+                xb = augment(xb, rng, shift_fwd, rot_deg, time_warp)
             if step_w is None:
                 loss = loss_fn(net(xb), yb)
             else:  # deep supervision: the decision after every sub-window

@@ -347,3 +347,25 @@ def test_report_compares_partial_runs_on_their_common_subjects(tmp_path):
     two, one = md.split("On the same held-out subjects (1):")
     assert "(1, 2):" in two and "| LSTM |" not in two and "| ConvLSTM | 1.000 |" in two and "| CNN |" in two
     assert "| LSTM | 0.500 |" in one and "| ConvLSTM | 1.000 |" in one  # 2 of 4 wrong: F1 0.5 for both classes
+
+
+def test_time_warp_keeps_the_trigger_and_changes_the_pace():
+    from models.train import TRIGGER_FRAME, time_warped
+
+    n = 198
+    seq = torch.arange(n, dtype=torch.float32)[None, :, None].expand(2, n, 3).contiguous()
+    out = time_warped(seq, np.array([1.0, 1.2]))
+    assert torch.allclose(out[0], seq[0])  # factor 1: unchanged
+    t = int(TRIGGER_FRAME)
+    assert abs(float(out[1, t + 10, 0]) - (TRIGGER_FRAME + (t + 10 - TRIGGER_FRAME) * 1.2)) < 1e-4  # 1.2x as fast
+    assert float(out[1, -1, 0]) == n - 1  # past the end: the edge frame
+
+
+def test_weighted_loss_is_cross_entropy_unless_asked():
+    from models.train import WeightedLoss
+
+    logits, y, w = torch.randn(8, 6), torch.randint(0, 6, (8,)), torch.rand(6) + 0.5
+    ce = torch.nn.CrossEntropyLoss(weight=w)(logits, y)
+    assert torch.allclose(WeightedLoss(w)(logits, y), ce)
+    assert torch.allclose(WeightedLoss(w, 0.0, 1e-9)(logits, y), ce, atol=1e-5)  # the focal path at gamma -> 0
+    assert WeightedLoss(w, 0.0, 2.0)(logits, y) < ce  # the focal term only lowers each example's loss

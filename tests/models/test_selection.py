@@ -11,13 +11,18 @@ from models.selection import (
     CANDIDATES,
     DEFAULT_RECIPE,
     EARLY_CANDIDATES,
+    LOSS_CANDIDATES,
+    LOSS_FOLDS,
     choose_early,
+    choose_loss,
     load_recipe,
     run_early_selection,
+    run_loss_selection,
     run_selection,
     training_arrays,
 )
 from models.toy import toy_windows
+from models.train import recipe_fit_kwargs
 
 
 def test_training_arrays_add_the_subjects_captures_only():
@@ -71,11 +76,16 @@ def test_the_early_rule_keeps_the_current_recipe_unless_a_new_one_clearly_wins()
     assert win is base and h["epochs"] == 12
 
 
-def test_the_early_stage_writes_the_step_weights_only_when_they_win(tmp_path):
+def _toy_stage1(tmp_path) -> None:
+    """Stage 1 on a toy cohort of 3 subjects (2 train, 1 validates), for the later stages to build on."""
     d = tmp_path / "data"
     save_npz(d / "train.npz", toy_windows(n_per_class=6, n_classes=3, n_subjects=3, seed=0))
     save_npz(d / "test.npz", toy_windows(n_per_class=4, n_classes=3, n_subjects=3, seed=1))
     run_selection(tmp_path, subjects=3, epochs=3, n_train=2, jobs=1, log=lambda s: None)
+
+
+def test_the_early_stage_writes_the_step_weights_only_when_they_win(tmp_path):
+    _toy_stage1(tmp_path)
     stage1 = load_recipe(tmp_path / "selection.json")
     sel = run_early_selection(tmp_path, jobs=1, log=lambda s: None)
     e = sel["early_stage"]
@@ -86,3 +96,38 @@ def test_the_early_stage_writes_the_step_weights_only_when_they_win(tmp_path):
     else:
         assert r == stage1
     assert "Stage 2" in (tmp_path / "selection.md").read_text()
+
+
+def _cv(epochs_full_early: list[tuple[int, float, float]]) -> list[dict]:
+    return [{"epochs": e, "full": f, "early": early} for e, f, early in epochs_full_early]
+
+
+def test_the_loss_rule_needs_a_clear_full_window_gain_without_losing_the_early_steps():
+    base = {"cv": _cv([(12, 0.80, 0.70), (15, 0.805, 0.70)])}  # the current recipe at its best: 15 epochs
+    early_worse = {"cv": _cv([(12, 0.85, 0.68)])}                  # +0.045 full, early -0.02: not eligible
+    small = {"cv": _cv([(12, 0.812, 0.71)])}                       # +0.007: below the margin
+    clear = {"cv": _cv([(9, 0.80, 0.72), (12, 0.82, 0.695)])}     # +0.015 at 12 epochs, early -0.005: wins
+    i, h, b = choose_loss([base, early_worse, small, clear])
+    assert (i, h["epochs"], b["epochs"]) == (3, 12, 15)
+    i, h, _ = choose_loss([base, early_worse, small])
+    assert i == 0 and h["epochs"] == 15
+
+
+def test_the_loss_stage_validates_every_subject_once_and_records_the_folds(tmp_path):
+    _toy_stage1(tmp_path)
+    before = load_recipe(tmp_path / "selection.json")
+    sel = run_loss_selection(tmp_path, jobs=1, log=lambda s: None)
+    e = sel["loss_stage"]
+    assert sorted(x for f in e["folds"] for x in f) == [0, 1, 2] and len(e["folds"]) == LOSS_FOLDS
+    assert [c["change"] for c in e["candidates"]] == [dict(c) for c in LOSS_CANDIDATES]
+    r = load_recipe(tmp_path / "selection.json")
+    if e["new_recipe_won"]:
+        assert all(r[k] == v for k, v in e["chosen"]["change"].items())
+    else:
+        assert r == before
+    assert "Stage 3" in (tmp_path / "selection.md").read_text()
+
+
+def test_a_recipe_sets_only_fit_arguments_it_names():
+    assert recipe_fit_kwargs({"captures": True, "shift_fwd": 10, "label_smoothing": 0.1, "epochs": 12}) == {
+        "shift_fwd": 10, "label_smoothing": 0.1}

@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from support.early_model import NEUTRAL_WEIGHTS, Scripted, step_signal, write_assets
+from support.early_model import NEUTRAL_WEIGHTS, SCRIPTED_EARLY_THRESHOLDS, Scripted, step_signal, write_assets
 
 from edge_runtime import config
 from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
@@ -22,7 +22,8 @@ def _drive():
 
 
 def test_each_mode_is_scored_from_its_first_alerts():
-    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS)
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS,
+                          min_confidence_by_steps=SCRIPTED_EARLY_THRESHOLDS)
     res = evaluate([_drive()], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), cfg, progress=lambda _: None)
     early, full = res["scores"]["early"], res["scores"]["full_window"]
     for s in (early, full):
@@ -38,7 +39,8 @@ def test_each_mode_is_scored_from_its_first_alerts():
 
 
 def test_a_withdrawn_false_alert_and_a_repeat_alert_are_counted(tmp_path):
-    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS)
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS,
+                          min_confidence_by_steps=SCRIPTED_EARLY_THRESHOLDS)
     acc = step_signal(9000, [1000, 1700, 4000])  # 17 s: the hand returns during the Phone event (9.5..20 s)
     drive = Drive("steps", acc, [{"start_s": 9.5, "end_s": 20.0, "label": "Phone"}], "distraction")
     res = evaluate([drive], Scripted({2: ("Phone", 0.95), 6: ("Other", 0.9)}), cfg, modes=("early",),
@@ -48,7 +50,8 @@ def test_a_withdrawn_false_alert_and_a_repeat_alert_are_counted(tmp_path):
     plot_example(res["example"], tmp_path / "trace.png")
     assert (tmp_path / "trace.png").stat().st_size > 10_000
     # with the event tracker, the hand returning continues the event: no repeat alert
-    held = config.override(config.load(None), "alerts", event_hold_s=10.0, class_weights=NEUTRAL_WEIGHTS)
+    held = config.override(config.load(None), "alerts", event_hold_s=10.0, class_weights=NEUTRAL_WEIGHTS,
+                          min_confidence_by_steps=SCRIPTED_EARLY_THRESHOLDS)
     res = evaluate([drive], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), held, modes=("early",),
                    progress=lambda _: None)
     assert res["scores"]["early"]["repeat_alerts"] == 0 and res["scores"]["early"]["statuses"]["continued"] == 1

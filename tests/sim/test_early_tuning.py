@@ -2,7 +2,7 @@
 model outputs, the sweep and the rule that picks the operating point (a scripted classifier on step
 signals: known answers)."""
 import pytest
-from support.early_model import NEUTRAL_WEIGHTS, Scripted, step_signal
+from support.early_model import NEUTRAL_WEIGHTS, SCRIPTED_EARLY_THRESHOLDS, Scripted, step_signal
 
 from edge_runtime import config
 from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
@@ -64,7 +64,8 @@ def test_decide_is_the_runtime_replay_and_the_cache_asks_the_model_once():
 
 def test_breakdown_says_when_the_trigger_came_which_step_alerted_and_what_set_off_false_alerts():
     drive = _drive()
-    ds = decide([drive], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), _cfg())
+    ds = decide([drive], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}),
+                _cfg(min_confidence_by_steps=SCRIPTED_EARLY_THRESHOLDS))
     b = breakdown([drive], ds, pre_frames=100, rate_hz=100)
     phone, drink = b["events"]
     assert (phone["trigger_delay_s"], phone["first_steps"], phone["first_correct"]) == (0.5, 2, True)

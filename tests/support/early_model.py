@@ -99,3 +99,6 @@ def step_signal(n: int, at, rest_mps2: float = 9.81) -> np.ndarray:
 NEUTRAL_WEIGHTS = (1.0,) * len(CLASSES)
 """[alerts] class_weights that leave a stand-in model's probabilities as scripted: the loop's mechanics,
 not the shipped operating point (whose weights would reshuffle a stand-in's evenly spread remainder)."""
+SCRIPTED_EARLY_THRESHOLDS = (0.9,) * 5 + (-1.0,)
+"""[alerts] min_confidence_by_steps that a scripted early step at 0.95 clears (the manifest's for S = 6):
+the loop's mechanics, not the shipped operating point (whose early thresholds are refitted per model)."""
