@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import itertools
 import json
-from collections import deque
+from collections import Counter, deque
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -610,16 +610,20 @@ STAND_GAP_S = 1.0
 a glitch of a quarter second leaves a hole about this long in the half-second medians. The walk between
 two markers 1 m apart moves the rays far more, so different markers are never joined."""
 MAX_UNLABELLED_RESIDUAL_M = {"pnp": 0.12, "rigid": 0.6}
-"""An unlabelled calibration (:func:`from_recording` without ``marker``) is refused when its largest residual
+"""A fit of three stands found without labels (:func:`_fit_stands`) passes only when its largest residual
 at the markers (:meth:`Calibration.residuals_m`: pnp the target's distance from its ray, rigid the 3-D
-distance) exceeds this, per method: the stands found are then not the markers. Development seed 4 of
-``firmware_sim head-error``'s calibration walks at a real detector's noise: right fits 0.016-0.066 m (pnp,
-labelled, 10 placements), 0.10-0.37 m (rigid); fits to the wrong stands 0.13-0.197 m (pnp; a 0.15 m limit let
-one through, turned by 130 degrees), 0.88-1.04 m (rigid). eq2 is exact
-at the markers (no residual to judge by). A module constant, not a [calibration] key, like the
-anchoring's: [calibration] is in the validated safety hash, and the labelled path the hrc suites
-calibrate by does not use it.
-"""
+distance) is at most this, per method. Development seed 4 of ``firmware_sim head-error``'s calibration
+walks at a real detector's noise: right fits 0.016-0.066 m (pnp, labelled, 10 placements), 0.10-0.37 m
+(rigid); fits to the wrong stands 0.13-0.197 m (pnp; a 0.15 m limit let one through, turned by 130
+degrees), 0.88-1.04 m (rigid). It catches those; it does not catch every wrong layout (:func:`_fit_stands`).
+A module constant, not a [calibration] key, like the anchoring's: [calibration] is in the validated safety
+hash, and the labelled path the hrc suites calibrate by does not use it."""
+MAX_UNLABELLED_DISAGREEMENT_DEG = 10.0
+"""Two trios of stands that both pass but put the camera more than this far apart (degrees) make the
+recording ambiguous: refused. Right fits differ from the true pose by 2-4 degrees (pnp), 5-10 (rigid)."""
+MAX_UNLABELLED_STANDS = 8
+"""More standing periods than this are refused rather than searched (every three of them are fitted: 56
+trios at 8, a few seconds with pnp; a long recording with many pauses would take hours)."""
 
 
 def segment_stands(t_s, ankle_cam_m, params: CalibrationParams = CalibrationParams()) -> list[np.ndarray]:
@@ -681,61 +685,78 @@ def from_recording(t_s, joints_cam_m, params: CalibrationParams = CalibrationPar
 
     ``joints_cam_m`` is (N, 17, 3). ``marker`` (N,) may label each frame 1, 2, 3 (0 or
     negative: walking); without it the standing periods are found (:func:`segment_stands`) and
-    the three in time order that fit the marker layout best are taken as markers 1, 2 and 3, or
-    the recording is refused when none fit (:func:`_fit_stands`).
+    chosen as :func:`_fit_stands` says.
     """
     heads, ankles = head_and_ankles(joints_cam_m)
     if marker is not None:
         marker = np.asarray(marker)
-        groups = [np.flatnonzero(marker == k) for k in (1, 2, 3)]
-    else:
-        stands = segment_stands(t_s, ankles, params)
-        if len(stands) < 3:
-            raise CalibrationError(f"found {len(stands)} standing period(s) of at least {params.still_min_s} s; "
-                                   "need 3 (markers 1, 2, 3) -- did the worker move between markers?")
-        return _fit_stands(heads, ankles, stands, params)
-    _check_frames(heads, groups, params)
-    h = np.stack([robust_mean(heads[g]) for g in groups])
-    a = np.stack([robust_mean(ankles[g]) for g in groups])
-    return fit(h, a, params, frames=tuple(len(g) for g in groups))
+        return _fit_groups(heads, ankles, [np.flatnonzero(marker == k) for k in (1, 2, 3)], params)
+    stands = segment_stands(t_s, ankles, params)
+    if len(stands) < 3:
+        raise CalibrationError(f"found {len(stands)} standing period(s) of at least {params.still_min_s} s; "
+                               "need 3 (markers 1, 2, 3) -- did the worker move between markers?")
+    if len(stands) > MAX_UNLABELLED_STANDS:
+        raise CalibrationError(f"found {len(stands)} standing periods, at most {MAX_UNLABELLED_STANDS} can be told "
+                               "apart: record the marker walk alone, or label the frames by marker")
+    return _fit_stands(heads, ankles, stands, params)
 
 
-def _check_frames(heads, groups, params: CalibrationParams) -> None:
+def _fit_groups(heads, ankles, groups, params: CalibrationParams) -> Calibration:
+    """The fit of the frames ``groups`` (index arrays of markers 1, 2, 3): each marker's robust
+    head and ankle positions."""
     for k, g in enumerate(groups, 1):
         n_ok = int(np.isfinite(heads[g]).all(axis=1).sum()) if len(g) else 0
         if n_ok < params.min_frames:
             raise CalibrationError(f"marker {k}: {n_ok} usable frames, need {params.min_frames}")
+    return fit(np.stack([robust_mean(heads[g]) for g in groups]), np.stack([robust_mean(ankles[g]) for g in groups]),
+               params, frames=tuple(len(g) for g in groups))
 
 
 def _fit_stands(heads, ankles, stands: list[np.ndarray], params: CalibrationParams) -> Calibration:
-    """The calibration from standing periods found without labels: of every three of them in time
-    order (markers 1, 2, 3), the one whose fit leaves the smallest residual at the markers; refused
-    when even that one does not fit the marker layout (:data:`MAX_UNLABELLED_RESIDUAL_M`).
+    """The calibration from standing periods found without labels.
 
     Without labels nothing says which stands are the markers: a stand the detector's noise broke in
     two, or a pause on the way, makes a fourth one, and taking the first three then fits a layout the
-    worker never walked (on development seed 4 of ``firmware_sim head-error``, 2 of 10 such fits were
-    turned by 22 and 88 degrees with nothing to show it). The marker layout is the check: three
-    stands that are not the markers cannot put a worker on all three."""
-    best, why = None, "no three standing periods in time order fit"
+    worker never walked (development seed 4 of ``firmware_sim head-error``: fits turned by 22 and 88
+    degrees with nothing to show it). So every three stands in time order are fitted, each fit's
+    largest residual at the markers is judged against its method's limit
+    (:data:`MAX_UNLABELLED_RESIDUAL_M`; a rigid trio can fall back to pnp, whose residuals are
+    distances from rays, not 3-D), and the calibration is refused when no trio passes, or when two
+    that pass put the camera more than :data:`MAX_UNLABELLED_DISAGREEMENT_DEG` apart (the stands do
+    not say which are the markers). What this cannot see: with exactly three stands of which one is not
+    a marker, a fit with a free scale (rigid) or height (pnp) can still pass (tests/robot/
+    test_calibration.py); labelled frames are the safe way. eq2 leaves no residual at the markers to
+    judge by, so without labels it takes the first three stands, as before.
+    """
+    if params.method == "eq2":
+        return _fit_groups(heads, ankles, stands[:3], params)
+    passed, errors = [], Counter()
     for trio in itertools.combinations(range(len(stands)), 3):
-        groups = [stands[i] for i in trio]
         try:
-            _check_frames(heads, groups, params)
-            cal = fit(np.stack([robust_mean(heads[g]) for g in groups]),
-                      np.stack([robust_mean(ankles[g]) for g in groups]), params,
-                      frames=tuple(len(g) for g in groups))
+            cal = _fit_groups(heads, ankles, [stands[i] for i in trio], params)
         except CalibrationError as e:
-            why = str(e)
+            errors[str(e).split(" (")[0]] += 1
             continue
         residual_m = max(max(v) for v in cal.residuals_m().values())
-        if best is None or residual_m < best[0]:
-            best = (residual_m, cal)
-    if best is None:
-        raise CalibrationError(f"{len(stands)} standing periods, none three of them calibrate: {why}")
-    limit_m = MAX_UNLABELLED_RESIDUAL_M.get(best[1].method)
-    if limit_m is not None and best[0] > limit_m:
-        raise CalibrationError(f"the standing periods found do not fit the marker layout (residual {best[0]:.2f} m, "
-                               f"at most {limit_m} m for {best[1].method}): record the walk again, standing still "
-                               "on each marker, or label the frames by marker")
-    return best[1]
+        limit_m = MAX_UNLABELLED_RESIDUAL_M[cal.method]
+        if not residual_m <= limit_m:  # NaN fails too
+            errors[f"{cal.method} residual above {limit_m} m"] += 1
+            continue
+        passed.append((residual_m / limit_m, cal))
+    if not passed:
+        why = "; ".join(f"{n} x {e}" for e, n in errors.most_common(3))
+        raise CalibrationError(f"no three of the {len(stands)} standing periods fit the marker layout ({why}): record "
+                               "the walk again, standing still on each marker, or label the frames by marker")
+    best = min(passed, key=lambda x: x[0])[1]
+    for _, other in passed:
+        if _rotation_deg(other.A, best.A) > MAX_UNLABELLED_DISAGREEMENT_DEG:
+            raise CalibrationError(f"the {len(stands)} standing periods fit the marker layout in more than one way "
+                                   f"(camera poses {_rotation_deg(other.A, best.A):.0f} degrees apart): label the "
+                                   "frames by marker, or record the marker walk alone")
+    return best
+
+
+def _rotation_deg(A1, A2) -> float:
+    """Angle (degrees) between the rotations of two camera -> robot maps (their scales removed)."""
+    R1, R2 = (np.asarray(A, float) / np.cbrt(abs(np.linalg.det(A))) for A in (A1, A2))
+    return float(np.degrees(np.arccos(np.clip((np.trace(R1.T @ R2) - 1.0) / 2.0, -1.0, 1.0))))
