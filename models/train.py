@@ -126,9 +126,9 @@ def class_weights(y: np.ndarray, n_classes: int) -> torch.Tensor:
 
 RECIPE_FIT_KEYS = ("shift_fwd", "schedule_epochs", "step_loss_weights", "label_smoothing", "focal_gamma", "rot_deg",
                    "time_warp")
+"""The keys of a selection recipe (models.selection) that are arguments of :func:`fit`."""
 TRIGGER_FRAME = 100 * 200 / 700
 """The trigger's place in the 198 resampled frames (a capture starts 1 s = 100 raw frames before it)."""
-"""The keys of a selection recipe (models.selection) that are arguments of :func:`fit`."""
 
 
 def recipe_fit_kwargs(recipe: dict) -> dict:

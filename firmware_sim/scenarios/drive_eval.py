@@ -353,7 +353,9 @@ def to_markdown(report: dict) -> str:
 
     held_out = report.get("seed", HELD_OUT_SEED) == HELD_OUT_SEED
     lines = [f"# Held-out simulated driving: {report['hours']:g} h" if held_out else
-             f"# Development drives (seed {report['seed']}, not the held-out seed {HELD_OUT_SEED}): "
+             # which other seeds are development and which were run once as fresh held-out ones is the
+             # reports' record (reports/drive_eval/development.md), not the tool's to say
+             f"# Simulated driving, seed {report['seed']} (not the documented held-out seed {HELD_OUT_SEED}): "
              f"{report['hours']:g} h", "",
              f"`{report['command']}`", "",
              f"Model {report['model']}; " + "; ".join(f"{m}: {d}" for m, d in report["decision_modes"].items()), "",
