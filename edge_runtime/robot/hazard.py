@@ -39,7 +39,8 @@ Two ways to protect people (``[zones] separation``):
   (walking in, half out of the picture, partly hidden) are bounded by their keypoints' rays
   (``ray_bound``, :func:`ray_separation_m`): with the calibrated camera, a seen ankle's ray meets
   the floor within a range of distance (or the head's ray crosses the heights of a standing
-  person's head), and every joint he shows lies on its own ray near that range. That region
+  person's head; with none of those, any joint he shows is between the floor and a raised wrist's
+  height), and every joint he shows lies on its own ray near that range. That region
   stops the arm (``person_unlifted``) once it comes within the protective distance; when his
   rays stop bounding him, his last bound shrinks as a lost person's reachable set does. One
   whose rays never bounded him stops the arm (FAULT, ``person_unseen``) as long as he is in
@@ -208,11 +209,16 @@ class ZoneParams:
     way in the first second, at up to 0.6 m/s; a slower walker lets the arm work longer."""
     stop_time_scales: bool = False
     """whole_body: T_s in S_p shrinks with the arm's speed (``iso_stop_time_s`` from full speed,
-    proportionally less from a slower one: a constant deceleration), so the arm may work slowly
-    closer in (S_p 0.71 m at 10 % speed, 1.31 m at full speed, against 1.13-1.31 m with the
-    full-speed T_s throughout). Off: with it (and ``reach_retract_m``) the arm worked 1.29-1.36x
-    as long as stop-only on the development seed, but two workers in hard:200 seed 1 reached a
-    slow arm (hard_038 0.088 m, hard_084 0.084 m; 0.287 / 0.123 m without it)."""
+    proportionally less from a slower one: a constant deceleration, T_s(v_r) = 0.3 s x v_r / 0.6 m/s and
+    S_s = v_r T_s / 2), so the arm may work slowly closer in (S_p 0.71 m at 10 % speed, 1.31 m at full
+    speed, against 1.13-1.31 m with the full-speed T_s throughout). As a model of the arm it is
+    conservative: the simulated Sawyer (full joint speed in 0.25 s, its speed override scaling every
+    joint's limit) stops doing the cell's task from 0.6 m/s in 0.13 s with no point of it travelling more
+    than 0.041 m, from 0.06 m/s in 0.013 s (tests/sim/test_sawyer.py checks it at 10-100 % speed). Off:
+    with it the arm worked 1.24x as long as stop-only in hard:200 seed 1 (session 9; 1.29-1.36x on
+    hard:60 seed 5 in session 7), but a worker walking up to the tool reached the arm in hard:200 seed 3
+    (hard_075, 0.045 m; 0.621 m without it), as two did in seed 1 in session 7 (hard_038 0.088 m,
+    hard_084 0.084 m): the arm working on closer in leaves it elsewhere when a retraction starts."""
     reach_retract_m: float = config.setting(0.85, config.NON_NEGATIVE)
     """whole_body: anyone whose separation is below this (m) makes the arm retract (Eq. 6), coming
     or not: he can reach it faster than the camera and the lifter see an arm move (ISO 13855's
@@ -276,6 +282,13 @@ class ZoneParams:
         (1.2, 2.05), ("[low, high] heights (m) with 0 < low < high", lambda v: len(v) == 2 and 0 < v[0] < v[1]))
     """whole_body ray bound: the head joint's (the crown's) height above the floor (m): people 1.45-2.0
     m tall, bending toward the work down to 1.2 m."""
+    ray_joint_heights_m: tuple[float, float] = config.setting(
+        (0.0, 2.6), ("[low, high] heights (m) with 0 <= low < high", lambda v: len(v) == 2 and 0 <= v[0] < v[1]))
+    """whole_body ray bound, for a person who shows no ankle, hip, pelvis or head (a wrist, a knee or a
+    shoulder at the picture's edge or past an occluder): any joint's height above the floor (m), from the
+    floor to a 2.0 m person's wrist raised over his head; every other joint of him is within its bones
+    (``JOINT_REACH_M``) of it. Looser than the anchors above, but it bounds someone far out where he
+    stopped the arm (``person_unseen``) before."""
     ray_body_extent_m: float = config.setting(1.3, config.POSITIVE)
     """whole_body ray bound: how far (ground distance, m) any joint of a person may be from his foot on
     the ground (or, bounded by the head, from his head): a pelvis over the feet and an arm reaching
@@ -1000,13 +1013,16 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
       seen), of his hips and of his head: so each joint he shows is on its own ray within the
       ranges above widened by that (where they all overlap), and every joint (shown or not)
       stands over the floor within that of each such anchor's floor points;
+    * showing no ankle, hip, pelvis or head, each joint he shows is on its ray between the floor and
+      ``ray_joint_heights_m`` (a raised wrist), and every joint of him within its bones of it;
     * two joints he shows are no further apart than the bones between them (``JOINT_REACH_M``):
       the points of each joint's ray segment that no point of a related one's is that close to
       are dropped (:func:`_consistent`), and a joint he does not show is within its bones of one
       he does.
 
     The bound is the smallest of these regions' clearance from the capsules, less each joint's
-    body radius (``BODY_RADII_M``; limb midpoints too)."""
+    body radius (``BODY_RADII_M``; limb midpoints too). Where he stands is None without an ankle, hip,
+    pelvis or head anchor: a ray's whole way to the floor says too little to retract away from."""
     u, o = rays.directions, np.asarray(rays.origin_m, float)
     seen = np.isfinite(u).all(axis=1)
     g = np.hypot(u[:, 0], u[:, 2])
@@ -1026,6 +1042,14 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
             ranges.update(got)
             regions.append((min(r[0] for r in got.values()) - extent, max(r[1] for r in got.values()) + extent,
                             list(got), extent))
+    placed = bool(regions)  # where he stands is known well enough to retract away from it
+    if not regions:  # no anchor: each seen joint is between the floor and a raised wrist, the rest within its bones
+        for j in np.flatnonzero(seen):
+            r = ray_ground_range_m(o, u[j], zones.ray_joint_heights_m, rays.floor_y_m)
+            if r is not None:
+                ranges[j] = r
+                regions.append((r[0] - JOINT_REACH_M[j].max(), r[1] + JOINT_REACH_M[j].max(), [j],
+                                float(JOINT_REACH_M[j].max())))
     if not regions:  # nothing crosses the floor or its band of heights
         return None
     near, far = max(r[0] for r in regions), min(r[1] for r in regions)  # each region holds all of him
@@ -1046,7 +1070,7 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     # where he stands, for the retraction's direction: the middle of his anchors' segments (the point of his
     # segments nearest the arm may lie beyond it, the far end of a ray that passes the arm)
     anchored = np.isin(joints, list(ranges))
-    stands = (o + 0.5 * (lo + hi)[anchored, None] * u[joints[anchored]]).mean(axis=0)
+    stands = (o + 0.5 * (lo + hi)[anchored, None] * u[joints[anchored]]).mean(axis=0) if placed else None
     # every joint stands over the floor within an anchor group's extent of where it stands (the arm seen from above)
     flat = np.array([1.0, 0.0, 1.0])
     a, b, r = capsules

@@ -10,6 +10,7 @@ from support.robot import EFF, FPS, HEAD_Y, head_at
 
 from edge_runtime.robot.hazard import (
     ARM_LINK_RADII_M,
+    JOINT_REACH_M,
     HazardMonitor,
     HeadEstimate,
     HeadTracker,
@@ -359,13 +360,19 @@ def settle(mon, body, t0=0.0, seconds=1.0):
     return d
 
 
-def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops():
-    z = WHOLE_BODY
+def settled_at(z, seps):
+    """(speed scales, states) the arm settles to with a worker standing at each of ``seps``."""
     scales, states = [], []
-    for sep in (4.0, 1.55, 1.45, 1.35, 1.2, 1.1, 1.0):
+    for sep in seps:
         d = settle(ready_body(z), body_facing_arm(sep))
         scales.append(d.speed_scale)
         states.append(d.state)
+    return scales, states
+
+
+def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops():
+    z = WHOLE_BODY                                                     # shipped: the full-speed T_s at every speed
+    scales, states = settled_at(z, (4.0, 1.55, 1.45, 1.35, 1.2, 1.1, 1.0))
     assert scales[0] == 1.0 and states[0] == State.NORMAL
     working = [s for s, st in zip(scales, states) if st == State.NORMAL]
     assert all(a > b for a, b in zip(working, working[1:])) and len(working) >= 3   # slower as he is closer
@@ -376,6 +383,20 @@ def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops(
     only = ZoneParams(speed_scaling=False)
     d = settle(ready_body(only), body_facing_arm(1.45))
     assert d.state == State.LEVEL1 and d.speed_scale == 1.0            # where the scaled arm still works
+
+
+def test_with_the_speed_dependent_stopping_time_a_slow_arm_works_on_until_the_worker_is_within_reach():
+    z = replace(WHOLE_BODY, stop_time_scales=True)
+    assert z.body_protective_distance_m(z.min_speed_fraction * z.iso_robot_speed_mps) < z.reach_retract_m
+    seps = (4.0, 1.55, 1.45, 1.35, 1.2, 1.1, 1.0, 0.9)
+    scales, states = settled_at(z, seps)
+    last = max(i for i, st in enumerate(states) if st == State.NORMAL)
+    assert states[:last + 1] == [State.NORMAL] * (last + 1) and states[last + 1:] and \
+        set(states[last + 1:]) == {State.LEVEL2}                      # never a stop: slow, then retract
+    assert all(a > b for a, b in zip(scales[:last + 1], scales[1:last + 1])) and 0.0 < scales[last] < 0.5
+    assert separation_of(body_facing_arm(seps[last])) > z.reach_retract_m
+    assert separation_of(body_facing_arm(seps[last + 1])) <= z.reach_retract_m
+    assert settled_at(WHOLE_BODY, seps)[1][last] == State.LEVEL1          # where the full-speed T_s stops it
 
 
 def test_the_stopping_time_shrinks_with_the_arms_speed_when_asked():
@@ -534,7 +555,8 @@ def test_the_ray_bound_never_exceeds_the_true_separation():
                             pelvis_xz_m=(EFF[0] + dist * math.sin(bearing), EFF[2] + dist * math.cos(bearing)),
                             heading_rad=math.atan2(-math.sin(bearing), -math.cos(bearing)) + rng.uniform(-1, 1))
         cam = np.array([rng.uniform(-4, 4), rng.uniform(0.1, 2.1), rng.uniform(4, 9)])
-        hide = rng.choice(17, size=int(rng.integers(0, 5)), replace=False)
+        hide = rng.choice(17, size=int(rng.integers(0, 5) if rng.random() < 0.6 else rng.integers(13, 17)),
+                          replace=False)  # a few joints hidden, or all but one to four (at the picture's edge)
         bound = ray_separation_m(rays_of(body, cam, hide), caps, WHOLE_BODY)
         if bound is not None:
             checked += 1
@@ -556,10 +578,18 @@ def test_anchored_rays_bound_a_person_within_his_body_extent_of_where_he_stands(
     assert sep - WHOLE_BODY.ray_body_extent_m - 0.6 < d_feet < d
     d_upper, _ = ray_separation_m(rays_of(body, hide=(3, 6)), caps, WHOLE_BODY)
     assert d_upper < sep
-    # nothing that crosses the floor or its band of heights (no ankle, hip, pelvis or head): no bound
-    assert ray_separation_m(rays_of(body, hide=(0, 1, 3, 4, 6, 10)), caps, WHOLE_BODY) is None
-    level = np.array([0.0, body[10, 1], 8.0])                          # a camera at his head's height: a flat head ray
-    assert ray_separation_m(rays_of(body, level, hide=(0, 1, 3, 4, 6)), caps, WHOLE_BODY) is None
+    # no ankle, hip, pelvis or head: any joint he shows is between the floor and a raised wrist, the rest within
+    # its bones of it: a looser bound, still below the truth
+    d_rest, _ = ray_separation_m(rays_of(body, hide=(0, 1, 3, 4, 6, 10)), caps, WHOLE_BODY)
+    assert d_rest < sep
+    only_wrist = [j for j in range(17) if j != 16]
+    d_wrist, _ = ray_separation_m(rays_of(body, hide=only_wrist), caps, WHOLE_BODY)
+    assert sep - 2 * JOINT_REACH_M[16].max() - 1.0 < d_wrist < d_rest
+    # a ray that never meets the floor or the heights a joint can be at bounds nothing
+    level = np.array([0.0, FLOOR_Y + WHOLE_BODY.ray_joint_heights_m[1] + 1.0, 8.0])   # a camera above every joint
+    flat = rays_of(body, level, hide=only_wrist)
+    flat.directions[16] = [0.0, 0.0, -1.0]
+    assert ray_separation_m(flat, caps, WHOLE_BODY) is None
 
 
 def test_a_person_never_lifted_far_along_his_rays_does_not_stop_the_arm():
@@ -636,3 +666,4 @@ def test_a_lost_person_in_view_within_reach_by_his_rays_makes_the_arm_retract_aw
     # his lift goes invalid while he walks up to the tool: 1.5 s later his rays show him within reach
     d = mon.observe(2.5, {}, EFF, unseen={0: "missing_joints: left_wrist"}, rays={0: rays_of(body_facing_arm(0.6))})
     assert d.state == State.LEVEL2 and d.worker == 0 and d.head.position_m[2] > EFF[2]
+

@@ -206,3 +206,36 @@ def test_a_speed_limit_slows_every_motion_and_zero_holds_the_arm():
     arm.set_target((0.0, 0.3, 0.6), 0.0, 0.0)
     run_to_rest(arm, 100)
     assert np.allclose(arm.q_rad, q)
+
+
+@pytest.mark.parametrize("share", [1.0, 0.6, 0.3, 0.1])
+def test_the_runtimes_stopping_model_covers_the_arm_at_every_speed(share):
+    """The runtime's speed-dependent T_s(v_r) and S_s = v_r T_s / 2 ([zones] stop_time_scales,
+    hazard.ZoneParams.stop_time_s, ISO/TS 15066 speed and separation monitoring; the shipped full-speed
+    T_s is longer still) are at least what the arm needs to stop from a speed override of ``share`` x full
+    speed while it does the cell's task (between its waypoints, where the runtime scales its speed): time
+    to rest, and how far any of its collision spheres travels meanwhile."""
+    from dataclasses import replace
+
+    from firmware_sim.scenarios.hrc_world import box_config, hard_scenarios, task_start_posture
+
+    zones, loop = replace(box_config().zones, stop_time_scales=True), box_config().robot_loop
+    v_r = share * zones.iso_robot_speed_mps
+    t_s = zones.stop_time_s(v_r)
+    task = hard_scenarios(1, 0)[0].task_m
+    rng = np.random.default_rng(int(share * 10))
+    for k in range(12):
+        arm = SawyerArm(q_rad=task_start_posture(task[k % len(task)], loop.task_pitch_rad, loop.task_yaw_rad))
+        arm.set_speed_limit(v_r)
+        arm.set_target(task[(k + 1) % len(task)], loop.task_pitch_rad, loop.task_yaw_rad)
+        for _ in range(int(rng.uniform(0.1, 0.8) / 0.001)):       # at speed, part way there
+            arm.step(0.001)
+        before, _ = arm.collision_spheres()
+        arm.clear_target()
+        steps = 0
+        while arm.moving:
+            arm.step(0.001)
+            steps += 1
+        after, _ = arm.collision_spheres()
+        assert steps * 0.001 <= t_s + 0.001
+        assert float(np.max(np.linalg.norm(after - before, axis=1))) <= 0.5 * v_r * t_s + 1e-4
