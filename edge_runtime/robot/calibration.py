@@ -748,15 +748,15 @@ def _fit_stands(heads, ankles, stands: list[np.ndarray], params: CalibrationPara
         raise CalibrationError(f"no three of the {len(stands)} standing periods fit the marker layout ({why}): record "
                                "the walk again, standing still on each marker, or label the frames by marker")
     best = min(passed, key=lambda x: x[0])[1]
-    for _, other in passed:
-        if _rotation_deg(other.A, best.A) > MAX_UNLABELLED_DISAGREEMENT_DEG:
-            raise CalibrationError(f"the {len(stands)} standing periods fit the marker layout in more than one way "
-                                   f"(camera poses {_rotation_deg(other.A, best.A):.0f} degrees apart): label the "
-                                   "frames by marker, or record the marker walk alone")
+    apart_deg = max(rotation_between_deg(other.A, best.A) for _, other in passed)
+    if apart_deg > MAX_UNLABELLED_DISAGREEMENT_DEG:
+        raise CalibrationError(f"the {len(stands)} standing periods fit the marker layout in more than one way "
+                               f"(camera poses {apart_deg:.0f} degrees apart): label the "
+                               "frames by marker, or record the marker walk alone")
     return best
 
 
-def _rotation_deg(A1, A2) -> float:
+def rotation_between_deg(A1, A2) -> float:
     """Angle (degrees) between the rotations of two camera -> robot maps (their scales removed)."""
     R1, R2 = (np.asarray(A, float) / np.cbrt(abs(np.linalg.det(A))) for A in (A1, A2))
     return float(np.degrees(np.arccos(np.clip((np.trace(R1.T @ R2) - 1.0) / 2.0, -1.0, 1.0))))

@@ -48,6 +48,7 @@ from edge_runtime.robot.calibration import (
     CalibrationParams,
     anchor_factor,
     from_recording,
+    rotation_between_deg,
 )
 from firmware_sim.devices.camera import REAL_DETECTOR, Camera, DetectorNoise, detect, random_placement
 from firmware_sim.people import motions
@@ -160,11 +161,14 @@ def calibration_error(cal: Calibration, camera: Camera) -> dict:
     """How far a fitted calibration's camera pose is from the simulated camera's: the angle (deg) of
     the rotation between the two camera -> robot rotations, the camera centre's distance (m) and its
     height error (m, signed), and the fit's scale."""
-    R = cal.A / cal.scale
-    cos = (np.trace(R.T @ camera.R.T) - 1.0) / 2.0
-    return {"rotation_deg": float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))),
+    return {"rotation_deg": rotation_between_deg(cal.A, camera.R.T),
             "camera_position_m": float(np.linalg.norm(cal.b - camera.position_m)),
             "camera_height_m": float(cal.b[1] - camera.position_m[1]), "scale": cal.scale}
+
+
+def _error_rows(d_m: np.ndarray) -> np.ndarray:
+    """(N, 3) rows of 3-D, ground-projected (x-z) and signed height errors of (N, 3) head offsets (m)."""
+    return np.stack([np.linalg.norm(d_m, axis=1), np.hypot(d_m[:, 0], d_m[:, 2]), d_m[:, 1]], axis=1)
 
 
 def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
@@ -208,8 +212,7 @@ def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
     raw = cal.apply(joints)
     k_depth = (np.linalg.norm(work.joints_m[ok, HIP] - cal.b, axis=1)
                / np.linalg.norm(raw[:, HIP] - cal.b, axis=1))
-    d = cal.b + k_depth[:, None] * (raw[:, HEAD] - cal.b) - truth
-    res["true_depth"] = np.stack([np.linalg.norm(d, axis=1), np.hypot(d[:, 0], d[:, 2]), d[:, 1]], axis=1)
+    res["true_depth"] = _error_rows(cal.b + k_depth[:, None] * (raw[:, HEAD] - cal.b) - truth)
     for m in methods:
         if m == "on":
             head = anchored[:, HEAD]
@@ -220,23 +223,26 @@ def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
             res["factor"] = k
         else:
             head = cal.apply(joints[:, HEAD])
-        d = head - truth
-        res[m] = np.stack([np.linalg.norm(d, axis=1), np.hypot(d[:, 0], d[:, 2]), d[:, 1]], axis=1)
+        res[m] = _error_rows(head - truth)
     return res
 
 
 # ------------------------------------------------------------------------------ figures
+def _pct(x, p: float) -> float:
+    """The ``p``-th percentile of ``x``, rounded for the JSON."""
+    return round(float(np.percentile(x, p)), 4)
+
+
 def _stats(err: np.ndarray) -> dict:
     """Median and p95 (m) of (N, 3) rows of 3-D, ground and signed height errors."""
     if not len(err):
         return {"n": 0}
-    q = lambda x, p: round(float(np.percentile(x, p)), 4)  # noqa: E731
     e3, eg, eh = err.T
     return {"n": int(len(err)),
-            "error_3d_m": {"median": q(e3, 50), "p95": q(e3, 95)},
-            "error_ground_m": {"median": q(eg, 50), "p95": q(eg, 95)},
-            "error_height_m": {"median_abs": q(np.abs(eh), 50), "p95_abs": q(np.abs(eh), 95),
-                               "median_signed": q(eh, 50)}}
+            "error_3d_m": {"median": _pct(e3, 50), "p95": _pct(e3, 95)},
+            "error_ground_m": {"median": _pct(eg, 50), "p95": _pct(eg, 95)},
+            "error_height_m": {"median_abs": _pct(np.abs(eh), 50), "p95_abs": _pct(np.abs(eh), 95),
+                               "median_signed": _pct(eh, 50)}}
 
 
 def summarise(results: list[dict], methods, args) -> dict:
@@ -263,11 +269,10 @@ def summarise(results: list[dict], methods, args) -> dict:
     if done:
         err = np.concatenate([r["true_depth"] for r in done])
         pose = {k: np.array([r["calibration_error"][k] for r in done]) for k in ("rotation_deg", "camera_position_m")}
-        q = lambda x, p: round(float(np.percentile(x, p)), 4)  # noqa: E731
         out["true_depth"] = {"what": "the lifted skeleton scaled about the camera centre so that its pelvis lies at "
                                      "the true distance: the error left by the lifter's shape and the calibration's "
                                      "pose when the depth is perfect", "all": _stats(err)}
-        out["calibration_pose_error"] = {k: {"median": q(v, 50), "p90": q(v, 90), "max": q(v, 100)}
+        out["calibration_pose_error"] = {k: {"median": _pct(v, 50), "p90": _pct(v, 90), "max": _pct(v, 100)}
                                          for k, v in pose.items()}
         # a fit turned this far is not a noisy calibration but a wrong one (the markers mistaken)
         out["calibration_pose_error"]["over_10_deg"] = int(np.sum(pose["rotation_deg"] > 10.0))
