@@ -317,7 +317,10 @@ def run_loss_selection(out: str | Path, *, jobs: int = 1, log=print, stage: str 
     folds = [list(f) for f in np.array_split(np.array(ids[::-1]), LOSS_FOLDS)]
     folds = [sorted(int(x) for x in f) for f in folds]
     seed = sel["selection_seed"] - SELECTION_SEED_OFFSET
-    fit_keys = {k: current[k] for k in ("captures", "shift_fwd", "schedule_epochs", "step_loss_weights") if k in current}
+    from models.train import RECIPE_FIT_KEYS
+
+    # what the current recipe trains with (its loss keys are the candidates', left out of ``current``)
+    fit_keys = {k: current[k] for k in ("captures", *RECIPE_FIT_KEYS) if k in current}
     job_list = [{"recipe": {**fit_keys, **change}, "epochs": current["schedule_epochs"], "seed": seed,
                  "train": str(data / "train.npz"), "test": str(data / "test.npz"),
                  "train_subjects": [x for x in ids if x not in val], "val_subjects": val}
