@@ -9,6 +9,9 @@
                 simulate, train the ConvLSTM, export fp32 + int8, score, write manifest.json
   int8          [--variants a,b,...] [--assets DIR] [--train TRAIN.npz --test TEST.npz] [--loso-dir DIR] [--work DIR]
                 the shipped fp32 ConvLSTM quantised again (no training): recipe chosen and gated as `assets` does
+  step          --checkpoint DIR/model.pt [--assets DIR] [--train TRAIN.npz --test TEST.npz] [--work DIR]
+                the shipped ConvLSTM's streaming step model (one sub-window + LSTM state per run), fp32 + int8,
+                added to the assets (what `assets` does as its step 7; the one-shot files untouched)
   opsets        [--assets DIR]
                 every shipped model declares only the opset domains its nodes use; manifest sha256 updated
   sign          --keygen DIR | --key PRIVATE.pem [--assets DIR]
@@ -64,12 +67,13 @@ def _parser() -> argparse.ArgumentParser:
     a.add_argument("--no-progress", action="store_true")
 
     i = sub.add_parser("int8", help="quantise the shipped fp32 ConvLSTM again (no training)")
-    i.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
     i.add_argument("--variants", default=None, help="comma-separated quantisation candidates (default: all)")
-    i.add_argument("--train", default=None, help="calibration windows NPZ instead of the fp32 entry's simulated cohort")
-    i.add_argument("--test", default=None, help="gate windows NPZ instead of the fp32 entry's simulated cohort")
     i.add_argument("--loso-dir", default=None, help="also compare fp32 and int8 over these LOSO folds")
-    i.add_argument("--work", default=None, help="scratch directory (default: runs/assets-seed<S>)")
+    _shipped_model_args(i)
+
+    t = sub.add_parser("step", help="add the shipped ConvLSTM's streaming step model (fp32, int8) to the assets")
+    t.add_argument("--checkpoint", required=True, help="the model.pt the shipped ConvLSTM was exported from")
+    _shipped_model_args(t)
 
     s = sub.add_parser("opsets", help="declare only the opset domains each shipped model uses")
     s.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
@@ -91,6 +95,14 @@ _MODULE_COMMANDS = (
     ("bundle", "bundle", "build what goes onto a box: runtime wheel, assets, default config, checksums"),
     ("sign", "sign", "sign the manifest with Ed25519 (or make a key pair): a box then refuses other models"),
 )
+
+
+def _shipped_model_args(p: argparse.ArgumentParser) -> None:
+    """The options of a command that works on the shipped fp32 ConvLSTM and its cohort's windows."""
+    p.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
+    p.add_argument("--train", default=None, help="calibration windows NPZ instead of the fp32 entry's simulated cohort")
+    p.add_argument("--test", default=None, help="gate windows NPZ instead of the fp32 entry's simulated cohort")
+    p.add_argument("--work", default=None, help="scratch directory (default: runs/assets-seed<S>)")
 
 
 def _variants(s: str | None):
@@ -160,6 +172,14 @@ def cmd_int8(a) -> int:
     return 0
 
 
+def cmd_step(a) -> int:
+    from export.assets import DEFAULT_ASSETS, add_step_models
+
+    add_step_models(checkpoint=a.checkpoint, out=a.assets or DEFAULT_ASSETS, work=a.work, train_npz=a.train,
+                    test_npz=a.test)
+    return 0
+
+
 def cmd_opsets(a) -> int:
     from edge_runtime.core.manifest import ASSETS_DIR
     from export.opsets import apply_to_assets
@@ -186,7 +206,7 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from edge_runtime.core.manifest import ModelIntegrityError
 
-    cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "int8": cmd_int8, "opsets": cmd_opsets,
+    cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "int8": cmd_int8, "step": cmd_step, "opsets": cmd_opsets,
             "compare-int8": cmd_compare}
     func = getattr(args, "func", None) or cmds[args.command]
     # ExportError, QuantizeError and DataError are ValueErrors: naming them here would import

@@ -22,7 +22,13 @@
    model (fp32 and int8 each on its own outputs), check int8 against fp32 after every
    S = 1..6 sub-windows on the test captures, and write the models and ``manifest.json``
    (each ConvLSTM entry with an ``early`` object; entries for other models already in
-   the manifest, e.g. a pose lifter, are kept).
+   the manifest, e.g. a pose lifter, are kept);
+7. export the same trained model as the streaming step model (``export.step_model``: one
+   sub-window and the LSTM state in, the decision and the next state out), fp32 (parity with
+   torch after every S) and int8 (``quantise_step``: gated per step on the test captures),
+   as entries ``convlstm-step-fp32`` / ``convlstm-step-int8`` (arch ``convlstm_step``) that the
+   ConvLSTM entries name in ``step_model``: the box decides by them (``python -m export step``
+   runs this step alone on the shipped model).
 
 No timestamps go into the files: the same seed on the same commit rebuilds
 byte-identical models (training is deterministic with one thread).
@@ -298,8 +304,127 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
     for e in entries:
         e["early"] = early[e["precision"]]
     entries[1]["metrics"]["early_agreement_with_fp32_by_steps"] = early["agreement_by_steps"]
-    manifest, path = _install(out, entries, (fp32_path, int8_path), command)
-    log(f"wrote {out / fp32_path.name}, {out / int8_path.name}, {path} in {time.time() - t0:.0f} s")
+    step_paths, step_entries = build_step(model, train, X_train, X_test, test.y, seed=seed, version=version,
+                                          commit=commit, stage=work / "stage", provenance=provenance, log=log,
+                                          min_agreement=early_min_agreement)
+    link_steps(entries, step_entries)
+    manifest, path = _install(out, entries + step_entries, (fp32_path, int8_path, *step_paths), command)
+    log(f"wrote {out / fp32_path.name}, {out / int8_path.name}, "
+        f"{', '.join(p.name for p in step_paths)}, {path} in {time.time() - t0:.0f} s")
+    return manifest
+
+
+# --------------------------------------------------------------------------- the step model
+
+STEP_FILE = "convlstm_step.{}.onnx"
+
+
+def build_step(model, train, X_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray, *, seed: int, version: str,
+               commit: str | None, stage: Path, provenance: dict, log: Callable[[str], None],
+               min_agreement: float = EARLY_MIN_AGREEMENT) -> tuple[list[Path], list[dict]]:
+    """7. The streaming step model of the same trained ConvLSTM (``export.step_model``): fp32 (parity with
+    torch's decision after every S = 1..6 on the test captures) and int8 (the candidate chosen by
+    ``export.step_model.quantise_step``, calibrated on the training windows the one-shot int8 is, gated
+    per step on the test captures); their files in ``stage`` and their manifest entries."""
+    from export.step_model import (
+        C_IN,
+        C_OUT,
+        H_IN,
+        H_OUT,
+        STEP_ARCH,
+        STEP_INPUT_LAYOUT,
+        check_step_parity,
+        quantise_step,
+        to_step_onnx,
+    )
+    from models.nets import keras_param_count, torch_param_count
+
+    classes = list(train.classes)
+    stage.mkdir(parents=True, exist_ok=True)
+    onx = to_step_onnx(model, classes, model_version=version, commit=commit,
+                       extra_meta={"training": {"seed": seed, "epochs": provenance["training"]["epochs"],
+                                                "windows": len(train)}})
+    fp32_path = save_onnx(onx, stage / STEP_FILE.format("fp32"))
+    parity = check_step_parity(model, onx, X_test[:512])
+    log(f"[7] {fp32_path.name}: parity with torch's decisions after S = 1..6, max |d| probs "
+        f"{parity['max_abs_probs']:.2e}")
+    if not parity["ok"]:
+        raise ExportError(f"{fp32_path}: torch/onnxruntime parity of the step model exceeds {parity['tol']:g}")
+    int8_path = fp32_path.with_name(STEP_FILE.format("int8"))
+    quant = quantise_step(fp32_path, int8_path, calibration_windows(X_train, train.y, seed), X_test, y_test,
+                          gate_steps=ALERT_STEPS, min_agreement=min_agreement, log=log)
+    quant["calibration"].update(source="training windows (ground-truth segments), stratified by class", seed=seed)
+    log(f"    chose {quant['method']}: int8/fp32 agreement by steps "
+        + ", ".join(f"{k}: {v:.4f}" for k, v in quant["agreement_by_steps"].items()))
+    hidden = model.lstm.hidden_size
+    state = {"dtype": "float32", "units": "LSTM state"}
+    common = {"arch": STEP_ARCH, "model_version": version, "classes": classes, "provenance": provenance,
+              "parameters": {"torch": torch_param_count(model), "keras": keras_param_count(model)},
+              "inputs": [{"name": INPUT_NAME, "shape": ["N", 33, 3], "dtype": "float32", "units": "m/s^2",
+                          "layout": STEP_INPUT_LAYOUT,
+                          "preprocess": "edge_runtime.wearable.classifier.step_inputs (sub-window s as it arrived)"},
+                         {"name": H_IN, "shape": ["N", hidden], **state}, {"name": C_IN, "shape": ["N", hidden], **state}],
+              "outputs": [{"name": PROBS, "shape": ["N", len(classes)], "dtype": "float32",
+                           "meaning": "softmax, classes order: the decision after this sub-window (temperature: the "
+                                      "one-shot entry's early.temperature_by_steps[S])"},
+                          {"name": H_OUT, "shape": ["N", hidden], **state}, {"name": C_OUT, "shape": ["N", hidden], **state}]}
+    entries = [{"name": f"{ARCH}-step-{p}", "file": path.name, "sha256": sha256_file(path), "precision": p,
+                "size_bytes": path.stat().st_size, **common} for p, path in (("fp32", fp32_path), ("int8", int8_path))]
+    entries[0]["metrics"] = {"parity_vs_torch": parity}
+    entries[1]["metrics"] = {"agreement_with_fp32_by_steps": quant["agreement_by_steps"],
+                             "macro_f1_by_steps": quant["macro_f1_by_steps"],
+                             "macro_f1_delta_vs_fp32": quant["macro_f1_delta"],
+                             "evaluated_on": "detector-captured test windows of the training subjects, run step by step"}
+    entries[1]["quantization"] = quant
+    return [fp32_path, int8_path], entries
+
+
+def link_steps(entries: list[dict], step_entries: list[dict]) -> None:
+    """Each one-shot entry names the step model of its precision (``step_model``), the one the box decides by."""
+    by_precision = {e["precision"]: e["name"] for e in step_entries}
+    for e in entries:
+        e["step_model"] = by_precision[e["precision"]]
+
+
+def add_step_models(*, checkpoint: str | Path, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = None,
+                    train_npz: str | None = None, test_npz: str | None = None, command: str | None = None,
+                    log: Callable[[str], None] = print) -> dict:
+    """``python -m export step``: step 7 of :func:`build_assets` alone, on the shipped ConvLSTM: its
+    checkpoint (checked to give the shipped fp32 model's outputs on the test captures) exported as the
+    step model, fp32 and int8, added to ``out`` and linked from the ConvLSTM entries; the one-shot
+    files are untouched."""
+    from edge_runtime.core.onnx import open_session
+    from models.train import load_checkpoint
+
+    out = Path(out)
+    manifest = verify_all(out)
+    fp32_entry = select_model(manifest, f"{ARCH}-fp32", arch=ARCH)
+    train, test = _windows_of(fp32_entry, work, train_npz, test_npz, log)
+    model, meta = load_checkpoint(checkpoint)
+    X_train, X_test = preprocess(train.X), preprocess(test.X)
+    shipped = open_session(out / fp32_entry["file"]).run([PROBS], {INPUT_NAME: X_test[:512]})[0]
+    onx = to_onnx(model, list(train.classes), commit="")
+    mine = open_session(onx.SerializeToString()).run([PROBS], {INPUT_NAME: X_test[:512]})[0]
+    if list(meta.get("classes", [])) != list(fp32_entry["classes"]) or float(np.abs(mine - shipped).max()) > 1e-5:
+        raise ExportError(f"{checkpoint}: not the checkpoint {out / fp32_entry['file']} was exported from "
+                          f"(its outputs on the test captures differ)")
+    seed = int(fp32_entry["provenance"]["seed"])
+    provenance = dict(fp32_entry["provenance"],
+                      step_model={"command": command or "python -m export " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+                                  "checkpoint": str(checkpoint), "git_commit": git_commit(), "versions": versions()})
+    with tempfile.TemporaryDirectory() as td:
+        paths, step_entries = build_step(model, train, X_train, X_test, test.y, seed=seed,
+                                         version=fp32_entry["model_version"], commit=git_commit(), stage=Path(td),
+                                         provenance=provenance, log=log)
+        for p in paths:
+            shutil.copyfile(p, out / p.name)
+    names = {e["name"] for e in step_entries}
+    kept = [e for e in manifest["models"] if e["name"] not in names]
+    link_steps([e for e in kept if e["arch"] == ARCH], step_entries)
+    last = max(i for i, e in enumerate(kept) if e["arch"] == ARCH)  # beside the ConvLSTM's entries
+    manifest["models"] = kept[:last + 1] + step_entries + kept[last + 1:]
+    write_manifest(out, manifest)
+    log(f"wrote {', '.join(p.name for p in paths)} and {out / 'manifest.json'}")
     return manifest
 
 
@@ -527,6 +652,17 @@ def cohort_of(entry: dict, work: str | Path | None = None, *, log: Callable[[str
     return load_npz(train_npz), load_npz(test_npz)
 
 
+def _windows_of(fp32_entry: dict, work, train_npz: str | None, test_npz: str | None, log: Callable[[str], None]):
+    """The training and test windows of the shipped model: the given NPZ files, else its cohort simulated again."""
+    from models.dataset import load_npz
+
+    if train_npz or test_npz:
+        if not (train_npz and test_npz):
+            raise ExportError("--train and --test go together")
+        return load_npz(train_npz), load_npz(test_npz)
+    return cohort_of(fp32_entry, work, log=log)
+
+
 def requantize(*, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = None, train_npz: str | None = None,
                test_npz: str | None = None, variants: Sequence[str] | None = None, loso_dir: str | None = None,
                command: str | None = None, early_min_agreement: float = EARLY_MIN_AGREEMENT,
@@ -539,19 +675,13 @@ def requantize(*, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = No
     quantisation report, test-capture metrics) are replaced, the fp32 file is untouched. The
     LOSO comparison is kept only when it was made with the chosen recipe (or is redone over
     ``loso_dir``)."""
-    from models.dataset import load_npz
 
     out = Path(out)
     manifest = verify_all(out)
     fp32_entry = select_model(manifest, f"{ARCH}-fp32", arch=ARCH)
     int8_entry = select_model(manifest, f"{ARCH}-int8", arch=ARCH)
     seed = int(fp32_entry["provenance"]["seed"])
-    if train_npz or test_npz:
-        if not (train_npz and test_npz):
-            raise ExportError("--train and --test go together")
-        train, test = load_npz(train_npz), load_npz(test_npz)
-    else:
-        train, test = cohort_of(fp32_entry, work, log=log)
+    train, test = _windows_of(fp32_entry, work, train_npz, test_npz, log)
     if list(train.classes) != list(fp32_entry["classes"]):
         raise ExportError(f"{out / fp32_entry['file']}: field 'classes': {fp32_entry['classes']} differ from the "
                           f"windows' {list(train.classes)}")

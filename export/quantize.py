@@ -108,6 +108,25 @@ class WindowReader(CalibrationDataReader):
         return -(-len(self.windows) // self.batch_size)
 
 
+class FeedReader(CalibrationDataReader):
+    """Calibration batches given as feeds ({input name: array}), for a graph of several inputs (the
+    ConvLSTM step model's sub-window and LSTM state: ``export.step_model.step_states``)."""
+
+    def __init__(self, feeds: list[dict[str, np.ndarray]], batch_size: int = 64):
+        self.items = [{k: np.ascontiguousarray(v[i:i + batch_size], dtype=np.float32) for k, v in f.items()}
+                      for f in feeds for i in range(0, len(next(iter(f.values()))), batch_size)]
+        self._i = 0
+
+    def get_next(self):
+        if self._i >= len(self.items):
+            return None
+        self._i += 1
+        return self.items[self._i - 1]
+
+    def rewind(self):
+        self._i = 0
+
+
 def pick_windows(y: np.ndarray, n: int, seed: int = 0) -> np.ndarray:
     """Indices of up to n windows, stratified by class (every class represented)."""
     y = np.asarray(y)
@@ -171,10 +190,11 @@ def _quiet_root_logger():
 
 
 def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant | str,
-                  calib: np.ndarray, *, pre_processed: str | Path | None = None, describe: bool = True) -> Path:
+                  calib: np.ndarray | list[dict[str, np.ndarray]], *, pre_processed: str | Path | None = None, describe: bool = True) -> Path:
     """Quantise ``fp32_path`` with ``variant`` into ``out_path``; metadata carried over.
 
-    ``calib`` holds calibration inputs of the graph's (single) input. ``describe`` appends the
+    ``calib`` holds calibration inputs of the graph's (single) input, or feeds of all its inputs
+    (a list of {input name: array}, :class:`FeedReader`). ``describe`` appends the
     variant's description to the doc string (the ConvLSTM assets carry it; the lifter's never
     did, and their bytes stay as shipped)."""
     v = VARIANTS[variant] if isinstance(variant, str) else variant
@@ -190,7 +210,9 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
                 present = {n.op_type for n in model.graph.node}
                 ops = None if v.static_ops is None else [o for o in v.static_ops if o in present]
                 stage = Path(td) / "static.onnx"
-                quantize_static(str(cur), str(stage), WindowReader(calib, input_name=model.graph.input[0].name),
+                reader = FeedReader(calib) if isinstance(calib, list) else \
+                    WindowReader(calib, input_name=model.graph.input[0].name)
+                quantize_static(str(cur), str(stage), reader,
                                 quant_format=QuantFormat.QDQ, op_types_to_quantize=ops, per_channel=v.per_channel,
                                 activation_type=QuantType.QInt8 if v.activation == "int8" else QuantType.QUInt8,
                                 weight_type=QuantType.QInt8,

@@ -66,7 +66,7 @@ _REQUIRED_MODEL_KEYS = ("name", "file", "sha256", "precision", "arch", "paramete
                         "outputs", "classes")
 _OBJECT_KEYS = ("parameters", "metrics", "quantization", "provenance", "camera")
 """Entry fields that, when present, must be JSON objects."""
-_STRING_KEYS = ("model_version", "joints")
+_STRING_KEYS = ("model_version", "joints", "step_model")
 """Entry fields that, when present, must be strings."""
 
 

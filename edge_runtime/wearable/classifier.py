@@ -52,6 +52,7 @@ from edge_runtime.core.manifest import (
     CLASSIFIER_ARCHS,
     ModelIntegrityError,
     load_verified,
+    manifest_path,
 )
 from edge_runtime.core.onnx import open_session
 
@@ -206,6 +207,15 @@ def preprocess_prefix_steps(captures: np.ndarray, steps: Sequence[int]) -> list[
     return _prefix_inputs(x, tuple((s, needed_frames(s)) for s in steps))
 
 
+def step_inputs(captures: np.ndarray, top: int) -> list[np.ndarray]:
+    """For N captures (N, n, 3) with at least ``needed_frames(top)`` frames: sub-window s = 1..``top`` of each
+    (N, 33, 3) as the streaming step model reads it, computed when it arrived: row s - 1 of
+    :func:`preprocess_prefixes` of the first ``needed_frames(s)`` frames. A sub-window is fixed once it is
+    there (the box has run its step), so sub-window 1's first :data:`MEAN_EDGE_FRAMES` frames carry the
+    capture's mean as known after ``needed_frames(1)`` frames, not the whole capture's."""
+    return [a[:, s] for s, a in enumerate(preprocess_prefix_steps(captures, range(1, top + 1)))]
+
+
 def _prefix_inputs(x: np.ndarray, prefixes: tuple[tuple[int, int], ...]) -> list[np.ndarray]:
     """(N, n, 3) float32 -> for each (steps, frames) of ``prefixes``: the first ``steps`` sub-windows
     (N, steps, 33, 3) of the captures of which only the first ``frames`` frames have arrived."""
@@ -352,9 +362,70 @@ class ModelParams:
     """Manifest entry: a model name, or a precision (int8, fp32)."""
     threads: int = config.setting(1, config.AT_LEAST_1)
     """onnxruntime intra-op threads."""
+    stream: bool = True
+    """Decide by the ConvLSTM's step model (one run per sub-window as it arrives, the LSTM state kept per
+    capture) when the manifest entry names one (``step_model``); false: run the whole model on the
+    capture's prefix at every decision (sessions 8-9)."""
     manifest_public_key: str = ""
     """PEM file of the Ed25519 key the manifest must be signed with (manifest.json.sig); empty =
     the sha256 hashes only. Needs the signed-models extra."""
+
+
+STEP_ARCH = "convlstm_step"
+STEP_INPUTS, STEP_OUTPUTS = ("imu", "h", "c"), ("probs", "h_out", "c_out")
+
+
+class StepModel:
+    """The ConvLSTM's streaming step graph (``export.step_model``): one sub-window (N, 33, 3) m/s^2 and
+    the LSTM state (h, c) (N, hidden) in, the decision's probabilities (N, K) and the next state out."""
+
+    def __init__(self, model: bytes, threads: int, source: str, classes: Sequence[str]):
+        self.source = source
+        self.session = open_session(model, threads, source)
+        inputs = {i.name: i.shape for i in self.session.get_inputs()}
+        outputs = [o.name for o in self.session.get_outputs()]
+        if set(inputs) != set(STEP_INPUTS) or not set(STEP_OUTPUTS) <= set(outputs):
+            raise ModelIntegrityError(f"{source}: a step model takes {list(STEP_INPUTS)} and gives "
+                                      f"{list(STEP_OUTPUTS)}; this one takes {list(inputs)}, gives {outputs}")
+        hidden = inputs["h"][-1]
+        if not isinstance(hidden, int) or tuple(inputs["imu"][1:]) != (SUBSEQ_FRAMES, N_CHANNELS):
+            raise ModelIntegrityError(f"{source}: step inputs imu {inputs['imu']}, h {inputs['h']}: expected "
+                                      f"(N, {SUBSEQ_FRAMES}, {N_CHANNELS}) and (N, hidden)")
+        self.hidden = hidden
+        # the session's own run, without the Python wrapper's check of the feed's names on every call (ours
+        # are fixed and checked above): 3 of the 24 us of a step at batch 1 on one thread
+        self._run = getattr(self.session, "_sess", self.session).run
+        self._run_options = ort.RunOptions()
+        probe = self.step(np.zeros((1, SUBSEQ_FRAMES, N_CHANNELS), np.float32), *self.zero_state(1))[0]
+        if probe.shape != (1, len(classes)):
+            raise ModelIntegrityError(f"{source}: step model has {probe.shape[-1]} outputs but {len(classes)} "
+                                      "classes are listed")
+
+    def zero_state(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros((n, self.hidden), np.float32), np.zeros((n, self.hidden), np.float32)
+
+    def step(self, x: np.ndarray, h: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(probs (N, K), h', c') after sub-windows x (N, 33, 3) float32 C-contiguous from the state (h, c)."""
+        return tuple(self._run(STEP_OUTPUTS, {"imu": x, "h": h, "c": c}, self._run_options))
+
+    def run(self, subs: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """Raw probabilities (N, K) after each of the sub-windows ``subs`` (each (N, 33, 3)), from the zero state."""
+        h, c = self.zero_state(len(subs[0]))
+        out = []
+        for x in subs:
+            p, h, c = self.step(np.ascontiguousarray(x, dtype=np.float32), h, c)
+            out.append(p)
+        return out
+
+
+@dataclass
+class StepStream:
+    """One capture's state in the step model: the sub-windows run so far and the probabilities after each."""
+
+    h: np.ndarray
+    c: np.ndarray
+    done: int = 0
+    probs: dict[int, np.ndarray] = field(default_factory=dict)
 
 
 class Engine:
@@ -362,7 +433,7 @@ class Engine:
 
     def __init__(self, model: bytes | str | os.PathLike, *, classes: Sequence[str] | None = None,
                  name: str = "", precision: str = "", threads: int = 1, entry: dict | None = None,
-                 source: str = ""):
+                 source: str = "", step_model: "StepModel | None" = None):
         source = source or (str(model) if not isinstance(model, bytes) else "<model bytes>")
         self.source = source
         self.threads = threads
@@ -391,6 +462,8 @@ class Engine:
         self._outputs = [self.output_name]
         self._run_options = ort.RunOptions()
         self.early = EarlyModel.of(self.input_shape, self.entry)
+        self.step_model = step_model
+        """The streaming step model the decisions come from (None: the whole model on each prefix)."""
         item = tuple(N_SUBSEQ if d is None and k == 0 and len(self._item_shape) == 3 else d
                      for k, d in enumerate(self._item_shape))
         probe = self.classify(np.zeros(item, np.float32)) if None not in item else None
@@ -403,14 +476,27 @@ class Engine:
     @classmethod
     def from_manifest(cls, assets_dir: str | os.PathLike = ASSETS_DIR, name_or_precision: str = "int8",
                       threads: int = 1, arch: str | tuple[str, ...] | None = CLASSIFIER_ARCHS,
-                      public_key_file: str | os.PathLike | None = None) -> "Engine":
+                      public_key_file: str | os.PathLike | None = None, stream: bool = True) -> "Engine":
         """The manifest entry named ``name_or_precision`` (or the first of that precision)
         among the ``arch`` entries (default: the classifiers; None: any), hash-checked (and the
         manifest signature-checked with ``public_key_file``), on onnxruntime with ``threads``
-        intra-op threads."""
+        intra-op threads; with ``stream``, also the step model its ``step_model`` field names (hash-checked
+        the same way), which then makes every decision after S sub-windows."""
         entry, data, path = load_verified(assets_dir, name_or_precision, arch=arch, public_key_file=public_key_file)
+        step = None
+        if stream and "step_model" in entry:
+            name = entry["step_model"]
+            if not (isinstance(name, str) and name):
+                raise ModelIntegrityError(f"{manifest_path(assets_dir)}: field 'step_model' of {entry['name']!r}: "
+                                          f"expected the name of a {STEP_ARCH} entry, got {name!r}")
+            step_entry, step_data, step_path = load_verified(assets_dir, name, arch=STEP_ARCH,
+                                                             public_key_file=public_key_file)
+            if step_entry["classes"] != entry["classes"]:
+                raise ModelIntegrityError(f"{step_path}: field 'classes': {step_entry['classes']} differ from "
+                                          f"{entry['name']}'s {entry['classes']}")
+            step = StepModel(step_data, threads, str(step_path), entry["classes"])
         return cls(data, classes=entry["classes"], name=entry["name"], precision=entry["precision"],
-                   threads=threads, entry=entry, source=str(path))
+                   threads=threads, entry=entry, source=str(path), step_model=step)
 
     @classmethod
     def from_file(cls, path: str | os.PathLike, threads: int = 1, classes: Sequence[str] | None = None
@@ -453,6 +539,32 @@ class Engine:
         """The sub-window counts S this model decides at ((6,): full-window decisions only)."""
         return self.early.steps
 
+    @property
+    def streaming(self) -> bool:
+        """Whether decisions come from the step model (one run per sub-window)."""
+        return self.step_model is not None
+
+    def new_stream(self) -> StepStream:
+        """The state of a new capture for :meth:`advance` (requires a step model)."""
+        return StepStream(*self.step_model.zero_state(1))
+
+    def advance(self, stream: StepStream, data: np.ndarray, steps: int) -> np.ndarray:
+        """Calibrated probabilities (K,) after ``steps`` sub-windows of one capture whose frames so far are
+        ``data`` (at least ``needed_frames(steps)``): runs the step model once for each sub-window the
+        capture's ``stream`` has not yet seen, sub-window s computed from the first ``needed_frames(s)``
+        frames (:func:`step_inputs`), and keeps the state in ``stream``. Equal to :meth:`classify_prefix`
+        of the same frames, since both read each sub-window as it arrived."""
+        self._check_steps(steps)
+        x = np.asarray(data, dtype=np.float32)
+        for s in range(stream.done + 1, steps + 1):
+            sub = preprocess_prefixes(x[None, :needed_frames(s)], s)[:, s - 1]
+            if not np.isfinite(sub).all():
+                raise ValueError(f"{self.name}: input holds NaN or infinite values")
+            p, stream.h, stream.c = self.step_model.step(sub, stream.h, stream.c)
+            stream.probs[s] = p[0]
+            stream.done = s
+        return calibrate(stream.probs[steps], self._temperature(steps))
+
     def classify_prefix(self, x_prefix: np.ndarray, steps: int) -> np.ndarray:
         """Calibrated probabilities (K,) after ``steps`` sub-windows, from the capture's first
         ``needed_frames(steps)`` frames or more (:func:`preprocess_prefix`); the model's decision after
@@ -470,7 +582,10 @@ class Engine:
         """For each group (captures (N, n, 3), sub-window counts): {S: :meth:`classify_prefixes` of the
         captures' first ``needed_frames(S)`` frames}, with one model run per S for every group that
         asks for it and the preprocessing of each group's steps shared (:func:`preprocess_prefix_steps`).
-        A replay's loop asks this for the captures a block completes."""
+        A replay's loop asks this for the captures a block completes. With a step model, every capture's
+        sub-windows 1..max(its S) go through it, one run per sub-window for every group that reaches it."""
+        if self.step_model is not None:
+            return self._step_groups(groups)
         inputs = [dict(zip(steps, preprocess_prefix_steps(captures, steps))) for captures, steps in groups]
         out: list[dict[int, np.ndarray]] = [{} for _ in groups]
         for steps in sorted({s for g in inputs for s in g}):
@@ -484,6 +599,32 @@ class Engine:
                 start += count
         return out
 
+    def _step_groups(self, groups: Sequence[tuple[np.ndarray, Sequence[int]]]) -> list[dict[int, np.ndarray]]:
+        """:meth:`classify_capture_groups` by the step model: the state of each group's captures carried
+        from sub-window to sub-window, the groups that reach sub-window s run together in one step."""
+        tops = [max(steps) for _, steps in groups]
+        for _, steps in groups:
+            for s in steps:
+                self._check_steps(s)
+        subs = [step_inputs(captures, top) for (captures, _), top in zip(groups, tops)]
+        sizes = [len(captures) for captures, _ in groups]
+        h, c = self.step_model.zero_state(sum(sizes))
+        starts = np.cumsum([0] + sizes)
+        out: list[dict[int, np.ndarray]] = [{} for _ in groups]
+        for s in range(1, max(tops) + 1):
+            asking = [k for k, top in enumerate(tops) if top >= s]
+            rows = np.concatenate([np.arange(starts[k], starts[k + 1]) for k in asking])
+            x = subs[asking[0]][s - 1] if len(asking) == 1 else np.concatenate([subs[k][s - 1] for k in asking])
+            if not np.isfinite(x).all():
+                raise ValueError(f"{self.name}: input holds NaN or infinite values")
+            probs, h[rows], c[rows] = self.step_model.step(np.ascontiguousarray(x), h[rows], c[rows])
+            start = 0
+            for k in asking:
+                if s in groups[k][1]:
+                    out[k][s] = calibrate(probs[start:start + sizes[k]], self._temperature(s))
+                start += sizes[k]
+        return out
+
     def _check_steps(self, steps: int) -> None:
         """S = 6 (the whole capture: needed_frames(6) = 700) is every model's; others, the manifest's."""
         if steps not in self.early.steps and steps != N_SUBSEQ:
@@ -493,7 +634,14 @@ class Engine:
         return self.early.temperature_by_steps.get(steps, 1.0)
 
     def _prefix_probs(self, x_prefixes: np.ndarray, steps: int) -> np.ndarray:
-        """The model's raw probabilities (N, K) for prefixes (N, n, 3) after ``steps`` sub-windows."""
+        """The model's raw probabilities (N, K) for prefixes (N, n, 3) after ``steps`` sub-windows: the step
+        model's after running sub-windows 1..``steps``, or the whole model's on the prefix."""
+        if self.step_model is not None:
+            self._check_steps(steps)
+            subs = step_inputs(np.asarray(x_prefixes, dtype=np.float32), steps)
+            if not all(np.isfinite(x).all() for x in subs):
+                raise ValueError(f"{self.name}: input holds NaN or infinite values")
+            return self.step_model.run(subs)[-1]
         return self._model_probs(preprocess_prefixes(x_prefixes, steps), steps)
 
     def _model_probs(self, a: np.ndarray, steps: int) -> np.ndarray:
@@ -524,6 +672,7 @@ class Engine:
 
     def describe(self) -> dict:
         return {"name": self.name, "precision": self.precision, "source": self.source,
+                "step_model": self.step_model.source if self.step_model is not None else None,
                 "threads": self.threads, "classes": self.classes, "input": self.input_name,
                 "input_shape": ["N" if d is None else d for d in self.input_shape],
                 "output": self.output_name, "metadata": self.metadata}

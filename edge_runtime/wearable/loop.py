@@ -45,7 +45,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Callable, Protocol, Sequence
+from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
@@ -62,7 +62,10 @@ class Classifier(Protocol):
     ``early_steps`` (the sub-window counts S it accepts), ``classify_prefix(x, S)`` (calibrated
     probabilities after S sub-windows) and ``early.min_confidence_by_steps`` (the manifest's thresholds).
     One that also has ``classify_capture_groups`` (the shipped Engine) is asked for the captures a
-    block completes together, which must give each what ``classify_prefix`` gives it alone."""
+    block completes together, which must give each what ``classify_prefix`` gives it alone. One that is
+    ``streaming`` (the Engine with a step model) also has ``new_stream()`` (a capture's state) and
+    ``advance(stream, frames, S)``: the loop keeps a state per capture, runs a step as each of its
+    sub-windows arrives, and reads each decision after S sub-windows from it."""
 
     classes: Sequence[str]
 
@@ -313,6 +316,8 @@ class _CaptureState:
     other_sum: float = 0.0
     other_steps: int = 0
     """P(Other) summed over the decided steps S >= OTHER_EVIDENCE_FROM_STEP, and their count."""
+    stream: Any = None
+    """The classifier's step state of this capture (``new_stream()``), when it decides by steps."""
 
 
 class WearableLoop:
@@ -358,6 +363,8 @@ class WearableLoop:
             else "full-window decisions" + (" (the model takes S = 6 only)" if offered == (N_SUBSEQ,) else
                                             " (every S < 6 has threshold 1)" if policy.decision == "early" else "")
         self._prefix = getattr(classifier, "classify_prefix", None)
+        # a classifier that decides by steps keeps each capture's state and runs a step per sub-window
+        self._stream = classifier.new_stream if getattr(classifier, "streaming", False) else None
         # a block that completes several captures classifies them together (see _classify_ahead)
         self._batch = getattr(classifier, "classify_capture_groups", None) if self._prefix is not None else None
         self._ready: dict[tuple[int, int], tuple[list[float], float]] = {}
@@ -531,14 +538,18 @@ class WearableLoop:
             missing = tuple(s for s in st.steps if (trigger, s) not in self._ready)
             if missing:  # a whole capture, not classified ahead (or not at these steps): its steps in one go
                 self._classify_groups([([trigger], data[None], missing)])
+        elif st.stream is not None and len(data) < CAPTURE_FRAMES:  # filling: a step per sub-window arrived
+            arrived = max(s for s in range(N_SUBSEQ + 1) if s == 0 or needed_frames(s) <= len(data))
+            if arrived > st.stream.done:
+                self.classifier.advance(st.stream, data, arrived)
         out = []
         while st.steps and needed_frames(st.steps[0]) <= len(data):
             steps = st.steps.pop(0)
             d = self._decide(st, data, steps)
             if d is not None:
                 out.append(d)
-        if st.steps:
-            self._next_frames = needed_frames(st.steps[0])
+        if st.steps:  # the next step to decide at, or with a step model the next sub-window to run
+            self._next_frames = needed_frames(st.steps[0] if st.stream is None else min(st.steps[0], st.stream.done + 1))
         else:  # decided: the next capture's first early step is the next to wait for
             self._capture = None
             self._next_frames = self._first_frames
@@ -551,7 +562,7 @@ class WearableLoop:
             ev = self._event = None  # the event ended: quiet for event_hold_s, or withdrawn
         continues = ev is not None
         steps = [N_SUBSEQ] if continues else list(self._early_steps)
-        return _CaptureState(trigger, steps, ev, continues)
+        return _CaptureState(trigger, steps, ev, continues, stream=self._stream() if self._stream else None)
 
     def _decide(self, st: _CaptureState, data: np.ndarray, steps: int) -> Decision | None:
         verdict = self._classify(st, data, steps)
@@ -591,7 +602,9 @@ class WearableLoop:
             values, compute_us = ready
         else:
             t_start = time.perf_counter()
-            if self._prefix is not None:
+            if st.stream is not None:
+                probs = self.classifier.advance(st.stream, data, steps)
+            elif self._prefix is not None:
                 probs = np.asarray(self._prefix(data[: needed_frames(steps)], steps))
             else:
                 probs = np.asarray(self.classifier.classify_capture(data))

@@ -42,10 +42,12 @@ def test_assets_build_writes_a_valid_manifest(small_assets):
     out, _ = small_assets
     m = verify_all(out)
     assert (out / "vehicle_alerts.dbc").exists()
-    by = {e["precision"]: e for e in m["models"]}
+    assert [e["arch"] for e in m["models"]] == ["convlstm"] * 2 + ["convlstm_step"] * 2
+    by = {e["precision"]: e for e in m["models"] if e["arch"] == "convlstm"}
     assert set(by) == {"fp32", "int8"}
     for e in by.values():
         assert e["arch"] == "convlstm" and e["classes"] == list(CLASSES)
+        assert e["step_model"] == f"convlstm-step-{e['precision']}"
         assert e["parameters"] == {"torch": 79998, "keras": 79598}
         assert e["inputs"][0]["name"] == "imu" and e["inputs"][0]["shape"] == ["N", "S", 33, 3]
         early = e["early"]
@@ -69,6 +71,23 @@ def test_assets_build_writes_a_valid_manifest(small_assets):
 
 
 @pytest.mark.slow
+def test_assets_build_adds_the_step_model(small_assets):
+    """Step 7: the streaming step model of the same weights, fp32 and int8, each hash-checked, linked from
+    the one-shot entry of its precision, and the Engine decides by it."""
+    out, _ = small_assets
+    steps = {e["precision"]: e for e in verify_all(out)["models"] if e["arch"] == "convlstm_step"}
+    assert set(steps) == {"fp32", "int8"}
+    assert steps["fp32"]["metrics"]["parity_vs_torch"]["ok"]
+    assert [i["name"] for i in steps["int8"]["inputs"]] == ["imu", "h", "c"]
+    q = steps["int8"]["quantization"]
+    assert min(q["agreement_by_steps"][str(s)] for s in range(2, 7)) >= TOY_AGREEMENT
+    assert q["int8_operators"] and abs(q["macro_f1_delta"]) <= 0.01
+    eng = Engine.from_manifest(out, "int8")
+    assert eng.streaming and eng.step_model.source.endswith("convlstm_step.int8.onnx")
+    assert not Engine.from_manifest(out, "int8", stream=False).streaming
+
+
+@pytest.mark.slow
 def test_rebuild_keeps_entries_of_other_models(small_assets, tmp_path):
     """A manifest entry this command does not build (e.g. a pose lifter) is kept on rebuild."""
     import shutil
@@ -87,7 +106,7 @@ def test_rebuild_keeps_entries_of_other_models(small_assets, tmp_path):
                  command="test", log=lambda s: None, progress=False, auto_loso=False,
                  selection=work / "selection" / "selection.json", early_min_agreement=TOY_AGREEMENT)
     names = [e["name"] for e in load_manifest(dst)["models"]]
-    assert sorted(names) == ["convlstm-fp32", "convlstm-int8", "lifter-fp32"]
+    assert sorted(names) == ["convlstm-fp32", "convlstm-int8", "convlstm-step-fp32", "convlstm-step-int8", "lifter-fp32"]
     # same seed, same data, same commit -> the same fp32 model bytes
     assert (dst / "convlstm.fp32.onnx").read_bytes() == (out / "convlstm.fp32.onnx").read_bytes()
 
@@ -131,7 +150,7 @@ def test_int8_requantises_the_shipped_fp32_without_training(small_assets, tmp_pa
     method = select_model(verify_all(dst), "convlstm-int8")["quantization"]["method"]  # what the toy build chose
     m = requantize(out=dst, work=work, variants=[method], command="test", early_min_agreement=TOY_AGREEMENT,
                    log=lambda s: None)
-    by = {e["precision"]: e for e in m["models"]}
+    by = {e["precision"]: e for e in m["models"] if e["arch"] == "convlstm"}
     assert by["int8"]["quantization"]["method"] == method
     assert by["int8"]["quantization"]["command"] == "test"
     assert by["int8"]["quantization"]["runtime_op_types"].get("QLinearConv", 0) >= 1
