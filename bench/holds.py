@@ -229,8 +229,9 @@ def tampered() -> dict:
     def load(assets: Path, entry: dict) -> None:
         if entry["arch"] == "lifter":
             StreamingLifter.from_manifest(assets, LifterParams(precision=entry["precision"]))
-        else:
-            Engine.from_manifest(assets, entry["name"])
+        else:  # a step model is loaded by the classifier entry that names it
+            Engine.from_manifest(assets, next((e["name"] for e in entries if e.get("step_model") == entry["name"]),
+                                              entry["name"]))
 
     def flip(data: bytes, other: bytes) -> bytes:
         mid = len(data) // 2
