@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy import signal
 from support import REPO_ROOT
+from support.drive import drive_captures
 from support.early_model import engine as early_engine
 
 from edge_runtime.core.manifest import (
@@ -335,19 +336,10 @@ def test_calibrating_one_decision_gives_the_batch_path_s_float32_values():
         np.testing.assert_allclose(batch, want / want.sum(1, keepdims=True), rtol=1e-6, atol=1e-30)
 
 
-def _drive_captures(minutes: float = 6.0, seed: int = 3) -> np.ndarray:
-    """Every detector capture of a simulated drive (N, 700, 3): real motions, real gravity."""
-    from edge_runtime.wearable.detector import StreamingDetector
-    from firmware_sim.devices.wrist import simulate_drive
-
-    acc = np.ascontiguousarray(simulate_drive(minutes, seed=seed).acc_mps2, dtype=np.float32)
-    return np.stack([c.data for c in StreamingDetector().push(acc)])
-
-
 def test_prefixes_preprocessed_together_are_each_one_preprocessed_alone_bit_for_bit():
     """The replay preprocesses the captures of a block together, every step from one product of the
     resampler; each prefix's model input must be exactly what the per-capture path gives it."""
-    caps = _drive_captures()
+    caps = drive_captures()
     assert len(caps) >= 20
     steps = (1, 2, 3, 4, 5, 6)
     together = preprocess_prefix_steps(caps, steps)
@@ -368,7 +360,7 @@ def test_the_shipped_model_classifies_a_batch_as_each_capture_alone():
     """One model run for many captures (a replay's block) gives each the probabilities it gets alone,
     to the last bit: onnxruntime computes each item of a batch as it computes it alone."""
     eng = Engine.from_manifest(ASSETS_DIR, "int8")
-    caps = _drive_captures()
+    caps = drive_captures()
     groups = [(caps[:-3], (2, 3, 4, 5, 6)), (caps[-3:], (6,)), (caps[:1], (3, 6))]
     got = eng.classify_capture_groups(groups)
     for (captures, steps), by_steps in zip(groups, got):
