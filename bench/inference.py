@@ -25,7 +25,7 @@ process (``bench.worker``) so that its peak resident memory is its own:
 
 Inputs come from the manifest entry (``inputs[].shape``, the batch dimension
 set to 1): the ConvLSTM gets a plausible wrist window (gravity on z plus
-3 m/s^2 noise), any other model standard-normal values scaled by 0.3 (e.g.
+3 m/s^2 noise; its step model one sub-window of it, and an LSTM state like the others), any other model standard-normal values scaled by 0.3 (e.g.
 normalised 2D keypoints). Latency does not depend on the values.
 """
 from __future__ import annotations
@@ -45,6 +45,8 @@ RUNTIMES = ("onnxruntime", "openvino", "torch-eager")
 REPO_ROOT = Path(__file__).resolve().parent.parent
 NETS_ARCHS = ("convlstm", "cnn", "lstm")
 """Architectures ``models.nets.build`` rebuilds."""
+STEP_ARCH = "convlstm_step"
+"""The ConvLSTM's step model: one sub-window (a wrist window's 33 frames) and the LSTM state per run."""
 
 
 @dataclass(frozen=True)
@@ -77,7 +79,7 @@ def example_inputs(entry: dict, seed: int = 0) -> dict[str, np.ndarray]:
     for spec in entry["inputs"]:
         shape = example_shape(spec, 1)
         dtype = np.dtype(spec.get("dtype", "float32"))
-        if entry.get("arch") in NETS_ARCHS:
+        if entry.get("arch") in NETS_ARCHS or (entry.get("arch") == STEP_ARCH and spec["name"] == "imu"):
             x = rng.normal(0.0, 3.0, size=shape) + np.array([0.0, 0.0, 9.80665])[: shape[-1]]
         else:
             x = rng.normal(0.0, 0.3, size=shape)

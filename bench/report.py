@@ -93,6 +93,19 @@ def _loop_figure(lp: dict) -> str:
     return s
 
 
+WHAT_A_RUN_IS = {
+    "convlstm": "convlstm: the whole capture (S = 6 sub-windows) in one run (the one-shot model: the comparison)",
+    "convlstm_step": "convlstm_step: per decision: one step, what the box runs when a sub-window of a capture "
+                     "completes (the sub-window and the LSTM state in, the decision and the next state out)",
+}
+"""What one timed call of a model is, where that needs saying (a row's ``model``)."""
+
+
+def _what_a_run_is(report: dict) -> list[str]:
+    shown = dict.fromkeys(r["model"] for r in report["results"])
+    return [WHAT_A_RUN_IS[m] for m in shown if m in WHAT_A_RUN_IS] if "convlstm_step" in shown else []
+
+
 def format_table(report: dict) -> str:
     """The plain-text table printed by ``python -m bench``."""
     m = report["machine"]
@@ -107,6 +120,7 @@ def format_table(report: dict) -> str:
                      f"{_kib(r['file_bytes']):>9} {r['peak_rss_mb']:>12.1f}")
     for s in report.get("skipped", []):
         lines.append(f"{s['model']:<10} {s['precision']:<9} {s['runtime']:<12} {s['threads']:>7} skipped: {s['note']}")
+    lines += _what_a_run_is(report)
     if report.get("loops"):
         lines.append("loops:")
         lines += [f"  {lp['name']:<17} {_loop_figure(lp)}" for lp in report["loops"]]
@@ -134,6 +148,7 @@ def format_markdown(report: dict) -> str:
     for s in report.get("skipped", []):
         lines.append(f"| {s['model']} | {s['precision']} | {s['runtime']} | {s['threads']} | "
                      f"skipped: {s['note']} | | | | |")
+    lines += [""] + _what_a_run_is(report) if _what_a_run_is(report) else []
     if report.get("loops"):
         lines += ["", "| loop | cost |", "|---|---|"]
         lines += [f"| {lp['name']} | {_loop_figure(lp)} |" for lp in report["loops"]]

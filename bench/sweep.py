@@ -74,11 +74,15 @@ def _entries(assets: Path, only: tuple[str, ...]) -> list[dict]:
     from edge_runtime.core.manifest import load_manifest, verify_all
 
     verify_all(assets)  # a tampered or missing model is bad input, reported before anything runs
-    entries = load_manifest(assets)["models"]
+    every = load_manifest(assets)["models"]
+    entries = every
     if only:
-        entries = [e for e in entries if e["arch"] in only or e["name"] in only]
+        entries = [e for e in every if e["arch"] in only or e["name"] in only]
         if not entries:
             raise ValueError(f"--models {','.join(only)}: no manifest entry has that arch or name")
+        # an architecture's step model (the ConvLSTM's) is what the box runs per decision: measured beside it
+        named = {e["step_model"] for e in entries if "step_model" in e and e["arch"] in only}
+        entries += [e for e in every if e["name"] in named and e not in entries]
     return entries
 
 

@@ -199,7 +199,7 @@ def _load_classifier(cfg) -> Engine:
     from edge_runtime.wearable.classifier import Engine
 
     engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads,
-                                  public_key_file=cfg.model.manifest_public_key or None)
+                                  public_key_file=cfg.model.manifest_public_key or None, stream=cfg.model.stream)
     unknown = sorted(set(cfg.alerts.never_alert) - set(engine.classes))
     if unknown:
         raise ConfigError(f"[alerts] never_alert: {unknown} are not classes of {engine.name} ({', '.join(engine.classes)})")

@@ -130,6 +130,17 @@ def test_profiles_and_markdown(quick):
     table = [line for line in md.splitlines() if line.startswith("| ") and "µs" not in line and "cost" not in line]
     assert len(table) == len(report["results"]) + len(report["skipped"]) + len(report["loops"])
     assert md == format_markdown(report)
+    # the step model's rows say they are one step per decision, the one-shot's the whole capture in one run
+    assert {"convlstm", "convlstm_step"} <= {r["model"] for r in report["results"]}
+    assert "convlstm_step: per decision: one step" in md and "convlstm: the whole capture" in md
+
+
+def test_an_arch_brings_its_step_model_and_an_entry_name_only_itself():
+    from bench.sweep import _entries
+
+    names = [e["name"] for e in _entries(ASSETS_DIR, ("convlstm",))]
+    assert names == ["convlstm-fp32", "convlstm-int8", "convlstm-step-fp32", "convlstm-step-int8"]
+    assert [e["name"] for e in _entries(ASSETS_DIR, ("convlstm-int8",))] == ["convlstm-int8"]
 
 
 @pytest.mark.slow
