@@ -213,12 +213,17 @@ def step_inputs(captures: np.ndarray, top: int) -> list[np.ndarray]:
     :func:`preprocess_prefixes` of the first ``needed_frames(s)`` frames. A sub-window is fixed once it is
     there (the box has run its step), so sub-window 1's first :data:`MEAN_EDGE_FRAMES` frames carry the
     capture's mean as known after ``needed_frames(1)`` frames, not the whole capture's."""
-    return [a[:, s] for s, a in enumerate(preprocess_prefix_steps(captures, range(1, top + 1)))]
+    x = np.asarray(captures, dtype=np.float32)
+    if x.ndim != 3 or x.shape[2] != N_CHANNELS or not needed_frames(top) <= x.shape[1] <= CAPTURE_FRAMES:
+        raise ValueError(f"captures for {top} sub-windows need {needed_frames(top)}..{CAPTURE_FRAMES} frames "
+                         f"of (n, 3), got {x.shape[1:]}")
+    return _prefix_inputs(x, tuple((s, needed_frames(s)) for s in range(1, top + 1)), last_only=True)
 
 
-def _prefix_inputs(x: np.ndarray, prefixes: tuple[tuple[int, int], ...]) -> list[np.ndarray]:
+def _prefix_inputs(x: np.ndarray, prefixes: tuple[tuple[int, int], ...], last_only: bool = False) -> list[np.ndarray]:
     """(N, n, 3) float32 -> for each (steps, frames) of ``prefixes``: the first ``steps`` sub-windows
-    (N, steps, 33, 3) of the captures of which only the first ``frames`` frames have arrived."""
+    (N, steps, 33, 3) of the captures of which only the first ``frames`` frames have arrived; with
+    ``last_only``, only the last of them (N, 33, 3), its values bit for bit."""
     count = len(x)
     first, block, _ = _pair_block()
     top = max(s for s, _ in prefixes)
@@ -246,6 +251,10 @@ def _prefix_inputs(x: np.ndarray, prefixes: tuple[tuple[int, int], ...]) -> list
         else:
             xs = x[:, :n].astype(np.float64)
             mean = (_ones(n) @ xs + (CAPTURE_FRAMES - n) * xs[:, -1]) / CAPTURE_FRAMES
+        if last_only:  # the same sums for the rows of sub-window `steps` alone
+            rows = slice((steps - 1) * SUBSEQ_FRAMES, steps * SUBSEQ_FRAMES)
+            out.append((product[:, rows] + edge[rows] * mean[:, None, :]).astype(np.float32))
+            continue
         y = product[:, :len(edge)] + edge * mean[:, None, :]
         out.append(y.astype(np.float32).reshape(count, steps, SUBSEQ_FRAMES, N_CHANNELS))
     return out
@@ -557,7 +566,7 @@ class Engine:
         self._check_steps(steps)
         x = np.asarray(data, dtype=np.float32)
         for s in range(stream.done + 1, steps + 1):
-            sub = preprocess_prefixes(x[None, :needed_frames(s)], s)[:, s - 1]
+            sub = _prefix_inputs(x[None, :needed_frames(s)], ((s, needed_frames(s)),), last_only=True)[0]
             if not np.isfinite(sub).all():
                 raise ValueError(f"{self.name}: input holds NaN or infinite values")
             p, stream.h, stream.c = self.step_model.step(sub, stream.h, stream.c)
@@ -601,28 +610,28 @@ class Engine:
 
     def _step_groups(self, groups: Sequence[tuple[np.ndarray, Sequence[int]]]) -> list[dict[int, np.ndarray]]:
         """:meth:`classify_capture_groups` by the step model: the state of each group's captures carried
-        from sub-window to sub-window, the groups that reach sub-window s run together in one step."""
-        tops = [max(steps) for _, steps in groups]
+        from sub-window to sub-window, the groups that reach sub-window s run together in one step. The
+        groups go in order of their last step, so those that reach s are the first rows of the state."""
         for _, steps in groups:
             for s in steps:
                 self._check_steps(s)
-        subs = [step_inputs(captures, top) for (captures, _), top in zip(groups, tops)]
-        sizes = [len(captures) for captures, _ in groups]
-        h, c = self.step_model.zero_state(sum(sizes))
-        starts = np.cumsum([0] + sizes)
+        order = sorted(range(len(groups)), key=lambda k: -max(groups[k][1]))
+        tops = [max(groups[k][1]) for k in order]
+        subs = [step_inputs(groups[k][0], top) for k, top in zip(order, tops)]
+        h, c = self.step_model.zero_state(sum(len(groups[k][0]) for k in order))
         out: list[dict[int, np.ndarray]] = [{} for _ in groups]
-        for s in range(1, max(tops) + 1):
-            asking = [k for k, top in enumerate(tops) if top >= s]
-            rows = np.concatenate([np.arange(starts[k], starts[k + 1]) for k in asking])
-            x = subs[asking[0]][s - 1] if len(asking) == 1 else np.concatenate([subs[k][s - 1] for k in asking])
+        for s in range(1, tops[0] + 1):
+            reach = sum(top >= s for top in tops)
+            x = subs[0][s - 1] if reach == 1 else np.concatenate([subs[j][s - 1] for j in range(reach)])
             if not np.isfinite(x).all():
                 raise ValueError(f"{self.name}: input holds NaN or infinite values")
-            probs, h[rows], c[rows] = self.step_model.step(np.ascontiguousarray(x), h[rows], c[rows])
+            probs, h, c = self.step_model.step(x, h[:len(x)], c[:len(x)])
             start = 0
-            for k in asking:
+            for j in range(reach):
+                k, count = order[j], len(subs[j][s - 1])
                 if s in groups[k][1]:
-                    out[k][s] = calibrate(probs[start:start + sizes[k]], self._temperature(s))
-                start += sizes[k]
+                    out[k][s] = calibrate(probs[start:start + count], self._temperature(s))
+                start += count
         return out
 
     def _check_steps(self, steps: int) -> None:
