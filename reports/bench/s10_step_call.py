@@ -1,7 +1,6 @@
 """The step model as the box calls it (StepModel.step: the session's own run, no Python feed check) beside
 session.run of the same graph and of the one-shot graph; pinned to CPU 0, a busy loop on CPU 1."""
 import os, sys, json
-sys.path.insert(0, "/work/s10-stream")
 import numpy as np
 from bench.machine import LoadGenerator, pin_cpus
 from bench.timing import interleaved_calls, summarize

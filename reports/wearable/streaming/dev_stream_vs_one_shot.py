@@ -1,7 +1,6 @@
 """Development drives (drive-eval seeds 1 and 5): streaming steps vs the one-shot model on prefixes (session 9's
 path), same int8 precision, same policy: event scores of each and how many decisions change."""
 import json, sys, time
-sys.path.insert(0, "/work/s10-stream")
 from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR
 from edge_runtime.wearable import alerts, classifier, detector, loop, sources  # noqa

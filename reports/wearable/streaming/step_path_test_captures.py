@@ -3,7 +3,6 @@ the step model), on the shipped model's test captures (/work/s9-runs/assets-seed
 cohort): int8 vs fp32 macro-F1 and class agreement after every S; and the stream vs the one-shot model on the
 same prefixes (fp32: the difference is sub-window 1's mean-padded frames, fixed when it arrived)."""
 import json, os, sys
-sys.path.insert(0, "/work/s10-stream")
 import numpy as np
 from edge_runtime.core.manifest import ASSETS_DIR
 from edge_runtime.wearable.classifier import Engine, needed_frames
