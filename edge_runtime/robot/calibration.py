@@ -18,16 +18,16 @@ Two fits, both giving ``p_robot = A @ p_cam + b``:
   a scale per axis and a rotation, exact at the three markers. With noisy inputs the
   three axes are not orthogonal, so the map shears space, and it rests on four points
   only (three heads and one ankle).
-* ``"rigid"`` (default) -- a least-squares similarity (rotation by SVD, one scale,
+* ``"rigid"`` -- a least-squares similarity (rotation by SVD, one scale,
   translation; Umeyama 1991) over all six correspondences, every head and every ankle
   at every marker. It cannot shear, uses twice the data, and its residuals measure
   how well the recording fits. tests/robot/test_calibration.py compares the two on simulated
-  cameras with keypoint noise; the rigid fit's head error is the lower, hence the
-  default. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
+  cameras with keypoint noise; the rigid fit's head error is the lower of the two. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
   transform).
-* ``"pnp"`` -- the camera pose from the directions of the six points only
+* ``"pnp"`` (default) -- the camera pose from the directions of the six points only
   (``cv2.solvePnP`` with identity intrinsics on ``(x/z, y/z)``, started from the rigid
-  fit): ignores the lifter's depth. Scale 1, so use it with the ground anchoring.
+  fit): ignores the lifter's depth, which at a real detector's noise turns the rigid fit by
+  4-5 degrees (reports/robot/head_error.md). Scale 1, so use it with the ground anchoring.
 
 Ground anchoring (``ground_anchor``, :func:`anchor_factor`, :meth:`Calibration.to_robot`):
 the lifter's weak part is the root's depth (from apparent body size). Once the floor is
@@ -89,9 +89,9 @@ class CalibrationParams:
     ankle_height_m: float = config.setting(0.07, config.within(0, 0.2))
     """Height of the ankle joints above the floor (m; 0.039 of body height). The
     dissertation puts the ankle midpoint on the marker (0); this lifts it to the joint."""
-    method: str = "rigid"
-    """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
-    "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1)."""
+    method: str = "pnp"
+    """"pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1; the
+    default), "rigid" (SVD similarity over six points) or "eq2" (the dissertation's)."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)
