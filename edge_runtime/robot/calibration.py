@@ -33,7 +33,9 @@ Ground anchoring (``ground_anchor``, :func:`anchor_factor`, :meth:`Calibration.t
 the lifter's weak part is the root's depth (from apparent body size). Once the floor is
 known, each lifted skeleton is scaled about the camera centre (every 2D projection is
 kept) so that its lower ankle rests ``ankle_height_m`` above the floor (both ankles' rays when
-both feet are down); guarded against flat rays and low cameras, the factor clamped. In a stream
+both feet are down); that factor is fused with the lifter's own depth, each weighted by its error, and
+the fused one is taken only where it puts the person nearer the arm; guarded against flat rays and low
+cameras, the factor clamped. In a stream
 (:meth:`Calibration.to_robot`, :class:`FloorAnchor`) each person's factor is the median of his
 recent plausible ones: one ankle ray's floor crossing is noisy, his distance is not.
 reports/robot/head_error.md measures it.

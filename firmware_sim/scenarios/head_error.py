@@ -17,7 +17,8 @@ from the cell, 1-3 m high, canonical intrinsics, 30 Hz):
    robot frame twice: ``off`` -- ``Calibration.apply`` of the lifted head; ``on`` --
    ``Calibration.to_robot`` as the robot loop calls it (every valid frame in order, warm-up
    frames too, with the observed-joint mask): the skeleton scaled about the camera centre so
-   its ankles rest on the floor, each person's factor filtered over his recent frames
+   its ankles rest on the floor (fused with the lifter's depth where that is nearer the arm;
+   ``calibration.anchor_factor``), each person's factor filtered over his recent frames
    (``FloorAnchor``, causal), guards as in ``CalibrationParams``. Warm-up frames are not scored.
 
 Errors (m) against the true head: 3-D, ground-projected (x-z: what the hazard zones use)
