@@ -18,22 +18,24 @@ Two fits, both giving ``p_robot = A @ p_cam + b``:
   a scale per axis and a rotation, exact at the three markers. With noisy inputs the
   three axes are not orthogonal, so the map shears space, and it rests on four points
   only (three heads and one ankle).
-* ``"rigid"`` (default) -- a least-squares similarity (rotation by SVD, one scale,
+* ``"rigid"`` -- a least-squares similarity (rotation by SVD, one scale,
   translation; Umeyama 1991) over all six correspondences, every head and every ankle
   at every marker. It cannot shear, uses twice the data, and its residuals measure
   how well the recording fits. tests/robot/test_calibration.py compares the two on simulated
-  cameras with keypoint noise; the rigid fit's head error is the lower, hence the
-  default. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
+  cameras with keypoint noise; the rigid fit's head error is the lower of the two. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
   transform).
-* ``"pnp"`` -- the camera pose from the directions of the six points only
+* ``"pnp"`` (default) -- the camera pose from the directions of the six points only
   (``cv2.solvePnP`` with identity intrinsics on ``(x/z, y/z)``, started from the rigid
-  fit): ignores the lifter's depth. Scale 1, so use it with the ground anchoring.
+  fit): ignores the lifter's depth, which at a real detector's noise turns the rigid fit by
+  4-5 degrees (reports/robot/head_error.md). Scale 1, so use it with the ground anchoring.
 
 Ground anchoring (``ground_anchor``, :func:`anchor_factor`, :meth:`Calibration.to_robot`):
 the lifter's weak part is the root's depth (from apparent body size). Once the floor is
 known, each lifted skeleton is scaled about the camera centre (every 2D projection is
 kept) so that its lower ankle rests ``ankle_height_m`` above the floor (both ankles' rays when
-both feet are down); guarded against flat rays and low cameras, the factor clamped. In a stream
+both feet are down); that factor is fused with the lifter's own depth, each weighted by its error, and
+the fused one is taken only where it puts the person nearer the arm; guarded against flat rays and low
+cameras, the factor clamped. In a stream
 (:meth:`Calibration.to_robot`, :class:`FloorAnchor`) each person's factor is the median of his
 recent plausible ones: one ankle ray's floor crossing is noisy, his distance is not.
 reports/robot/head_error.md measures it.
@@ -89,9 +91,9 @@ class CalibrationParams:
     ankle_height_m: float = config.setting(0.07, config.within(0, 0.2))
     """Height of the ankle joints above the floor (m; 0.039 of body height). The
     dissertation puts the ankle midpoint on the marker (0); this lifts it to the joint."""
-    method: str = "rigid"
-    """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
-    "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1)."""
+    method: str = "pnp"
+    """"pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1; the
+    default), "rigid" (SVD similarity over six points) or "eq2" (the dissertation's)."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)
@@ -172,7 +174,11 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     head stays on its own ray. ``observed`` (17,) bool, when given, restricts the choice to the
     ankles seen in this frame (a held ankle's ray is an old one); with none seen, both count.
     When both ankles lie within :data:`ANCHOR_LEVEL_FEET_M` of each other in height (both feet on
-    the floor), ``k`` is the geometric mean of the two rays' factors.
+    the floor), the floor's factor is the geometric mean of the two rays' factors. That factor is then
+    also fused with the lifter's own depth (factor 1), each weighted by its error
+    (:func:`_fused_with_lifter`: a shallow ray of a low, far camera weighs little), and of the two, floor
+    alone or fused, ``k`` is the one that puts the person nearer the arm (:func:`_nearer_to_arm`): the
+    hazard monitor relies on people not being placed farther from the arm than they are.
 
     ``k`` is 1 with a reason when the anchoring cannot be trusted: ``no_ankle`` (no finite
     ankle), ``camera_low`` (camera centre less than ``anchor_min_camera_height_m`` above the
@@ -199,8 +205,31 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
         return 1.0, ANCHOR_CAMERA_LOW
     if (-feet[:, 1] < np.sin(np.radians(params.anchor_min_ray_deg)) * np.linalg.norm(feet, axis=1)).any():
         return 1.0, ANCHOR_RAY_FLAT
-    k = float(np.exp(np.mean(np.log(drop_m / -feet[:, 1]))))
+    log_floor = float(np.mean(np.log(drop_m / -feet[:, 1])))
+    k = _nearer_to_arm(j[HIP] @ A.T, b, np.exp(log_floor), np.exp(_fused_with_lifter(log_floor, feet, drop_m)))
     return float(np.clip(k, params.anchor_min_scale, params.anchor_max_scale)), None
+
+
+def _fused_with_lifter(log_floor: float, feet: np.ndarray, drop_m: float) -> float:
+    """The floor rays' log factor fused with the lifter's own depth (log factor 0), each weighted by
+    its error: a foot ray's floor crossing moves by ``cos(ray angle) / drop`` of the keypoint's error
+    on the body (:data:`ANCHOR_ANKLE_SD_M`), plus the foot's height above the floor
+    (:data:`ANCHOR_FOOT_SD_M`) over the drop, so a shallow ray of a low camera weighs little and the
+    lifter's depth (:data:`ANCHOR_LIFTER_DEPTH_SD`) carries more there."""
+    cos = np.hypot(feet[:, 0], feet[:, 2]) / np.linalg.norm(feet, axis=1)
+    var_floor = float(np.mean((np.hypot(ANCHOR_ANKLE_SD_M * cos, ANCHOR_FOOT_SD_M) / drop_m) ** 2)) / len(feet)
+    # written so that an infinite lifter error (no weight: the floor rays alone) is exact
+    return log_floor * (1.0 - var_floor / (ANCHOR_LIFTER_DEPTH_SD ** 2 + var_floor))
+
+
+def _nearer_to_arm(pelvis_ray, b, *factors: float) -> float:
+    """Of several anchoring factors, the one that puts the pelvis (``b + k * pelvis_ray``, robot frame)
+    nearest the arm's base axis (the robot frame's y axis) on the ground: where two depth estimates
+    disagree, the hazard monitor gets the one that places the person nearer the arm, never the farther.
+    The first factor when the pelvis is not finite."""
+    if not np.isfinite(pelvis_ray).all():
+        return factors[0]
+    return min(factors, key=lambda k: float(np.hypot(*(b + k * pelvis_ray)[[0, 2]])))
 
 
 ANCHOR_WINDOW_FRAMES = 15
@@ -211,6 +240,19 @@ A module constant, not a [calibration] key: [calibration] is in the validated sa
 ANCHOR_LEVEL_FEET_M = 0.1
 """Both observed ankles within this height of each other (robot frame, the lifter's metres): both
 feet are on the floor and both rays count in :func:`anchor_factor` (geometric mean of the two)."""
+ANCHOR_ANKLE_SD_M = 0.10
+"""A real 2D detector's ankle keypoint error on the body (m, 1 sd): COCO's ankle sigma (0.089) at a
+standing person's scale (about 1.1 m, the square root of his box's area). Weighs the floor rays
+against the lifter's depth (:func:`anchor_factor`); not tuned on the simulator."""
+ANCHOR_FOOT_SD_M = 0.03
+"""How far the lower ankle joint is from ``ankle_height_m`` above the floor (m, 1 sd): ankle heights
+differ between people and a foot rolls and lifts mid-stride."""
+ANCHOR_LIFTER_DEPTH_SD = 0.12
+"""The lifter's own depth (from apparent body size): its relative error (1 sd, natural log), the weight
+:func:`anchor_factor` gives it against the floor rays. The simulator's lifter is within 0.07 (dev seed 4,
+perfect calibration, real-detector noise); real people's heights (1.45-2.0 m) and motions vary more,
+so a larger error is assumed (0.08-0.2 measured on development seeds 4, 13, 17;
+reports/robot/head_error.md, Session 10)."""
 ANCHOR_GATE_M = 0.5
 """:class:`FloorAnchor` matches a skeleton to the person whose last anchored pelvis is nearest when
 this skeleton is anchored with that person's factor, within this distance (m); farther, he is a

@@ -17,12 +17,14 @@ from the cell, 1-3 m high, canonical intrinsics, 30 Hz):
    robot frame twice: ``off`` -- ``Calibration.apply`` of the lifted head; ``on`` --
    ``Calibration.to_robot`` as the robot loop calls it (every valid frame in order, warm-up
    frames too, with the observed-joint mask): the skeleton scaled about the camera centre so
-   its ankles rest on the floor, each person's factor filtered over his recent frames
+   its ankles rest on the floor (fused with the lifter's depth where that is nearer the arm;
+   ``calibration.anchor_factor``), each person's factor filtered over his recent frames
    (``FloorAnchor``, causal), guards as in ``CalibrationParams``. Warm-up frames are not scored.
 
 Errors (m) against the true head: 3-D, ground-projected (x-z: what the hazard zones use)
 and height (y), median and p95, overall and binned by the true ground distance from the
-camera to the worker's pelvis (3-4, 4-5, ..., 7-8 m). Placements whose calibration is
+camera to the worker's pelvis (3-4, 4-5, ..., 7-8 m); and ``farther_from_arm``: how often and by
+how much the head is placed farther from the arm's base axis than it is (the hazard monitor's side). Placements whose calibration is
 refused are counted and skipped.
 
 Where the error comes from: ``calibration_pose_error`` (the fitted camera pose against the
@@ -224,6 +226,9 @@ def run_placement(lifter, rng: np.random.Generator, methods=METHODS,
         else:
             head = cal.apply(joints[:, HEAD])
         res[m] = _error_rows(head - truth)
+        # signed: how much farther from the arm's base axis (the robot frame's y axis) the head is placed
+        # than it is, on the ground (> 0: farther, what the hazard monitor must not get)
+        res[f"{m}_farther"] = np.hypot(head[:, 0], head[:, 2]) - np.hypot(truth[:, 0], truth[:, 2])
     return res
 
 
@@ -266,6 +271,13 @@ def summarise(results: list[dict], methods, args) -> dict:
         err = np.concatenate([r[m] for r in done]) if done else np.zeros((0, 3))
         bins = {f"{lo}-{lo + 1}m": _stats(err[(dist >= lo) & (dist < lo + 1)]) for lo in BINS_M[:-1]}
         out["methods"][m] = {"all": _stats(err), "by_distance": bins}
+        if done:
+            far = np.concatenate([r[f"{m}_farther"] for r in done])
+            out["methods"][m]["farther_from_arm"] = {
+                "what": "the head's ground distance from the arm's base axis, placed minus true (m; > 0: placed "
+                        "farther than it is)",
+                **{f"share_over_{t:g}_m": round(float(np.mean(far > t)), 4) for t in (0.0, 0.1, 0.3)},
+                "p95_m": _pct(far, 95), "p99_m": _pct(far, 99)}
     if done:
         err = np.concatenate([r["true_depth"] for r in done])
         pose = {k: np.array([r["calibration_error"][k] for r in done]) for k in ("rotation_deg", "camera_position_m")}
@@ -363,6 +375,10 @@ def cmd(args) -> int:
             print(f"{m:>3}: 3-D median {a['error_3d_m']['median']:.3f} p95 {a['error_3d_m']['p95']:.3f} m; "
                   f"ground median {a['error_ground_m']['median']:.3f} p95 {a['error_ground_m']['p95']:.3f} m "
                   f"({a['n']} frames)")
+            f = s["farther_from_arm"]
+            print(f"     placed farther from the arm than it is: {f['share_over_0_m']:.3f} of frames, by > 0.1 m "
+                  f"{f['share_over_0.1_m']:.3f}, by > 0.3 m {f['share_over_0.3_m']:.4f}; p95 {f['p95_m']:.3f} "
+                  f"p99 {f['p99_m']:.3f} m")
     if "calibration_pose_error" in summary:
         pe, td = summary["calibration_pose_error"], summary["true_depth"]["all"]
         print(f"calibrations: {len(summary['per_placement']) - len(summary['calibrations_refused'])} made, "

@@ -7,6 +7,7 @@ import pytest
 from support.robot import anchored_worker, true_calibration
 
 from edge_runtime.core.skeleton import HEAD, L_ANKLE, R_ANKLE
+from edge_runtime.robot import calibration
 from edge_runtime.robot.calibration import (
     ANCHOR_CAMERA_LOW,
     ANCHOR_NO_ANKLE,
@@ -27,6 +28,13 @@ from firmware_sim.people import human
 MARKERS = ((0.0, 1.0), (1.0, 1.0), (0.0, 2.0))
 BODY = human.Body.from_height(1.75)
 NOISE_M = np.array([0.03, 0.03, 0.08])  # camera frame: a monocular lifter is worst in depth
+
+
+@pytest.fixture
+def floor_rays_only(monkeypatch):
+    """The floor rays' geometry alone: the lifter's own depth given no weight in the anchoring (an
+    infinite error), so that a perfect ankle ray gives the exact factor."""
+    monkeypatch.setattr(calibration, "ANCHOR_LIFTER_DEPTH_SD", np.inf)
 
 
 def standing(xz, heading=0.0):
@@ -95,7 +103,7 @@ def test_labelled_frames_and_a_lifter_scale_bias():
     rng = np.random.default_rng(3)
     cam = camera((-2.0, 2.2, 6.5))
     t, cam_j, label = recording(cam, rng, scale=1.15)  # the lifter's depths are 15 % too large
-    cal = from_recording(t, cam_j, CalibrationParams(), marker=label)
+    cal = from_recording(t, cam_j, CalibrationParams(method="rigid"), marker=label)
     assert cal.scale == pytest.approx(1 / 1.15, rel=0.03)
     errs = head_errors(cal, cam, np.random.default_rng(4), scale=1.15)
     assert np.median(errs) < 0.12
@@ -112,7 +120,7 @@ def test_save_and_load_keep_everything(tmp_path):
     path = tmp_path / "cal.json"
     cal.save(path)
     data = json.loads(path.read_text())
-    assert data["version"] == 1 and data["method"] == "rigid" and len(data["inputs"]["head_cam_m"]) == 3
+    assert data["version"] == 1 and data["method"] == "pnp" and len(data["inputs"]["head_cam_m"]) == 3
     assert data["worker_height_m"] == pytest.approx(cal.worker_height_m)
     assert set(data["residuals_m"]) == {"head", "ankle"} and data["inputs"]["frames_per_marker"] == [60, 60, 60]
     again = Calibration.load(path)
@@ -183,8 +191,8 @@ def test_degenerate_inputs_are_refused():
     with pytest.raises(CalibrationError, match="did not move from marker 1 to marker 2"):
         fit(heads[[0, 0, 2]], ankles[[0, 0, 2]])
     line = np.stack([heads[0], heads[1], 2 * heads[1] - heads[0]])
-    with pytest.raises(CalibrationError, match="collinear"):
-        fit(line, ankles)
+    with pytest.raises(CalibrationError, match="collinear"):  # the lifted positions' fits (pnp uses rays only)
+        fit(line, ankles, CalibrationParams(method="rigid"))
     bad = heads.copy()
     bad[1, 0] = np.nan
     with pytest.raises(CalibrationError, match="non-finite"):
@@ -241,6 +249,7 @@ def project(p):
     return p[..., :2] / p[..., 2:3]
 
 
+@pytest.mark.usefixtures("floor_rays_only")
 @pytest.mark.parametrize("scale", [0.8, 0.93, 1.12, 1.3])
 def test_recovers_a_known_depth_and_keeps_the_2d_projections(scale):
     cam = Camera.look_at((2.0, 1.2, 6.5), (0.0, -0.2, 1.0))
@@ -258,6 +267,7 @@ def test_recovers_a_known_depth_and_keeps_the_2d_projections(scale):
     assert off > 0.2 * abs(scale - 1) * np.linalg.norm(cam.to_camera(truth[HEAD]))
 
 
+@pytest.mark.usefixtures("floor_rays_only")
 def test_anchors_on_an_observed_ankle_not_a_held_one():
     cam = Camera.look_at((0.0, 1.5, 6.0), (0.0, -0.2, 1.0))
     cal = true_calibration(cam)
@@ -272,6 +282,7 @@ def test_anchors_on_an_observed_ankle_not_a_held_one():
     assert np.abs(unmasked[R_ANKLE] - truth[R_ANKLE]).max() > 0.05  # the held one would move it
 
 
+@pytest.mark.usefixtures("floor_rays_only")
 def test_uses_the_lower_ankle_of_a_stride():
     cam = Camera.look_at((0.0, 1.5, 6.0), (0.0, -0.2, 1.0))
     cal = true_calibration(cam)
@@ -297,6 +308,52 @@ def test_refuses_a_flat_ray_and_a_low_camera_and_clamps_the_factor():
     cal = true_calibration(near)
     k, reason = anchor_factor(near.to_camera(truth) * 2.0, cal.A, cal.b, cal.params)
     assert reason is None and k == cal.params.anchor_min_scale
+
+
+def _factor_seen_from(eye_m, truth, lifter_scale):
+    """anchor_factor of ``truth`` seen by a camera at ``eye_m`` aimed at the cell, lifted
+    ``lifter_scale`` times too far."""
+    cam = Camera.look_at(eye_m, (0.0, -0.4, 0.0))
+    cal = true_calibration(cam)
+    return anchor_factor(cam.to_camera(truth) * lifter_scale, cal.A, cal.b, cal.params)
+
+
+def test_the_lifters_depth_counts_only_toward_the_arm():
+    """A worker between the camera and the arm: a lifter that puts him too far from the camera (nearer
+    the arm) pulls the anchoring toward its depth, more from a low camera, whose floor rays are
+    shallow; one that puts him too near the camera (farther from the arm) is not listened to: the floor
+    rays' exact factor stands."""
+    truth = anchored_worker((0.0, 4.0))
+    high, reason = _factor_seen_from((0.0, 2.1, 8.0), truth, 1.2)        # 3 m above the floor
+    low, _ = _factor_seen_from((0.0, 0.1, 8.0), truth, 1.2)              # 1 m above the floor
+    assert reason is None and 1 / 1.2 < high < low < 1.0
+    assert _factor_seen_from((0.0, 2.1, 8.0), truth, 0.8) == (pytest.approx(1 / 0.8, rel=1e-9), None)
+
+
+def test_the_anchoring_never_puts_anyone_farther_from_the_arm_than_the_floor_rays_do(monkeypatch):
+    rng = np.random.default_rng(7)
+    cases = []
+    for _ in range(60):
+        az = rng.uniform(-2.0, 2.0)
+        cam = Camera.look_at((6.0 * np.sin(az), rng.uniform(0.1, 2.1), 6.0 * np.cos(az)), (0.0, -0.4, 0.5))
+        truth = anchored_worker(rng.uniform([-2.0, 0.5], [2.0, 3.0]), rng.uniform(-np.pi, np.pi))
+        cases.append((true_calibration(cam), cam.to_camera(truth) * rng.uniform(0.8, 1.25)))
+
+    def pelvis_from_arm_m():
+        out = []
+        for cal, lifted in cases:
+            k, reason = anchor_factor(lifted, cal.A, cal.b, cal.params)
+            assert reason is None
+            out.append((k, np.hypot(*cal.apply(k * lifted[0])[[0, 2]])))
+        return np.array(out)
+
+    fused = pelvis_from_arm_m()
+    monkeypatch.setattr(calibration, "ANCHOR_LIFTER_DEPTH_SD", np.inf)
+    floor = pelvis_from_arm_m()
+    assert (fused[:, 1] <= floor[:, 1] + 1e-9).all()
+    # between the floor rays' factor and the lifter's own depth (1), and not always the floor's
+    assert (np.abs(np.log(fused[:, 0])) <= np.abs(np.log(floor[:, 0])) + 1e-9).all()
+    assert (fused[:, 1] < floor[:, 1] - 0.01).any()
 
 
 def test_switched_off_it_is_apply():
@@ -387,6 +444,7 @@ def test_a_noisy_ankle_stream_is_anchored_steadier_than_each_frame_alone():
     np.testing.assert_allclose(project(back), project(frames_cam), atol=1e-9)
 
 
+@pytest.mark.usefixtures("floor_rays_only")
 def test_one_wild_ankle_frame_does_not_move_the_anchoring():
     truth, frames_cam = noisy_ankle_stream(np.random.default_rng(4), frames=30, ankle_sd_m=0.002)
     frames_cam[20, [L_ANKLE, R_ANKLE], 1] += 0.4                 # both ankle keypoints far below the feet
@@ -399,6 +457,7 @@ def test_one_wild_ankle_frame_does_not_move_the_anchoring():
     np.testing.assert_allclose(cal.to_robot(frames_cam[29]), streamed[29], atol=0)
 
 
+@pytest.mark.usefixtures("floor_rays_only")
 def test_each_person_keeps_his_own_anchoring_whatever_the_order():
     near, far = anchored_worker((0.5, 2.5)), anchored_worker((-1.0, 0.0))
     lifted = np.stack([STREAM_CAMERA.to_camera(near) * 1.2, STREAM_CAMERA.to_camera(far) * 0.85])
@@ -411,6 +470,7 @@ def test_each_person_keeps_his_own_anchoring_whatever_the_order():
     assert len(cal._anchor.tracks) == 2
 
 
+@pytest.mark.usefixtures("floor_rays_only")
 def test_a_trackers_ids_key_the_anchoring_when_given():
     near, far = anchored_worker((0.5, 2.5)), anchored_worker((-1.0, 0.0))
     lifted = np.stack([STREAM_CAMERA.to_camera(near) * 1.2, STREAM_CAMERA.to_camera(far) * 0.85])

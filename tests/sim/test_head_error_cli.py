@@ -30,6 +30,9 @@ def test_a_tiny_run_writes_the_figures(tmp_path):
         assert a["n"] == data["frames"] and 0 < a["error_ground_m"]["median"] <= a["error_3d_m"]["median"]
         assert a["error_3d_m"]["median"] <= a["error_3d_m"]["p95"]
         assert sum(b["n"] for b in m["by_distance"].values()) <= a["n"]
+        far = m["farther_from_arm"]  # the signed side: how often the head is placed farther from the arm
+        assert 0 <= far["share_over_0.3_m"] <= far["share_over_0.1_m"] <= far["share_over_0_m"] <= 1
+        assert far["p95_m"] <= far["p99_m"]
     assert 0 <= data["anchoring"]["applied_fraction"] <= 1
     assert data["true_depth"]["all"]["n"] == data["frames"]
     assert data["calibration_pose_error"]["rotation_deg"]["median"] > 0  # a fit from noisy keypoints is not exact
