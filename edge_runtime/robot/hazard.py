@@ -111,7 +111,7 @@ import numpy as np
 from edge_runtime import config
 from edge_runtime.core.skeleton import HEAD as HEAD_JOINT
 from edge_runtime.core.skeleton import HIP as HIP_JOINT
-from edge_runtime.core.skeleton import L_ANKLE, L_HIP, PARENTS, R_ANKLE, R_HIP
+from edge_runtime.core.skeleton import L_ANKLE, L_HIP, L_SHOULDER, PARENTS, R_ANKLE, R_HIP, R_SHOULDER, SPINE, THORAX
 
 GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
 
@@ -904,13 +904,101 @@ def effector_capsule(effector_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def body_spheres(person_m) -> tuple[np.ndarray, np.ndarray]:
     """Centres (N, 3) and radii (N,) covering a person: the 17 joints and the limb midpoints;
-    a lone head position (3,) is one head-sized sphere."""
+    a lone head position (3,) is one head-sized sphere. A skeleton with joints not known (NaN:
+    the lifter's ``missing`` ones) is covered by :func:`_bounded_spheres` instead."""
     p = np.asarray(person_m, float)
     if p.shape == (3,):
         return p[None], BODY_RADII_M[HEAD_JOINT:HEAD_JOINT + 1]
+    known = np.isfinite(p).all(axis=1)
+    if not known.all():
+        return _bounded_spheres(p, known)
     a, b = np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS])
     centres = np.concatenate([p, 0.5 * (p[a] + p[b])])
     return centres, np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[a] + BODY_RADII_M[b])])
+
+
+MAX_MISSING_JOINTS = 0
+"""A lifted person may have up to this many joints not known (the lifter's ``missing`` ones, NaN
+here): each is bounded by its bones from the joints he shows (:func:`_bounded_spheres`). 0 (off)
+as shipped: with 3, hard:200 seed 1 (development) had fewer person_lost halts but more retractions
+for walkers (a lift from an imputed keypoint moves the rest of him by up to 0.18 m, p95, and his
+tracked head with it), 255 walk-by false stops per worker-hour against 198 (reports/hrc/report.md,
+session 10). A module constant, not a [zones] key: [zones] is in the validated safety hash
+(firmware_sim.scenarios.hrc), and turning it on belongs with that re-validation."""
+REQUIRED_JOINTS = (HIP_JOINT, R_HIP, L_HIP, SPINE, THORAX, L_SHOULDER, R_SHOULDER, HEAD_JOINT)
+"""Joints a person must show for the rest to be bounded from them: his trunk (the lifter's root
+and frame of reference) and his head (tracked: its velocity predicts the whole body). In COCO:
+both hips, both shoulders and the ears or eyes. What may be missing: knees, one ankle, elbows,
+wrists, the nose."""
+
+
+def enough_joints(shown) -> bool:
+    """Does a person who shows the joints ``shown`` ((17,) bool: observed or held) show enough of
+    himself to be lifted and judged with the rest missing: every one of ``REQUIRED_JOINTS``, at
+    least one ankle (the floor anchoring's, edge_runtime.robot.calibration), at most
+    ``MAX_MISSING_JOINTS`` missing."""
+    shown = np.asarray(shown, bool)
+    return bool(shown[list(REQUIRED_JOINTS)].all() and (shown[L_ANKLE] or shown[R_ANKLE])
+                and (~shown).sum() <= MAX_MISSING_JOINTS)
+
+
+MIRROR = (0, 4, 5, 6, 1, 2, 3, 7, 8, 9, 10, 14, 15, 16, 11, 12, 13)
+"""Each H36M joint's counterpart on the other side of the body (itself on the midline): a 2D
+detector swaps left and right."""
+
+
+def _bounded_spheres(p: np.ndarray, known: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Spheres covering a person of whom only the ``known`` joints of ``p`` (17, 3) are known
+    (robot frame; the others NaN): where a joint is not known, it is within its bones
+    (``JOINT_REACH_M``) of the known joint nearest to it along the skeleton, so a sphere around that
+    joint, of its own radius plus that reach, holds it (several when equally near: a knee from the
+    hip and the ankle). A limb's midpoint is within half its bone of a known end.
+
+    What a 2D detector gets wrong cannot place him farther than he is (the randomised test in
+    tests/robot/test_hazard.py): each such sphere is repeated around its joint's left-right
+    counterpart (a swap), and a known joint farther from its nearest consistent ancestor than the
+    bones between them (a stray keypoint) is not known either. ValueError without any known joint."""
+    known = _consistent_joints(p, known)
+    if not known.any():
+        raise ValueError("a skeleton without any known joint")
+    centres, radii = [p[known]], [BODY_RADII_M[known]]
+
+    def around(j: int, extra_m: float):
+        """Spheres holding whatever is within ``extra_m`` of joint ``j``, or of his nearest known joints if ``j`` is not known."""
+        if known[j]:
+            ks, reach = np.array([j]), 0.0
+        else:
+            reach = float(JOINT_REACH_M[j][known].min())
+            ks = np.flatnonzero(known & (JOINT_REACH_M[j] <= reach + 1e-9))
+        ks = np.union1d(ks, [MIRROR[k] for k in ks if known[MIRROR[k]]]).astype(int)
+        centres.append(p[ks])
+        radii.append(np.full(len(ks), reach + extra_m))
+
+    for j in np.flatnonzero(~known):
+        around(int(j), float(BODY_RADII_M[j]))
+    for i, k in LIMBS:
+        r = 0.5 * (BODY_RADII_M[i] + BODY_RADII_M[k])
+        if known[i] and known[k]:
+            centres.append(0.5 * (p[i] + p[k])[None])
+            radii.append(np.array([r]))
+        else:
+            around(i if known[i] or not known[k] else k, r + 0.5 * float(JOINT_REACH_M[i, k]))
+    return np.concatenate(centres), np.concatenate(radii)
+
+
+def _consistent_joints(p: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """``known`` less each joint farther from its nearest known, consistent ancestor (``PARENTS``)
+    than the bones between them (``JOINT_REACH_M``): a stray keypoint. The root is taken as it is."""
+    out = np.asarray(known, bool).copy()
+    for j in range(1, len(PARENTS)):
+        if not out[j]:
+            continue
+        a = PARENTS[j]
+        while a >= 0 and not out[a]:
+            a = PARENTS[a]
+        if a >= 0 and np.linalg.norm(p[j] - p[a]) > JOINT_REACH_M[j, a]:
+            out[j] = False
+    return out
 
 
 def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_mps: np.ndarray, shifts_s,

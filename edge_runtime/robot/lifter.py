@@ -55,9 +55,21 @@ Missing data is never fed through as garbage:
 * A joint is missing when its score is below ``min_score``, a coordinate is
   NaN/infinite, or it lies more than 4.5 image widths outside the image
   (``MAX_NORMALISED``). It is HELD at its last valid observation for up to
-  ``hold_frames`` frames (``observed`` is False for it); missing longer (or never
-  seen since the last reset) the frame is INVALID (reason ``missing_joints: ...``)
-  and the model is not run.
+  ``hold_frames`` frames (``observed`` is False for it). Missing longer (or never
+  seen since the last reset), the frame can still be lifted when the person shows
+  enough of himself (:func:`edge_runtime.robot.hazard.enough_joints`: his trunk
+  and head, pelvis, hips, spine, thorax, shoulders, observed or held, at least
+  one ankle, and at most ``hazard.MAX_MISSING_JOINTS`` joints missing): that joint is flagged ``missing`` and
+  the model is fed its last keypoint moved with the image motion of the joints
+  he shows (one never seen: his nearest seen joint's keypoint). Its lifted
+  position is a guess, no measurement: the hazard monitor bounds it by its
+  bones from the joints he shows (:func:`edge_runtime.robot.hazard.body_spheres`).
+  A real 2D detector drops single wrists, elbows, knees and ankles all the time
+  (self-occlusion, a passing arm); declaring the whole person unseen for one of
+  them costs more than it protects. Showing less, the frame is INVALID (reason
+  ``missing_joints: ...``) and the model is not run. As shipped
+  ``MAX_MISSING_JOINTS`` is 0: every joint missing beyond ``hold_frames`` makes
+  the frame invalid (the hazard module says why).
 * A frame with no person (``None``) or a keypoint array that is not 17 joints
   counts as every joint missing: held within ``hold_frames``, else invalid with
   reason ``no_person`` / ``joint_count`` (counted either way: ``stats.no_person``,
@@ -104,7 +116,8 @@ import numpy as np
 from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
 from edge_runtime.core.onnx import session_from_manifest
-from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS
+from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS, PARENTS
+from edge_runtime.robot.hazard import enough_joints
 from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, image_to_canonical, to_h36m
 
 LIFTER_ARCH = "lifter"
@@ -213,6 +226,10 @@ class LiftedPose:
     joints_model_cam_m: np.ndarray | None = None
     """(17, 3) the model's own absolute joints (before they were put on the keypoints' rays);
     None when the model did not run."""
+    missing: np.ndarray | None = None
+    """(17,) bool: the joint has not been seen for longer than ``hold_frames`` (module docstring):
+    its position in ``joints_cam_m`` is the model's guess from an imputed keypoint, not a
+    measurement (the robot loop passes it on as NaN). None or all False: every joint observed or held."""
 
     @property
     def code(self) -> str | None:
@@ -224,9 +241,11 @@ class LiftedPose:
             return np.round(a, 5).tolist() if self.valid else None
 
         held = self.held if self.held is not None else np.zeros(N_JOINTS, bool)
+        missing = self.missing if self.missing is not None else np.zeros(N_JOINTS, bool)
         return {"t": self.t_s, "valid": self.valid, "reason": self.reason, "warming_up": self.warming_up,
                 "joints_cam_m": fin(self.joints_cam_m), "root_cam_m": fin(self.root_cam_m),
-                "observed": [bool(v) for v in self.observed], "held": [bool(v) for v in held]}
+                "observed": [bool(v) for v in self.observed], "held": [bool(v) for v in held],
+                "missing": [bool(v) for v in missing]}
 
 
 @dataclass
@@ -245,6 +264,9 @@ class LifterStats:
     """Frames whose keypoints were not 17 joints (all their joints count as missing)."""
     joints_held: int = 0
     """Joint-frames filled from an earlier observation."""
+    joints_missing: int = 0
+    """Joint-frames lifted from an imputed keypoint (missing beyond ``hold_frames``, the person
+    lifted anyway: :func:`edge_runtime.robot.hazard.enough_joints`)."""
     frames_dropped: int = 0
     """Camera frames missing according to the timestamps."""
     frames_interpolated: int = 0
@@ -292,6 +314,8 @@ class StreamingLifter:
         r = self.receptive_field
         self._ring = np.zeros((2 * r, N_JOINTS, 2), np.float32)
         self._last_seen = np.zeros((N_JOINTS, 2), np.float64)
+        self._moved = np.zeros((N_JOINTS, 2), np.float64)
+        """Image motion (normalised) of the person's seen joints since each joint's last sighting."""
         self._age = np.full(N_JOINTS, np.inf)
         self._last_t: float | None = None
         self.reset()
@@ -366,14 +390,29 @@ class StreamingLifter:
         if self._buffered_t is not None and t_s - self._buffered_t > self.params.lost_timeout_s + 1e-9:
             st.resets += 1  # lost for too long: the buffer no longer describes this person's recent motion
             self.reset()
-        if stale.any():
+        if stale.any() and (why is not None or not enough_joints(~stale)):
             if why is None:
                 why = f"{MISSING_JOINTS}: " + ", ".join(JOINTS[j] for j in np.flatnonzero(stale))
             return self._invalid(t_s, why, observed)
         st.joints_held += int(held.sum())
+        st.joints_missing += int(stale.sum())
         frame = self._last_seen.astype(np.float32)
+        self._impute(frame, stale)
         self._buffer(frame)
-        return self._run(t_s, observed, held)
+        return self._run(t_s, observed, held, stale)
+
+    def _impute(self, frame: np.ndarray, stale: np.ndarray) -> None:
+        """The model's input for joints missing beyond ``hold_frames`` (in place): the last keypoint
+        moved with the image motion the person's other joints made since (``_moved``); a joint never
+        seen since the last restart stands at its nearest seen ancestor's keypoint."""
+        for j in np.flatnonzero(stale):
+            if math.isinf(self._age[j]):
+                k = PARENTS[j]
+                while stale[k] and PARENTS[k] >= 0:
+                    k = PARENTS[k]
+                frame[j] = frame[k]
+            else:
+                frame[j] += self._moved[j].astype(np.float32)
 
     def _steps_since_last(self, t_s: float) -> int:
         """Frame periods since the previous frame (1, or more when frames were dropped)."""
@@ -404,6 +443,13 @@ class StreamingLifter:
             ok_norm = np.isfinite(norm).all(axis=1) & (np.abs(norm) <= MAX_NORMALISED).all(axis=1)
             idx = np.flatnonzero(ok)
             ok[idx[~ok_norm]] = False
+            # the image motion of the joints seen now and at their previous sighting moves the joints not seen
+            # (each from its own last keypoint): the person walks on while a hand is hidden
+            again = ok & (self._age == 0)  # seen in the previous frame too
+            if again.any():
+                step = np.median(norm[ok_norm][again[idx[ok_norm]]] - self._last_seen[again], axis=0)
+                self._moved[~ok] += step
+            self._moved[ok] = 0.0
             self._last_seen[idx[ok_norm]] = norm[ok_norm]
             self._age[idx[ok_norm]] = 0
         return ok, None
@@ -425,7 +471,7 @@ class StreamingLifter:
         self._buffered_t = self._last_t
         self._frames_since_buffered = 0
 
-    def _run(self, t_s: float, observed: np.ndarray, held: np.ndarray) -> LiftedPose:
+    def _run(self, t_s: float, observed: np.ndarray, held: np.ndarray, missing: np.ndarray) -> LiftedPose:
         x = self.window()[None]
         t0 = time.perf_counter()
         pose, root = self.session.run(self._outputs, {INPUT_NAME: x})
@@ -440,10 +486,13 @@ class StreamingLifter:
             return self._invalid(t_s, f"model_output: a joint {model_joints[:, 2].min():.2f} m in front of the "
                                       "camera", observed)
         joints = self._rays(model_joints) * model_joints[:, 2:3]
+        # a missing joint's ray is its imputed keypoint's: the model's own joint is as good a guess
+        joints[missing] = model_joints[missing]
         warming = self.warming_up
         st.valid += 1
         st.warming_up += warming
-        return LiftedPose(t_s, joints, joints[HIP].copy(), True, None, observed, warming, dt, held, model_joints)
+        return LiftedPose(t_s, joints, joints[HIP].copy(), True, None, observed, warming, dt, held, model_joints,
+                          missing)
 
     def _rays(self, model_joints: np.ndarray | None = None) -> np.ndarray:
         """(17, 3) canonical-camera rays (x/z, y/z, 1) of this frame's keypoints (observed or held):
@@ -488,6 +537,7 @@ class StreamingLifter:
         r = self.receptive_field
         other._ring = np.zeros((2 * r, N_JOINTS, 2), np.float32)
         other._last_seen = np.zeros((N_JOINTS, 2), np.float64)
+        other._moved = np.zeros((N_JOINTS, 2), np.float64)
         other._age = np.full(N_JOINTS, np.inf)
         other._last_t = None
         other.reset()

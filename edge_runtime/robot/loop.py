@@ -85,6 +85,7 @@ from edge_runtime.robot.hazard import (
     ZoneParams,
     arm_capsules,
     body_spheres,
+    enough_joints,
     eq6_retraction,
     escape_retraction,
     ground,
@@ -259,6 +260,15 @@ class PendingCommand:
     them confirms it too, since the arm then did carry it out."""
 
 
+def _measured(pose) -> np.ndarray:
+    """A lifted pose's joints with its ``missing`` ones NaN (``LiftedPose.missing``: guesses, not measured); a
+    stand-in pose without that flag gives its joints as they are."""
+    missing = getattr(pose, "missing", None)
+    if missing is None or not np.any(missing):
+        return pose.joints_cam_m
+    return np.where(np.asarray(missing, bool)[:, None], np.nan, pose.joints_cam_m)
+
+
 def _rounded(v) -> list[float]:
     """A robot-frame point for the log: metres to 0.1 mm."""
     return [round(float(x), 4) for x in np.asarray(v, float).reshape(3)]
@@ -358,9 +368,13 @@ class RobotLoop:
                        else self.calibration.to_robot(persons, observed, ids))
         keys = list(range(len(persons))) if ids is None else list(ids)
         people = []
-        # whole-body separation needs every joint; the head zones only the head
-        needed = persons if self.zones.separation == "whole_body" else persons[:, HEAD, :] if shaped else persons
-        if not valid or not shaped or not np.isfinite(needed).all():
+        # the head zones need the head; whole-body separation every joint, or enough of them that the rest is
+        # bounded by its bones from those (lifter.enough_joints; hazard.body_spheres)
+        if self.zones.separation == "whole_body":
+            enough = shaped and all(enough_joints(f) for f in np.isfinite(persons).all(axis=2))
+        else:
+            enough = np.isfinite(persons[:, HEAD, :] if shaped else persons).all()
+        if not valid or not shaped or not enough:
             self.counters.invalid += 1
             why = reason if not valid else "non-finite joints" if shaped else f"joints of shape {persons.shape}"
             decision = self.monitor.invalid(t_in, why)
@@ -393,7 +407,7 @@ class RobotLoop:
                   if not p.valid and str(p.reason or "").split(":", 1)[0] != NO_PERSON}
         if not valid:
             return self.feed_joints(None, t_in_s=t_in_s, unseen=unseen, rays=rays)
-        return self.feed_joints(np.stack([p.joints_cam_m for _, p in valid]), ids=[pid for pid, _ in valid],
+        return self.feed_joints(np.stack([_measured(p) for _, p in valid]), ids=[pid for pid, _ in valid],
                                 t_in_s=t_in_s, observed=np.stack([p.observed for _, p in valid]), unseen=unseen,
                                 rays=rays)
 
@@ -676,8 +690,8 @@ class RobotLoop:
             return None
         # either way round, whichever takes the hand furthest from everyone (on the ground); never one that
         # takes it nearer anyone than it is (a colleague on the other side: hard:200 seed 1, hard_163)
-        people = [ground(decision.head.position_m)[None], *(ground(np.asarray(b, float)).reshape(-1, 2)
-                                                              for b in self.monitor.bodies())]
+        people = [ground(decision.head.position_m)[None], *(ground(b[np.isfinite(b).all(axis=1)]).reshape(-1, 2)
+                                                              for b in map(np.atleast_2d, self.monitor.bodies()))]
         gap = lambda p: min(float(np.linalg.norm(q - ground(p), axis=1).min()) for q in people)  # noqa: E731
         best, here = None, gap(self._last_effector)
         for side in (1.0, -1.0):

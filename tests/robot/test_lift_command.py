@@ -24,10 +24,10 @@ def assets(tmp_path_factory):
 
 def _keypoint_file(tmp_path, n=40, seed=0):
     """COCO keypoints of a 1920x1080 camera, two people (the larger one followed), with
-    faults: a NaN wrist for 6 frames, a frame with 15 keypoints, nobody for 2 frames."""
+    faults: a NaN hip for 6 frames (his trunk: not lifted without it), a frame with 15 keypoints, nobody for 2 frames."""
     rng = np.random.default_rng(seed)
     kp = random_walk_keypoints(rng, n, 1920, 1080)
-    kp[10:16, 9, :2] = np.nan
+    kp[10:16, 11, :2] = np.nan
     small = kp * [0.2, 0.2, 1.0]
     lines = []
     for i in range(n):
@@ -63,9 +63,9 @@ def test_keypoint_file_to_3d(assets, tmp_path, capsys):
     assert len(frames) == 40 and [f["frame"] for f in frames] == list(range(40))
     assert all(f["person"] == 1 for f in frames if f["frame"] not in (30, 31))
     valid = [f["valid"] for f in frames]
-    # wrist NaN 10..15: held 3 frames, invalid 13..15; 15 joints at 20 and nobody at 30, 31: all held
+    # hip NaN 10..15: held 3 frames, invalid 13..15; 15 joints at 20 and nobody at 30, 31: all held
     assert [i for i, v in enumerate(valid) if not v] == [13, 14, 15]
-    assert frames[13]["reason"].startswith("missing_joints") and "left_wrist" in frames[13]["reason"]
+    assert frames[13]["reason"].startswith("missing_joints") and "left_hip" in frames[13]["reason"]
     assert frames[13]["joints_cam_m"] is None
     for i in (20, 30, 31):
         assert frames[i]["valid"] and not any(frames[i]["observed"])
@@ -170,7 +170,7 @@ def test_config_lifter_section_and_flags(assets, tmp_path, capsys):
     assert rc == 0
     frames, summary = _read(out)
     assert summary["model"] == "lifter-fp32"  # the flag --precision fp32 beats the file
-    # no holding: the NaN wrist (10..15), the 15-joint frame (20) and nobody (30, 31) are all invalid
+    # no holding: the NaN hip (10..15), the 15-joint frame (20) and nobody (30, 31) are all invalid
     assert [f["frame"] for f in frames if not f["valid"]] == [10, 11, 12, 13, 14, 15, 20, 30, 31]
     rc, _ = _lift(assets, tmp_path, "--keypoints", str(kp_file), "--width", "1920", "--height", "1080",
                   "--hold-frames", "-1")

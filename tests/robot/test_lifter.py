@@ -132,28 +132,72 @@ def test_low_score_and_nan_joints_are_held_then_the_frame_is_invalid(assets):
     lifter = _lifter(assets, hold_frames=2, min_score=0.5)
     p0 = lifter.push(0.0, kp[0])
     assert p0.valid and p0.observed.all()
-    kp[1:, 13, 2] = 0.2          # left wrist: low score from frame 1 on
+    kp[1:, 4, 2] = 0.2           # left hip: low score from frame 1 on
     kp[2:, 3, 0] = np.nan        # right ankle: NaN from frame 2 on
     p1 = lifter.push(PERIOD, kp[1])
-    assert p1.valid and not p1.observed[13] and p1.observed.sum() == 16
-    # the held wrist is the frame-0 observation: the buffer's last frame holds it
-    np.testing.assert_allclose(lifter.window()[-1, 13], normalize_screen(kp[0, 13, :2], 1280, 720), atol=1e-6)
+    assert p1.valid and not p1.observed[4] and p1.observed.sum() == 16
+    # the held hip is the frame-0 observation: the buffer's last frame holds it
+    np.testing.assert_allclose(lifter.window()[-1, 4], normalize_screen(kp[0, 4, :2], 1280, 720), atol=1e-6)
     p2 = lifter.push(2 * PERIOD, kp[2])
     assert p2.valid and not p2.observed[3]
     before = lifter.window().copy()
-    p3 = lifter.push(3 * PERIOD, kp[3])  # wrist missing for 3 frames > hold 2
-    assert not p3.valid and p3.code == MISSING_JOINTS and "left_wrist" in p3.reason
+    p3 = lifter.push(3 * PERIOD, kp[3])  # a hip (the trunk: required) missing for 3 frames > hold 2
+    assert not p3.valid and p3.code == MISSING_JOINTS and "left_hip" in p3.reason
     assert "right_ankle" not in p3.reason  # the ankle is still within its hold
     assert np.isnan(p3.joints_cam_m).all() and np.isnan(p3.root_cam_m).all()
     assert p3.to_json()["joints_cam_m"] is None
     np.testing.assert_array_equal(lifter.window(), before)  # nothing fed through
-    assert lifter.stats.invalid[MISSING_JOINTS] == 1 and lifter.stats.joints_held == 3  # wrist x2, ankle x1
+    assert lifter.stats.invalid[MISSING_JOINTS] == 1 and lifter.stats.joints_held == 3  # hip x2, ankle x1
     assert lifter.stats.inferences == 3
-    # the wrist comes back: valid again, with the invalid frame bridged in the buffer
-    kp[4, 13, 2] = 0.9
+    # the hip comes back: valid again, with the invalid frame bridged in the buffer
+    kp[4, 4, 2] = 0.9
     kp[4, 3, 0] = 600.0
     p4 = lifter.push(4 * PERIOD, kp[4])
     assert p4.valid and p4.observed.all() and lifter.stats.frames_interpolated == 1
+
+
+@pytest.fixture
+def missing_allowed(monkeypatch):
+    """hazard.MAX_MISSING_JOINTS = 3 (0, off, as shipped: reports/hrc/report.md, session 10)."""
+    from edge_runtime.robot import hazard
+
+    monkeypatch.setattr(hazard, "MAX_MISSING_JOINTS", 3)
+
+
+def test_a_person_missing_a_limb_joint_beyond_the_hold_is_lifted_with_it_flagged(assets, missing_allowed):
+    """With missing joints allowed, a wrist gone for longer than hold_frames does not make the frame
+    invalid: the person shows his trunk, head and ankles; the wrist is flagged missing, and the model is
+    fed its last keypoint moved with the image motion of the joints he shows; a keypoint far outside
+    the image is missing and never reaches the model."""
+    kp = random_walk_keypoints(np.random.default_rng(7), 13)
+    kp[12, 3, 0] = 1e300
+    lifter = _lifter(assets, hold_frames=2)
+    assert all(lifter.push(i * PERIOD, kp[i]).valid for i in range(3))
+    kp[3:, 13, :2] = np.nan  # the left wrist from frame 3 on
+    outs = [lifter.push(i * PERIOD, kp[i]) for i in range(3, 12)]
+    assert all(p.valid for p in outs)
+    assert outs[0].held[13] and outs[1].held[13] and not outs[0].missing.any()
+    assert all(p.missing[13] and p.missing.sum() == 1 and not p.held[13] for p in outs[2:])
+    assert np.isfinite(outs[-1].joints_cam_m).all() and outs[-1].to_json()["missing"][13] is True
+    assert lifter.stats.joints_missing == 7 and lifter.stats.joints_held == 2
+    norm = normalize_screen(kp[..., :2], 1280, 720)
+    others = np.delete(np.arange(17), 13)
+    moved = sum(np.median(norm[i, others] - norm[i - 1, others], axis=0) for i in range(3, 12))
+    np.testing.assert_allclose(lifter.window()[-1, 13], norm[2, 13] + moved, atol=1e-5)
+    far = lifter.push(12 * PERIOD, kp[12])    # and an ankle 1e300 px out: not seen (held)
+    assert far.valid and far.held[3] and far.missing[13] and far.missing.sum() == 1
+    assert np.isfinite(lifter.window()).all() and np.abs(lifter.window()).max() <= 10
+
+
+@pytest.mark.parametrize("hide", [(4,), (10,), (3, 6), (2, 5, 12, 15)])
+def test_a_person_missing_his_trunk_head_both_ankles_or_four_joints_is_not_lifted(assets, hide, missing_allowed):
+    kp = random_walk_keypoints(np.random.default_rng(8), 6)
+    lifter = _lifter(assets, hold_frames=1)
+    lifter.push(0.0, kp[0])
+    kp[1:, list(hide), :2] = np.nan
+    outs = [lifter.push(i * PERIOD, kp[i]) for i in range(1, 6)]
+    assert outs[0].valid and not any(p.valid for p in outs[1:])
+    assert all(p.code == MISSING_JOINTS for p in outs[1:])
 
 
 def test_never_seen_joint_makes_frames_invalid(assets):

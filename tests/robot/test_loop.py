@@ -180,6 +180,24 @@ def test_invalid_lifter_output_and_nan_joints_stop_the_arm():
         assert link.calls[-2][:2] == ("set_alarm", "yellow") and loop.status()["invalid"] == 1
 
 
+def test_a_worker_with_a_limb_joint_not_known_is_judged_and_one_without_his_hips_stops_the_arm(monkeypatch):
+    """With missing joints allowed (hazard.MAX_MISSING_JOINTS, 0 as shipped), NaN for a wrist and a knee
+    (the lifter's missing joints): bounded by their bones, the far worker keeps the arm working; NaN for a
+    hip (his trunk: hazard.enough_joints) is an invalid frame."""
+    from edge_runtime.robot import hazard
+
+    monkeypatch.setattr(hazard, "MAX_MISSING_JOINTS", 3)
+    loop, link, clock = make_whole_body()
+    drive(loop, link, clock, Path(lambda t: worker(4.0, 5.0), 3.0))
+    j = worker(4.0, 5.0)
+    j[[16, 2]] = np.nan
+    rec = loop.feed_joints(j)
+    assert rec.state == "NORMAL" and loop.status()["invalid"] == 0
+    j[1] = np.nan
+    rec = loop.feed_joints(j)
+    assert rec.reason == "pose_invalid: non-finite joints" and rec.state == "FAULT"
+
+
 def test_no_person_from_the_lifter_is_an_empty_scene_not_a_fault():
     @dataclass
     class Lifted:
