@@ -93,7 +93,14 @@ def _ort_runner(cfg: InferenceConfig, entry: dict, feed: dict) -> tuple[Callable
     from edge_runtime.core.manifest import read_verified
     from edge_runtime.core.onnx import open_session
 
-    sess = open_session(read_verified(cfg.assets, entry), cfg.threads, str(Path(cfg.assets) / entry["file"]))
+    data, source = read_verified(cfg.assets, entry), str(Path(cfg.assets) / entry["file"])
+    if entry.get("arch") == STEP_ARCH:  # the box's own call of a step (its IOBinding), not a generic session.run
+        from edge_runtime.wearable.classifier import StepModel
+
+        model = StepModel(data, cfg.threads, source, entry["classes"])
+        x, h, c = (feed[k] for k in ("imu", "h", "c"))
+        return (lambda: model.step(x, h, c)), {"call": "StepModel.step" + (" (IOBinding)" if model.bound else "")}
+    sess = open_session(data, cfg.threads, source)
     outputs = [o.name for o in sess.get_outputs()]
     ro = ort.RunOptions()
     return (lambda: sess.run(outputs, feed, ro)), {}

@@ -96,7 +96,8 @@ def _loop_figure(lp: dict) -> str:
 WHAT_A_RUN_IS = {
     "convlstm": "convlstm: the whole capture (S = 6 sub-windows) in one run (the one-shot model: the comparison)",
     "convlstm_step": "convlstm_step: per decision: one step, what the box runs when a sub-window of a capture "
-                     "completes (the sub-window and the LSTM state in, the decision and the next state out)",
+                     "completes (the sub-window and the LSTM state in, the decision and the next state out); "
+                     "on onnxruntime timed as the box calls it (StepModel.step: inputs and outputs bound once)",
 }
 """What one timed call of a model is, where that needs saying (a row's ``model``)."""
 

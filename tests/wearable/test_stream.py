@@ -13,7 +13,15 @@ from support import REPO_ROOT
 from support.drive import drive_captures
 
 from edge_runtime.core.manifest import ASSETS_DIR, ManifestError, ModelIntegrityError, load_manifest
-from edge_runtime.wearable.classifier import Engine, needed_frames, preprocess, step_inputs
+from edge_runtime.wearable.classifier import (
+    STEP_OUTPUTS,
+    Engine,
+    bound_step,
+    fast_run,
+    needed_frames,
+    preprocess,
+    step_inputs,
+)
 from edge_runtime.wearable.loop import AlertPolicy, WearableLoop
 from edge_runtime.wearable.sources import SAMPLE_RATE_HZ, ImuBlock
 
@@ -72,6 +80,60 @@ def test_advancing_a_capture_gives_its_prefix_decisions_and_two_captures_keep_th
     jump = eng.new_stream()  # a decision after S = 4 runs the steps it has not yet run, once each
     np.testing.assert_array_equal(eng.advance(jump, a, 4), eng.classify_prefix(a[:needed_frames(4)], 4))
     assert jump.done == 4 and sorted(jump.probs) == [1, 2, 3, 4]
+
+
+class _PublicOnly:
+    """A session as an onnxruntime without the private ``_sess`` would give it: only the public calls."""
+
+    def __init__(self, session):
+        self.run = session.run
+        self.io_binding = session.io_binding
+
+
+class _Inner:
+    def __init__(self, run):
+        self.run = run
+
+
+class _ChangedPrivate(_PublicOnly):
+    """A session whose private run takes other arguments, or gives other results, than this code expects."""
+
+    def __init__(self, session, inner):
+        super().__init__(session)
+        self._sess = _Inner(inner)
+
+
+@pytest.mark.parametrize("precision", ["fp32", "int8"])
+def test_the_step_call_takes_a_private_path_only_when_it_gives_what_the_public_run_gives(captures, precision):
+    """StepModel.step runs a single capture through an IOBinding and a batch through ``_sess.run`` when this
+    onnxruntime has them and they agree with ``session.run``; otherwise (another onnxruntime) the public run,
+    with the same results, bit for bit."""
+    model = Engine.from_manifest(ASSETS_DIR, precision).step_model
+    session = model.session
+    subs = [np.ascontiguousarray(x) for x in step_inputs(captures[:4], 6)]
+    if hasattr(session, "_sess"):
+        assert model._run == session._sess.run and model._step_one is not None
+    fast = [model.run([x[k:k + 1] for x in subs]) for k in range(4)] + [model.run(subs)]
+    h, c = model.zero_state(4)
+    feed = {"imu": subs[0], "h": h, "c": c}
+    public = _PublicOnly(session)
+    assert fast_run(public, STEP_OUTPUTS, feed, model._run_options) == session.run
+    assert bound_step(public, {k: v[:1] for k, v in feed.items()}, ((1, 6), (1, 100), (1, 100)),
+                      model._run_options) is None
+
+    def other_signature(feed, outputs):
+        raise TypeError("incompatible function arguments")
+
+    def other_results(outputs, feed, options):
+        return [np.zeros_like(a) for a in session.run(outputs, feed, options)]
+
+    for inner in (other_signature, other_results):
+        assert fast_run(_ChangedPrivate(session, inner), STEP_OUTPUTS, feed, model._run_options) == session.run
+    model._run, model._step_one = session.run, None  # what an onnxruntime without the private calls gets
+    slow = [model.run([x[k:k + 1] for x in subs]) for k in range(4)] + [model.run(subs)]
+    for a, b in zip(fast, slow):
+        for pa, pb in zip(a, b):
+            np.testing.assert_array_equal(pa, pb)
 
 
 class Spy:
