@@ -18,13 +18,13 @@ Two fits, both giving ``p_robot = A @ p_cam + b``:
   a scale per axis and a rotation, exact at the three markers. With noisy inputs the
   three axes are not orthogonal, so the map shears space, and it rests on four points
   only (three heads and one ankle).
-* ``"rigid"`` -- a least-squares similarity (rotation by SVD, one scale,
+* ``"rigid"`` (default) -- a least-squares similarity (rotation by SVD, one scale,
   translation; Umeyama 1991) over all six correspondences, every head and every ankle
   at every marker. It cannot shear, uses twice the data, and its residuals measure
   how well the recording fits. tests/robot/test_calibration.py compares the two on simulated
   cameras with keypoint noise; the rigid fit's head error is the lower of the two. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
   transform).
-* ``"pnp"`` (default) -- the camera pose from the directions of the six points only
+* ``"pnp"`` -- the camera pose from the directions of the six points only
   (``cv2.solvePnP`` with identity intrinsics on ``(x/z, y/z)``, started from the rigid
   fit): ignores the lifter's depth, which at a real detector's noise turns the rigid fit by
   4-5 degrees (reports/robot/head_error.md). Scale 1, so use it with the ground anchoring.
@@ -33,8 +33,9 @@ Ground anchoring (``ground_anchor``, :func:`anchor_factor`, :meth:`Calibration.t
 the lifter's weak part is the root's depth (from apparent body size). Once the floor is
 known, each lifted skeleton is scaled about the camera centre (every 2D projection is
 kept) so that its lower ankle rests ``ankle_height_m`` above the floor (both ankles' rays when
-both feet are down); that factor is fused with the lifter's own depth, each weighted by its error, and
-the fused one is taken only where it puts the person nearer the arm; guarded against flat rays and low
+both feet are down); that factor can be fused with the lifter's own depth, each weighted by its error,
+the fused one taken only where it puts the person nearer the arm (off as shipped:
+``ANCHOR_LIFTER_DEPTH_SD``); guarded against flat rays and low
 cameras, the factor clamped. In a stream
 (:meth:`Calibration.to_robot`, :class:`FloorAnchor`) each person's factor is the median of his
 recent plausible ones: one ankle ray's floor crossing is noisy, his distance is not.
@@ -91,9 +92,12 @@ class CalibrationParams:
     ankle_height_m: float = config.setting(0.07, config.within(0, 0.2))
     """Height of the ankle joints above the floor (m; 0.039 of body height). The
     dissertation puts the ankle midpoint on the marker (0); this lifts it to the joint."""
-    method: str = "pnp"
-    """"pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1; the
-    default), "rigid" (SVD similarity over six points) or "eq2" (the dissertation's)."""
+    method: str = "rigid"
+    """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
+    "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1). ``pnp``
+    halves the head error (reports/robot/head_error.md) but, with the fused anchoring, failed its
+    closed-loop validation in session 10 (fresh hrc seed 11: 2 collisions in hard:200; reports/hrc/
+    report.md), so the validated ``rigid`` stays the default."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)
@@ -175,7 +179,8 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     ankles seen in this frame (a held ankle's ray is an old one); with none seen, both count.
     When both ankles lie within :data:`ANCHOR_LEVEL_FEET_M` of each other in height (both feet on
     the floor), the floor's factor is the geometric mean of the two rays' factors. That factor is then
-    also fused with the lifter's own depth (factor 1), each weighted by its error
+    fused with the lifter's own depth (factor 1), each weighted by its error (no weight as shipped:
+    :data:`ANCHOR_LIFTER_DEPTH_SD` is infinite)
     (:func:`_fused_with_lifter`: a shallow ray of a low, far camera weighs little), and of the two, floor
     alone or fused, ``k`` is the one that puts the person nearer the arm (:func:`_nearer_to_arm`): the
     hazard monitor relies on people not being placed farther from the arm than they are.
@@ -247,9 +252,15 @@ against the lifter's depth (:func:`anchor_factor`); not tuned on the simulator."
 ANCHOR_FOOT_SD_M = 0.03
 """How far the lower ankle joint is from ``ankle_height_m`` above the floor (m, 1 sd): ankle heights
 differ between people and a foot rolls and lifts mid-stride."""
-ANCHOR_LIFTER_DEPTH_SD = 0.12
-"""The lifter's own depth (from apparent body size): its relative error (1 sd, natural log), the weight
-:func:`anchor_factor` gives it against the floor rays. The simulator's lifter is within 0.07 (dev seed 4,
+ANCHOR_LIFTER_DEPTH_SD = np.inf
+"""The lifter's own depth's relative error (1 sd, natural log) as :func:`anchor_factor` weighs it against the
+floor rays. Shipped: infinite, i.e. no weight, the floor rays alone (what the hrc suites validated): the
+fusion with :data:`ANCHOR_LIFTER_DEPTH_SD_FUSED` was measured with ``pnp`` and that candidate failed its
+closed-loop validation in session 10 (reports/hrc/report.md). A module constant, not a [calibration] key,
+as :data:`ANCHOR_WINDOW_FRAMES`: changing it needs the hrc suites re-run on a fresh seed."""
+ANCHOR_LIFTER_DEPTH_SD_FUSED = 0.12
+"""The lifter's own depth (from apparent body size): its relative error (1 sd, natural log) in the fusion
+session 10 measured (reports/robot/head_error.md; not shipped, see :data:`ANCHOR_LIFTER_DEPTH_SD`). The simulator's lifter is within 0.07 (dev seed 4,
 perfect calibration, real-detector noise); real people's heights (1.45-2.0 m) and motions vary more,
 so a larger error is assumed (0.08-0.2 measured on development seeds 4, 13, 17;
 reports/robot/head_error.md, Session 10)."""

@@ -120,7 +120,7 @@ def test_save_and_load_keep_everything(tmp_path):
     path = tmp_path / "cal.json"
     cal.save(path)
     data = json.loads(path.read_text())
-    assert data["version"] == 1 and data["method"] == "pnp" and len(data["inputs"]["head_cam_m"]) == 3
+    assert data["version"] == 1 and data["method"] == "rigid" and len(data["inputs"]["head_cam_m"]) == 3
     assert data["worker_height_m"] == pytest.approx(cal.worker_height_m)
     assert set(data["residuals_m"]) == {"head", "ankle"} and data["inputs"]["frames_per_marker"] == [60, 60, 60]
     again = Calibration.load(path)
@@ -318,6 +318,13 @@ def _factor_seen_from(eye_m, truth, lifter_scale):
     return anchor_factor(cam.to_camera(truth) * lifter_scale, cal.A, cal.b, cal.params)
 
 
+@pytest.fixture
+def fused_with_lifter(monkeypatch):
+    """The anchoring fused with the lifter's own depth as session 10 measured it (not shipped)."""
+    monkeypatch.setattr(calibration, "ANCHOR_LIFTER_DEPTH_SD", calibration.ANCHOR_LIFTER_DEPTH_SD_FUSED)
+
+
+@pytest.mark.usefixtures("fused_with_lifter")
 def test_the_lifters_depth_counts_only_toward_the_arm():
     """A worker between the camera and the arm: a lifter that puts him too far from the camera (nearer
     the arm) pulls the anchoring toward its depth, more from a low camera, whose floor rays are
@@ -330,6 +337,7 @@ def test_the_lifters_depth_counts_only_toward_the_arm():
     assert _factor_seen_from((0.0, 2.1, 8.0), truth, 0.8) == (pytest.approx(1 / 0.8, rel=1e-9), None)
 
 
+@pytest.mark.usefixtures("fused_with_lifter")
 def test_the_anchoring_never_puts_anyone_farther_from_the_arm_than_the_floor_rays_do(monkeypatch):
     rng = np.random.default_rng(7)
     cases = []
