@@ -486,8 +486,10 @@ class StepModel:
     """The ConvLSTM's streaming step graph (``export.step_model``): one sub-window (N, 33, 3) m/s^2 and
     the LSTM state (h, c) (N, hidden) in, the decision's probabilities (N, K) and the next state out."""
 
-    def __init__(self, model: bytes, threads: int, source: str, classes: Sequence[str]):
+    def __init__(self, model: bytes, threads: int, source: str, classes: Sequence[str], entry: dict | None = None):
         self.source = source
+        self.entry = entry or {}
+        """Its manifest entry (name, sha256, ...), when it was loaded through one."""
         self.session = open_session(model, threads, source)
         inputs = {i.name: i.shape for i in self.session.get_inputs()}
         outputs = [o.name for o in self.session.get_outputs()]
@@ -567,7 +569,7 @@ def _load_step_model(assets_dir: str | os.PathLike, entry: dict, threads: int,
                                       f"{entry.get(key)!r}: not the step model of this model")
     declared = next((t["shape"][-1] for t in named["inputs"] if t["name"] == STEP_INPUTS[1] and t.get("shape")), None)
     path = mpath.parent / named["file"]
-    step = StepModel(read_verified(mpath.parent, named), threads, str(path), entry["classes"])
+    step = StepModel(read_verified(mpath.parent, named), threads, str(path), entry["classes"], named)
     if step.hidden != declared:
         raise ModelIntegrityError(f"{path}: LSTM state size {step.hidden}, but its manifest entry {name!r} "
                                   f"(field 'inputs', {STEP_INPUTS[1]!r}) declares {declared!r}")
@@ -832,6 +834,14 @@ class Engine:
             return json.loads(raw)
         except json.JSONDecodeError:
             raise ModelIntegrityError(f"{self.source}: ONNX metadata {key!r} is not valid JSON") from None
+
+    def decision_path(self) -> dict:
+        """What makes the decisions, for a report's provenance: this model's manifest name and sha256, and the
+        step model's when decisions come from it (None: the whole model on each prefix)."""
+        step = self.step_model
+        return {"model": self.name, "sha256": self.entry.get("sha256"),
+                "step_model": None if step is None else step.entry.get("name", step.source),
+                "step_model_sha256": None if step is None else step.entry.get("sha256")}
 
     def describe(self) -> dict:
         return {"name": self.name, "precision": self.precision, "source": self.source,
