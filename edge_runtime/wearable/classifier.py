@@ -706,7 +706,9 @@ class Engine:
         ``data`` (at least ``needed_frames(steps)``): runs the step model once for each sub-window the
         capture's ``stream`` has not yet seen, sub-window s computed from the first ``needed_frames(s)``
         frames (:func:`step_inputs`), and keeps the state in ``stream``. Equal to :meth:`classify_prefix`
-        of the same frames, since both read each sub-window as it arrived."""
+        of the same frames, since both read each sub-window as it arrived. Refused (ValueError, one line) before
+        the state is touched: fewer than ``needed_frames(steps)`` frames, or frames whose first frame is not the
+        one this stream was first advanced with (another capture's: a stream holds one capture)."""
         self._check_steps(steps)
         x = np.asarray(data, dtype=np.float32)
         need = needed_frames(steps)
