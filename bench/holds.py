@@ -33,7 +33,7 @@ Each prints one JSON document (``--json OUT`` writes it too). What each measures
     truncated to half, or swapped for another shipped model's file), loaded the way the box
     loads it (``Engine.from_manifest`` for the ConvLSTM, ``StreamingLifter.from_manifest``
     for the lifter); refused = ``ModelIntegrityError`` before anything runs. One more case,
-    the model and its manifest hash replaced together, shows what a sha256 cannot prove
+    the model and its manifest hash replaced together (with its step model and hash), shows what a sha256 cannot prove
     (reported, not counted as refused). The untouched copy must load (the control).
 ``memory``
     The wearable loop (``WearableLoop`` with the int8 ConvLSTM + ``AlertPublisher`` on a
@@ -259,18 +259,21 @@ def tampered() -> dict:
         shutil.copytree(ASSETS_DIR, control)
         for entry in entries:
             load(control, entry)
-        # the model and its hash replaced together: integrity, not authorship (issue 16 item 6)
+        # the model and its hash replaced together: integrity, not authorship (issue 16 item 6); its step model
+        # too (the box refuses a step model that does not decide as the one-shot model it is loaded with)
         entry = next(e for e in entries if e["name"] == "convlstm-int8")
-        other = next(e for e in entries if e["name"] == "convlstm-fp32")
+        by_name = {e["name"]: e for e in entries}
+        swaps = {entry["name"]: "convlstm-fp32", entry.get("step_model"): by_name["convlstm-fp32"].get("step_model")}
+        swaps = {by_name[k]["name"]: by_name[v] for k, v in swaps.items() if k and v}
         assets = Path(tmp) / "with-hash"
         shutil.copytree(ASSETS_DIR, assets)
         public_key = _sign_genuine(assets, Path(tmp) / "keys")  # the builder signs what he built
         manifest = json.loads((assets / "manifest.json").read_text())
         for e in manifest["models"]:
-            if e["name"] == entry["name"]:
-                e["sha256"] = other["sha256"]
+            if e["name"] in swaps:
+                e["sha256"] = swaps[e["name"]]["sha256"]
+                shutil.copy(assets / swaps[e["name"]]["file"], assets / e["file"])
         (assets / "manifest.json").write_text(json.dumps(manifest))
-        shutil.copy(assets / other["file"], assets / entry["file"])
         try:
             load(assets, entry)
             with_hash = "LOADED (a sha256 proves integrity, not who built the model)"

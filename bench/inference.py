@@ -39,14 +39,12 @@ from typing import Callable
 import numpy as np
 
 from bench.timing import peak_rss_mb, rss_mb, time_calls
-from edge_runtime.core.manifest import example_shape
+from edge_runtime.core.manifest import STEP_ARCH, example_shape
 
 RUNTIMES = ("onnxruntime", "openvino", "torch-eager")
 REPO_ROOT = Path(__file__).resolve().parent.parent
 NETS_ARCHS = ("convlstm", "cnn", "lstm")
 """Architectures ``models.nets.build`` rebuilds."""
-STEP_ARCH = "convlstm_step"
-"""The ConvLSTM's step model: one sub-window (a wrist window's 33 frames) and the LSTM state per run."""
 
 
 @dataclass(frozen=True)

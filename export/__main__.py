@@ -73,6 +73,8 @@ def _parser() -> argparse.ArgumentParser:
 
     t = sub.add_parser("step", help="add the shipped ConvLSTM's streaming step model (fp32, int8) to the assets")
     t.add_argument("--checkpoint", required=True, help="the model.pt the shipped ConvLSTM was exported from")
+    t.add_argument("--selection", default=None, help="the selection cohort whose captures gate the int8 step "
+                                                     "recipe (default: reports/wearable/selection/selection.json)")
     _shipped_model_args(t)
 
     s = sub.add_parser("opsets", help="declare only the opset domains each shipped model uses")
@@ -176,7 +178,7 @@ def cmd_step(a) -> int:
     from export.assets import DEFAULT_ASSETS, add_step_models
 
     add_step_models(checkpoint=a.checkpoint, out=a.assets or DEFAULT_ASSETS, work=a.work, train_npz=a.train,
-                    test_npz=a.test)
+                    test_npz=a.test, selection=a.selection)
     return 0
 
 

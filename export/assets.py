@@ -25,7 +25,9 @@
    the manifest, e.g. a pose lifter, are kept);
 7. export the same trained model as the streaming step model (``export.step_model``: one
    sub-window and the LSTM state in, the decision and the next state out), fp32 (parity with
-   torch after every S) and int8 (``quantise_step``: gated per step on the test captures),
+   torch after every S) and int8 (``quantise_step``: gated per step on the selection cohort's
+   captures, none of whose subjects is in training; the training cohort's "test" captures are
+   training data when the recipe says ``captures``),
    as entries ``convlstm-step-fp32`` / ``convlstm-step-int8`` (arch ``convlstm_step``) that the
    ConvLSTM entries name in ``step_model``: the box decides by them (``python -m export step``
    runs this step alone on the shipped model).
@@ -304,9 +306,9 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
     for e in entries:
         e["early"] = early[e["precision"]]
     entries[1]["metrics"]["early_agreement_with_fp32_by_steps"] = early["agreement_by_steps"]
-    step_paths, step_entries = build_step(model, train, X_train, X_test, test.y, seed=seed, version=version,
+    step_paths, step_entries = build_step(model, train, X_train, X_test, seed=seed, version=version,
                                           commit=commit, stage=work / "stage", provenance=provenance, log=log,
-                                          min_agreement=early_min_agreement)
+                                          min_agreement=early_min_agreement, selection=selection)
     link_steps(entries, step_entries)
     manifest, path = _install(out, entries + step_entries, (fp32_path, int8_path, *step_paths), command)
     log(f"wrote {out / fp32_path.name}, {out / int8_path.name}, "
@@ -319,13 +321,18 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
 STEP_FILE = "convlstm_step.{}.onnx"
 
 
-def build_step(model, train, X_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray, *, seed: int, version: str,
+def build_step(model, train, X_train: np.ndarray, X_test: np.ndarray, *, seed: int, version: str,
                commit: str | None, stage: Path, provenance: dict, log: Callable[[str], None],
-               min_agreement: float = EARLY_MIN_AGREEMENT) -> tuple[list[Path], list[dict]]:
+               min_agreement: float = EARLY_MIN_AGREEMENT, selection: str | Path | None = None
+               ) -> tuple[list[Path], list[dict]]:
     """7. The streaming step model of the same trained ConvLSTM (``export.step_model``): fp32 (parity with
-    torch's decision after every S = 1..6 on the test captures) and int8 (the candidate chosen by
+    torch's decision after every S = 1..6 on the training cohort's captures) and int8 (the candidate chosen by
     ``export.step_model.quantise_step``, calibrated on the training windows the one-shot int8 is, gated
-    per step on the test captures); their files in ``stage`` and their manifest entries."""
+    per step on the selection cohort's captures: ``selection``'s, as step 6 reads them); their files in
+    ``stage`` and their manifest entries.
+
+    Why the selection cohort: with the shipped recipe (``captures``) the training cohort's detector captures
+    are training data, so a gate on them would choose the recipe on windows the model has seen."""
     from export.step_model import (
         C_IN,
         C_OUT,
@@ -338,22 +345,23 @@ def build_step(model, train, X_train: np.ndarray, X_test: np.ndarray, y_test: np
         to_step_onnx,
     )
     from models.nets import keras_param_count, torch_param_count
+    from models.selection import ensure_selection_captures
 
     classes = list(train.classes)
+    sel, gated_on = ensure_selection_captures(seed, selection, log=log)
+    if list(sel.classes) != classes:
+        raise ExportError(f"{sel.source}: field 'classes': {sel.classes} differ from {classes}")
     stage.mkdir(parents=True, exist_ok=True)
     onx = to_step_onnx(model, classes, model_version=version, commit=commit,
                        extra_meta={"training": {"seed": seed, "epochs": provenance["training"]["epochs"],
                                                 "windows": len(train)}})
-    fp32_path = save_onnx(onx, stage / STEP_FILE.format("fp32"))
     parity = check_step_parity(model, onx, X_test[:512])
-    log(f"[7] {fp32_path.name}: parity with torch's decisions after S = 1..6, max |d| probs "
-        f"{parity['max_abs_probs']:.2e}")
-    if not parity["ok"]:
-        raise ExportError(f"{fp32_path}: torch/onnxruntime parity of the step model exceeds {parity['tol']:g}")
+    fp32_path = _save_with_parity(onx, stage / STEP_FILE.format("fp32"), parity, "[7] decisions after S = 1..6,", log)
     int8_path = fp32_path.with_name(STEP_FILE.format("int8"))
-    quant = quantise_step(fp32_path, int8_path, calibration_windows(X_train, train.y, seed), X_test, y_test,
+    quant = quantise_step(fp32_path, int8_path, calibration_windows(X_train, train.y, seed), preprocess(sel.X), sel.y,
                           gate_steps=ALERT_STEPS, min_agreement=min_agreement, log=log)
     quant["calibration"].update(source="training windows (ground-truth segments), stratified by class", seed=seed)
+    quant["selection"]["gated_on"] = gated_on
     log(f"    chose {quant['method']}: int8/fp32 agreement by steps "
         + ", ".join(f"{k}: {v:.4f}" for k, v in quant["agreement_by_steps"].items()))
     hidden = model.lstm.hidden_size
@@ -374,7 +382,7 @@ def build_step(model, train, X_train: np.ndarray, X_test: np.ndarray, y_test: np
     entries[1]["metrics"] = {"agreement_with_fp32_by_steps": quant["agreement_by_steps"],
                              "macro_f1_by_steps": quant["macro_f1_by_steps"],
                              "macro_f1_delta_vs_fp32": quant["macro_f1_delta"],
-                             "evaluated_on": "detector-captured test windows of the training subjects, run step by step"}
+                             "evaluated_on": f"{gated_on}, run step by step (the int8 recipe's gate)"}
     entries[1]["quantization"] = quant
     return [fp32_path, int8_path], entries
 
@@ -388,7 +396,7 @@ def link_steps(entries: list[dict], step_entries: list[dict]) -> None:
 
 def add_step_models(*, checkpoint: str | Path, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = None,
                     train_npz: str | None = None, test_npz: str | None = None, command: str | None = None,
-                    log: Callable[[str], None] = print) -> dict:
+                    selection: str | Path | None = None, log: Callable[[str], None] = print) -> dict:
     """``python -m export step``: step 7 of :func:`build_assets` alone, on the shipped ConvLSTM: its
     checkpoint (checked to give the shipped fp32 model's outputs on the test captures) exported as the
     step model, fp32 and int8, added to ``out`` and linked from the ConvLSTM entries; the one-shot
@@ -413,9 +421,9 @@ def add_step_models(*, checkpoint: str | Path, out: str | Path = DEFAULT_ASSETS,
                       step_model={"command": command or "python -m export " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
                                   "checkpoint": str(checkpoint), "git_commit": git_commit(), "versions": versions()})
     with tempfile.TemporaryDirectory() as td:
-        paths, step_entries = build_step(model, train, X_train, X_test, test.y, seed=seed,
+        paths, step_entries = build_step(model, train, X_train, X_test, seed=seed,
                                          version=fp32_entry["model_version"], commit=git_commit(), stage=Path(td),
-                                         provenance=provenance, log=log)
+                                         provenance=provenance, log=log, selection=selection)
         for p in paths:
             shutil.copyfile(p, out / p.name)
     names = {e["name"] for e in step_entries}
@@ -503,13 +511,19 @@ def _export_fp32(model, train, X_test: np.ndarray, *, seed: int, epochs: int, ve
     stage.mkdir(parents=True, exist_ok=True)
     onx = to_onnx(model, list(train.classes), opset=DEFAULT_OPSET, model_version=version, commit=commit,
                   extra_meta={"training": {"seed": seed, "epochs": epochs, "windows": len(train)}})
-    fp32_path = save_onnx(onx, stage / f"{ARCH}.fp32.onnx")
     parity = check_parity(model, onx, X_test[:512])
-    log(f"[3/5] {fp32_path.name}: parity with torch max |d| logits {parity['max_abs_logits']:.2e}, "
-        f"probs {parity['max_abs_probs']:.2e}")
+    return _save_with_parity(onx, stage / f"{ARCH}.fp32.onnx", parity, "[3/5]", log), parity
+
+
+def _save_with_parity(onx, path: Path, parity: dict, what: str, log: Callable[[str], None]) -> Path:
+    """``onx`` written to ``path`` and its torch/onnxruntime ``parity`` logged (``what``: the build step and
+    the outputs compared); raises ExportError when the parity does not hold."""
+    path = save_onnx(onx, path)
+    log(f"{what} {path.name}: parity with torch, max |d| "
+        + ", ".join(f"{k.removeprefix('max_abs_')} {v:.2e}" for k, v in parity.items() if k.startswith("max_abs_")))
     if not parity["ok"]:
-        raise ExportError(f"{fp32_path}: torch/onnxruntime parity exceeds {parity['tol']:g}")
-    return fp32_path, parity
+        raise ExportError(f"{path}: torch/onnxruntime parity exceeds {parity['tol']:g}")
+    return path
 
 
 def _quantise(fp32_path: Path, X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray, *,
@@ -611,10 +625,15 @@ def _common(model, classes: list[str], version: str, provenance: dict) -> dict:
             "inputs": inputs, "outputs": outputs, "classes": classes, "provenance": provenance}
 
 
+TRAINING_COHORT_NOTE = ("training-cohort captures, seen in training: the detector captures of the training subjects, "
+                        "which the recipe (captures) trains on; not a test figure (between-subject figures are "
+                        "under 'loso', the selection cohort's under the step model's gate)")
+"""What the "test_captures" figures of a ConvLSTM entry are measured on (the key's name is the schema's)."""
+
+
 def _entries(fp32_path: Path, int8_path: Path, common: dict, parity: dict, quant: dict, scores: dict) -> list[dict]:
     """6. The fp32 and int8 manifest entries."""
-    eval_note = ("detector-captured test windows of the training subjects (all subjects are in training: "
-                 "an in-sample-subject figure; between-subject figures are under 'loso')")
+    eval_note = TRAINING_COHORT_NOTE
     loso = scores["loso"]
     return [
         {"name": f"{ARCH}-fp32", "file": fp32_path.name, "sha256": sha256_file(fp32_path), "precision": "fp32",

@@ -23,7 +23,7 @@ from __future__ import annotations
 import io
 import warnings
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import onnx
@@ -31,6 +31,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from edge_runtime.core.manifest import STEP_ARCH
+from edge_runtime.wearable.classifier import STEP_INPUTS, STEP_OUTPUTS, zero_state
+from edge_runtime.wearable.classifier import run_steps as runtime_run_steps
 from export.onnx_export import (
     DEFAULT_OPSET,
     PROBS,
@@ -38,15 +41,15 @@ from export.onnx_export import (
     _prune_dead,
     model_metadata,
     package_version,
-    save_onnx,
     set_metadata,
 )
 from models import nets
 
-INPUT_NAME, H_IN, C_IN, H_OUT, C_OUT = "imu", "h", "c", "h_out", "c_out"
+# the graph's names are the runtime's (edge_runtime.wearable.classifier.StepModel reads them)
+INPUT_NAME, H_IN, C_IN = STEP_INPUTS
+_, H_OUT, C_OUT = STEP_OUTPUTS
 STEP_INPUT_LAYOUT = ("N,33,3 (one sub-window: frame, axis x/y/z), m/s^2; h, c (N,hidden): the LSTM state after "
                      "the sub-windows before it (zeros before the first)")
-STEP_ARCH = "convlstm_step"
 PARITY_TOL = 1e-4
 
 
@@ -96,10 +99,6 @@ def _conv1d_copy(conv: nn.Conv1d, scale: float) -> nn.Conv1d:
     return out
 
 
-def zero_state(n: int, hidden: int = 100) -> tuple[np.ndarray, np.ndarray]:
-    return np.zeros((n, hidden), np.float32), np.zeros((n, hidden), np.float32)
-
-
 def to_step_onnx(model: nets.ConvLSTM, classes: Sequence[str], *, opset: int = DEFAULT_OPSET,
                  model_version: str | None = None, commit: str | None = None, extra_meta: dict | None = None
                  ) -> onnx.ModelProto:
@@ -132,27 +131,38 @@ def to_step_onnx(model: nets.ConvLSTM, classes: Sequence[str], *, opset: int = D
     return onx
 
 
-def run_steps(session, X: np.ndarray, hidden: int = 100) -> np.ndarray:
-    """(S, N, K): an onnxruntime step session run over sub-windows X (N, S, 33, 3) from the zero state."""
-    X = np.asarray(X, np.float32)
-    h, c = zero_state(len(X), hidden)
-    out = []
-    for s in range(X.shape[1]):
-        p, h, c = session.run([PROBS, H_OUT, C_OUT], {INPUT_NAME: np.ascontiguousarray(X[:, s]), H_IN: h, C_IN: c})
-        out.append(p)
-    return np.stack(out)
+def state_size(session) -> int:
+    """The LSTM state size of an onnxruntime step session (its ``h`` input's last dimension)."""
+    return next(i.shape[-1] for i in session.get_inputs() if i.name == H_IN)
 
 
-def step_states(session, X: np.ndarray, hidden: int = 100) -> list[dict[str, np.ndarray]]:
+def session_step(session) -> Callable[[np.ndarray, np.ndarray, np.ndarray], list[np.ndarray]]:
+    """``(x, h, c) -> (probs, h', c')`` by an onnxruntime step session's public run."""
+    outputs = list(STEP_OUTPUTS)
+    return lambda x, h, c: session.run(outputs, {INPUT_NAME: x, H_IN: h, C_IN: c})
+
+
+def _subs(X: np.ndarray) -> list[np.ndarray]:
+    return [X[:, s] for s in range(np.shape(X)[1])]
+
+
+def run_steps(session, X: np.ndarray) -> np.ndarray:
+    """(S, N, K): an onnxruntime step session run over sub-windows X (N, S, 33, 3) from the zero state
+    (the runtime's own loop, ``edge_runtime.wearable.classifier.run_steps``)."""
+    return np.stack(runtime_run_steps(session_step(session), _subs(X), state_size(session)))
+
+
+def step_states(session, X: np.ndarray) -> list[dict[str, np.ndarray]]:
     """The step model's feeds (sub-window, state before it) over sub-windows X (N, S, 33, 3): its
     calibration inputs, the states those windows really lead to."""
-    X = np.asarray(X, np.float32)
-    h, c = zero_state(len(X), hidden)
     feeds = []
-    for s in range(X.shape[1]):
-        feed = {INPUT_NAME: np.ascontiguousarray(X[:, s]), H_IN: h, C_IN: c}
-        feeds.append(feed)
-        _, h, c = session.run([PROBS, H_OUT, C_OUT], feed)
+    run = session_step(session)
+
+    def step(x, h, c):
+        feeds.append({INPUT_NAME: x, H_IN: h, C_IN: c})
+        return run(x, h, c)
+
+    runtime_run_steps(step, _subs(X), state_size(session))
     return feeds
 
 
@@ -162,15 +172,11 @@ def check_step_parity(model: nets.ConvLSTM, onx: onnx.ModelProto, X: np.ndarray,
 
     sess = open_session(onx.SerializeToString())
     X = np.asarray(X, np.float32)
-    steps = run_steps(sess, X, model.lstm.hidden_size)
+    steps = run_steps(sess, X)
     with torch.no_grad():
         ref = torch.softmax(model.eval()(torch.from_numpy(X), all_steps=True), dim=2).numpy()  # (N, S, K)
     d = float(np.abs(steps - ref.transpose(1, 0, 2)).max())
     return {"max_abs_probs": d, "n": int(len(X)), "steps": int(X.shape[1]), "tol": tol, "ok": bool(d < tol)}
-
-
-def save_step_onnx(onx: onnx.ModelProto, path: str | Path) -> Path:
-    return save_onnx(onx, path)
 
 
 # --------------------------------------------------------------------------- int8
@@ -197,7 +203,8 @@ def quantise_step(fp32_path: Path, int8_path: Path, calib_X: np.ndarray, eval_X:
     from edge_runtime.core.onnx import open_session
     from export.quantize import TIE, VARIANTS, QuantizeError, _macro_f1, compare_variants, fastest
 
-    ref = run_steps(open_session(fp32_path), eval_X)
+    fp32 = open_session(fp32_path)
+    ref = run_steps(fp32, eval_X)
     f1_ref = [_macro_f1(eval_y, p.argmax(1)) for p in ref]
 
     def score(session) -> dict:
@@ -207,8 +214,8 @@ def quantise_step(fp32_path: Path, int8_path: Path, calib_X: np.ndarray, eval_X:
         return {"agreement_by_steps": agree, "macro_f1_by_steps": {str(s + 1): v for s, v in enumerate(f1)},
                 "macro_f1_delta": f1[-1] - f1_ref[-1], "max_abs_probs": float(np.abs(out - ref).max())}
 
-    feeds = step_states(open_session(fp32_path), calib_X)
-    h, c = zero_state(1)
+    feeds = step_states(fp32, calib_X)
+    h, c = zero_state(1, state_size(fp32))
     feed = {INPUT_NAME: np.ascontiguousarray(eval_X[:1, 0]), H_IN: h, C_IN: c}
     with tempfile.TemporaryDirectory() as td:
         comp = compare_variants(fp32_path, [VARIANTS[k] for k in candidates], feeds, td, score=score, feed=feed,

@@ -62,13 +62,16 @@ PRECISIONS = ("fp32", "int8")
 CLASSIFIER_ARCHS = ("convlstm", "cnn", "lstm", "lda")
 """Architectures whose entries must list their ``classes``; other models (the pose
 lifter) list ``[]``."""
+STEP_ARCH = "convlstm_step"
+"""The ConvLSTM's streaming step model (one sub-window and the LSTM state per run): the arch of the entry a
+classifier entry's ``step_model`` names (``export.step_model`` writes it, the wearable runtime and the bench
+read it; defined here, where all three may import it)."""
 _REQUIRED_MODEL_KEYS = ("name", "file", "sha256", "precision", "arch", "parameters", "inputs",
                         "outputs", "classes")
 _OBJECT_KEYS = ("parameters", "metrics", "quantization", "provenance", "camera")
 """Entry fields that, when present, must be JSON objects."""
 _STRING_KEYS = ("model_version", "joints", "step_model")
 """Entry fields that, when present, must be strings."""
-
 
 
 def sha256_file(path: str | os.PathLike) -> str:

@@ -41,7 +41,7 @@ import os
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import onnxruntime as ort
@@ -50,9 +50,13 @@ from edge_runtime import config
 from edge_runtime.core.manifest import (
     ASSETS_DIR,
     CLASSIFIER_ARCHS,
+    STEP_ARCH,
+    ManifestError,
     ModelIntegrityError,
+    load_manifest,
     load_verified,
     manifest_path,
+    read_verified,
 )
 from edge_runtime.core.onnx import open_session
 
@@ -380,8 +384,44 @@ class ModelParams:
     the sha256 hashes only. Needs the signed-models extra."""
 
 
-STEP_ARCH = "convlstm_step"
 STEP_INPUTS, STEP_OUTPUTS = ("imu", "h", "c"), ("probs", "h_out", "c_out")
+"""The step graph's inputs (sub-window, LSTM state) and outputs (decision, next state); ``export.step_model``
+names its graph by these."""
+STEP_AGREEMENT_TOL = 1e-3
+"""Largest |probability| difference allowed at load between the one-shot model and its step model after 6
+sub-windows of :func:`probe_captures`: the same checkpoint gives about 5e-7 (fp32) and 5e-6 (int8 and int8,
+each quantised alone), another checkpoint a difference of the order of the probabilities themselves."""
+
+
+def probe_captures() -> np.ndarray:
+    """Four fixed synthetic captures (4, 700, 3) m/s^2: gravity on z, a slow swing of a few m/s^2 per axis
+    (frequencies and phases from a fixed seed) and some noise. Why: a probe whose every sub-window moves,
+    so that two models that are not the same checkpoint disagree on it."""
+    rng = np.random.default_rng(12345)
+    t_s = np.arange(CAPTURE_FRAMES)[None, :, None] / 100.0
+    amp = rng.uniform(1.0, 6.0, (4, 1, N_CHANNELS))
+    freq_hz = rng.uniform(0.2, 2.0, (4, 1, N_CHANNELS))
+    phase = rng.uniform(0.0, 2 * np.pi, (4, 1, N_CHANNELS))
+    x = amp * np.sin(2 * np.pi * freq_hz * t_s + phase) + rng.normal(0.0, 0.5, (4, CAPTURE_FRAMES, N_CHANNELS))
+    x[..., 2] += 9.80665
+    return x.astype(np.float32)
+
+
+def zero_state(n: int, hidden: int) -> tuple[np.ndarray, np.ndarray]:
+    """The LSTM state (h, c) before a capture's first sub-window: zeros (n, hidden) float32."""
+    return np.zeros((n, hidden), np.float32), np.zeros((n, hidden), np.float32)
+
+
+def run_steps(step: Callable[[np.ndarray, np.ndarray, np.ndarray], Sequence[np.ndarray]],
+              subs: Sequence[np.ndarray], hidden: int) -> list[np.ndarray]:
+    """Raw probabilities (N, K) after each of the sub-windows ``subs`` (each (N, 33, 3)), from the zero state,
+    by ``step`` ((x, h, c) -> (probs, h', c'): :meth:`StepModel.step`, or the export's session run)."""
+    h, c = zero_state(len(subs[0]), hidden)
+    out = []
+    for x in subs:
+        p, h, c = step(np.ascontiguousarray(x, dtype=np.float32), h, c)
+        out.append(p)
+    return out
 
 
 def _same(got: Sequence[np.ndarray], want: Sequence[np.ndarray]) -> bool:
@@ -446,8 +486,10 @@ class StepModel:
     """The ConvLSTM's streaming step graph (``export.step_model``): one sub-window (N, 33, 3) m/s^2 and
     the LSTM state (h, c) (N, hidden) in, the decision's probabilities (N, K) and the next state out."""
 
-    def __init__(self, model: bytes, threads: int, source: str, classes: Sequence[str]):
+    def __init__(self, model: bytes, threads: int, source: str, classes: Sequence[str], entry: dict | None = None):
         self.source = source
+        self.entry = entry or {}
+        """Its manifest entry (name, sha256, ...), when it was loaded through one."""
         self.session = open_session(model, threads, source)
         inputs = {i.name: i.shape for i in self.session.get_inputs()}
         outputs = [o.name for o in self.session.get_outputs()]
@@ -474,7 +516,7 @@ class StepModel:
                                       "classes are listed")
 
     def zero_state(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros((n, self.hidden), np.float32), np.zeros((n, self.hidden), np.float32)
+        return zero_state(n, self.hidden)
 
     @property
     def bound(self) -> bool:
@@ -489,12 +531,7 @@ class StepModel:
 
     def run(self, subs: Sequence[np.ndarray]) -> list[np.ndarray]:
         """Raw probabilities (N, K) after each of the sub-windows ``subs`` (each (N, 33, 3)), from the zero state."""
-        h, c = self.zero_state(len(subs[0]))
-        out = []
-        for x in subs:
-            p, h, c = self.step(np.ascontiguousarray(x, dtype=np.float32), h, c)
-            out.append(p)
-        return out
+        return run_steps(self.step, subs, self.hidden)
 
 
 @dataclass
@@ -505,6 +542,38 @@ class StepStream:
     c: np.ndarray
     done: int = 0
     probs: dict[int, np.ndarray] = field(default_factory=dict)
+    first_frame: bytes | None = None
+    """The bytes of the capture's first frame, as :meth:`Engine.advance` first saw it: frames whose first
+    frame differs are another capture's (a guard against a caller's mix-up, not a proof of identity)."""
+
+
+def _load_step_model(assets_dir: str | os.PathLike, entry: dict, threads: int,
+                     public_key_file: str | os.PathLike | None) -> StepModel:
+    """The step model the classifier ``entry``'s field ``step_model`` names, hash-checked, and refused in one line
+    (naming that field) unless it is a :data:`STEP_ARCH` entry of the same precision, model_version and classes
+    whose graph's LSTM state has the size its manifest entry declares. Whether it decides as the one-shot model
+    does is checked by :meth:`Engine._check_step_model` once both are loaded."""
+    mpath = manifest_path(assets_dir)
+    name = entry["step_model"]
+    where = f"{mpath}: field 'step_model' of {entry['name']!r}"
+    if not (isinstance(name, str) and name):
+        raise ManifestError(f"{where}: expected the name of a {STEP_ARCH} entry, got {name!r}")
+    named = next((e for e in load_manifest(assets_dir, public_key_file)["models"] if e["name"] == name), None)
+    if named is None:
+        raise ManifestError(f"{where}: names {name!r}, which is not an entry of the manifest")
+    if named["arch"] != STEP_ARCH:
+        raise ManifestError(f"{where}: names {name!r}, a {named['arch']} entry, not a {STEP_ARCH} one")
+    for key in ("precision", "model_version", "classes"):
+        if named.get(key) != entry.get(key):
+            raise ModelIntegrityError(f"{where}: {name!r} has {key} {named.get(key)!r}, {entry['name']!r} has "
+                                      f"{entry.get(key)!r}: not the step model of this model")
+    declared = next((t["shape"][-1] for t in named["inputs"] if t["name"] == STEP_INPUTS[1] and t.get("shape")), None)
+    path = mpath.parent / named["file"]
+    step = StepModel(read_verified(mpath.parent, named), threads, str(path), entry["classes"], named)
+    if step.hidden != declared:
+        raise ModelIntegrityError(f"{path}: LSTM state size {step.hidden}, but its manifest entry {name!r} "
+                                  f"(field 'inputs', {STEP_INPUTS[1]!r}) declares {declared!r}")
+    return step
 
 
 class Engine:
@@ -549,6 +618,22 @@ class Engine:
         if probe is not None and probe.shape != (len(self.classes),):
             raise ModelIntegrityError(f"{source}: model has {probe.shape[-1]} outputs but "
                                       f"{len(self.classes)} classes are listed")
+        if step_model is not None:
+            self._check_step_model()
+
+    def _check_step_model(self) -> None:
+        """Refuse a step model that does not decide as this model does: after 6 sub-windows of
+        :func:`probe_captures` (the same inputs to both) their probabilities must agree within
+        :data:`STEP_AGREEMENT_TOL`. Why: hashes prove the files are the manifest's, not that the step graph
+        was exported from the same checkpoint as the one-shot model whose thresholds and temperatures apply."""
+        x = preprocess(probe_captures())
+        one_shot = self._model_probs(x, N_SUBSEQ)
+        stepped = self.step_model.run([x[:, s] for s in range(N_SUBSEQ)])[-1]
+        diff = float(np.abs(one_shot - stepped).max())
+        if not diff <= STEP_AGREEMENT_TOL:
+            raise ModelIntegrityError(f"{self.step_model.source}: its decisions after {N_SUBSEQ} sub-windows of a "
+                                      f"fixed probe differ from {self.source}'s by {diff:.3g} (> {STEP_AGREEMENT_TOL:g}): "
+                                      "not the step model of the same trained model")
 
     # ------------------------------------------------------------------ construction
 
@@ -562,18 +647,8 @@ class Engine:
         intra-op threads; with ``stream``, also the step model its ``step_model`` field names (hash-checked
         the same way), which then makes every decision after S sub-windows."""
         entry, data, path = load_verified(assets_dir, name_or_precision, arch=arch, public_key_file=public_key_file)
-        step = None
-        if stream and "step_model" in entry:
-            name = entry["step_model"]
-            if not (isinstance(name, str) and name):
-                raise ModelIntegrityError(f"{manifest_path(assets_dir)}: field 'step_model' of {entry['name']!r}: "
-                                          f"expected the name of a {STEP_ARCH} entry, got {name!r}")
-            step_entry, step_data, step_path = load_verified(assets_dir, name, arch=STEP_ARCH,
-                                                             public_key_file=public_key_file)
-            if step_entry["classes"] != entry["classes"]:
-                raise ModelIntegrityError(f"{step_path}: field 'classes': {step_entry['classes']} differ from "
-                                          f"{entry['name']}'s {entry['classes']}")
-            step = StepModel(step_data, threads, str(step_path), entry["classes"])
+        step = _load_step_model(assets_dir, entry, threads, public_key_file) if stream and "step_model" in entry \
+            else None
         return cls(data, classes=entry["classes"], name=entry["name"], precision=entry["precision"],
                    threads=threads, entry=entry, source=str(path), step_model=step)
 
@@ -598,8 +673,7 @@ class Engine:
                 want is not None and got != want for got, want in zip(a.shape[1:], self._item_shape))):
             raise ValueError(f"{self.name}: input shape {np.shape(x)}, expected "
                              f"{tuple(d or 'N' for d in self._item_shape)} or (N, ...) of it")
-        if not np.isfinite(a).all():
-            raise ValueError(f"{self.name}: input holds NaN or infinite values")
+        self._finite(a)
         if a.shape[0] == 0:
             return np.zeros((0, len(self.classes)), np.float32)
         if not a.flags.c_contiguous:
@@ -632,13 +706,24 @@ class Engine:
         ``data`` (at least ``needed_frames(steps)``): runs the step model once for each sub-window the
         capture's ``stream`` has not yet seen, sub-window s computed from the first ``needed_frames(s)``
         frames (:func:`step_inputs`), and keeps the state in ``stream``. Equal to :meth:`classify_prefix`
-        of the same frames, since both read each sub-window as it arrived."""
+        of the same frames, since both read each sub-window as it arrived. Refused (ValueError, one line) before
+        the state is touched: fewer than ``needed_frames(steps)`` frames, or frames whose first frame is not the
+        one this stream was first advanced with (another capture's: a stream holds one capture)."""
         self._check_steps(steps)
         x = np.asarray(data, dtype=np.float32)
+        need = needed_frames(steps)
+        if x.ndim != 2 or x.shape[1] != N_CHANNELS or not need <= len(x) <= CAPTURE_FRAMES:
+            raise ValueError(f"{self.name}: a decision after {steps} sub-windows needs {need}..{CAPTURE_FRAMES} "
+                             f"frames of (n, {N_CHANNELS}), got {x.shape}")
+        first = x[0].tobytes()  # bytes: NaN compares equal to itself here
+        if stream.first_frame is None:
+            stream.first_frame = first
+        elif first != stream.first_frame:
+            raise ValueError(f"{self.name}: these frames are not the capture this stream was advanced with "
+                             "(its first frame differs): a stream holds one capture's state")
         for s in range(stream.done + 1, steps + 1):
             sub = _prefix_inputs(x[None, :needed_frames(s)], ((s, needed_frames(s)),), last_only=True)[0]
-            if not np.isfinite(sub).all():
-                raise ValueError(f"{self.name}: input holds NaN or infinite values")
+            self._finite(sub)
             p, stream.h, stream.c = self.step_model.step(sub, stream.h, stream.c)
             stream.probs[s] = p[0]
             stream.done = s
@@ -693,8 +778,7 @@ class Engine:
         for s in range(1, tops[0] + 1):
             reach = sum(top >= s for top in tops)
             x = subs[0][s - 1] if reach == 1 else np.concatenate([subs[j][s - 1] for j in range(reach)])
-            if not np.isfinite(x).all():
-                raise ValueError(f"{self.name}: input holds NaN or infinite values")
+            self._finite(x)
             probs, h, c = self.step_model.step(x, h[:len(x)], c[:len(x)])
             start = 0
             for j in range(reach):
@@ -709,6 +793,11 @@ class Engine:
         if steps not in self.early.steps and steps != N_SUBSEQ:
             raise ValueError(f"{self.name}: decides after {list(self.early.steps)} sub-windows, not {steps}")
 
+    def _finite(self, a: np.ndarray) -> None:
+        """ValueError unless every value of a model input is finite (onnxruntime would pass NaN through)."""
+        if not np.isfinite(a).all():
+            raise ValueError(f"{self.name}: input holds NaN or infinite values")
+
     def _temperature(self, steps: int) -> float:
         return self.early.temperature_by_steps.get(steps, 1.0)
 
@@ -718,16 +807,15 @@ class Engine:
         if self.step_model is not None:
             self._check_steps(steps)
             subs = step_inputs(np.asarray(x_prefixes, dtype=np.float32), steps)
-            if not all(np.isfinite(x).all() for x in subs):
-                raise ValueError(f"{self.name}: input holds NaN or infinite values")
+            for x in subs:
+                self._finite(x)
             return self.step_model.run(subs)[-1]
         return self._model_probs(preprocess_prefixes(x_prefixes, steps), steps)
 
     def _model_probs(self, a: np.ndarray, steps: int) -> np.ndarray:
         """The model's raw probabilities (N, K) for its inputs (N, steps, 33, 3), C-contiguous float32."""
         self._check_steps(steps)
-        if not np.isfinite(a).all():
-            raise ValueError(f"{self.name}: input holds NaN or infinite values")
+        self._finite(a)
         # the checks of classify() hold by construction here; the loop asks this 18,000 times a day
         return self._run(self._outputs, {self.input_name: a}, self._run_options)[0]
 
@@ -748,6 +836,14 @@ class Engine:
             return json.loads(raw)
         except json.JSONDecodeError:
             raise ModelIntegrityError(f"{self.source}: ONNX metadata {key!r} is not valid JSON") from None
+
+    def decision_path(self) -> dict:
+        """What makes the decisions, for a report's provenance: this model's manifest name and sha256, and the
+        step model's when decisions come from it (None: the whole model on each prefix)."""
+        step = self.step_model
+        return {"model": self.name, "sha256": self.entry.get("sha256"),
+                "step_model": None if step is None else step.entry.get("name", step.source),
+                "step_model_sha256": None if step is None else step.entry.get("sha256")}
 
     def describe(self) -> dict:
         return {"name": self.name, "precision": self.precision, "source": self.source,

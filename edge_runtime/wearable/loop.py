@@ -373,8 +373,11 @@ class WearableLoop:
             weights.get(c, 1.0) for c in self.classes]  # in the model's class order
         self._other_k = self.classes.index(OTHER) if OTHER in self.classes and policy.max_mean_other < 1.0 else None
         self._capture: _CaptureState | None = None  # the capture being decided
-        self._first_frames = needed_frames(self._early_steps[0])
-        self._next_frames = self._first_frames  # frames the next early step needs
+        # a capture still filling is acted on when it may decide early, or when a step model runs a step as each
+        # of its sub-windows arrives, whatever the decisions: every decision then costs one step, never six
+        self._fills = self._early or self._stream is not None
+        self._first_frames = needed_frames(1 if self._stream is not None else self._early_steps[0])
+        self._next_frames = self._first_frames  # frames the next early step (or sub-window) needs
         self._event: AlertEvent | None = None  # the alert event under way, if any
 
     def _time_of(self, index: int) -> float:
@@ -414,7 +417,7 @@ class WearableLoop:
                 self.status.count_samples(1)
                 cap = self.detector.push_sample(x, y, z)
                 if cap is None:
-                    return self._early_due() if self._early else []
+                    return self._early_due() if self._fills else []
                 return self._steps_of(cap.trigger_index, cap.data) + self._early_due()
         elif np.isfinite(acc).all():  # the common case
             self.status.count_samples(len(acc))
@@ -520,8 +523,8 @@ class WearableLoop:
                     self._ready[trigger, steps] = row, compute_us
 
     def _early_due(self) -> list[Decision]:
-        """The early steps the capture still filling now holds the frames for."""
-        if self._early and self.detector.capturing and self.detector.filled >= self._next_frames:
+        """The early steps (or with a step model the sub-windows) the capture still filling now holds the frames for."""
+        if self._fills and self.detector.capturing and self.detector.filled >= self._next_frames:
             trigger, so_far = self.detector.filling
             return self._steps_of(trigger, so_far)
         return []

@@ -51,6 +51,31 @@ from edge_runtime.wearable.labels import DISTRACTIONS
 from edge_runtime.wearable.sources import SAMPLE_RATE_HZ
 from firmware_sim.scenarios.scoring import raises_alert
 
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def git_head(root: Path = REPO_ROOT) -> str | None:
+    """The commit HEAD names in the checkout at ``root`` (a worktree's too), read from its git files, or None.
+    Why not ``git rev-parse``: the command's tests run without child processes. Uncommitted changes are not
+    seen: a report made on a changed tree names the commit it started from."""
+    try:
+        gitdir = root / ".git"
+        if gitdir.is_file():  # a worktree: "gitdir: PATH"
+            gitdir = Path(gitdir.read_text().split(":", 1)[1].strip())
+        head = (gitdir / "HEAD").read_text().strip()
+        if not head.startswith("ref: "):
+            return head  # detached
+        ref = head[len("ref: "):]
+        common = (gitdir / (gitdir / "commondir").read_text().strip()).resolve() \
+            if (gitdir / "commondir").is_file() else gitdir
+        for base in (gitdir, common):
+            if (base / ref).is_file():
+                return (base / ref).read_text().strip()
+        packed = common / "packed-refs"
+        return next((line.split()[0] for line in packed.read_text().splitlines() if line.endswith(" " + ref)), None)
+    except (OSError, IndexError):
+        return None
+
 DRIVE_SEED0 = 900_000
 """Distraction drives use seeds DRIVE_SEED0 + 1000 * seed + k: no other command or test uses them."""
 BASELINE_COHORT0 = 950_000
@@ -359,6 +384,7 @@ def to_markdown(report: dict) -> str:
              f"{report['hours']:g} h", "",
              f"`{report['command']}`", "",
              f"Model {report['model']}; " + "; ".join(f"{m}: {d}" for m, d in report["decision_modes"].items()), "",
+             *_provenance_lines(report),
              f"Drives: {report['hours_by_kind']} (hours by kind); {report['held_out']}", "",
              "| figure | " + " | ".join(modes) + " |", "|---|" + "---:|" * len(modes)]
     lines += [f"| {name} | " + " | ".join(cell(report["scores"][m], key) for m in modes) + " |" for name, key in rows]
@@ -386,6 +412,16 @@ def to_markdown(report: dict) -> str:
     lines += ["Distractions: " + ", ".join(f"{m} {report['scores'][m]['distractions']}" for m in modes)
               + "; decisions by status: " + "; ".join(f"{m} {report['scores'][m]['statuses']}" for m in modes), ""]
     return "\n".join(lines)
+
+
+def _provenance_lines(report: dict) -> list[str]:
+    """What decided and on which code (reports written before these fields existed have none)."""
+    path = report.get("decision_path")
+    if path is None:
+        return []
+    by = (f"the step model {path['step_model']} (sha256 {path['step_model_sha256']})" if path["step_model"] else
+          "the whole model on each prefix (no step model)")
+    return [f"Decisions by {by}; model {path['model']} (sha256 {path['sha256']}); code: git {report.get('git_commit')}", ""]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -445,6 +481,7 @@ def cmd(a) -> int:
                      "agreement")
             and v is not None) + (" --step-accuracy" if a.step_accuracy else ""),
         "hours": a.hours, "seed": a.seed, "model": f"{engine.name} ({engine.precision})",
+        "decision_path": engine.decision_path(), "git_commit": git_head(),
         "early_steps": list(engine.early_steps), "decision_modes": described,
         "held_out": (f"distraction drives: seeds {DRIVE_SEED0 + 1000 * a.seed}+k (a new driver each); baseline "
                      f"drives: subjects of cohort seed {BASELINE_COHORT0 + a.seed}; models/ trains and validates "

@@ -70,6 +70,17 @@ def test_the_command_writes_json_markdown_and_the_trace(tmp_path, capsys):
     assert set(report["scores"]) == {"full_window", "early"}  # the shipped model takes partial captures
     assert all(report["scores"][m]["driving_hours"] == pytest.approx(0.1) for m in report["scores"])
     assert "| event recall |" in (tmp_path / "drive_eval.md").read_text()
+    # provenance: what decided (the shipped int8 model by its int8 step model, each by its sha256) and the code
+    from edge_runtime.core.manifest import ASSETS_DIR, load_manifest
+    from firmware_sim.scenarios.drive_eval import git_head
+
+    sha = {e["name"]: e["sha256"] for e in load_manifest(ASSETS_DIR)["models"]}
+    assert report["decision_path"] == {"model": "convlstm-int8", "sha256": sha["convlstm-int8"],
+                                       "step_model": "convlstm-step-int8", "step_model_sha256": sha["convlstm-step-int8"]}
+    head = git_head()
+    assert report["git_commit"] == head and (head is None or len(head) == 40)
+    assert f"Decisions by the step model convlstm-step-int8 (sha256 {sha['convlstm-step-int8']})" in (
+        tmp_path / "drive_eval.md").read_text()
     assert main(["drive-eval", "--hours", "0.05", "--drive-minutes", "3", "--seed", "5", "--out", str(tmp_path),
                  "--decision", "early", "--step-accuracy"]) == 0
     assert "| S | decision frame" in (tmp_path / "drive_eval.md").read_text()
@@ -130,3 +141,25 @@ def test_step_accuracy_scores_every_capture_at_every_sub_window_count():
     # weighting Other up makes the 40 s capture right and the Phone wrong
     weights = (1.0, 1.0, 1.0, 1.0, 1.0, 10.0)
     assert step_accuracy([drive], clf, config.load(None).detector, weights)["6"]["accuracy_distraction_captures"] == 0.0
+
+
+def test_git_head_reads_a_checkout_a_worktree_and_packed_refs_without_git(tmp_path):
+    from firmware_sim.scenarios.drive_eval import git_head
+
+    a, b = "a" * 40, "b" * 40
+    common = tmp_path / "repo" / ".git"
+    (common / "refs" / "heads").mkdir(parents=True)
+    (common / "HEAD").write_text("ref: refs/heads/main\n")
+    (common / "refs" / "heads" / "main").write_text(a + "\n")
+    assert git_head(tmp_path / "repo") == a
+    wt_git = common / "worktrees" / "wt"  # a worktree whose branch is only in packed-refs
+    wt_git.mkdir(parents=True)
+    (wt_git / "HEAD").write_text("ref: refs/heads/topic\n")
+    (wt_git / "commondir").write_text("../..\n")
+    (common / "packed-refs").write_text(f"# pack-refs with: peeled\n{b} refs/heads/topic\n")
+    (tmp_path / "wt").mkdir()
+    (tmp_path / "wt" / ".git").write_text(f"gitdir: {wt_git}\n")
+    assert git_head(tmp_path / "wt") == b
+    (wt_git / "HEAD").write_text(a + "\n")  # detached
+    assert git_head(tmp_path / "wt") == a
+    assert git_head(tmp_path / "nowhere") is None

@@ -2,20 +2,26 @@
 per capture. Its fp32 decisions are the one-shot fp32 model's on the same sub-windows; a capture's state is
 its own; the live loop (one sample at a time, a step as each sub-window arrives) decides what the replay's
 batched steps decide; a bad or missing step entry is one line naming the file and field."""
+import argparse
+import hashlib
 import json
 import shutil
 import subprocess
 import sys
 
 import numpy as np
+import onnx
 import pytest
+from onnx import TensorProto, helper, numpy_helper
 from support import REPO_ROOT
 from support.drive import drive_captures
 
-from edge_runtime.core.manifest import ASSETS_DIR, ManifestError, ModelIntegrityError, load_manifest
+from edge_runtime.core.manifest import ASSETS_DIR, STEP_ARCH, ManifestError, ModelIntegrityError, load_manifest
+from edge_runtime.wearable import classifier, command
 from edge_runtime.wearable.classifier import (
     STEP_OUTPUTS,
     Engine,
+    StepModel,
     bound_step,
     fast_run,
     needed_frames,
@@ -25,13 +31,21 @@ from edge_runtime.wearable.classifier import (
 from edge_runtime.wearable.loop import AlertPolicy, WearableLoop
 from edge_runtime.wearable.sources import SAMPLE_RATE_HZ, ImuBlock
 
-pytestmark = pytest.mark.skipif(not any(e["arch"] == "convlstm_step" for e in load_manifest(ASSETS_DIR)["models"]),
-                                reason="no shipped step model")
-
 
 @pytest.fixture(scope="module")
 def captures():
     return drive_captures()
+
+
+def test_every_shipped_classifier_entry_names_a_step_model_of_its_precision():
+    """The tests below run on the shipped step models: their absence is a failure here, never a silent skip."""
+    models = {e["name"]: e for e in load_manifest(ASSETS_DIR)["models"]}
+    convlstm = [e for e in models.values() if e["arch"] == "convlstm"]
+    assert {e["precision"] for e in convlstm} == {"fp32", "int8"}
+    for e in convlstm:
+        step = models[e["step_model"]]
+        assert step["arch"] == STEP_ARCH and step["precision"] == e["precision"]
+        assert step["model_version"] == e["model_version"] and step["classes"] == e["classes"]
 
 
 @pytest.mark.parametrize("precision", ["fp32", "int8"])
@@ -80,6 +94,21 @@ def test_advancing_a_capture_gives_its_prefix_decisions_and_two_captures_keep_th
     jump = eng.new_stream()  # a decision after S = 4 runs the steps it has not yet run, once each
     np.testing.assert_array_equal(eng.advance(jump, a, 4), eng.classify_prefix(a[:needed_frames(4)], 4))
     assert jump.done == 4 and sorted(jump.probs) == [1, 2, 3, 4]
+
+
+def test_advance_refuses_too_few_frames_or_another_capture_before_touching_the_state(captures):
+    eng = Engine.from_manifest(ASSETS_DIR, "int8")
+    a, b = captures[0], captures[1]
+    st = eng.new_stream()
+    with pytest.raises(ValueError, match="needs 263..700 frames") as e:
+        eng.advance(st, a[:needed_frames(2) - 1], 2)
+    assert "\n" not in str(e.value) and st.done == 0 and not st.h.any() and not st.probs
+    eng.advance(st, a[:needed_frames(2)], 2)
+    h = st.h.copy()
+    with pytest.raises(ValueError, match="not the capture"):
+        eng.advance(st, b[:needed_frames(3)], 3)
+    assert st.done == 2 and np.array_equal(st.h, h)
+    np.testing.assert_array_equal(eng.advance(st, a[:needed_frames(3)], 3), eng.classify_prefix(a[:needed_frames(3)], 3))
 
 
 class _PublicOnly:
@@ -136,6 +165,59 @@ def test_the_step_call_takes_a_private_path_only_when_it_gives_what_the_public_r
             np.testing.assert_array_equal(pa, pb)
 
 
+class _Wrapped:
+    """A real session whose private ``_sess`` is missing (``inner`` None) or an object whose ``run`` is ``inner``;
+    every public call goes to the real session."""
+
+    def __init__(self, session, inner=None):
+        self._real = session
+        if inner is not None:
+            self._sess = _Inner(inner)
+
+    def __getattr__(self, name):
+        if name == "_sess":
+            raise AttributeError(name)
+        return getattr(self._real, name)
+
+
+@pytest.mark.parametrize("private", ["missing", "raises"])
+def test_a_step_model_on_an_onnxruntime_whose_private_run_is_missing_or_raises_gives_the_same_results(
+        captures, monkeypatch, private):
+    """Built as the box builds it (``from_manifest``), on sessions without ``_sess`` or whose ``_sess.run`` raises
+    (any exception): the load-time probe falls back to the public ``run``, with the same results bit for bit."""
+    shipped = Engine.from_manifest(ASSETS_DIR, "int8")
+
+    def broken(*args):
+        raise RuntimeError("a changed private API")
+
+    real_open = classifier.open_session
+    monkeypatch.setattr(classifier, "open_session", lambda *a, **k: _Wrapped(real_open(*a, **k),
+                                                                             None if private == "missing" else broken))
+    eng = Engine.from_manifest(ASSETS_DIR, "int8")
+    model = eng.step_model
+    assert model._run == model.session._real.run and not model.bound
+    subs = step_inputs(captures[:6], 6)
+    for got, want in zip(model.run(subs), shipped.step_model.run(subs)):  # a batch
+        np.testing.assert_array_equal(got, want)
+    for k in range(3):  # one capture at a time: the loop's call
+        st, ref = eng.new_stream(), shipped.new_stream()
+        np.testing.assert_array_equal(eng.advance(st, captures[k], 6), shipped.advance(ref, captures[k], 6))
+
+
+class StepSpy:
+    """Counts StepModel.step's runs per feed (each capture's step, batch or one)."""
+
+    def __init__(self, monkeypatch):
+        self.calls = 0
+        real = StepModel.step
+
+        def step(model, x, h, c):
+            self.calls += 1
+            return real(model, x, h, c)
+
+        monkeypatch.setattr(StepModel, "step", step)
+
+
 class Spy:
     """The shipped int8 engine, counting the steps each capture's stream runs."""
 
@@ -163,18 +245,70 @@ def _feed(loop, acc, block):
     return [{k: v for k, v in d.to_json().items() if k not in ("compute_us", "latency_ms")} for d in out]
 
 
-def test_the_live_loop_steps_each_capture_and_decides_what_the_batched_replay_decides():
-    """One sample at a time, the loop opens a stream per capture and runs a step as each sub-window arrives;
-    the replay (whole blocks) batches every capture's steps instead: the same decisions."""
+@pytest.fixture(scope="module")
+def drive_acc():
     from firmware_sim.devices.wrist import simulate_drive
 
-    acc = np.ascontiguousarray(simulate_drive(4.0, seed=3).acc_mps2, dtype=np.float32)
-    spy = Spy()
-    live = _feed(WearableLoop(spy, policy=AlertPolicy()), acc, 1)
-    replay = _feed(WearableLoop(Engine.from_manifest(ASSETS_DIR, "int8"), policy=AlertPolicy()), acc, len(acc))
+    return np.ascontiguousarray(simulate_drive(4.0, seed=3).acc_mps2, dtype=np.float32)
+
+
+def _steps_per_feed(loop, acc, block, spy):
+    per_feed = []
+    for i in range(0, len(acc), block):
+        spy.calls = 0
+        loop.feed(ImuBlock(i / SAMPLE_RATE_HZ, acc[i:i + block], continuous=i > 0))
+        per_feed.append(spy.calls)
+    return per_feed
+
+
+@pytest.mark.parametrize("decision", ["early", "full_window"])
+@pytest.mark.parametrize("block", [1, 5])
+def test_every_feed_runs_only_the_steps_of_the_sub_windows_it_completed(drive_acc, monkeypatch, decision, block):
+    """A decision costs one step whatever the policy: the loop runs a capture's step as each of its sub-windows
+    arrives (in full_window mode too, and for a capture that only continues an event), never several at once
+    when a capture completes. A feed of 1 or 5 samples completes at most one sub-window (they are >= 90 frames
+    apart, and a capture starts after the one before it ends), so it runs at most one step."""
+    spy = StepSpy(monkeypatch)
+    streams = Spy()
+    loop = WearableLoop(streams, policy=AlertPolicy(decision=decision))
+    per_feed = _steps_per_feed(loop, drive_acc, block, spy)
+    assert max(per_feed) == 1 and sum(per_feed) == sum(s.done for s in streams.streams)
+    assert len(streams.streams) >= 5 and all(s.done == 6 for s in streams.streams[:-1])
+    assert loop.stats.statuses["continued"] >= 1  # the captures that only continue an event are stepped too
+
+
+@pytest.mark.parametrize("stream", [True, False])
+def test_the_live_loop_decides_what_the_batched_replay_decides(drive_acc, monkeypatch, stream):
+    """One sample at a time, the loop opens a stream per capture and runs a step as each sub-window arrives
+    (``stream = false``: the whole model on each prefix); the replay (whole blocks) batches every capture's
+    steps instead: the same decisions."""
+    spy = StepSpy(monkeypatch)
+    eng = Spy() if stream else Engine.from_manifest(ASSETS_DIR, "int8", stream=False)
+    live_loop = WearableLoop(eng, policy=AlertPolicy())
+    per_feed = _steps_per_feed(live_loop, drive_acc, 1, spy)
+    live_loop = WearableLoop(eng, policy=AlertPolicy())
+    live = _feed(live_loop, drive_acc, 1)
+    replay = _feed(WearableLoop(Engine.from_manifest(ASSETS_DIR, "int8", stream=stream), policy=AlertPolicy()),
+                   drive_acc, len(drive_acc))
     assert len(live) > 5 and live == replay
-    assert len(spy.streams) >= 5 and len({id(s) for s in spy.streams}) == len(spy.streams)  # one per capture
-    assert all(s.done == 6 for s in spy.streams[:-1])  # every decided capture ran its 6 steps once
+    if stream:
+        assert max(per_feed) == 1  # the live loop's steps are never bunched
+        assert len({id(s) for s in eng.streams}) == len(eng.streams)  # one state per capture
+    else:
+        assert sum(per_feed) == 0  # no step model runs
+
+
+def test_model_stream_reaches_the_engine_through_the_command(tmp_path):
+    """``[model] stream`` of the box config decides the engine the wearable command loads."""
+    p = argparse.ArgumentParser()
+    command.add_arguments(p)
+    engines = {}
+    for stream in ("true", "false"):
+        box = tmp_path / f"box_{stream}.toml"
+        box.write_text(f"[model]\nstream = {stream}\n")
+        engines[stream] = command._load_classifier(command.effective_config(
+            p.parse_args(["--replay", "x.csv", "--config", str(box)])))
+    assert engines["true"].streaming and not engines["false"].streaming
 
 
 def _assets_with(tmp_path, change):
@@ -190,6 +324,30 @@ def _entry(m, name):
     return next(e for e in m["models"] if e["name"] == name)
 
 
+def _toy_step_graph(hidden: int) -> bytes:
+    """A graph with the step model's contract (imu (N, 33, 3), h, c (N, hidden) in; probs (N, 6), h_out, c_out
+    out) that decides by the sub-window's mean alone: a step model that is not the shipped model's."""
+    w = numpy_helper.from_array(np.random.default_rng(1).normal(0.0, 1.0, (3, 6)).astype(np.float32), "w")
+    nodes = [helper.make_node("ReduceMean", ["imu"], ["m"], axes=[1], keepdims=0),
+             helper.make_node("MatMul", ["m", "w"], ["z"]), helper.make_node("Softmax", ["z"], ["probs"], axis=1),
+             helper.make_node("Identity", ["h"], ["h_out"]), helper.make_node("Identity", ["c"], ["c_out"])]
+    t = lambda name, *dims: helper.make_tensor_value_info(name, TensorProto.FLOAT, ["N", *dims])  # noqa: E731
+    graph = helper.make_graph(nodes, "toy_step", [t("imu", 33, 3), t("h", hidden), t("c", hidden)],
+                              [t("probs", 6), t("h_out", hidden), t("c_out", hidden)], [w])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    onnx.checker.check_model(model)
+    return model.SerializeToString()
+
+
+def _step_file(hidden: int):
+    """Replace the int8 step model's file (and its manifest hash and size) with a toy graph of state ``hidden``."""
+    def change(m, d):
+        data = _toy_step_graph(hidden)
+        (d / "convlstm_step.int8.onnx").write_bytes(data)
+        _entry(m, "convlstm-step-int8").update(sha256=hashlib.sha256(data).hexdigest(), size_bytes=len(data))
+    return change
+
+
 @pytest.mark.parametrize("change, error, words", [
     (lambda m, d: _entry(m, "convlstm-int8").update(step_model="convlstm-step-int9"), ManifestError,
      ("convlstm-step-int9",)),
@@ -200,7 +358,16 @@ def _entry(m, name):
      ("convlstm_step.int8.onnx", "sha256")),
     (lambda m, d: _entry(m, "convlstm-step-int8").update(classes=["Phone", "Other"]), ModelIntegrityError,
      ("classes",)),
-], ids=["unknown name", "not a string", "entry missing", "file tampered", "other classes"])
+    (lambda m, d: _entry(m, "convlstm-int8").update(step_model="convlstm-fp32"), ManifestError,
+     ("field 'step_model' of 'convlstm-int8'", "convlstm-fp32", "not a convlstm_step")),
+    (lambda m, d: _entry(m, "convlstm-int8").update(step_model="convlstm-step-fp32"), ModelIntegrityError,
+     ("field 'step_model' of 'convlstm-int8'", "precision")),
+    (lambda m, d: _entry(m, "convlstm-step-int8").update(model_version="9.9.9+other"), ModelIntegrityError,
+     ("field 'step_model' of 'convlstm-int8'", "model_version", "9.9.9+other")),
+    (_step_file(64), ModelIntegrityError, ("convlstm_step.int8.onnx", "state size 64", "100")),
+    (_step_file(100), ModelIntegrityError, ("convlstm_step.int8.onnx", "fixed probe", "not the step model")),
+], ids=["unknown name", "not a string", "entry missing", "file tampered", "other classes", "names a one-shot entry",
+        "other precision", "other model_version", "other state size", "another model, right hash"])
 def test_a_bad_or_missing_step_entry_is_refused_in_one_line(tmp_path, change, error, words):
     d = _assets_with(tmp_path, change)
     with pytest.raises(error) as e:
@@ -209,8 +376,10 @@ def test_a_bad_or_missing_step_entry_is_refused_in_one_line(tmp_path, change, er
 
 
 @pytest.mark.slow
-def test_the_wearable_command_refuses_a_missing_step_model_in_one_line(tmp_path):
-    d = _assets_with(tmp_path, lambda m, d: (d / "convlstm_step.int8.onnx").unlink())
+@pytest.mark.parametrize("change", [lambda m, d: (d / "convlstm_step.int8.onnx").unlink(), _step_file(100)],
+                         ids=["missing", "another model, right hash"])
+def test_the_wearable_command_refuses_a_missing_or_foreign_step_model_in_one_line(tmp_path, change):
+    d = _assets_with(tmp_path, change)
     csv = tmp_path / "rec.csv"
     csv.write_text("t,ax,ay,az\n" + "\n".join(f"{i / 100:.2f},0.0,0.0,9.81" for i in range(300)) + "\n")
     r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(csv), "--assets", str(d)],
