@@ -459,7 +459,8 @@ def cmd(a) -> int:
     cfg = config.load(a.config)
     cfg = config.override(cfg, "model", assets=a.assets, name=a.model)
     out = _out_dir(a.out)
-    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
+    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads,
+                                 stream=cfg.model.stream)
     early = engine.early_steps != (6,)
     measured = modes if early else tuple(m for m in modes if m != "early") or ("full_window",)
     t_wall = time.perf_counter()
@@ -490,7 +491,8 @@ def cmd(a) -> int:
         "config": {"alerts": _section(cfg.alerts), "detector": _section(cfg.detector)},
         "scores": res["scores"]}
     if a.agreement:
-        other = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, a.agreement, threads=cfg.model.threads)
+        other = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, a.agreement, threads=cfg.model.threads,
+                                   stream=cfg.model.stream)
         report["class_agreement"] = class_agreement(drives, engine, other, cfg.detector)
     if a.step_accuracy:
         report["step_accuracy"] = step_accuracy(drives, engine, cfg.detector, cfg.alerts.class_weights)
