@@ -52,13 +52,14 @@ import numpy as np
 from edge_runtime.core.manifest import (
     SCHEMA_VERSION,
     ManifestError,
+    ModelIntegrityError,
     load_manifest,
     select_model,
     sha256_file,
     verify_all,
     write_manifest,
 )
-from edge_runtime.wearable.classifier import preprocess
+from edge_runtime.wearable.classifier import Engine, preprocess
 from export.onnx_export import (
     DEFAULT_OPSET,
     EARLY_INPUT_LAYOUT,
@@ -311,6 +312,7 @@ def build_assets(*, seed: int = 0, subjects: int = 20, epochs: int | None = None
                                           min_agreement=early_min_agreement, selection=selection)
     link_steps(entries, step_entries)
     manifest, path = _install(out, entries + step_entries, (fp32_path, int8_path, *step_paths), command)
+    check_loads(out)
     log(f"wrote {out / fp32_path.name}, {out / int8_path.name}, "
         f"{', '.join(p.name for p in step_paths)}, {path} in {time.time() - t0:.0f} s")
     return manifest
@@ -432,6 +434,7 @@ def add_step_models(*, checkpoint: str | Path, out: str | Path = DEFAULT_ASSETS,
     last = max(i for i, e in enumerate(kept) if e["arch"] == ARCH)  # beside the ConvLSTM's entries
     manifest["models"] = kept[:last + 1] + step_entries + kept[last + 1:]
     write_manifest(out, manifest)
+    check_loads(out)
     log(f"wrote {', '.join(p.name for p in paths)} and {out / 'manifest.json'}")
     return manifest
 
@@ -722,8 +725,20 @@ def requantize(*, out: str | Path = DEFAULT_ASSETS, work: str | Path | None = No
         new["metrics"]["loso"] = old_loso
     manifest["models"] = [new if e is int8_entry else e for e in manifest["models"]]
     write_manifest(out, manifest)
+    check_loads(out)
     log(f"wrote {out / int8_entry['file']} ({quant['method']}) and {out / 'manifest.json'}")
     return manifest
+
+
+def check_loads(out: Path) -> None:
+    """The box's own load of what was just written: every ConvLSTM precision through
+    ``Engine.from_manifest`` (hashes, the step model's link and its agreement with the one-shot model),
+    so that an export never leaves assets the box refuses to start with."""
+    for precision in ("fp32", "int8"):
+        try:
+            Engine.from_manifest(out, precision)
+        except (ModelIntegrityError, ManifestError) as e:
+            raise ExportError(f"{out}: the box would refuse these assets ({precision}): {e}") from None
 
 
 def _install(out: Path, entries: list[dict], files: Sequence[Path], command: str) -> tuple[dict, Path]:

@@ -349,7 +349,9 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
     stream_s = h.samples / loop.rate_hz
     print(
         f"summary: {stream_s:.1f} s of IMU data ({h.samples} samples) in {wall_s:.3f} s "
-        f"({stream_s / max(wall_s, 1e-9):,.0f}x real time); model {engine.name} ({engine.precision})\n"
+        f"({stream_s / max(wall_s, 1e-9):,.0f}x real time); model {engine.name} ({engine.precision})"
+        + (f", steps by {engine.step_model.call_path}" if getattr(engine, "step_model", None) is not None else "")
+        + "\n"
         f"  captures {s.captures} ({loop.decision_mode}): alert events {s.events}; decisions "
         + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(s.statuses.items())) + "\n"
         "  by class: " + (", ".join(f"{k} {v}" for k, v in sorted(s.labels.items())) or "none") + "\n"

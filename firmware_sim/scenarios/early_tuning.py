@@ -547,7 +547,8 @@ def cmd(a) -> int:
     t_wall = time.perf_counter()
     cfg = config.load(a.config)
     out = _out_dir(a.out)
-    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads)
+    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads,
+                                 stream=cfg.model.stream)
     clf = CachedClassifier(engine, Path(a.cache) if a.cache else None)
     command = "python -m firmware_sim early-tune " + " ".join(
         f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()

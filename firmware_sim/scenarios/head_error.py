@@ -43,6 +43,7 @@ import numpy as np
 
 from edge_runtime.cli import CliError, positive_int
 from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, HIP
+from edge_runtime.robot import calibration
 from edge_runtime.robot.calibration import METHODS as METHODS_FIT
 from edge_runtime.robot.calibration import (
     Calibration,
@@ -295,7 +296,9 @@ def summarise(results: list[dict], methods, args) -> dict:
         out["anchoring"] = {"applied_fraction": round(float(applied.mean()), 4) if len(applied) else None,
                             "factor_median": round(float(np.median(k)), 4) if len(k) else None,
                             "clamped_fraction": round(float(np.mean((k <= p.anchor_min_scale)
-                                                                    | (k >= p.anchor_max_scale))), 4) if len(k) else None}
+                                                                    | (k >= p.anchor_max_scale))), 4) if len(k) else None,
+                            # which anchoring ran: the floor rays alone (inf, shipped) or fused with the lifter's depth
+                            "lifter_depth_sd": str(calibration.ANCHOR_LIFTER_DEPTH_SD)}
     out["per_placement"] = [
         {"camera_position_m": np.round(r["camera"]["position_m"], 3).tolist(),
          **({"refused": r["refused"]} if "refused" in r else

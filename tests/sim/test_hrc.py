@@ -261,6 +261,28 @@ fresh seed) is still to run; empty when the shipped defaults are the validated o
 ``[calibration] method = "pnp"`` here; its validation on seed 11 failed and the default went back.)"""
 
 
+VALIDATED_MODULE_CONSTANTS = {
+    ("edge_runtime.robot.hazard", "MAX_MISSING_JOINTS"): 0,
+    ("edge_runtime.robot.calibration", "ANCHOR_LIFTER_DEPTH_SD"): float("inf"),
+    ("edge_runtime.robot.calibration", "ANCHOR_WINDOW_FRAMES"): 15,
+    ("edge_runtime.robot.calibration", "ANCHOR_LEVEL_FEET_M"): 0.1,
+    ("edge_runtime.robot.calibration", "ANCHOR_GATE_M"): 0.5,
+}
+"""Module constants of the robot path that change its decisions but are not [section] keys, so the safety
+hash does not see them: the values reports/hrc/validated.json was measured with. Session 10's candidate
+(ANCHOR_LIFTER_DEPTH_SD 0.12 with pnp) collided on its fresh seed; changing any of these needs the hrc
+suites re-run on a fresh seed, as a config default does."""
+
+
+@pytest.mark.parametrize("where", sorted(VALIDATED_MODULE_CONSTANTS), ids=lambda w: w[1])
+def test_the_robot_paths_module_constants_are_the_validated_ones(where):
+    import importlib
+
+    module, name = where
+    assert getattr(importlib.import_module(module), name) == VALIDATED_MODULE_CONSTANTS[where], (
+        f"{module}.{name} changed since reports/hrc/validated.json: re-run the hrc suites on a fresh seed")
+
+
 def test_the_shipped_safety_defaults_are_the_validated_ones():
     """Fails when a default the cell's safety depends on changed since reports/hrc/validated.json was
     measured: re-run the commands it lists (each with --validated reports/hrc/validated.json). Only the

@@ -324,25 +324,27 @@ def _entry(m, name):
     return next(e for e in m["models"] if e["name"] == name)
 
 
-def _toy_step_graph(hidden: int) -> bytes:
+def _toy_step_graph(hidden: int, c_hidden: int | None = None) -> bytes:
     """A graph with the step model's contract (imu (N, 33, 3), h, c (N, hidden) in; probs (N, 6), h_out, c_out
-    out) that decides by the sub-window's mean alone: a step model that is not the shipped model's."""
+    out) that decides by the sub-window's mean alone: a step model that is not the shipped model's (with
+    ``c_hidden``, a c state of another size than h's)."""
+    c_hidden = hidden if c_hidden is None else c_hidden
     w = numpy_helper.from_array(np.random.default_rng(1).normal(0.0, 1.0, (3, 6)).astype(np.float32), "w")
     nodes = [helper.make_node("ReduceMean", ["imu"], ["m"], axes=[1], keepdims=0),
              helper.make_node("MatMul", ["m", "w"], ["z"]), helper.make_node("Softmax", ["z"], ["probs"], axis=1),
              helper.make_node("Identity", ["h"], ["h_out"]), helper.make_node("Identity", ["c"], ["c_out"])]
     t = lambda name, *dims: helper.make_tensor_value_info(name, TensorProto.FLOAT, ["N", *dims])  # noqa: E731
-    graph = helper.make_graph(nodes, "toy_step", [t("imu", 33, 3), t("h", hidden), t("c", hidden)],
-                              [t("probs", 6), t("h_out", hidden), t("c_out", hidden)], [w])
+    graph = helper.make_graph(nodes, "toy_step", [t("imu", 33, 3), t("h", hidden), t("c", c_hidden)],
+                              [t("probs", 6), t("h_out", hidden), t("c_out", c_hidden)], [w])
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     onnx.checker.check_model(model)
     return model.SerializeToString()
 
 
-def _step_file(hidden: int):
+def _step_file(hidden: int, c_hidden: int | None = None):
     """Replace the int8 step model's file (and its manifest hash and size) with a toy graph of state ``hidden``."""
     def change(m, d):
-        data = _toy_step_graph(hidden)
+        data = _toy_step_graph(hidden, c_hidden)
         (d / "convlstm_step.int8.onnx").write_bytes(data)
         _entry(m, "convlstm-step-int8").update(sha256=hashlib.sha256(data).hexdigest(), size_bytes=len(data))
     return change
@@ -366,8 +368,10 @@ def _step_file(hidden: int):
      ("field 'step_model' of 'convlstm-int8'", "model_version", "9.9.9+other")),
     (_step_file(64), ModelIntegrityError, ("convlstm_step.int8.onnx", "state size 64", "100")),
     (_step_file(100), ModelIntegrityError, ("convlstm_step.int8.onnx", "fixed probe", "not the step model")),
+    (_step_file(100, 64), ModelIntegrityError, ("convlstm_step.int8.onnx", "c_out", "expected all (N, 100)")),
 ], ids=["unknown name", "not a string", "entry missing", "file tampered", "other classes", "names a one-shot entry",
-        "other precision", "other model_version", "other state size", "another model, right hash"])
+        "other precision", "other model_version", "other state size", "another model, right hash",
+        "c of another size than h"])
 def test_a_bad_or_missing_step_entry_is_refused_in_one_line(tmp_path, change, error, words):
     d = _assets_with(tmp_path, change)
     with pytest.raises(error) as e:
