@@ -96,8 +96,8 @@ class CalibrationParams:
     """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
     "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1). ``pnp``
     halves the head error (reports/robot/head_error.md) but, with the fused anchoring, failed its
-    closed-loop validation in session 10 (fresh hrc seed 11: 2 collisions in hard:200; reports/hrc/
-    report.md), so the validated ``rigid`` stays the default."""
+    closed-loop validation in session 10 (fresh hrc seed 11: 2 collisions in hard:200;
+    reports/hrc/report.md), so the validated ``rigid`` stays the default."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)
