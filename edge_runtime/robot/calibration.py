@@ -211,7 +211,9 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     if (-feet[:, 1] < np.sin(np.radians(params.anchor_min_ray_deg)) * np.linalg.norm(feet, axis=1)).any():
         return 1.0, ANCHOR_RAY_FLAT
     log_floor = float(np.mean(np.log(drop_m / -feet[:, 1])))
-    k = _nearer_to_arm(j[HIP] @ A.T, b, np.exp(log_floor), np.exp(_fused_with_lifter(log_floor, feet, drop_m)))
+    k = np.exp(log_floor)
+    if np.isfinite(ANCHOR_LIFTER_DEPTH_SD):  # the fusion (off as shipped: the floor rays alone, no work per frame)
+        k = _nearer_to_arm(j[HIP] @ A.T, b, k, np.exp(_fused_with_lifter(log_floor, feet, drop_m)))
     return float(np.clip(k, params.anchor_min_scale, params.anchor_max_scale)), None
 
 
