@@ -468,7 +468,10 @@ class WearableLoop:
         it leaves them unused. Each row is what the classifier gives for that capture alone, so the
         decisions are those of one call per step."""
         st, ev = self._capture, self._event
-        first = [(c, tuple(st.steps) if st is not None and c.trigger_index == st.trigger else (N_SUBSEQ,))
+        # a step model runs sub-windows 1..6 of every capture for its full window anyway: the early steps'
+        # probabilities come with them at no further model run (asking for them later would run them again)
+        fresh = tuple(self._early_steps) if self._stream is not None else (N_SUBSEQ,)
+        first = [(c, tuple(st.steps) if st is not None and c.trigger_index == st.trigger else fresh)
                  for c in captures]  # the capture opened in an earlier block: the steps it still has
         self._classify_groups([([c.trigger_index for c, s in first if s == steps],
                                 np.stack([c.data for c, s in first if s == steps]), steps)
@@ -493,7 +496,7 @@ class WearableLoop:
             may_continue = (may_continue or alerts or opened) and not ends
             last_end_s = self._time_of(cap.start_index + len(cap.data) - 1) if may_continue else None
         steps = tuple(s for s in self._early_steps if s != N_SUBSEQ)
-        if early and steps:
+        if early and steps and self._stream is None:
             self._classify_groups([([c.trigger_index for c in early], np.stack([c.data for c in early]), steps)])
 
     def _top(self, values: list[float]) -> tuple[str, float]:

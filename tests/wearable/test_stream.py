@@ -277,6 +277,19 @@ def test_every_feed_runs_only_the_steps_of_the_sub_windows_it_completed(drive_ac
     assert loop.stats.statuses["continued"] >= 1  # the captures that only continue an event are stepped too
 
 
+def test_a_replay_runs_each_sub_window_of_a_capture_once(drive_acc, monkeypatch):
+    """A block's captures go through the step model together: their early decisions read the states the full
+    windows' steps pass through, so no sub-window of any capture is run twice (before: once more for the early
+    steps of every capture that could open an event)."""
+    loop = WearableLoop(Engine.from_manifest(ASSETS_DIR, "int8"), policy=AlertPolicy())  # its load-time probes ...
+    rows = []  # ... are not counted: the rows each step run of the replay carries
+    real = StepModel.step
+    monkeypatch.setattr(StepModel, "step", lambda model, x, h, c: rows.append(len(x)) or real(model, x, h, c))
+    decided = _feed(loop, drive_acc, len(drive_acc))
+    assert loop.stats.captures >= 5 and any(d["steps"] < 6 for d in decided)  # early decisions were made
+    assert sum(rows) == 6 * loop.stats.captures
+
+
 @pytest.mark.parametrize("stream", [True, False])
 def test_the_live_loop_decides_what_the_batched_replay_decides(drive_acc, monkeypatch, stream):
     """One sample at a time, the loop opens a stream per capture and runs a step as each sub-window arrives
