@@ -213,8 +213,9 @@ def _status_of(engine: Engine) -> WearableStatus:
 
 def _open_publisher(cfg, can_log: str | None, status: WearableStatus, data_clock: bool = False) -> AlertPublisher:
     """The CAN side: the configured python-can bus, alerts and the WEARABLE_STATUS heartbeat, started.
-    ``data_clock`` (a replay): frames go out, and are logged, at the recording's time (``Clock.DATA``)."""
-    from edge_runtime.canbus.bus import open_bus
+    ``data_clock`` (a replay): frames go out, and are logged, at the recording's time (``Clock.DATA``); on the
+    in-process virtual bus the bus opens when a frame must go out (``DeferredBus``: with nobody on it, none does)."""
+    from edge_runtime.canbus.bus import DeferredBus, open_bus
     from edge_runtime.wearable.alerts import AlertPublisher, Clock
 
     c = cfg.can
@@ -222,8 +223,10 @@ def _open_publisher(cfg, can_log: str | None, status: WearableStatus, data_clock
     def bus_factory():
         return open_bus(c.interface, c.channel, c.bitrate, host=c.host, port=c.port)
 
+    deferred = data_clock and c.interface == "virtual"
     try:
-        pub = AlertPublisher(bus_factory(), heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
+        pub = AlertPublisher(DeferredBus(bus_factory, c.channel) if deferred else bus_factory(),
+                             heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
                              bus_factory=bus_factory, status=status, clock=Clock.DATA if data_clock else Clock.WALL)
     except ValueError as e:  # python-can's Logger: unknown file suffix
         raise CliError(f"--can-log {can_log}: {e}") from None

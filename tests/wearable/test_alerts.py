@@ -8,14 +8,20 @@ import time
 from types import SimpleNamespace
 
 import can
+import numpy as np
 import pytest
 
+from edge_runtime.canbus.bus import DeferredBus
+from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EChecker
+from edge_runtime.core.manifest import sha256_file
 from edge_runtime.wearable.alerts import (
     DBC_PATH,
+    DBC_SCHEDULE_PATH,
     AlertEncoder,
     AlertPublisher,
     Clock,
+    FrameSchedule,
     Repetition,
     WearableStatus,
     load_vehicle_dbc,
@@ -279,13 +285,17 @@ def test_updates_of_an_alert_go_out_under_its_alert_seq_with_their_own_status_an
                    + [(1, "alert", "Drink")] * 5 + [(1, "withdrawn", "Other")] * 5)
 
 
-def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_is_what_it_would_have_been():
+@pytest.mark.parametrize("deferred", [False, True])
+def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_is_what_it_would_have_been(deferred):
     """A data-clock publisher whose virtual bus has nobody else on its channel skips encoding the
     heartbeats and alert frames; once a listener joins, its frames equal those of a publisher that
-    was heard all along."""
+    was heard all along. ``deferred``: the replay's bus, opened when the first frame must go out."""
     def publisher(channel):
-        pub = AlertPublisher(can.Bus(interface="virtual", channel=channel), heartbeat_period_s=0.1,
-                             clock=Clock.DATA)
+        def open_virtual():
+            return can.Bus(interface="virtual", channel=channel)
+
+        pub = AlertPublisher(DeferredBus(open_virtual, channel) if deferred else open_virtual(),
+                             heartbeat_period_s=0.1, clock=Clock.DATA)
         pub.status.count_samples(100)
         return pub
 
@@ -313,3 +323,34 @@ def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_i
         return out
 
     assert frames(rx_unheard) == frames(rx_heard)[4:]
+
+
+def test_the_kept_frame_schedule_is_the_shipped_dbcs():
+    """The publisher schedules frames by the kept schedule until it first encodes one; it must be what parsing the
+    DBC gives (after a change of the DBC: python -c 'from edge_runtime.wearable.alerts import write_frame_schedule;
+    write_frame_schedule()')."""
+    assert FrameSchedule.kept() == FrameSchedule.of(load_vehicle_dbc(), sha256_file(DBC_PATH))
+
+
+def test_a_schedule_kept_for_another_dbc_is_not_used(tmp_path):
+    dbc = tmp_path / "vehicle_alerts.dbc"
+    dbc.write_text(DBC_PATH.read_text().replace("GenMsgNrOfRepetition\" BO_ 928 4", "GenMsgNrOfRepetition\" BO_ 928 2"))
+    kept = tmp_path / "schedule.json"
+    kept.write_text(DBC_SCHEDULE_PATH.read_text())
+    assert FrameSchedule.kept(DBC_PATH, kept) is not None and FrameSchedule.kept(dbc, kept) is None
+    assert FrameSchedule.of(load_dbc(dbc)).repetition.copies == 2
+    kept.write_text("{}")
+    assert FrameSchedule.kept(DBC_PATH, kept) is None  # another layout: the DBC is parsed
+
+
+@pytest.mark.slow  # an interpreter of its own: this one has python-can loaded
+def test_a_replay_nobody_hears_loads_neither_python_can_nor_cantools(tmp_path):
+    """On the in-process virtual bus with nobody on its channel, nothing is encoded and nothing is sent: the
+    replay needs neither python-can nor the DBC's parser (about a tenth of a day's replay to import)."""
+    acc = tmp_path / "imu.csv"
+    t = np.arange(3000) / 100.0
+    acc.write_text("t,ax,ay,az\n" + "".join(f"{s:.2f},0.1,0.2,9.8\n" for s in t))
+    code = ("import sys; from edge_runtime.__main__ import main; rc = main(['wearable', '--replay', sys.argv[1], "
+            "'--quiet']); print(rc, 'can' in sys.modules, 'cantools' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code, str(acc)], capture_output=True, text=True, timeout=120)
+    assert r.stdout.strip().splitlines()[-1] == "0 False False", r.stdout + r.stderr
