@@ -508,26 +508,29 @@ def chained_step(session: ort.InferenceSession, hidden: int, classes: int, run_o
         run, bound, copyto = session._sess.run_with_iobinding, [b._iobinding for b in bindings], np.copyto
     except Exception:  # noqa: BLE001 - a private API that changed: the caller's usual step is the contract
         return None
-    now = {"reads": 0, "resident": None}  # the pair the next step reads, and whose state it is
+    reads, resident = 0, None  # the pair the next step reads, and whose state it is
 
     def release(stream: StepStream) -> None:
         """The resident ``stream``'s state back into its own arrays: the buffers are about to hold another's."""
-        h, c = pairs[now["reads"]]
+        nonlocal resident
+        h, c = pairs[reads]
         stream._h, stream._c, stream._held_by = h.copy(), c.copy(), None
-        now["resident"] = None
+        resident = None
 
     def call(x: np.ndarray, stream: StepStream) -> np.ndarray:
-        k = now["reads"]
-        if now["resident"] is not stream:
-            if now["resident"] is not None:
-                release(now["resident"])
+        nonlocal reads, resident
+        k = reads
+        if resident is not stream:  # another capture's state, or none, is in the buffers: this one's goes in
+            if resident is not None:
+                release(resident)
             copyto(pairs[k][0], stream.h)
             copyto(pairs[k][1], stream.c)
+            stream._h = stream._c = None  # in the buffers from now on: StepStream.h asks for it back
+            stream._held_by = release
+            resident = stream
         copyto(x_in, x)
         run(bound[k], run_options)
-        now["reads"], now["resident"] = 1 - k, stream
-        stream._h = stream._c = None  # in the buffers now: StepStream.h asks for it back
-        stream._held_by = release
+        reads = 1 - k
         return p_out.copy()
 
     call.keep = bindings  # with the buffers in the closure: what onnxruntime writes lives as long as the call
