@@ -143,8 +143,25 @@ def reaches_anyone(bus: Any) -> bool:
     virtual = sys.modules.get(VIRTUAL_MODULE)  # not loaded: no virtual bus exists in this process
     if isinstance(bus, DeferredBus):
         if bus.bus is None:
-            return virtual is not None and bool(virtual.channels.get(bus.channel))
+            return virtual is not None and _anyone_on(virtual.channels, bus.channel)
         bus = bus.bus
     if virtual is None or not isinstance(bus, virtual.VirtualBus) or bus.receive_own_messages:
         return True
     return any(q is not bus.queue for q in bus.channel)
+
+
+def _anyone_on(channels: dict, channel: Any) -> bool:
+    """Whether any virtual bus is on the configured ``channel``. python-can keys its virtual channels by the
+    channel after its config casting (``can.util.cast_from_string``: "0" is 0, "true" is True), so a configured
+    string is matched as python-can would open it, and by its text too. A channel python-can would take from its
+    own config (None) or a key it cannot compare counts as someone there: a frame sent to nobody costs little,
+    a frame lost costs an alert."""
+    if not isinstance(channel, str):
+        return True
+    from can.util import cast_from_string  # loaded: the virtual interface is
+
+    opened_as = cast_from_string(channel)
+    try:
+        return any(queues and (key == opened_as or str(key) == channel) for key, queues in list(channels.items()))
+    except Exception:  # noqa: BLE001 - a channel key whose comparison raises: open the bus
+        return True

@@ -285,11 +285,14 @@ def test_updates_of_an_alert_go_out_under_its_alert_seq_with_their_own_status_an
                    + [(1, "alert", "Drink")] * 5 + [(1, "withdrawn", "Other")] * 5)
 
 
+@pytest.mark.parametrize("channels", [("beats-heard", "beats-unheard"), ("9101", "9102")])
 @pytest.mark.parametrize("deferred", [False, True])
-def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_is_what_it_would_have_been(deferred):
+def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_is_what_it_would_have_been(
+        deferred, channels):
     """A data-clock publisher whose virtual bus has nobody else on its channel skips encoding the
     heartbeats and alert frames; once a listener joins, its frames equal those of a publisher that
-    was heard all along. ``deferred``: the replay's bus, opened when the first frame must go out."""
+    was heard all along. ``deferred``: the replay's bus, opened when the first frame must go out.
+    A numeric channel ("9102") is one python-can opens as the number 9102: its listener must be found."""
     def publisher(channel):
         def open_virtual():
             return can.Bus(interface="virtual", channel=channel)
@@ -299,8 +302,8 @@ def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_i
         pub.status.count_samples(100)
         return pub
 
-    heard, unheard = publisher("beats-heard"), publisher("beats-unheard")
-    rx_heard = can.Bus(interface="virtual", channel="beats-heard")
+    heard, unheard = publisher(channels[0]), publisher(channels[1])
+    rx_heard = can.Bus(interface="virtual", channel=channels[0])
     for pub in (heard, unheard):
         pub.advance_to(0.0)
         pub.status.set_alerts_undelivered(1)  # the next UNDELIVERED_HEARTBEATS heartbeats say degraded ...
@@ -308,7 +311,7 @@ def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_i
         pub.publish_alert(SimpleNamespace(t_trigger_s=0.1, t_alert_s=0.25, label="Phone", confidence=0.9,
                                           status="alert", compute_us=0.0))  # its first frame unheard, its copies heard
         pub.status.count_samples(10, non_finite=3)
-    rx_unheard = can.Bus(interface="virtual", channel="beats-unheard")
+    rx_unheard = can.Bus(interface="virtual", channel=channels[1])
     for pub in (heard, unheard):
         pub.advance_to(1.0)
         pub.close()
