@@ -389,6 +389,10 @@ def build_bundle(out: str | os.PathLike, package: str | os.PathLike = RUNTIME_PA
         requirements = tuple(ONNXRUNTIME_PINS[platform_name] if _requirement_name(r) == "onnxruntime" else r
                              for r in requirements)
     manifest = verify_all(package / "assets")  # a tampered model never gets into a bundle
+    from edge_runtime.wearable.alerts import DBC_PATH, DBC_SCHEDULE_PATH, check_frame_schedule
+
+    # ... nor a frame schedule that is not its DBC's (the runtime would refuse it at its first frame)
+    check_frame_schedule(package / "assets" / DBC_PATH.name, package / "assets" / DBC_SCHEDULE_PATH.name)
     from edge_runtime.config import load as load_config
 
     load_config(package / "box.example.toml")

@@ -43,10 +43,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 
 from edge_runtime import config
-from edge_runtime.canbus.bus import BUS_INTERFACES, reaches_anyone
+from edge_runtime.canbus.bus import BUS_INTERFACES, CanLinkError, reaches_anyone
 from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EProtector
 from edge_runtime.core.manifest import ASSETS_DIR, sha256_file
+from edge_runtime.errors import ModelIntegrityError
 from edge_runtime.wearable.backlog import AlertBacklog
 
 if TYPE_CHECKING:
@@ -57,7 +58,9 @@ log = logging.getLogger(__name__)
 DBC_PATH = ASSETS_DIR / "vehicle_alerts.dbc"
 DBC_SCHEDULE_PATH = ASSETS_DIR / "vehicle_alerts.schedule.json"
 """What the publisher needs of :data:`DBC_PATH` before it encodes a frame (:class:`FrameSchedule`), with the
-DBC's sha256: written by :func:`write_frame_schedule`, held to the DBC by tests/wearable/test_alerts.py."""
+DBC's sha256: written by :func:`write_frame_schedule` (``python -m export schedule``, ``export assets``), held to the
+DBC when the DBC is parsed (:meth:`FrameSchedule.check_against`), by ``export bundle`` and by tests/wearable/test_alerts.py."""
+SCHEDULE_HINT = "write it from the DBC with python -m export schedule"
 ALERT = "DISTRACTION_ALERT"
 STATUS = "WEARABLE_STATUS"
 NO_CLASS = "None"
@@ -262,8 +265,10 @@ class FrameSchedule:
 
     Why apart from the DBC: a replay whose frames nobody hears encodes none (:meth:`AlertPublisher._heard`), and
     parsing the DBC means importing cantools, and with it python-can: about a tenth of a day's replay. The shipped
-    DBC's schedule is kept beside it with the DBC's sha256 (:data:`DBC_SCHEDULE_PATH`); a DBC whose sha256 differs
-    is parsed at once, as before."""
+    DBC's schedule is kept beside it with the DBC's sha256 (:data:`DBC_SCHEDULE_PATH`); a DBC whose sha256 differs,
+    or a schedule file that cannot be read, is parsed at once, as before. The DBC is the single source of truth:
+    when it is parsed, a kept schedule that differs from it is a ModelIntegrityError (:meth:`AlertEncoder.db`).
+    ``python -m export schedule`` (and ``export assets``) writes it from the DBC."""
 
     dbc_sha256: str
     alert_frame_id: int
@@ -288,30 +293,53 @@ class FrameSchedule:
             kept = cls(str(d["dbc_sha256"]), int(d["alert_frame_id"]), int(d["status_frame_id"]),
                        Repetition(int(d["repetition_copies"]), float(d["repetition_period_s"])))
             return kept if kept.dbc_sha256 == sha256_file(dbc_path) else None
-        except (OSError, ValueError, KeyError, TypeError):  # none, unreadable or another layout: parse the DBC
-            return None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):  # none, unreadable or another layout:
+            return None  # parse the DBC at start
+
+    def check_against(self, db, where: Path = DBC_SCHEDULE_PATH) -> None:
+        """ModelIntegrityError (one line) unless this kept schedule is what the parsed DBC ``db`` gives."""
+        parsed = FrameSchedule.of(db, self.dbc_sha256)
+        if parsed != self:
+            raise ModelIntegrityError(f"{where}: differs from {DBC_PATH.name} ({self.to_json()} against "
+                                      f"{parsed.to_json()}); {SCHEDULE_HINT}")
+
+
+def frame_schedule_text(dbc_path: Path = DBC_PATH) -> str:
+    """The text :data:`DBC_SCHEDULE_PATH` must hold for the DBC at ``dbc_path``."""
+    schedule = FrameSchedule.of(load_dbc(dbc_path), sha256_file(dbc_path))
+    return json.dumps(schedule.to_json(), indent=1, sort_keys=True) + "\n"
 
 
 def write_frame_schedule(dbc_path: Path = DBC_PATH, path: Path = DBC_SCHEDULE_PATH) -> Path:
     """Keep ``dbc_path``'s :class:`FrameSchedule` at ``path`` (after a change of the DBC)."""
-    schedule = FrameSchedule.of(load_dbc(dbc_path), sha256_file(dbc_path))
-    path.write_text(json.dumps(schedule.to_json(), indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    path.write_text(frame_schedule_text(dbc_path), encoding="utf-8")
     return path
+
+
+def check_frame_schedule(dbc_path: Path = DBC_PATH, path: Path = DBC_SCHEDULE_PATH) -> None:
+    """ModelIntegrityError (one line) unless ``path`` holds ``dbc_path``'s :class:`FrameSchedule` (what
+    ``export bundle`` checks: a schedule that is not the DBC's never ships)."""
+    kept = FrameSchedule.kept(dbc_path, path)
+    if kept is None:
+        raise ModelIntegrityError(f"{path}: missing, unreadable or not {dbc_path.name}'s (another sha256); "
+                                  f"{SCHEDULE_HINT}")
+    kept.check_against(load_dbc(dbc_path), path)
 
 
 class AlertEncoder:
     """Encodes decisions and status with cantools from the DBC, then E2E-protects them.
 
-    One alive counter per message; ``encode_*`` returns a ``can.Message``. Without ``db``, the shipped DBC is
-    parsed when a frame is first encoded or decoded, and until then its kept :class:`FrameSchedule` serves
-    (parsed at once if there is none for this DBC)."""
+    One alive counter per message; ``encode_*`` returns a ``can.Message``. Without ``db`` the shipped DBC is
+    parsed at once, or with ``lazy`` (a replay, whose frames nobody may hear) when a frame is first encoded or
+    decoded: until then its kept :class:`FrameSchedule` serves (parsed at once if there is none for this DBC),
+    and the parse holds the kept schedule to the DBC."""
 
-    def __init__(self, db=None):
+    def __init__(self, db=None, lazy: bool = False):
         self._db = db
         self._db_lock = threading.Lock()
-        schedule = FrameSchedule.kept() if db is None else None
-        if schedule is None:
-            schedule = FrameSchedule.of(self.db)
+        self._kept = FrameSchedule.kept(DBC_PATH, DBC_SCHEDULE_PATH) if db is None and lazy else None
+        """The kept schedule in use until the DBC is parsed (then checked against it)."""
+        schedule = self._kept if self._kept is not None else FrameSchedule.of(self.db)
         self._alert_id, self._status_id = schedule.alert_frame_id, schedule.status_frame_id
         self.repetition = schedule.repetition
         self._e2e = E2EProtector()
@@ -322,7 +350,10 @@ class AlertEncoder:
     def db(self):
         with self._db_lock:  # the heartbeat thread and the loop may encode the first frames at once
             if self._db is None:
-                self._db = load_vehicle_dbc()
+                db = load_vehicle_dbc()
+                if self._kept is not None:  # frames were scheduled and counted by it: it must be the DBC's
+                    self._kept.check_against(db, DBC_SCHEDULE_PATH)
+                self._db = db
             return self._db
 
     @cached_property
@@ -424,7 +455,9 @@ class AlertPublisher:
         if heartbeat_period_s <= 0:
             raise ValueError("heartbeat_period_s must be > 0")
         self.bus = bus
-        self.encoder = encoder or AlertEncoder()
+        # a live box parses the DBC here, so a broken DBC or install is one line at start, not a dead heartbeat
+        # thread; a replay parses it when it first encodes a frame (with nobody listening, never)
+        self.encoder = encoder or AlertEncoder(lazy=clock is Clock.DATA)
         self.period = heartbeat_period_s
         self.bus_factory = bus_factory
         self.status = status if status is not None else WearableStatus()
@@ -437,6 +470,7 @@ class AlertPublisher:
         self.send_errors = 0
         self.reconnects = 0
         self.last_error: str | None = None
+        self.thread_error: str | None = None  # why the heartbeat thread died, if it did (:meth:`_run`)
         self._send_lock = threading.Lock()
         self._copies: list[_Copy] = []  # a heap, by due time
         self._copies_lock = threading.Lock()
@@ -660,6 +694,22 @@ class AlertPublisher:
 
     # -- heartbeat thread (wall clock) --------------------------------------
     def _run(self) -> None:
+        """The heartbeat thread. An exception it did not expect ends it (a bug, or an install that broke under it):
+        it is kept in :attr:`thread_error` and logged in one line, and :meth:`check_running` fails the command
+        (so the loop stops feeding the service watchdog) rather than leaving a box that looks healthy but sends
+        no heartbeat."""
+        try:
+            self._beat_until_stopped()
+        except BaseException as exc:  # noqa: BLE001 - any of them leaves the vehicle without heartbeats
+            self.thread_error = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+            log.error("CAN heartbeat thread stopped: %s", self.thread_error, extra={"event": "heartbeat_thread_died"})
+
+    def check_running(self) -> None:
+        """CanLinkError (one line, exit 2) if the heartbeat thread died (:meth:`_run`)."""
+        if self.thread_error is not None:
+            raise CanLinkError(f"CAN heartbeat thread stopped: {self.thread_error}")
+
+    def _beat_until_stopped(self) -> None:
         next_beat = time.monotonic()
         while not self._stop.is_set():
             self._wake.clear()

@@ -162,6 +162,21 @@ def test_tampered_model_is_not_bundled(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_frame_schedule_that_is_not_its_dbcs_is_not_bundled_and_export_schedule_writes_it(tmp_path):
+    pkg = tmp_path / "edge_runtime"
+    shutil.copytree(RUNTIME, pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    kept = pkg / "assets" / "vehicle_alerts.schedule.json"
+    shipped = kept.read_text()
+    kept.write_text(json.dumps(dict(json.loads(shipped), repetition_copies=1)))  # the DBC's sha256, not its content
+    from edge_runtime.core.manifest import ModelIntegrityError
+
+    with pytest.raises(ModelIntegrityError, match="schedule.json: differs"):
+        build_bundle(tmp_path / "out", package=pkg)
+    assert not (tmp_path / "out").exists()
+    assert export_main(["schedule", "--assets", str(pkg / "assets")]) == 0  # written from the DBC again
+    assert kept.read_text() == shipped
+
+
 def test_torch_requirement_is_refused(tmp_path):
     cfg = (ROOT / "setup.cfg").read_text().replace("install_requires =\n", "install_requires =\n    torch==2.13.0\n")
     (tmp_path / "setup.cfg").write_text(cfg)

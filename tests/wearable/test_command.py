@@ -128,6 +128,9 @@ class Publisher:
     def publish_alert(self, alert):
         return 0
 
+    def check_running(self):
+        pass
+
 
 class Live:
     """A live source's counters."""
