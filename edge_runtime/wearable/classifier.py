@@ -661,7 +661,10 @@ class _HeldState:
 class StepStream:
     """One capture's state in the step model: the LSTM state (h, c), the sub-windows run so far and the
     probabilities after each. While the capture steps on, its state may live in the step model's bound buffers
-    (:func:`chained_step`); reading ``h`` or ``c`` then takes it back into the stream's own arrays."""
+    (:func:`chained_step`); reading ``h`` or ``c`` then takes it back into the stream's own arrays. So a read
+    changes the step model's buffers' owner: one caller at a time, readers too (as for the steps). A copy (``copy``,
+    ``deepcopy``, ``pickle``) takes the state back first, so the copy and the original each hold their own arrays
+    (a copy that shared the buffers' claim could later read another capture's state as its own)."""
 
     def __init__(self, h: np.ndarray, c: np.ndarray, done: int = 0, probs: dict[int, np.ndarray] | None = None,
                  first_frame: bytes | None = None):
@@ -680,6 +683,10 @@ class StepStream:
     def _own(self) -> None:
         if self._held_by is not None:
             self._held_by(self)
+
+    def __getstate__(self) -> dict:
+        self._own()
+        return self.__dict__.copy()
 
 
 def _load_step_model(assets_dir: str | os.PathLike, entry: dict, threads: int,

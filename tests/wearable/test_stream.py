@@ -232,6 +232,26 @@ def test_a_capture_state_kept_in_the_bound_buffers_is_the_public_runs_however_ca
         np.testing.assert_array_equal(st.c, want[k][s][2])
 
 
+@pytest.mark.parametrize("how", ["copy", "deepcopy"])
+def test_a_copy_of_a_resident_stream_is_its_own_and_leaves_the_original_its_state(captures, how):
+    """A copy of the stream whose state is in the bound buffers takes the state back first: a shallow copy used to
+    share the buffers' claim, so once the copy was read and another capture stepped, the original read that
+    capture's state as its own."""
+    import copy
+
+    model = Engine.from_manifest(ASSETS_DIR, "int8").step_model
+    subs = [[np.ascontiguousarray(x[k:k + 1]) for x in step_inputs(captures[:2], 2)] for k in range(2)]
+    want = _public_chain(model, subs[0])
+    a, b = (classifier.StepStream(*model.zero_state(1)) for _ in range(2))
+    model.step_stream(subs[0][0], a)
+    model.step_stream(subs[0][1], a)  # a's state now lives in the buffers
+    twin = getattr(copy, how)(a)
+    np.testing.assert_array_equal(twin.h, want[1][1])
+    model.step_stream(subs[1][0], b)  # another capture's state goes into the buffers
+    np.testing.assert_array_equal(a.h, want[1][1])
+    np.testing.assert_array_equal(a.c, want[1][2])
+
+
 def test_a_kept_state_call_that_does_not_give_the_public_results_is_not_used(captures, monkeypatch):
     """The load-time check refuses a state-keeping call whose decisions or states differ from ``session.run``'s
     (here: the state it hands back is off by one float32 step); the capture's steps then copy the state each time."""
