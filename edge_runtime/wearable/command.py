@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 from edge_runtime.cli import CliError
+from edge_runtime.errors import EdgeError
 
 if TYPE_CHECKING:
     from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
@@ -224,12 +225,15 @@ def _open_publisher(cfg, can_log: str | None, status: WearableStatus, data_clock
         return open_bus(c.interface, c.channel, c.bitrate, host=c.host, port=c.port)
 
     deferred = data_clock and c.interface == "virtual"
+    bus = DeferredBus(bus_factory, c.channel) if deferred else bus_factory()
     try:
-        pub = AlertPublisher(DeferredBus(bus_factory, c.channel) if deferred else bus_factory(),
-                             heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
+        pub = AlertPublisher(bus, heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
                              bus_factory=bus_factory, status=status, clock=Clock.DATA if data_clock else Clock.WALL)
-    except ValueError as e:  # python-can's Logger: unknown file suffix
-        raise CliError(f"--can-log {can_log}: {e}") from None
+    except BaseException as e:  # a live box parses the DBC here: the bus it opened is shut, the error is one line
+        bus.shutdown()
+        if isinstance(e, ValueError) and not isinstance(e, EdgeError):  # python-can's Logger: unknown file suffix
+            raise CliError(f"--can-log {can_log}: {e}") from None
+        raise
     return pub.start()
 
 
