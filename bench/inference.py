@@ -93,11 +93,23 @@ def _ort_runner(cfg: InferenceConfig, entry: dict, feed: dict) -> tuple[Callable
 
     data, source = read_verified(cfg.assets, entry), str(Path(cfg.assets) / entry["file"])
     if entry.get("arch") == STEP_ARCH:  # the box's own call of a step (its IOBinding), not a generic session.run
-        from edge_runtime.wearable.classifier import StepModel
+        from edge_runtime.wearable.classifier import N_SUBSEQ, StepModel, StepStream
 
         model = StepModel(data, cfg.threads, source, entry["classes"])
         x, h, c = (feed[k] for k in ("imu", "h", "c"))
-        return (lambda: model.step(x, h, c)), {"call": "StepModel.step" + (" (IOBinding)" if model.bound else "")}
+        if len(x) != 1:
+            return (lambda: model.step(x, h, c)), {"call": "StepModel.step (a batch)"}
+        now = {"stream": None, "steps": 0}
+
+        def capture_step():
+            """As a capture is stepped: 6 steps from the zero state, each from the state the one before left."""
+            if now["steps"] % N_SUBSEQ == 0:
+                now["stream"] = StepStream(*model.zero_state(1))
+            now["steps"] += 1
+            return model.step_stream(x, now["stream"])
+
+        return capture_step, {"call": f"StepModel.step_stream ({model.call_path}; captures of {N_SUBSEQ} steps from "
+                                      "the zero state)"}
     sess = open_session(data, cfg.threads, source)
     outputs = [o.name for o in sess.get_outputs()]
     ro = ort.RunOptions()

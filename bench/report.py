@@ -97,7 +97,8 @@ WHAT_A_RUN_IS = {
     "convlstm": "convlstm: the whole capture (S = 6 sub-windows) in one run (the one-shot model: the comparison)",
     "convlstm_step": "convlstm_step: per decision: one step, what the box runs when a sub-window of a capture "
                      "completes (the sub-window and the LSTM state in, the decision and the next state out); "
-                     "on onnxruntime timed as the box calls it (StepModel.step: inputs and outputs bound once)",
+                     "on onnxruntime timed as the box calls it (StepModel.step_stream: inputs and outputs bound once, "
+                     "the state kept in the bound buffers from step to step; captures of 6 steps from the zero state)",
 }
 """What one timed call of a model is, where that needs saying (a row's ``model``)."""
 

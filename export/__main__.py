@@ -77,6 +77,9 @@ def _parser() -> argparse.ArgumentParser:
                                                      "recipe (default: reports/wearable/selection/selection.json)")
     _shipped_model_args(t)
 
+    f = sub.add_parser("schedule", help="write the vehicle DBC's frame schedule beside it (after a change of the DBC)")
+    f.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
+
     s = sub.add_parser("opsets", help="declare only the opset domains each shipped model uses")
     s.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
 
@@ -163,7 +166,24 @@ def cmd_assets(a) -> int:
                  out=a.out or DEFAULT_ASSETS, work=a.work, train_npz=a.train, test_npz=a.test,
                  loso_dir=a.loso_dir, variants=_variants(a.variants), progress=not a.no_progress,
                  auto_loso=not a.no_loso, selection=a.selection, checkpoint=a.checkpoint)
+    out = Path(a.out or DEFAULT_ASSETS)
+    if (out / "vehicle_alerts.dbc").exists():  # the assets the runtime ships: their DBC's schedule, fresh
+        write_schedule(out)
     return 0
+
+
+def cmd_schedule(a) -> int:
+    path = write_schedule(Path(a.assets) if a.assets else None)
+    print(f"wrote {path}")
+    return 0
+
+
+def write_schedule(assets: Path | None = None) -> Path:
+    """The frame schedule the runtime keeps beside the vehicle DBC, written from the DBC in ``assets``."""
+    from edge_runtime.wearable.alerts import DBC_PATH, DBC_SCHEDULE_PATH, write_frame_schedule
+
+    assets = assets or DBC_PATH.parent
+    return write_frame_schedule(assets / DBC_PATH.name, assets / DBC_SCHEDULE_PATH.name)
 
 
 def cmd_int8(a) -> int:
@@ -209,6 +229,7 @@ def main(argv=None) -> int:
     from edge_runtime.core.manifest import ModelIntegrityError
 
     cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "int8": cmd_int8, "step": cmd_step, "opsets": cmd_opsets,
+            "schedule": cmd_schedule,
             "compare-int8": cmd_compare}
     func = getattr(args, "func", None) or cmds[args.command]
     # ExportError, QuantizeError and DataError are ValueErrors: naming them here would import

@@ -389,6 +389,10 @@ def build_bundle(out: str | os.PathLike, package: str | os.PathLike = RUNTIME_PA
         requirements = tuple(ONNXRUNTIME_PINS[platform_name] if _requirement_name(r) == "onnxruntime" else r
                              for r in requirements)
     manifest = verify_all(package / "assets")  # a tampered model never gets into a bundle
+    from edge_runtime.wearable.alerts import DBC_PATH, DBC_SCHEDULE_PATH, check_frame_schedule
+
+    # ... nor a frame schedule that is not its DBC's (the runtime would refuse it at its first frame)
+    check_frame_schedule(package / "assets" / DBC_PATH.name, package / "assets" / DBC_SCHEDULE_PATH.name)
     from edge_runtime.config import load as load_config
 
     load_config(package / "box.example.toml")
@@ -424,10 +428,25 @@ def _tree_bytes(path: Path) -> int:
     return total
 
 
+def _run_in_venv(venv: Path, code: str, timeout_s: float = 120.0) -> str:
+    """``code``'s output, run by the venv's Python isolated (``-I``: no PYTHON* variables, neither the
+    current directory nor the script's on sys.path) from inside the venv. Why: run from a development
+    checkout, ``python -c`` also saw its ``edge_safety.egg-info`` (the current directory) and PYTHONPATH's
+    source tree, and the report listed them as installed distributions (edge-safety beside edge-safety-runtime)."""
+    r = subprocess.run([str(venv_python(venv)), "-I", "-c", code], capture_output=True, text=True, check=True,
+                       cwd=venv, timeout=timeout_s)
+    return r.stdout
+
+
 def site_packages(venv: Path) -> Path:
-    r = subprocess.run([str(venv_python(venv)), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                       capture_output=True, text=True, check=True)
-    return Path(r.stdout.strip())
+    return Path(_run_in_venv(venv, "import sysconfig; print(sysconfig.get_paths()['purelib'])").strip())
+
+
+def installed_distributions(venv: Path) -> tuple[dict[str, int], list[str]]:
+    """What the venv itself holds: each distribution's bytes (its files and their bytecode), and which of
+    torch, cv2 and pymavlink it cannot import."""
+    found = json.loads(_run_in_venv(venv, _PROBE))
+    return found["dists"], found["absent"]
 
 
 OFFLINE_ENV = {"PIP_NO_INDEX": "1", "PIP_FIND_LINKS": "", "PIP_INDEX_URL": "http://127.0.0.1:9/none",
@@ -465,12 +484,10 @@ def measure_install(bundle_dir: str | os.PathLike, venv: str | os.PathLike, time
     if r.returncode != 0:
         last = (r.stderr.strip().splitlines() or ["no output"])[-1]
         raise BundleError(f"{Path(bundle_dir) / 'install.sh'} into {venv}: exit {r.returncode}: {last}")
-    probe = subprocess.run([str(venv_python(venv)), "-c", _PROBE], capture_output=True, text=True, check=True,
-                           timeout=120)
-    found = json.loads(probe.stdout)
-    dists = tuple(sorted(found["dists"].items(), key=lambda kv: -kv[1]))
+    found, absent = installed_distributions(venv)
+    dists = tuple(sorted(found.items(), key=lambda kv: -kv[1]))
     return InstallReport(venv, _tree_bytes(venv), _tree_bytes(site_packages(venv)), dists,
-                         "torch" not in found["absent"], tuple(found["absent"]))
+                         "torch" not in absent, tuple(absent))
 
 
 def format_install(rep: InstallReport) -> str:

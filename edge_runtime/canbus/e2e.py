@@ -14,10 +14,12 @@ from __future__ import annotations
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import can
 import e2e.p01 as p01
+
+if TYPE_CHECKING:
+    import can
 
 COUNTER_MAX = 14  # AUTOSAR E2E Profile 1: 0..14, 15 is invalid
 
@@ -68,11 +70,11 @@ class E2EProtector:
                 self._payloads.popitem(last=False)
         return data
 
-    def skip(self, message, n: int) -> None:
-        """``n`` frames of ``message`` that were not sent: its alive counter moves on as if they had been."""
+    def skip(self, frame_id: int, n: int) -> None:
+        """``n`` frames of the message ``frame_id`` that were not sent: its alive counter moves on as if they had been."""
         with self._lock:
-            counter = self._counters.get(message.frame_id, 0)
-            self._counters[message.frame_id] = (counter + n) % (COUNTER_MAX + 1)
+            counter = self._counters.get(frame_id, 0)
+            self._counters[frame_id] = (counter + n) % (COUNTER_MAX + 1)
 
     def protect(self, message, signals: dict) -> can.Message:
         with self._lock:
@@ -84,6 +86,8 @@ class E2EProtector:
         if data_id is None:
             data_id = self._data_ids[message.frame_id] = e2e_data_id(message)
         p01.e2e_p01_protect(data, data_id, length=len(data), increment_counter=False)
+        import can  # here: a replay that sends nothing never loads python-can (canbus.bus.DeferredBus)
+
         return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
 
 

@@ -33,26 +33,34 @@ from __future__ import annotations
 import enum
 import heapq
 import itertools
+import json
 import logging
 import threading
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
-from typing import Any, Callable, NamedTuple
-
-import can
-from can.interfaces.virtual import VirtualBus
+from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 
 from edge_runtime import config
-from edge_runtime.canbus.bus import BUS_INTERFACES
+from edge_runtime.canbus.bus import BUS_INTERFACES, CanLinkError, reaches_anyone
 from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EProtector
-from edge_runtime.core.manifest import ASSETS_DIR
+from edge_runtime.core.manifest import ASSETS_DIR, sha256_file
+from edge_runtime.errors import ModelIntegrityError
 from edge_runtime.wearable.backlog import AlertBacklog
+
+if TYPE_CHECKING:
+    import can
 
 log = logging.getLogger(__name__)
 
 DBC_PATH = ASSETS_DIR / "vehicle_alerts.dbc"
+DBC_SCHEDULE_PATH = ASSETS_DIR / "vehicle_alerts.schedule.json"
+"""What the publisher needs of :data:`DBC_PATH` before it encodes a frame (:class:`FrameSchedule`), with the
+DBC's sha256: written by :func:`write_frame_schedule` (``python -m export schedule``, ``export assets``), held to the
+DBC when the DBC is parsed (:meth:`FrameSchedule.check_against`), by ``export bundle`` and by tests/wearable/test_alerts.py."""
+SCHEDULE_HINT = "write it from the DBC with python -m export schedule"
 ALERT = "DISTRACTION_ALERT"
 STATUS = "WEARABLE_STATUS"
 NO_CLASS = "None"
@@ -250,22 +258,119 @@ class Repetition:
         return [k * self.period_s for k in range(1, self.copies + 1)]
 
 
+@dataclass(frozen=True)
+class FrameSchedule:
+    """What the publisher needs of the vehicle DBC before it encodes a frame: the two messages' frame IDs (their
+    alive counters) and the alert's repetition (when its copies are due).
+
+    Why apart from the DBC: a replay whose frames nobody hears encodes none (:meth:`AlertPublisher._heard`), and
+    parsing the DBC means importing cantools, and with it python-can: about a tenth of a day's replay. The shipped
+    DBC's schedule is kept beside it with the DBC's sha256 (:data:`DBC_SCHEDULE_PATH`); a DBC whose sha256 differs,
+    or a schedule file that cannot be read, is parsed at once, as before. The DBC is the single source of truth:
+    when it is parsed, a kept schedule that differs from it is a ModelIntegrityError (:meth:`AlertEncoder.db`).
+    ``python -m export schedule`` (and ``export assets``) writes it from the DBC."""
+
+    dbc_sha256: str
+    alert_frame_id: int
+    status_frame_id: int
+    repetition: Repetition
+
+    @classmethod
+    def of(cls, db, dbc_sha256: str = "") -> "FrameSchedule":
+        alert = db.get_message_by_name(ALERT)
+        return cls(dbc_sha256, int(alert.frame_id), int(db.get_message_by_name(STATUS).frame_id), Repetition.of(alert))
+
+    def to_json(self) -> dict:
+        return {"dbc_sha256": self.dbc_sha256, "alert_frame_id": self.alert_frame_id,
+                "status_frame_id": self.status_frame_id, "repetition_copies": self.repetition.copies,
+                "repetition_period_s": self.repetition.period_s}
+
+    @classmethod
+    def kept(cls, dbc_path: Path = DBC_PATH, path: Path = DBC_SCHEDULE_PATH) -> "FrameSchedule | None":
+        """The schedule kept at ``path`` if it is ``dbc_path``'s (the same sha256), else None (parse the DBC)."""
+        try:
+            d = json.loads(path.read_text(encoding="utf-8"))
+            kept = cls(str(d["dbc_sha256"]), int(d["alert_frame_id"]), int(d["status_frame_id"]),
+                       Repetition(int(d["repetition_copies"]), float(d["repetition_period_s"])))
+            return kept if kept.dbc_sha256 == sha256_file(dbc_path) else None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):  # none, unreadable or another layout:
+            return None  # parse the DBC at start
+
+    def check_against(self, db, where: Path = DBC_SCHEDULE_PATH) -> None:
+        """ModelIntegrityError (one line) unless this kept schedule is what the parsed DBC ``db`` gives."""
+        parsed = FrameSchedule.of(db, self.dbc_sha256)
+        if parsed != self:
+            raise ModelIntegrityError(f"{where}: differs from {DBC_PATH.name} ({self.to_json()} against "
+                                      f"{parsed.to_json()}); {SCHEDULE_HINT}")
+
+
+def frame_schedule_text(dbc_path: Path = DBC_PATH) -> str:
+    """The text :data:`DBC_SCHEDULE_PATH` must hold for the DBC at ``dbc_path``."""
+    schedule = FrameSchedule.of(load_dbc(dbc_path), sha256_file(dbc_path))
+    return json.dumps(schedule.to_json(), indent=1, sort_keys=True) + "\n"
+
+
+def write_frame_schedule(dbc_path: Path = DBC_PATH, path: Path = DBC_SCHEDULE_PATH) -> Path:
+    """Keep ``dbc_path``'s :class:`FrameSchedule` at ``path`` (after a change of the DBC)."""
+    path.write_text(frame_schedule_text(dbc_path), encoding="utf-8")
+    return path
+
+
+def check_frame_schedule(dbc_path: Path = DBC_PATH, path: Path = DBC_SCHEDULE_PATH) -> None:
+    """ModelIntegrityError (one line) unless ``path`` holds ``dbc_path``'s :class:`FrameSchedule` (what
+    ``export bundle`` checks: a schedule that is not the DBC's never ships)."""
+    kept = FrameSchedule.kept(dbc_path, path)
+    if kept is None:
+        raise ModelIntegrityError(f"{path}: missing, unreadable or not {dbc_path.name}'s (another sha256); "
+                                  f"{SCHEDULE_HINT}")
+    kept.check_against(load_dbc(dbc_path), path)
+
+
 class AlertEncoder:
     """Encodes decisions and status with cantools from the DBC, then E2E-protects them.
 
-    One alive counter per message; ``encode_*`` returns a ``can.Message``.
-    """
+    One alive counter per message; ``encode_*`` returns a ``can.Message``. Without ``db`` the shipped DBC is
+    parsed at once, or with ``lazy`` (a replay, whose frames nobody may hear) when a frame is first encoded or
+    decoded: until then its kept :class:`FrameSchedule` serves (parsed at once if there is none for this DBC),
+    and the parse holds the kept schedule to the DBC."""
 
-    def __init__(self, db=None):
-        self.db = db if db is not None else load_vehicle_dbc()
-        self.alert_msg = self.db.get_message_by_name(ALERT)
-        self.status_msg = self.db.get_message_by_name(STATUS)
-        self.repetition = Repetition.of(self.alert_msg)
-        self._classes = {str(v) for v in self.alert_msg.get_signal_by_name("Class").choices.values()}
-        self._statuses = {str(v) for v in self.alert_msg.get_signal_by_name("Status").choices.values()}
+    def __init__(self, db=None, lazy: bool = False):
+        self._db = db
+        self._db_lock = threading.Lock()
+        self._kept = FrameSchedule.kept(DBC_PATH, DBC_SCHEDULE_PATH) if db is None and lazy else None
+        """The kept schedule in use until the DBC is parsed (then checked against it)."""
+        schedule = self._kept if self._kept is not None else FrameSchedule.of(self.db)
+        self._alert_id, self._status_id = schedule.alert_frame_id, schedule.status_frame_id
+        self.repetition = schedule.repetition
         self._e2e = E2EProtector()
         self._alert_seq = 0
         self._lock = threading.Lock()
+
+    @property
+    def db(self):
+        with self._db_lock:  # the heartbeat thread and the loop may encode the first frames at once
+            if self._db is None:
+                db = load_vehicle_dbc()
+                if self._kept is not None:  # frames were scheduled and counted by it: it must be the DBC's
+                    self._kept.check_against(db, DBC_SCHEDULE_PATH)
+                self._db = db
+            return self._db
+
+    @cached_property
+    def alert_msg(self):
+        return self.db.get_message_by_name(ALERT)
+
+    @cached_property
+    def status_msg(self):
+        return self.db.get_message_by_name(STATUS)
+
+    @cached_property
+    def _classes(self) -> set[str]:
+        return {str(v) for v in self.alert_msg.get_signal_by_name("Class").choices.values()}
+
+    @cached_property
+    def _statuses(self) -> set[str]:
+        return {str(v) for v in self.alert_msg.get_signal_by_name("Status").choices.values()}
 
     def _protect(self, message, signals: dict) -> can.Message:
         return self._e2e.protect(message, signals)
@@ -300,11 +405,11 @@ class AlertEncoder:
 
     def skip_status(self, n: int) -> None:
         """``n`` WEARABLE_STATUS frames that are not sent (nobody hears them): the alive counter moves on."""
-        self._e2e.skip(self.status_msg, n)
+        self._e2e.skip(self._status_id, n)
 
     def skip_alert(self, n: int) -> None:
         """``n`` DISTRACTION_ALERT frames that are not sent (nobody hears them): the alive counter moves on."""
-        self._e2e.skip(self.alert_msg, n)
+        self._e2e.skip(self._alert_id, n)
 
     def encode_status(self, state: str = "running", sensor_health: str = "ok", dropped_samples: int = 0,
                       model_version: int = 0, uptime_s: float = 0.0) -> can.Message:
@@ -350,7 +455,9 @@ class AlertPublisher:
         if heartbeat_period_s <= 0:
             raise ValueError("heartbeat_period_s must be > 0")
         self.bus = bus
-        self.encoder = encoder or AlertEncoder()
+        # a live box parses the DBC here, so a broken DBC or install is one line at start, not a dead heartbeat
+        # thread; a replay parses it when it first encodes a frame (with nobody listening, never)
+        self.encoder = encoder or AlertEncoder(lazy=clock is Clock.DATA)
         self.period = heartbeat_period_s
         self.bus_factory = bus_factory
         self.status = status if status is not None else WearableStatus()
@@ -363,6 +470,7 @@ class AlertPublisher:
         self.send_errors = 0
         self.reconnects = 0
         self.last_error: str | None = None
+        self.thread_error: str | None = None  # why the heartbeat thread died, if it did (:meth:`_run`)
         self._send_lock = threading.Lock()
         self._copies: list[_Copy] = []  # a heap, by due time
         self._copies_lock = threading.Lock()
@@ -373,7 +481,11 @@ class AlertPublisher:
         self._data_t0_s: float | None = None  # data clock: the first sample's time ...
         self._data_now_s: float | None = None  # ... the clock now ...
         self._next_beat_s: float | None = None  # ... and when the next heartbeat is due
-        self._logger = can.Logger(str(log_path)) if log_path else None
+        self._logger = None
+        if log_path:
+            import can  # here: a replay that sends nothing never loads python-can (canbus.bus.DeferredBus)
+
+            self._logger = can.Logger(str(log_path))
         self.backlog = AlertBacklog()
 
     # -- sending ----------------------------------------------------------
@@ -557,12 +669,7 @@ class AlertPublisher:
     def _heard(self) -> bool:
         """Whether a frame sent now reaches anyone: a log, or a bus other than a python-can
         virtual bus with nobody else on its channel (which drops what it is sent)."""
-        if self._logger is not None or self.bus is None:
-            return True
-        bus = self.bus
-        if not isinstance(bus, VirtualBus) or bus.receive_own_messages:
-            return True
-        return any(q is not bus.queue for q in bus.channel)
+        return self._logger is not None or self.bus is None or reaches_anyone(self.bus)
 
     def _skip_beats(self, until_s: float) -> None:
         """Data clock, nobody to hear them: the heartbeats due by ``until_s`` are counted, not
@@ -587,6 +694,22 @@ class AlertPublisher:
 
     # -- heartbeat thread (wall clock) --------------------------------------
     def _run(self) -> None:
+        """The heartbeat thread. An exception it did not expect ends it (a bug, or an install that broke under it):
+        it is kept in :attr:`thread_error` and logged in one line, and :meth:`check_running` fails the command
+        (so the loop stops feeding the service watchdog) rather than leaving a box that looks healthy but sends
+        no heartbeat."""
+        try:
+            self._beat_until_stopped()
+        except BaseException as exc:  # noqa: BLE001 - any of them leaves the vehicle without heartbeats
+            self.thread_error = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+            log.error("CAN heartbeat thread stopped: %s", self.thread_error, extra={"event": "heartbeat_thread_died"})
+
+    def check_running(self) -> None:
+        """CanLinkError (one line, exit 2) if the heartbeat thread died (:meth:`_run`)."""
+        if self.thread_error is not None:
+            raise CanLinkError(f"CAN heartbeat thread stopped: {self.thread_error}")
+
+    def _beat_until_stopped(self) -> None:
         next_beat = time.monotonic()
         while not self._stop.is_set():
             self._wake.clear()

@@ -482,6 +482,61 @@ def bound_step(session: ort.InferenceSession, feed: dict[str, np.ndarray], out_s
     return None
 
 
+def chained_step(session: ort.InferenceSession, hidden: int, classes: int, run_options: ort.RunOptions):
+    """A capture's batch-1 step ``(x, stream) -> probs (1, K)`` whose LSTM state stays in onnxruntime's bound buffers
+    from one step of the capture to the next, or None when this onnxruntime cannot (then :func:`bound_step`).
+
+    Why: of :func:`bound_step`'s six copies per step, four move the state (in and out); here two bindings are used in
+    turn, each reading the state the other wrote (buffers ``pairs[0]`` -> ``pairs[1]`` and back), so a step of the
+    capture whose state is in the buffers (the *resident* stream) copies only the sub-window in and the decision out
+    (about 1 us of a 19 us step). The buffers hold one capture's state: a step of another stream first gives the
+    resident one its state back as its own arrays (:meth:`StepStream` reads it through :func:`release`), then copies
+    its own in. The same private calls as :func:`bound_step`; the caller checks the results at load
+    (:meth:`StepModel._chain_matches`). One caller at a time, like the buffers of :func:`bound_step`."""
+    try:
+        x_in, p_out = np.zeros((1, SUBSEQ_FRAMES, N_CHANNELS), np.float32), np.zeros((1, classes), np.float32)
+        pairs = [(np.zeros((1, hidden), np.float32), np.zeros((1, hidden), np.float32)) for _ in range(2)]
+        bindings = []
+        for k in range(2):
+            binding = session.io_binding()
+            (h_in, c_in), (h_out, c_out) = pairs[k], pairs[1 - k]
+            for name, a, bind in (("imu", x_in, binding.bind_input), ("h", h_in, binding.bind_input),
+                                  ("c", c_in, binding.bind_input), ("probs", p_out, binding.bind_output),
+                                  ("h_out", h_out, binding.bind_output), ("c_out", c_out, binding.bind_output)):
+                bind(name, "cpu", 0, np.float32, list(a.shape), a.ctypes.data)
+            bindings.append(binding)
+        run, bound, copyto = session._sess.run_with_iobinding, [b._iobinding for b in bindings], np.copyto
+    except Exception:  # noqa: BLE001 - a private API that changed: the caller's usual step is the contract
+        return None
+    reads, resident = 0, None  # the pair the next step reads, and whose state it is
+
+    def release(stream: StepStream) -> None:
+        """The resident ``stream``'s state back into its own arrays: the buffers are about to hold another's."""
+        nonlocal resident
+        h, c = pairs[reads]
+        stream._h, stream._c, stream._held_by = h.copy(), c.copy(), None
+        resident = None
+
+    def call(x: np.ndarray, stream: StepStream) -> np.ndarray:
+        nonlocal reads, resident
+        k = reads
+        if resident is not stream:  # another capture's state, or none, is in the buffers: this one's goes in
+            if resident is not None:
+                release(resident)
+            copyto(pairs[k][0], stream.h)
+            copyto(pairs[k][1], stream.c)
+            stream._h = stream._c = None  # in the buffers from now on: StepStream.h asks for it back
+            stream._held_by = release
+            resident = stream
+        copyto(x_in, x)
+        run(bound[k], run_options)
+        reads = 1 - k
+        return p_out.copy()
+
+    call.keep = bindings  # with the buffers in the closure: what onnxruntime writes lives as long as the call
+    return call
+
+
 class StepModel:
     """The ConvLSTM's streaming step graph (``export.step_model``): one sub-window (N, 33, 3) m/s^2 and
     the LSTM state (h, c) (N, hidden) in, the decision's probabilities (N, K) and the next state out.
@@ -516,7 +571,12 @@ class StepModel:
             self._run = fast_run(self.session, STEP_OUTPUTS, feed, self._run_options)
             self._step_one = bound_step(self.session, feed, ((1, len(classes)), (1, hidden), (1, hidden)),
                                         self._run_options)
-            """The batch-1 step through its IOBinding (the loop's call), None on an onnxruntime that cannot."""
+            """The batch-1 step through its IOBinding, None on an onnxruntime that cannot."""
+            self._chain = chained_step(self.session, hidden, len(classes), self._run_options)
+            """A capture's step with its state kept in the bound buffers (the loop's call), None when this
+            onnxruntime cannot or it does not give exactly what ``session.run`` gives (:meth:`_chain_matches`)."""
+            if self._chain is not None and not self._chain_matches(feed):
+                self._chain = None
             probe = self.step(np.zeros((1, SUBSEQ_FRAMES, N_CHANNELS), np.float32), *self.zero_state(1))[0]
         except Exception as e:  # noqa: BLE001 - onnxruntime's own error types differ between versions
             first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
@@ -525,20 +585,50 @@ class StepModel:
             raise ModelIntegrityError(f"{source}: step model has {probe.shape[-1]} outputs but {len(classes)} "
                                       "classes are listed")
 
+    def _chain_matches(self, feed: dict[str, np.ndarray]) -> bool:
+        """Whether :func:`chained_step` gives exactly what ``session.run`` gives: two captures from the probe's
+        state, stepped in turn and in runs (each step of one gives the other's state back and takes its own in),
+        every decision and the final states compared bit for bit."""
+        x, h, c = (feed[k] for k in STEP_INPUTS)
+        order = (0, 0, 1, 0, 1, 1, 0)
+        want = [[h, c], [np.ascontiguousarray(h[:, ::-1]), np.ascontiguousarray(c[:, ::-1])]]
+        streams = [StepStream(*(a.copy() for a in state)) for state in want]
+        try:
+            for k in order:
+                got = self._chain(x, streams[k])
+                p, want[k][0], want[k][1] = self.session.run(list(STEP_OUTPUTS), {"imu": x, "h": want[k][0],
+                                                                                 "c": want[k][1]}, self._run_options)
+                if not np.array_equal(got, p):
+                    return False
+            return all(_same((st.h, st.c), ref) for st, ref in zip(streams, want))
+        except Exception:  # noqa: BLE001 - a private API that changed: the public run is the contract
+            return False
+
     def zero_state(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         return zero_state(n, self.hidden)
 
     @property
     def bound(self) -> bool:
-        """Whether a single capture's step goes through the IOBinding (:func:`bound_step`)."""
-        return self._step_one is not None
+        """Whether a single capture's step goes through an IOBinding (:func:`chained_step` or :func:`bound_step`)."""
+        return self._chain is not None or self._step_one is not None
 
     @property
     def call_path(self) -> str:
-        """How a step reaches onnxruntime here (the <= 20 us figure holds for ``iobinding`` only)."""
-        if self.bound:
+        """How a capture's step reaches onnxruntime here (the <= 20 us figure holds for the IOBinding paths only)."""
+        if self._chain is not None:
+            return "iobinding, state kept bound"
+        if self._step_one is not None:
             return "iobinding"
         return "session.run" if self._run == self.session.run else "_sess.run"
+
+    def step_stream(self, x: np.ndarray, stream: StepStream) -> np.ndarray:
+        """Raw probabilities (1, K) after sub-window x (1, 33, 3) float32 C-contiguous of the capture whose state is
+        ``stream``, whose state moves on: the loop's call. With :func:`chained_step` the state stays in the bound
+        buffers while the same capture steps on."""
+        if self._chain is not None:
+            return self._chain(x, stream)
+        p, stream.h, stream.c = self.step(x, stream.h, stream.c)
+        return p
 
     def step(self, x: np.ndarray, h: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(probs (N, K), h', c') after sub-windows x (N, 33, 3) float32 C-contiguous from the state (h, c)."""
@@ -551,17 +641,52 @@ class StepModel:
         return run_steps(self.step, subs, self.hidden)
 
 
-@dataclass
-class StepStream:
-    """One capture's state in the step model: the sub-windows run so far and the probabilities after each."""
+class _HeldState:
+    """A :class:`StepStream`'s ``h`` or ``c``: taken back from the step model's buffers before it is read or replaced."""
 
-    h: np.ndarray
-    c: np.ndarray
-    done: int = 0
-    probs: dict[int, np.ndarray] = field(default_factory=dict)
-    first_frame: bytes | None = None
-    """The bytes of the capture's first frame, as :meth:`Engine.advance` first saw it: frames whose first
-    frame differs are another capture's (a guard against a caller's mix-up, not a proof of identity)."""
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.attr = "_" + name
+
+    def __get__(self, stream: "StepStream | None", owner: type | None = None):
+        if stream is None:
+            return self
+        stream._own()
+        return getattr(stream, self.attr)
+
+    def __set__(self, stream: "StepStream", value: np.ndarray) -> None:
+        stream._own()
+        setattr(stream, self.attr, value)
+
+
+class StepStream:
+    """One capture's state in the step model: the LSTM state (h, c), the sub-windows run so far and the
+    probabilities after each. While the capture steps on, its state may live in the step model's bound buffers
+    (:func:`chained_step`); reading ``h`` or ``c`` then takes it back into the stream's own arrays. So a read
+    changes the step model's buffers' owner: one caller at a time, readers too (as for the steps). A copy (``copy``,
+    ``deepcopy``, ``pickle``) takes the state back first, so the copy and the original each hold their own arrays
+    (a copy that shared the buffers' claim could later read another capture's state as its own)."""
+
+    def __init__(self, h: np.ndarray, c: np.ndarray, done: int = 0, probs: dict[int, np.ndarray] | None = None,
+                 first_frame: bytes | None = None):
+        self._h, self._c = h, c
+        self._held_by: Callable[[StepStream], None] | None = None
+        """The release of the step model whose buffers hold this state (then ``_h`` and ``_c`` are None)."""
+        self.done = done
+        self.probs: dict[int, np.ndarray] = {} if probs is None else probs
+        self.first_frame = first_frame
+        """The bytes of the capture's first frame, as :meth:`Engine.advance` first saw it: frames whose first
+        frame differs are another capture's (a guard against a caller's mix-up, not a proof of identity)."""
+
+    h = _HeldState()
+    c = _HeldState()
+
+    def _own(self) -> None:
+        if self._held_by is not None:
+            self._held_by(self)
+
+    def __getstate__(self) -> dict:
+        self._own()
+        return self.__dict__.copy()
 
 
 def _load_step_model(assets_dir: str | os.PathLike, entry: dict, threads: int,
@@ -748,8 +873,7 @@ class Engine:
         for s in range(stream.done + 1, steps + 1):
             sub = _prefix_inputs(x[None, :needed_frames(s)], ((s, needed_frames(s)),), last_only=True)[0]
             self._finite(sub)
-            p, stream.h, stream.c = self.step_model.step(sub, stream.h, stream.c)
-            stream.probs[s] = p[0]
+            stream.probs[s] = self.step_model.step_stream(sub, stream)[0]
             stream.done = s
         return calibrate(stream.probs[steps], self._temperature(steps))
 

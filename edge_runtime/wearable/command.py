@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 from edge_runtime.cli import CliError
+from edge_runtime.errors import EdgeError
 
 if TYPE_CHECKING:
     from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
@@ -213,8 +214,9 @@ def _status_of(engine: Engine) -> WearableStatus:
 
 def _open_publisher(cfg, can_log: str | None, status: WearableStatus, data_clock: bool = False) -> AlertPublisher:
     """The CAN side: the configured python-can bus, alerts and the WEARABLE_STATUS heartbeat, started.
-    ``data_clock`` (a replay): frames go out, and are logged, at the recording's time (``Clock.DATA``)."""
-    from edge_runtime.canbus.bus import open_bus
+    ``data_clock`` (a replay): frames go out, and are logged, at the recording's time (``Clock.DATA``); on the
+    in-process virtual bus the bus opens when a frame must go out (``DeferredBus``: with nobody on it, none does)."""
+    from edge_runtime.canbus.bus import DeferredBus, open_bus
     from edge_runtime.wearable.alerts import AlertPublisher, Clock
 
     c = cfg.can
@@ -222,11 +224,16 @@ def _open_publisher(cfg, can_log: str | None, status: WearableStatus, data_clock
     def bus_factory():
         return open_bus(c.interface, c.channel, c.bitrate, host=c.host, port=c.port)
 
+    deferred = data_clock and c.interface == "virtual"
+    bus = DeferredBus(bus_factory, c.channel) if deferred else bus_factory()
     try:
-        pub = AlertPublisher(bus_factory(), heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
+        pub = AlertPublisher(bus, heartbeat_period_s=c.heartbeat_period_s, log_path=can_log,
                              bus_factory=bus_factory, status=status, clock=Clock.DATA if data_clock else Clock.WALL)
-    except ValueError as e:  # python-can's Logger: unknown file suffix
-        raise CliError(f"--can-log {can_log}: {e}") from None
+    except BaseException as e:  # a live box parses the DBC here: the bus it opened is shut, the error is one line
+        bus.shutdown()
+        if isinstance(e, ValueError) and not isinstance(e, EdgeError):  # python-can's Logger: unknown file suffix
+            raise CliError(f"--can-log {can_log}: {e}") from None
+        raise
     return pub.start()
 
 
@@ -285,6 +292,7 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
 
     status = loop.status
     for event in source.events:
+        loop.publisher.check_running()  # a dead heartbeat thread ends the run: no keep-alive for a silent box
         keepalive()  # READY, then the watchdog's keep-alives, only while this loop turns
         status.set_source_counts(*source.health())
         if not isinstance(event, ImuBlock):  # a live source's SourceStatus

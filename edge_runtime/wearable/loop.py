@@ -466,13 +466,19 @@ class WearableLoop:
         the others go second. The guess decides nothing: a capture that opens an event against it has
         its early steps classified when it opens (:meth:`_steps_of`), and one that continues against
         it leaves them unused. Each row is what the classifier gives for that capture alone, so the
-        decisions are those of one call per step."""
+        decisions are those of one call per step.
+
+        A step model needs no guess: it runs sub-windows 1..6 of every capture for the full window, so each
+        capture's early steps come with it, at no further model run (asked for later, they ran again)."""
         st, ev = self._capture, self._event
-        first = [(c, tuple(st.steps) if st is not None and c.trigger_index == st.trigger else (N_SUBSEQ,))
+        fresh = tuple(self._early_steps) if self._stream is not None else (N_SUBSEQ,)
+        first = [(c, tuple(st.steps) if st is not None and c.trigger_index == st.trigger else fresh)
                  for c in captures]  # the capture opened in an earlier block: the steps it still has
         self._classify_groups([([c.trigger_index for c, s in first if s == steps],
                                 np.stack([c.data for c, s in first if s == steps]), steps)
                                for steps in dict.fromkeys(s for _, s in first)])
+        if self._stream is not None:
+            return
         hold_s = self.policy.event_hold_s + 1.0 / self.rate_hz  # a frame's margin: a guess, never a decision
         threshold = self.policy.threshold(N_SUBSEQ, self._manifest_thresholds)
         may_continue = ev is not None and not ev.withdrawn  # the event under way may outlive ...

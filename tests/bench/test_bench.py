@@ -133,9 +133,10 @@ def test_profiles_and_markdown(quick):
     # the step model's rows say they are one step per decision, the one-shot's the whole capture in one run
     assert {"convlstm", "convlstm_step"} <= {r["model"] for r in report["results"]}
     assert "convlstm_step: per decision: one step" in md and "convlstm: the whole capture" in md
-    # the step is timed as the box calls it (StepModel.step, through its IOBinding on this onnxruntime)
+    # the step is timed as the box calls it (a capture's steps, its state kept in the IOBinding on this onnxruntime)
     assert {r.get("call") for r in report["results"] if r["model"] == "convlstm_step"
-            and r["runtime"] == "onnxruntime"} == {"StepModel.step (IOBinding)"}
+            and r["runtime"] == "onnxruntime"} == {"StepModel.step_stream (iobinding, state kept bound; captures "
+                                                   "of 6 steps from the zero state)"}
 
 
 def test_an_arch_brings_its_step_model_and_an_entry_name_only_itself():

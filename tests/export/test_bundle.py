@@ -22,6 +22,7 @@ from export.bundle import (
     BundleError,
     build_bundle,
     console_scripts,
+    installed_distributions,
     measure_install,
     product_requirements,
     runtime_metadata,
@@ -161,6 +162,21 @@ def test_tampered_model_is_not_bundled(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_frame_schedule_that_is_not_its_dbcs_is_not_bundled_and_export_schedule_writes_it(tmp_path):
+    pkg = tmp_path / "edge_runtime"
+    shutil.copytree(RUNTIME, pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    kept = pkg / "assets" / "vehicle_alerts.schedule.json"
+    shipped = kept.read_text()
+    kept.write_text(json.dumps(dict(json.loads(shipped), repetition_copies=1)))  # the DBC's sha256, not its content
+    from edge_runtime.core.manifest import ModelIntegrityError
+
+    with pytest.raises(ModelIntegrityError, match="schedule.json: differs"):
+        build_bundle(tmp_path / "out", package=pkg)
+    assert not (tmp_path / "out").exists()
+    assert export_main(["schedule", "--assets", str(pkg / "assets")]) == 0  # written from the DBC again
+    assert kept.read_text() == shipped
+
+
 def test_torch_requirement_is_refused(tmp_path):
     cfg = (ROOT / "setup.cfg").read_text().replace("install_requires =\n", "install_requires =\n    torch==2.13.0\n")
     (tmp_path / "setup.cfg").write_text(cfg)
@@ -227,6 +243,28 @@ def test_offline_install_gives_the_development_checkouts_alerts(bundle, tmp_path
     assert edge_main(["wearable", "--replay", str(drive / "imu.csv"), "--alerts", str(dev),
                                                  "--quiet"]) == 0
     assert _decisions(installed) == _decisions(dev) and any(d["alerted"] for d in _decisions(dev))
+
+
+@pytest.mark.slow  # a venv and three interpreters
+def test_the_install_report_lists_what_the_venv_holds_not_the_checkout_it_is_run_from(tmp_path, monkeypatch):
+    """Run from a development checkout (an egg-info in the current directory, its source tree on PYTHONPATH),
+    the report listed that checkout as a second installed distribution beside the runtime wheel."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    checkout = tmp_path / "checkout"
+    (checkout / "edge_safety.egg-info").mkdir(parents=True)
+    (checkout / "edge_safety.egg-info" / "PKG-INFO").write_text("Metadata-Version: 2.1\nName: edge-safety\n"
+                                                                 "Version: 0.1.0\n")
+    (checkout / "torch").mkdir()
+    (checkout / "torch" / "__init__.py").write_text("")
+    monkeypatch.chdir(checkout)
+    monkeypatch.setenv("PYTHONPATH", str(checkout))
+    leaky = subprocess.run([str(venv_python(venv)), "-c", "import importlib.metadata as md, importlib.util as u; "
+                            "print([d.metadata['Name'] for d in md.distributions()], u.find_spec('torch') is None)"],
+                           capture_output=True, text=True, check=True).stdout
+    assert "edge-safety" in leaky and "False" in leaky  # what a probe run as before saw
+    dists, absent = installed_distributions(venv)
+    assert "edge-safety" not in dists and set(absent) == {"torch", "cv2", "pymavlink"}
 
 
 @pytest.mark.slow  # pip builds the runtime wheel

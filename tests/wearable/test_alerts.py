@@ -1,6 +1,7 @@
 """wearable/alerts.py: the vehicle DBC, cantools encoding, the heartbeat and its status, bus errors."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import threading
@@ -8,16 +9,25 @@ import time
 from types import SimpleNamespace
 
 import can
+import numpy as np
 import pytest
 
+from edge_runtime.canbus.bus import CanLinkError, DeferredBus
+from edge_runtime.canbus.dbc import load_dbc
 from edge_runtime.canbus.e2e import E2EChecker
+from edge_runtime.core.manifest import sha256_file
+from edge_runtime.errors import ModelIntegrityError
+from edge_runtime.wearable import alerts as alerts_module
 from edge_runtime.wearable.alerts import (
     DBC_PATH,
+    DBC_SCHEDULE_PATH,
     AlertEncoder,
     AlertPublisher,
     Clock,
+    FrameSchedule,
     Repetition,
     WearableStatus,
+    check_frame_schedule,
     load_vehicle_dbc,
 )
 from edge_runtime.wearable.labels import CLASSES
@@ -279,18 +289,25 @@ def test_updates_of_an_alert_go_out_under_its_alert_seq_with_their_own_status_an
                    + [(1, "alert", "Drink")] * 5 + [(1, "withdrawn", "Other")] * 5)
 
 
-def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_is_what_it_would_have_been():
+@pytest.mark.parametrize("channels", [("beats-heard", "beats-unheard"), ("9101", "9102")])
+@pytest.mark.parametrize("deferred", [False, True])
+def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_is_what_it_would_have_been(
+        deferred, channels):
     """A data-clock publisher whose virtual bus has nobody else on its channel skips encoding the
     heartbeats and alert frames; once a listener joins, its frames equal those of a publisher that
-    was heard all along."""
+    was heard all along. ``deferred``: the replay's bus, opened when the first frame must go out.
+    A numeric channel ("9102") is one python-can opens as the number 9102: its listener must be found."""
     def publisher(channel):
-        pub = AlertPublisher(can.Bus(interface="virtual", channel=channel), heartbeat_period_s=0.1,
-                             clock=Clock.DATA)
+        def open_virtual():
+            return can.Bus(interface="virtual", channel=channel)
+
+        pub = AlertPublisher(DeferredBus(open_virtual, channel) if deferred else open_virtual(),
+                             heartbeat_period_s=0.1, clock=Clock.DATA)
         pub.status.count_samples(100)
         return pub
 
-    heard, unheard = publisher("beats-heard"), publisher("beats-unheard")
-    rx_heard = can.Bus(interface="virtual", channel="beats-heard")
+    heard, unheard = publisher(channels[0]), publisher(channels[1])
+    rx_heard = can.Bus(interface="virtual", channel=channels[0])
     for pub in (heard, unheard):
         pub.advance_to(0.0)
         pub.status.set_alerts_undelivered(1)  # the next UNDELIVERED_HEARTBEATS heartbeats say degraded ...
@@ -298,7 +315,7 @@ def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_i
         pub.publish_alert(SimpleNamespace(t_trigger_s=0.1, t_alert_s=0.25, label="Phone", confidence=0.9,
                                           status="alert", compute_us=0.0))  # its first frame unheard, its copies heard
         pub.status.count_samples(10, non_finite=3)
-    rx_unheard = can.Bus(interface="virtual", channel="beats-unheard")
+    rx_unheard = can.Bus(interface="virtual", channel=channels[1])
     for pub in (heard, unheard):
         pub.advance_to(1.0)
         pub.close()
@@ -313,3 +330,105 @@ def test_frames_nobody_can_hear_are_counted_not_encoded_and_the_next_heard_one_i
         return out
 
     assert frames(rx_unheard) == frames(rx_heard)[4:]
+
+
+def test_the_kept_frame_schedule_is_the_shipped_dbcs():
+    """The publisher schedules frames by the kept schedule until it first encodes one; it must be what parsing the
+    DBC gives (after a change of the DBC: python -m export schedule)."""
+    assert FrameSchedule.kept() == FrameSchedule.of(load_vehicle_dbc(), sha256_file(DBC_PATH))
+
+
+def test_a_schedule_kept_for_another_dbc_is_not_used(tmp_path):
+    dbc = tmp_path / "vehicle_alerts.dbc"
+    dbc.write_text(DBC_PATH.read_text().replace("GenMsgNrOfRepetition\" BO_ 928 4", "GenMsgNrOfRepetition\" BO_ 928 2"))
+    kept = tmp_path / "schedule.json"
+    kept.write_text(DBC_SCHEDULE_PATH.read_text())
+    assert FrameSchedule.kept(DBC_PATH, kept) is not None and FrameSchedule.kept(dbc, kept) is None
+    assert FrameSchedule.of(load_dbc(dbc)).repetition.copies == 2
+    kept.write_text("{}")
+    assert FrameSchedule.kept(DBC_PATH, kept) is None  # another layout: the DBC is parsed
+
+
+def _kept_schedule(tmp_path, monkeypatch, text: str):
+    """The runtime's kept schedule replaced by ``text`` (the shipped DBC unchanged)."""
+    kept = tmp_path / "vehicle_alerts.schedule.json"
+    kept.write_text(text)
+    monkeypatch.setattr(alerts_module, "DBC_SCHEDULE_PATH", kept)
+    return kept
+
+
+def test_a_kept_schedule_that_is_not_the_dbcs_is_refused_when_the_dbc_is_parsed(tmp_path, monkeypatch):
+    """A schedule file with the shipped DBC's sha256 but other content (1 copy, the heartbeat's frame id for the
+    alert's counter) was trusted: a late listener heard 2 alert frames instead of 5. The DBC is the truth: the
+    replay's first encoded frame parses it and the altered schedule is a one-line integrity error."""
+    good = json.loads(DBC_SCHEDULE_PATH.read_text())
+    kept = _kept_schedule(tmp_path, monkeypatch, json.dumps(dict(good, repetition_copies=1, alert_frame_id=0x3A1)))
+    pub = AlertPublisher(DeferredBus(lambda: can.Bus(interface="virtual", channel="tampered"), "tampered"),
+                         heartbeat_period_s=0.1, clock=Clock.DATA)
+    assert pub.encoder.repetition.copies == 1  # in use until the DBC is parsed ...
+    pub.status.count_samples(100)
+    pub.advance_to(0.0)
+    pub.publish_alert(SimpleNamespace(t_trigger_s=-1.0, t_alert_s=1.0, label="Phone", confidence=0.9,
+                                      status="alert", compute_us=0.0))  # nobody listens: nothing encoded
+    rx = can.Bus(interface="virtual", channel="tampered")
+    try:
+        with pytest.raises(ModelIntegrityError, match=kept.name):  # ... which the first heard frame does
+            pub.advance_to(2.0)
+    finally:
+        rx.shutdown()
+        pub.bus.shutdown()
+    with pytest.raises(ModelIntegrityError, match="differs"):
+        check_frame_schedule(DBC_PATH, kept)  # what export bundle refuses
+
+
+@pytest.mark.parametrize("text", ["not json", "[1, 2]", '{"dbc_sha256": null}', ""])
+def test_a_malformed_kept_schedule_is_as_none_the_dbc_is_parsed_at_start(tmp_path, monkeypatch, text):
+    _kept_schedule(tmp_path, monkeypatch, text)
+    enc = AlertEncoder(lazy=True)
+    assert enc._db is not None and enc.repetition == Repetition.of(load_vehicle_dbc().get_message_by_name("DISTRACTION_ALERT"))
+
+
+def test_a_live_publisher_parses_the_dbc_at_start_a_replays_when_it_first_encodes(monkeypatch):
+    """On the wall clock a DBC that cannot be parsed (or a missing cantools) is one line at start, not a heartbeat
+    thread that dies after the process said it was ready."""
+    assert AlertPublisher(None).encoder._db is not None
+    assert AlertPublisher(None, clock=Clock.DATA).encoder._db is None
+
+    def no_cantools():
+        raise ModuleNotFoundError("No module named 'cantools'", name="cantools")
+
+    monkeypatch.setattr(alerts_module, "load_vehicle_dbc", no_cantools)
+    with pytest.raises(ModuleNotFoundError):
+        AlertPublisher(None)
+    AlertPublisher(None, clock=Clock.DATA)  # a replay: the kept schedule serves until a frame is heard
+
+
+def test_a_heartbeat_thread_that_dies_fails_the_run(monkeypatch):
+    """Whatever ends the heartbeat thread is kept and turns into a one-line CanLinkError at the loop's next turn,
+    so the process stops feeding the service watchdog instead of looking healthy without heartbeats."""
+    pub = AlertPublisher(None, heartbeat_period_s=0.01)
+
+    def broken(**signals):
+        raise RuntimeError("encoder\nbroke")
+
+    monkeypatch.setattr(pub.encoder, "encode_status", broken)
+    pub.check_running()
+    pub.start()
+    pub._thread.join(timeout=5.0)
+    assert not pub._thread.is_alive() and pub.thread_error == "RuntimeError: encoder broke"
+    with pytest.raises(CanLinkError, match="heartbeat thread stopped: RuntimeError: encoder broke"):
+        pub.check_running()
+    pub.close()
+
+
+@pytest.mark.slow  # an interpreter of its own: this one has python-can loaded
+def test_a_replay_nobody_hears_loads_neither_python_can_nor_cantools(tmp_path):
+    """On the in-process virtual bus with nobody on its channel, nothing is encoded and nothing is sent: the
+    replay needs neither python-can nor the DBC's parser (about a tenth of a day's replay to import)."""
+    acc = tmp_path / "imu.csv"
+    t = np.arange(3000) / 100.0
+    acc.write_text("t,ax,ay,az\n" + "".join(f"{s:.2f},0.1,0.2,9.8\n" for s in t))
+    code = ("import sys; from edge_runtime.__main__ import main; rc = main(['wearable', '--replay', sys.argv[1], "
+            "'--quiet']); print(rc, 'can' in sys.modules, 'cantools' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code, str(acc)], capture_output=True, text=True, timeout=120)
+    assert r.stdout.strip().splitlines()[-1] == "0 False False", r.stdout + r.stderr

@@ -128,6 +128,9 @@ class Publisher:
     def publish_alert(self, alert):
         return 0
 
+    def check_running(self):
+        pass
+
 
 class Live:
     """A live source's counters."""
@@ -339,3 +342,26 @@ def test_the_wearable_command_keeps_openblas_on_one_thread_unless_told(given):
     code = "import os, edge_runtime.wearable.sources; print(os.environ.get('OPENBLAS_NUM_THREADS'))"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
     assert out.split() == [str(given)]
+
+
+def test_a_live_box_that_cannot_parse_the_dbc_stops_at_start_with_its_bus_shut(tmp_path, monkeypatch, caplog):
+    """A live publisher parses the DBC when it is made: a missing cantools is the command's one line at start (exit 2),
+    and the bus opened for it is shut, not left for python-can to warn about at exit."""
+    import gc
+
+    import can
+
+    from edge_runtime import config
+    from edge_runtime.wearable import alerts
+
+    def no_cantools():
+        raise ModuleNotFoundError("No module named 'cantools'", name="cantools")
+
+    monkeypatch.setattr(alerts, "load_vehicle_dbc", no_cantools)
+    box = tmp_path / "box.toml"
+    box.write_text('[can]\ninterface = "virtual"\nchannel = "no-dbc"\n')
+    with pytest.raises(ModuleNotFoundError):
+        command._open_publisher(config.load(box), None, WearableStatus())
+    gc.collect()  # a bus nobody shut is shut by python-can's finaliser, which warns
+    assert not can.interfaces.virtual.channels.get("no-dbc")
+    assert not [r for r in caplog.records if "not properly shut down" in r.getMessage()]

@@ -204,18 +204,102 @@ def test_a_step_model_on_an_onnxruntime_whose_private_run_is_missing_or_raises_g
         np.testing.assert_array_equal(eng.advance(st, captures[k], 6), shipped.advance(ref, captures[k], 6))
 
 
+def _public_chain(model, subs):
+    """(probs, h, c) after each sub-window of one capture by the public ``session.run`` from the zero state."""
+    h, c = model.zero_state(1)
+    out = []
+    for x in subs:
+        p, h, c = model.session.run(list(STEP_OUTPUTS), {"imu": x, "h": h, "c": c})
+        out.append((p, h, c))
+    return out
+
+
+@pytest.mark.parametrize("precision", ["fp32", "int8"])
+def test_a_capture_state_kept_in_the_bound_buffers_is_the_public_runs_however_captures_interleave(captures, precision):
+    """The loop's call keeps a capture's state in onnxruntime's buffers between its steps; another capture's step,
+    or reading the state, gives it back first: every decision and state is the public ``session.run``'s."""
+    model = Engine.from_manifest(ASSETS_DIR, precision).step_model
+    assert model.call_path == "iobinding, state kept bound"
+    subs = [[np.ascontiguousarray(x[k:k + 1]) for x in step_inputs(captures[:3], 6)] for k in range(3)]
+    want = [_public_chain(model, s) for s in subs]
+    streams = [classifier.StepStream(*model.zero_state(1)) for _ in range(3)]
+    for k, s in [(0, 0), (0, 1), (1, 0), (0, 2), (2, 0), (2, 1), (1, 1), (1, 2), (0, 3), (0, 4), (0, 5), (2, 2)]:
+        np.testing.assert_array_equal(model.step_stream(subs[k][s], streams[k]), want[k][s][0])
+        if (k, s) == (0, 4):  # read mid-capture: its state, and the next step still the public one's
+            np.testing.assert_array_equal(streams[0].h, want[0][4][1])
+    for st, (k, s) in zip(streams, [(0, 5), (1, 2), (2, 2)]):
+        np.testing.assert_array_equal(st.h, want[k][s][1])
+        np.testing.assert_array_equal(st.c, want[k][s][2])
+
+
+@pytest.mark.parametrize("how", ["copy", "deepcopy"])
+def test_a_copy_of_a_resident_stream_is_its_own_and_leaves_the_original_its_state(captures, how):
+    """A copy of the stream whose state is in the bound buffers takes the state back first: a shallow copy used to
+    share the buffers' claim, so once the copy was read and another capture stepped, the original read that
+    capture's state as its own."""
+    import copy
+
+    model = Engine.from_manifest(ASSETS_DIR, "int8").step_model
+    subs = [[np.ascontiguousarray(x[k:k + 1]) for x in step_inputs(captures[:2], 2)] for k in range(2)]
+    want = _public_chain(model, subs[0])
+    a, b = (classifier.StepStream(*model.zero_state(1)) for _ in range(2))
+    model.step_stream(subs[0][0], a)
+    model.step_stream(subs[0][1], a)  # a's state now lives in the buffers
+    twin = getattr(copy, how)(a)
+    np.testing.assert_array_equal(twin.h, want[1][1])
+    model.step_stream(subs[1][0], b)  # another capture's state goes into the buffers
+    np.testing.assert_array_equal(a.h, want[1][1])
+    np.testing.assert_array_equal(a.c, want[1][2])
+
+
+def test_a_kept_state_call_that_does_not_give_the_public_results_is_not_used(captures, monkeypatch):
+    """The load-time check refuses a state-keeping call whose decisions or states differ from ``session.run``'s
+    (here: the state it hands back is off by one float32 step); the capture's steps then copy the state each time."""
+    real = classifier.chained_step
+
+    def off(*args):
+        call = real(*args)
+
+        def wrong(x, stream):
+            p = call(x, stream)
+            stream.h = np.nextafter(stream.h, np.float32(np.inf))
+            return p
+
+        return wrong
+
+    monkeypatch.setattr(classifier, "chained_step", off)
+    eng = Engine.from_manifest(ASSETS_DIR, "int8")
+    assert eng.step_model.call_path == "iobinding"
+    monkeypatch.undo()
+    shipped = Engine.from_manifest(ASSETS_DIR, "int8")
+    for k in range(3):
+        st, ref = eng.new_stream(), shipped.new_stream()
+        np.testing.assert_array_equal(eng.advance(st, captures[k], 6), shipped.advance(ref, captures[k], 6))
+
+
 class StepSpy:
-    """Counts StepModel.step's runs per feed (each capture's step, batch or one)."""
+    """Counts the step model's runs per feed (each capture's step, batch or one: StepModel.step, and
+    StepModel.step_stream, the loop's call, once however it reaches onnxruntime)."""
 
     def __init__(self, monkeypatch):
         self.calls = 0
-        real = StepModel.step
+        self._inner = False
+        real, real_stream = StepModel.step, StepModel.step_stream
 
         def step(model, x, h, c):
-            self.calls += 1
+            self.calls += not self._inner
             return real(model, x, h, c)
 
+        def step_stream(model, x, stream):
+            self.calls += 1
+            self._inner = True
+            try:
+                return real_stream(model, x, stream)
+            finally:
+                self._inner = False
+
         monkeypatch.setattr(StepModel, "step", step)
+        monkeypatch.setattr(StepModel, "step_stream", step_stream)
 
 
 class Spy:
@@ -275,6 +359,19 @@ def test_every_feed_runs_only_the_steps_of_the_sub_windows_it_completed(drive_ac
     assert max(per_feed) == 1 and sum(per_feed) == sum(s.done for s in streams.streams)
     assert len(streams.streams) >= 5 and all(s.done == 6 for s in streams.streams[:-1])
     assert loop.stats.statuses["continued"] >= 1  # the captures that only continue an event are stepped too
+
+
+def test_a_replay_runs_each_sub_window_of_a_capture_once(drive_acc, monkeypatch):
+    """A block's captures go through the step model together: their early decisions read the states the full
+    windows' steps pass through, so no sub-window of any capture is run twice (before: once more for the early
+    steps of every capture that could open an event)."""
+    loop = WearableLoop(Engine.from_manifest(ASSETS_DIR, "int8"), policy=AlertPolicy())  # its load-time probes ...
+    rows = []  # ... are not counted: the rows each step run of the replay carries
+    real = StepModel.step
+    monkeypatch.setattr(StepModel, "step", lambda model, x, h, c: rows.append(len(x)) or real(model, x, h, c))
+    decided = _feed(loop, drive_acc, len(drive_acc))
+    assert loop.stats.captures >= 5 and any(d["steps"] < 6 for d in decided)  # early decisions were made
+    assert sum(rows) == 6 * loop.stats.captures
 
 
 @pytest.mark.parametrize("stream", [True, False])

@@ -1,7 +1,8 @@
 """s10-step2: the step as the live loop now calls it (Engine.advance -> StepModel.step, batch 1 through the IOBinding)
 against the public session.run (what an onnxruntime without the private calls gets), on every test capture of the
 shipped model (/work/s9-runs/assets-seed0/data/test.npz), one capture at a time through S = 1..6: probabilities
-compared bit for bit, decisions counted."""
+compared bit for bit, decisions counted. s11-replay: the loop's call is now Engine.advance -> StepModel.step_stream
+(the state kept in the bound buffers, ``call_path`` below); the public engine has every private path turned off."""
 import json, os, sys
 import numpy as np
 from edge_runtime.core.manifest import ASSETS_DIR
@@ -13,6 +14,8 @@ for p in ("fp32", "int8"):
     bound, public = Engine.from_manifest(ASSETS_DIR, p), Engine.from_manifest(ASSETS_DIR, p)
     assert bound.step_model.bound
     public.step_model._run, public.step_model._step_one = public.step_model.session.run, None
+    public.step_model._chain = None
+    out["call_path"] = bound.step_model.call_path
     equal = changed = 0
     for x in X:
         sb, sp = bound.new_stream(), public.new_stream()
