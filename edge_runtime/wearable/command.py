@@ -292,7 +292,8 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
 
     status = loop.status
     for event in source.events:
-        loop.publisher.check_running()  # a dead heartbeat thread ends the run: no keep-alive for a silent box
+        if loop.publisher is not None:  # a dead heartbeat thread ends the run: no keep-alive for a silent box
+            loop.publisher.check_running()
         keepalive()  # READY, then the watchdog's keep-alives, only while this loop turns
         status.set_source_counts(*source.health())
         if not isinstance(event, ImuBlock):  # a live source's SourceStatus

@@ -123,6 +123,9 @@ class NoBus:
     def publish_alert(self, alert):
         return 0
 
+    def check_running(self):
+        pass  # no heartbeat thread to have died
+
     def send_alert(self, alert):
         return True
 
