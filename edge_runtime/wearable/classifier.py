@@ -445,6 +445,15 @@ def fast_run(session: ort.InferenceSession, outputs: Sequence[str], feed: dict[s
     return session.run
 
 
+def _binding(session: ort.InferenceSession, buffers: dict[str, np.ndarray]):
+    """An IOBinding of the step graph's inputs and outputs named in ``buffers`` to those float32 CPU arrays."""
+    binding = session.io_binding()
+    for name, a in buffers.items():
+        bind = binding.bind_input if name in STEP_INPUTS else binding.bind_output
+        bind(name, "cpu", 0, np.float32, list(a.shape), a.ctypes.data)
+    return binding
+
+
 def bound_step(session: ort.InferenceSession, feed: dict[str, np.ndarray], out_shapes: Sequence[tuple[int, ...]],
                run_options: ort.RunOptions):
     """The step model's batch-1 call ``(x, h, c) -> (probs, h', c')`` through one IOBinding made here, or None
@@ -460,10 +469,7 @@ def bound_step(session: ort.InferenceSession, feed: dict[str, np.ndarray], out_s
     try:
         ins = [np.zeros(np.shape(feed[k]), np.float32) for k in STEP_INPUTS]
         outs = [np.zeros(shape, np.float32) for shape in out_shapes]
-        binding = session.io_binding()
-        for name, a in (*zip(STEP_INPUTS, ins), *zip(STEP_OUTPUTS, outs)):
-            bind = binding.bind_input if name in STEP_INPUTS else binding.bind_output
-            bind(name, "cpu", 0, np.float32, list(a.shape), a.ctypes.data)
+        binding = _binding(session, {**dict(zip(STEP_INPUTS, ins)), **dict(zip(STEP_OUTPUTS, outs))})
         run, bound, copyto = session._sess.run_with_iobinding, binding._iobinding, np.copyto
         (x_in, h_in, c_in), (p_out, h_out, c_out) = ins, outs
 
@@ -496,15 +502,8 @@ def chained_step(session: ort.InferenceSession, hidden: int, classes: int, run_o
     try:
         x_in, p_out = np.zeros((1, SUBSEQ_FRAMES, N_CHANNELS), np.float32), np.zeros((1, classes), np.float32)
         pairs = [(np.zeros((1, hidden), np.float32), np.zeros((1, hidden), np.float32)) for _ in range(2)]
-        bindings = []
-        for k in range(2):
-            binding = session.io_binding()
-            (h_in, c_in), (h_out, c_out) = pairs[k], pairs[1 - k]
-            for name, a, bind in (("imu", x_in, binding.bind_input), ("h", h_in, binding.bind_input),
-                                  ("c", c_in, binding.bind_input), ("probs", p_out, binding.bind_output),
-                                  ("h_out", h_out, binding.bind_output), ("c_out", c_out, binding.bind_output)):
-                bind(name, "cpu", 0, np.float32, list(a.shape), a.ctypes.data)
-            bindings.append(binding)
+        bindings = [_binding(session, dict(zip((*STEP_INPUTS, *STEP_OUTPUTS), (x_in, *pairs[k], p_out, *pairs[1 - k]))))
+                    for k in range(2)]
         run, bound, copyto = session._sess.run_with_iobinding, [b._iobinding for b in bindings], np.copyto
     except Exception:  # noqa: BLE001 - a private API that changed: the caller's usual step is the contract
         return None
