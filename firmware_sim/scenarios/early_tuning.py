@@ -52,21 +52,37 @@ from firmware_sim.scenarios.scoring import raises_alert
 
 AFTER_DISTRACTION_S = 3.0
 """A false alert triggered this soon after a distraction ended is put down to the hand returning."""
-RULE = ("first-alert class accuracy >= 0.90 (the must-hold), event recall >= the full window's and repeat alerts "
-        "<= the full window's, all on validation; among those the lowest median onset -> first alert frame; ties "
-        "(within 0.05 s) go to fewer false alerts per hour, then to higher event recall, then to the later "
-        "earliest step")
-"""How the operating point is chosen. Class accuracy is the one must-hold the decision policy can reach
-on this model (a wrong class is a wrong warning). Early decisions may not miss more distractions, nor
-warn twice for one distraction more often, than the dissertation's full-window decision: they buy
-time, not a worse alert. Within that, time is what early decisions are for. False alerts per hour are
-not a constraint: on validation every policy that keeps recall has about the full window's (the full
-window's own decisions on Other motions make most of them); they break ties. The detector's threshold
-is then tried with the chosen policy (:func:`choose_detector`).
+RULE = ("first-alert class accuracy >= 0.90 (the must-hold), event recall >= the full window's, repeat alerts and "
+        "false alerts each at most the full window's count plus one Poisson standard deviation of it (its square "
+        "root), all on validation; among those the lowest median onset -> first alert frame; ties (within 0.05 s) go "
+        "to fewer false alerts per hour, then to higher event recall, then to the later earliest step")
+"""How the operating point is chosen (on validation drives, ``--seed 1``; the held-out seeds only measure
+the choice). Class accuracy is the one must-hold the decision policy can reach on this model (a wrong
+class is a wrong warning). Early decisions buy time, not a worse alert: they may not miss more
+distractions than the dissertation's full-window decision, nor warn twice for one distraction or warn
+for nothing more often than it, within what the validation drives can measure. Within that, time is
+what early decisions are for.
 
-The repeat-alert constraint was added after the first sweep: without it the rule took
-``event_hold_s`` = 3 s for 0.01 of recall at 3.6 times the full window's repeat alerts (112 against
-31 in 20 h), the very second warnings the event tracker is there to prevent."""
+The tolerance is one Poisson standard deviation of the full window's own count (:func:`tolerance`): on
+another 20 h of validation driving its 32 repeat alerts would come out 32 +- 5.7, so an excess below
+that is not a difference the sweep measures and may not be what rejects a policy. Not two: that would
+let through ~35 % more repeat or false alerts than the full window, a worsening a driver would notice.
+The margin is stated before the pick and computed from the sweep's own counts.
+
+History. The repeat-alert constraint was added after the first sweep: without it the rule took
+``event_hold_s`` = 3 s for 0.01 of recall at 3.6 times the full window's repeat alerts (112 against 31
+in 20 h), the very second warnings the event tracker is there to prevent. Until session 12 it was
+"repeat alerts <= the full window's", with no tolerance and no false-alert constraint: a single count
+then decided, as one repeat alert in 20 h (33 against 32) excluded the 0.9-at-every-step policy and
+moved the median onset -> first alert from ~3.8 s to 5.76 s on validation (issue 12, session 12).
+Session 12 gave both counts the tolerance and made false alerts a constraint rather than a tie-break
+only, since a faster policy may otherwise buy its time with alerts for nothing."""
+
+
+def tolerance(count: int) -> float:
+    """How far a policy's count of repeat or false alerts may exceed the full window's ``count`` under
+    :data:`RULE`: one Poisson standard deviation of that count."""
+    return float(np.sqrt(count))
 
 
 class CachedClassifier:
@@ -342,7 +358,7 @@ def _figures(s: dict) -> dict:
     return {"median_s": s["onset_to_first_alert_s"]["median"], "p95_s": s["onset_to_first_alert_s"]["p95"],
             "event_recall": s["event_recall"], "class_accuracy": s["first_alert_class_accuracy"],
             "false_alerts_per_hour": s["false_alerts_per_hour"], "late": s["first_alerts_after_the_distraction_ended"],
-            "repeat_alerts": s["repeat_alerts"]}
+            "repeat_alerts": s["repeat_alerts"], "false_alerts": s["false_alerts"]}
 
 
 def sweep(drives, classifier, cfg, grid: dict = GRID, progress=print) -> list[dict]:
@@ -367,9 +383,12 @@ def sweep(drives, classifier, cfg, grid: dict = GRID, progress=print) -> list[di
 
 def choose_candidates(rows: list[dict], full_window: dict) -> list[dict]:
     """The policies that meet :data:`RULE`'s constraints."""
+    def within(r: dict, count: str) -> bool:
+        return r[count] <= full_window[count] + tolerance(full_window[count])
+
     return [r for r in rows if r["class_accuracy"] is not None and r["class_accuracy"] >= 0.90
-            and r["event_recall"] >= full_window["event_recall"] and r["repeat_alerts"] <= full_window["repeat_alerts"]
-            and r["median_s"] is not None]
+            and r["event_recall"] >= full_window["event_recall"] and within(r, "repeat_alerts")
+            and within(r, "false_alerts") and r["median_s"] is not None]
 
 
 def choose(rows: list[dict], full_window: dict) -> dict | None:

@@ -93,13 +93,33 @@ def test_sweep_scores_each_policy_and_the_rule_takes_the_fastest_that_keeps_clas
     assert by[("manifest", 1)]["class_accuracy"] == 1.0 and by[("manifest", 3)]["class_accuracy"] == 0.0
     assert by[(0.9, 1)]["median_s"] < by[(0.9, 3)]["median_s"]
     assert all(r["event_recall"] == 0.5 for r in rows)  # the Drink has no trigger
-    full = {"event_recall": 0.5, "repeat_alerts": 0}
+    full = {"event_recall": 0.5, "repeat_alerts": 0, "false_alerts": max(r["false_alerts"] for r in rows)}
     assert choose(rows, full)["point"]["earliest_alert_step"] == 1
     assert choose(rows, {**full, "event_recall": 0.6}) is None  # no policy keeps that recall
     for r in rows:
         if r["point"]["earliest_alert_step"] == 1:
             r["repeat_alerts"] = 1  # now the faster policies warn twice for one distraction
     assert choose(rows, full) is None  # the slower ones have the wrong class
+
+
+def test_the_rule_tolerates_one_poisson_sd_of_the_full_windows_repeat_and_false_alerts_not_more():
+    # the full window: 36 repeat alerts (sd 6) and 49 false alerts (sd 7) on the validation drives
+    full = {"event_recall": 0.9, "repeat_alerts": 36, "false_alerts": 49}
+
+    def row(median, repeat=36, false=49, recall=0.9, cls=0.91):
+        return {"point": {"median": median}, "settings": {"earliest_alert_step": 2}, "median_s": median,
+                "class_accuracy": cls, "event_recall": recall, "repeat_alerts": repeat, "false_alerts": false,
+                "false_alerts_per_hour": false / 20}
+
+    # one repeat alert more than the full window no longer decides: the faster policy is taken
+    assert choose([row(5.8), row(3.8, repeat=37)], full)["median_s"] == 3.8
+    assert choose([row(5.8), row(3.8, repeat=42)], full)["median_s"] == 3.8  # 36 + 6: at the limit
+    assert choose([row(5.8), row(3.8, repeat=43)], full)["median_s"] == 5.8  # beyond one sd
+    assert choose([row(5.8), row(3.8, false=56)], full)["median_s"] == 3.8  # 49 + 7
+    assert choose([row(5.8), row(3.8, false=57)], full)["median_s"] == 5.8  # false alerts are a constraint now
+    # recall and class accuracy keep no tolerance
+    assert choose([row(5.8), row(3.8, recall=0.899)], full)["median_s"] == 5.8
+    assert choose([row(5.8), row(3.8, cls=0.899)], full)["median_s"] == 5.8
 
 
 class ByShape(Scripted):
@@ -129,11 +149,12 @@ def test_the_held_out_seed_is_refused(tmp_path, capsys):
 def test_the_detector_threshold_moves_only_for_a_clear_gain_in_time():
     from firmware_sim.scenarios.early_tuning import choose_detector
 
-    full = {"event_recall": 0.8, "repeat_alerts": 10}
+    full = {"event_recall": 0.8, "repeat_alerts": 10, "false_alerts": 40}
 
     def run(thr, median, recall=0.85):
         return {"threshold_mps2": thr, "median_s": median, "event_recall": recall, "class_accuracy": 0.91,
-                "false_alerts_per_hour": 2.0, "repeat_alerts": 5, "settings": {"earliest_alert_step": 2}}
+                "false_alerts_per_hour": 2.0, "false_alerts": 40, "repeat_alerts": 5,
+                "settings": {"earliest_alert_step": 2}}
 
     # a tie in time that another threshold wins on recall: the current one stays
     assert choose_detector([run(4.5, 4.70, 0.86), run(5.0, 4.68)], full, 5.0) == 5.0

@@ -244,6 +244,20 @@ def test_unconfident_early_steps_wait_and_full_window_mode_decides_once():
     assert _summary(ds) == [("alert", 6, "Phone", 0)]
 
 
+def test_the_shipped_operating_point_alerts_from_s2_at_its_threshold_and_waits_below_it():
+    """What the shipped [alerts] defaults do (their values are pinned to the validation report in
+    tests/sim/test_early_tuning.py): no alert at S = 1 however sure, a preliminary alert at S = 2 once
+    the step's confidence reaches the shipped threshold (just above it: the model's float32), none just below it."""
+    shipped = AlertPolicy(class_weights=NEUTRAL_WEIGHTS)
+    at = {s: shipped.threshold(s, {}) for s in (2, 3)}
+    assert shipped.earliest_alert_step == 2 and all(0.5 < t < 1.0 for t in at.values())
+    sure = {1: ("Drink", 0.999), 2: ("Phone", at[2] + 0.001), 6: ("Phone", 0.8)}
+    ds, *_ = _early_run(sure, policy=shipped)
+    assert _summary(ds) == [("preliminary", 2, "Phone", 0), ("confirmed", 6, "Phone", 0)]
+    below = {2: ("Phone", at[2] - 0.01), 3: ("Phone", at[3] + 0.001), 6: ("Phone", 0.8)}
+    assert _summary(_early_run(below, policy=shipped)[0])[0] == ("preliminary", 3, "Phone", 0)
+
+
 def test_early_thresholds_come_from_the_config_else_the_manifest():
     answers = {2: ("Phone", 0.85), 6: ("Phone", 0.8)}
     ds, *_ = _early_run(answers, manifest_thresholds={2: 0.8})
