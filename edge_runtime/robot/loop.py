@@ -33,7 +33,10 @@ LEVEL2     ``retract(P_eff + L)`` on entry (Eq. 6; again when it  red, 4000 Hz 8
            by :mod:`edge_runtime.robot.hazard`; if the
            controller reports it unreachable, one retraction
            straight toward the base, and if that is refused too:
-           ``stop()`` (``retract_unreachable``)
+           ``stop()`` (``retract_unreachable``); someone within
+           reach of the folded or stopped arm: a turn about the
+           base to where it is clearest (planned again while
+           level 2 lasts, ``escape_*``)
 FAULT      ``stop()`` (pose stale / invalid / no pose yet, or a    yellow
            person in view never lifted validly)
 =========  =====================================================  ==================
@@ -85,12 +88,13 @@ from edge_runtime.robot.hazard import (
     ZoneParams,
     arm_capsules,
     body_spheres,
+    effector_capsule,
     enough_joints,
     eq6_retraction,
-    escape_retraction,
-    ground,
+    plan_escape_turn,
     radial_retraction,
     separation_m,
+    turned_retraction,
 )
 from edge_runtime.robot.rays import lifter_rays
 
@@ -142,7 +146,24 @@ class LoopParams:
     where the retraction began), is replaced by the retraction straight toward the base, and that
     one by a stop: the controller moves its joints along a straight line to its IK solution, and a
     far solution swings the hand through the cell (hard:200 seed 3, hard_109: toward a passing
-    worker, 0.081 m)."""
+    worker, 0.081 m). That straight retraction keeps the tool where it points when the first one is
+    given up, not the yaw the first one was turning it to: finishing that turn swung the elbow through
+    the worker (hard:40 seed 5, hard_012, after an escape turn)."""
+    escape_step_deg: float = config.setting(5.0, config.within(0, 180))
+    """whole_body: the escape turn (``[zones] escape_deg``) weighs turns of the base every this many
+    degrees both ways (deg): at 1 m from the axis 5 deg is 0.09 m of sweep between two candidates."""
+    escape_min_gain_m: float = config.setting(0.05, config.NON_NEGATIVE)
+    """whole_body: the arm turns only to where its separation from everyone is at least this much (m)
+    larger than now: a smaller gain is within keypoint noise and not worth moving for."""
+    escape_dip_m: float = config.setting(0.02, config.NON_NEGATIVE)
+    """whole_body: an escape turn may pass at most this much (m) nearer someone than the arm is now on
+    its way (candidates are weighed every ``escape_step_deg``, so a sweep's closest pass is known to a
+    few cm); a turn that would pass nearer is not taken."""
+    escape_replan_s: float = config.setting(0.5, config.NON_NEGATIVE)
+    """whole_body: while level 2 lasts and someone is within ``[zones] reach_retract_m``, the escape is
+    planned again from where the arm is once its last turn or retraction is done or it was stopped,
+    at most this often (s): an arm stopped half folded on a worker's side stood there while he reached
+    into it (hard:40 seed 5, hard_012), where turned about its base it cleared him."""
     retract_max_radius_m: float = config.setting(0.7, config.POSITIVE)
     """Retraction targets further than this from the base's axis (ground distance, m) are
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
@@ -314,7 +335,7 @@ class RobotLoop:
         self._retract_fallback = False
         self._retract_distance_m = math.inf
         self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
-        self._escaped = False  # this level 2 has turned the arm about its base once already
+        self._escape_s = -math.inf  # when this level 2 last planned an escape turn (clock, s)
         self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
@@ -625,23 +646,24 @@ class RobotLoop:
 
     def _desired_motion(self, state: State, decision: Decision) -> Motion:
         if state == State.NORMAL:
-            self._retract, self._retract_seq, self._unreachable, self._escaped = None, None, False, False
+            self._retract, self._retract_seq, self._unreachable, self._escape_s = None, None, False, -math.inf
             return self._task_motion()
         if state == State.LEVEL2:
             escape = self._escape(decision)
             if escape is not None or self._retract is None or self._retract_again(decision):
-                self._escaped |= escape is not None
                 self._retract = escape or self._retract_motion(decision)
                 self._retract_fallback = False
                 self._retract_distance_m = decision.distance_m
                 self._retract_q0 = self._last_q
             elif self._retract_backfires():
-                # the straight way toward the base once (the unreachable retraction's fallback), then a stop
+                # the straight way toward the base once (the unreachable retraction's fallback), with the tool
+                # held where it points now (the given-up retraction's yaw is what swung the arm), then a stop
                 self.counters.backfired += 1
-                self._retract = STOP if self._retract_fallback else self._radial_retract()
+                held = self._last_yaw if self._last_yaw is not None else self._held_yaw()
+                self._retract = STOP if self._retract_fallback else self._radial_retract(held)
                 self._retract_fallback, self._retract_q0 = True, self._last_q
             return self._retract
-        self._retract, self._retract_seq, self._unreachable, self._escaped = None, None, False, False
+        self._retract, self._retract_seq, self._unreachable, self._escape_s = None, None, False, -math.inf
         return STOP
 
     def _task_motion(self) -> Motion:
@@ -674,32 +696,37 @@ class RobotLoop:
         return nxt.kind is MotionKind.RETRACT and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
 
     def _escape(self, decision: Decision) -> Motion | None:
-        """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done (Eq. 6
-        takes it no further: it stops short of the base's axis) or was stopped makes the arm turn
-        about its base, away from him (:func:`edge_runtime.robot.hazard.escape_retraction`), once
-        while in level 2: a worker who stands at the cell and reaches for the tool reached the
-        folded arm in front of him (hard:200 seed 3, hard_101 0.033 m, hard_195 0.061 m). None
-        otherwise."""
-        r, z = self._retract, self.zones
-        if (z.separation != "whole_body" or z.escape_deg <= 0 or r is None or self._escaped or self._unreachable
-                or self._last_effector is None or decision.head is None or decision.distance_m > z.reach_retract_m):
+        """whole_body: someone within ``reach_retract_m`` of an arm whose retraction (or escape turn) is
+        done (Eq. 6 takes it no further: it stops short of the base's axis) or that was stopped makes
+        the arm turn about its base to where it is clearest of everyone accounted for, on its own
+        model (:func:`edge_runtime.robot.hazard.plan_escape_turn`: the links from the joint angles it
+        reports, the end effector alone before it has reported any): a worker who stands at the cell
+        and reaches for the tool reached the folded arm in front of him (hard:200 seed 3, hard_101
+        0.033 m, hard_195 0.061 m). Planned again while level 2 lasts, at most every
+        ``escape_replan_s``. None otherwise (nothing gains ``escape_min_gain_m``)."""
+        r, z, p = self._retract, self.zones, self.params
+        if (z.separation != "whole_body" or z.escape_deg <= 0 or r is None or self._unreachable
+                or self._last_effector is None or self._last_yaw is None or decision.head is None
+                or decision.distance_m > z.reach_retract_m):
             return None
-        # after a retraction that is done, or one that was stopped (it carried the arm toward someone)
+        # after a retraction or turn that is done, or one that was stopped (it carried the arm toward someone)
         if r.kind is MotionKind.RETRACT and np.linalg.norm(self._last_effector - r.position_m) \
-                > self.params.waypoint_tolerance_m:
+                > p.waypoint_tolerance_m:
             return None
-        # either way round, whichever takes the hand furthest from everyone (on the ground); never one that
-        # takes it nearer anyone than it is (a colleague on the other side: hard:200 seed 1, hard_163)
-        people = [ground(decision.head.position_m)[None], *(ground(b[np.isfinite(b).all(axis=1)]).reshape(-1, 2)
-                                                              for b in map(np.atleast_2d, self.monitor.bodies()))]
-        gap = lambda p: min(float(np.linalg.norm(q - ground(p), axis=1).min()) for q in people)  # noqa: E731
-        best, here = None, gap(self._last_effector)
-        for side in (1.0, -1.0):
-            e = escape_retraction(self._last_effector, decision.head, self._last_yaw, z.escape_deg, side)
-            if e is not None and gap(e.position_m) > here and (best is None or gap(e.position_m) > gap(best.position_m)):
-                best = e
-        return None if best is None else Motion(MotionKind.RETRACT, _vec3(best.position_m),
-                                                self.params.task_pitch_rad, best.yaw_rad)
+        now = self.clock()
+        if now - self._escape_s < p.escape_replan_s:
+            return None
+        q = self._last_q
+        caps = arm_capsules(q) if q is not None else effector_capsule(self._last_effector)
+        # everyone at his last valid body, and the nearest as the decision has him (a person bounded by his rays
+        # alone is there only as where he stands)
+        people = [*self.monitor.bodies(), decision.head.position_m]
+        turn = plan_escape_turn(caps, people, None if q is None else float(q[0]), p.escape_step_deg,
+                                p.escape_min_gain_m, p.escape_dip_m, z.escape_deg)
+        if turn is None:
+            return None
+        self._escape_s = now
+        return self._retraction(turned_retraction(self._last_effector, self._last_yaw, turn))
 
     def _retract_backfires(self) -> bool:
         """Has the retraction under way brought the arm ``retract_backfire_m`` closer to anyone
@@ -725,11 +752,13 @@ class RobotLoop:
         return self._retraction(eq6_retraction(self.effector_m(), decision.head, self.zones,
                                                self.params.retract_limits, self._last_yaw, self._held_yaw()))
 
-    def _radial_retract(self) -> Motion:
+    def _radial_retract(self, held_yaw_rad: float | None = None) -> Motion:
         """The fallback retraction, straight toward the base's axis
-        (:func:`edge_runtime.robot.hazard.radial_retraction`)."""
+        (:func:`edge_runtime.robot.hazard.radial_retraction`), the tool at ``held_yaw_rad`` (default: the
+        yaw of the retraction under way)."""
+        held = self._held_yaw() if held_yaw_rad is None else held_yaw_rad
         return self._retraction(radial_retraction(self.effector_m(), self.zones, self.params.retract_limits,
-                                                  self._last_yaw, self._held_yaw()))
+                                                  self._last_yaw, held))
 
     def _held_yaw(self) -> float | None:
         """The tool yaw of the retraction under way (a repeat one keeps it), or None."""

@@ -618,6 +618,79 @@ def test_someone_within_reach_of_a_finished_retraction_turns_the_arm_about_its_b
     bearing = lambda p: math.degrees(math.atan2(p[0], p[2]))  # noqa: E731
     first, turned = retracts[0], retracts[1]
     assert abs(bearing(first)) < 1.0                                    # Eq. 6: straight back from him, toward the base
-    assert abs(abs(bearing(turned) - bearing(where(5.0)[0])) - ZoneParams().escape_deg) < 1.0  # then 120 deg from him
+    # then round the base (the arm as a whole: the same distance from its axis) to where it is clearest of him,
+    # the far side of the base (the fake arm reports no joint angles: its hand stands for it)
+    assert abs(abs(bearing(turned) - bearing(where(5.0)[0])) - 180.0) < 1.0
     assert np.linalg.norm(turned[[0, 2]]) == pytest.approx(np.linalg.norm(first[[0, 2]]), abs=1e-6)
     assert loop.status()["backfired"] == 0
+
+
+def at_point(x, z):
+    """(17, 3) joints all at one point at the effector's height (as :func:`at_tool_height`)."""
+    j = np.zeros((17, 3))
+    j[:] = (x, 0.14, z)
+    return j
+
+
+def test_the_escape_is_planned_again_while_level_2_lasts_as_he_walks_round_the_base():
+    loop, link, clock = make_whole_body()
+
+    def where(t):  # up to the tool, then round the base 0.75 m from its axis, within reach of the arm all along
+        if t < 7.0:
+            return at_point(0.0, 6.8 if t < 2 else max(0.75, 3.8 - 1.5 * (t - 2)))
+        a = min(math.pi, 0.9 * (t - 7.0))
+        return at_point(0.75 * math.sin(a), 0.75 * math.cos(a))
+
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(where(t)))], 7.0)
+    before = len(link.calls)
+    frames = drive_poses(loop, link, clock, lambda t: [(0, lifted(where(t)))], 12.0)
+    entry = next(i for i, f in enumerate(frames) if f.state == "LEVEL2")
+    assert all(f.state == "LEVEL2" for f in frames[entry:int(3.5 * 30)])   # one level 2 while he walks round
+    # the turns about the base in it: retractions that keep the hand's distance from the axis and turn the tool
+    # by as much as its bearing (the arm turned as a whole)
+    turns = [(np.array(c[1]), c[3]) for c in link.calls[before:] if c[0] == "retract"]
+    rotations = [(p, y) for (p0, y0), (p, y) in zip(turns, turns[1:])
+                 if abs(np.hypot(p[0], p[2]) - np.hypot(p0[0], p0[2])) < 0.04
+                 and abs(math.remainder(math.atan2(p[0], p[2]) - math.atan2(p0[0], p0[2]) - (y - y0), 2 * math.pi)) < 0.05]
+    assert len(rotations) >= 2
+    bearing = lambda p: math.degrees(math.atan2(p[0], p[2]))  # noqa: E731
+    him = where(12.0)[0]
+    assert abs(math.remainder(math.radians(bearing(turns[-1][0]) - bearing(him)), 2 * math.pi)) > math.radians(90.0)
+
+
+def test_a_backfired_retraction_falls_back_with_the_tool_held_and_a_stopped_arm_turns_clear_of_him():
+    from dataclasses import replace
+
+    from edge_runtime.robot.hazard import arm_capsules, body_spheres, separation_m, turned_capsules
+
+    him = at_point(0.0, 1.0)
+    sep = lambda q: separation_m(*body_spheres(him), arm_capsules(q))  # noqa: E731
+    posture = lambda j0: np.array([j0, -0.5, 0.0, 1.2, 0.0, 0.4, 0.0])  # noqa: E731
+    # the arm's first joint turned away from him, to his side, at him: each posture well nearer him than the last
+    q_away, q_side, q_at = (posture(math.radians(a)) for a in (180.0, 45.0, 0.0))
+    assert sep(q_away) < ZoneParams().reach_retract_m and sep(q_side) < sep(q_away) - 0.2 and sep(q_at) < sep(q_side) - 0.2
+    loop, link, clock = make_whole_body()
+    link._state = replace(link._state, joint_positions_rad=q_away)
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(at_point(0.0, 8.0)))], 2.0)
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(him))], 2.2)
+    eq6 = next(c for c in link.calls if c[0] == "retract")
+    # the controller's joint-space path swings the arm toward him, the tool half way through its turn
+    n = len(link.calls)
+    link._state = replace(link._state, joint_positions_rad=q_side, yaw_rad=eq6[3] / 2 + 0.3)
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(him))], 2.3)
+    fallback = next(c for c in link.calls[n:] if c[0] == "retract")
+    assert loop.status()["backfired"] == 1
+    assert fallback[3] == pytest.approx(eq6[3] / 2 + 0.3)   # the tool held where it points, not turned on
+    # the straight retraction swings it nearer still: a stop, then (planned again from where it stopped) a turn
+    # about the base clear of him
+    n = len(link.calls)
+    link._state = replace(link._state, joint_positions_rad=q_at)
+    hand, yaw = link.state.ee_position_m.copy(), link.state.yaw_rad
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(him))], 2.4)
+    after = [c for c in link.calls[n:] if c[0] in ("stop", "retract")]
+    assert loop.status()["backfired"] == 2 and after[0][0] == "stop" and after[1][0] == "retract"
+    target, turned_yaw = np.array(after[1][1]), after[1][3]
+    turn = math.remainder(math.atan2(target[0], target[2]) - math.atan2(hand[0], hand[2]), 2 * math.pi)
+    assert np.hypot(target[0], target[2]) == pytest.approx(np.hypot(hand[0], hand[2])) and target[1] == pytest.approx(hand[1])
+    assert math.remainder(turned_yaw - yaw - turn, 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+    assert separation_m(*body_spheres(him), turned_capsules(arm_capsules(q_at), turn)) > sep(q_at) + 0.3
