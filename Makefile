@@ -54,7 +54,7 @@ fuzz: $(STAMP)
 ## Debian 12 (qemu-user-static, proot, mmdebstrap, gcc-aarch64-linux-gnu), the same recording's alerts
 ## and CAN frames as the x86 bundle's (export/aarch64.py); writes reports/box/aarch64.{json,md}; not in make test
 aarch64-check: $(STAMP)
-	$(PY) -m export.aarch64 --work runs/aarch64 --report-dir reports/box
+	$(PY) -m export.aarch64 --report-dir reports/box
 
 clean:
 	rm -rf $(VENV) demo_out .pytest_cache

@@ -540,7 +540,10 @@ def write_report(r: dict, out_dir: Path) -> tuple[Path, Path]:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m export.aarch64", description=__doc__.split("\n\n")[0])
-    p.add_argument("--work", default=str(ROOT / "runs" / "aarch64"), help="work directory (default runs/aarch64)")
+    # outside the repository: the work directory holds whole venvs and a Debian root (~800 MB), third-party
+    # code the repository's own checks must not scan as if it were the project's
+    p.add_argument("--work", default=str(Path.home() / ".cache" / "edge-safety" / "aarch64"),
+                   help="work directory (default ~/.cache/edge-safety/aarch64)")
     p.add_argument("--minutes", type=float, default=5.0, help="minutes of the simulated drive (default 5)")
     p.add_argument("--seed", type=int, default=2027)
     p.add_argument("--report-dir", default=str(ROOT / "reports" / "box"),

@@ -96,8 +96,8 @@ class CalibrationParams:
     """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
     "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1). ``pnp``
     halves the head error (reports/robot/head_error.md) but, with the fused anchoring, failed its
-    closed-loop validation in session 10 (fresh hrc seed 11: 2 collisions in hard:200; reports/hrc/
-    report.md), so the validated ``rigid`` stays the default."""
+    closed-loop validation in session 10 (fresh hrc seed 11: 2 collisions in hard:200;
+    reports/hrc/report.md), so the validated ``rigid`` stays the default."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)
@@ -211,7 +211,9 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     if (-feet[:, 1] < np.sin(np.radians(params.anchor_min_ray_deg)) * np.linalg.norm(feet, axis=1)).any():
         return 1.0, ANCHOR_RAY_FLAT
     log_floor = float(np.mean(np.log(drop_m / -feet[:, 1])))
-    k = _nearer_to_arm(j[HIP] @ A.T, b, np.exp(log_floor), np.exp(_fused_with_lifter(log_floor, feet, drop_m)))
+    k = np.exp(log_floor)
+    if np.isfinite(ANCHOR_LIFTER_DEPTH_SD):  # the fusion (off as shipped: the floor rays alone, no work per frame)
+        k = _nearer_to_arm(j[HIP] @ A.T, b, k, np.exp(_fused_with_lifter(log_floor, feet, drop_m)))
     return float(np.clip(k, params.anchor_min_scale, params.anchor_max_scale)), None
 
 

@@ -670,6 +670,13 @@ class Engine:
                    threads=threads, entry=entry, source=str(path), step_model=step)
 
     @classmethod
+    def from_params(cls, params: ModelParams, name_or_precision: str | None = None) -> "Engine":
+        """The engine a box's ``[model]`` section describes (assets, name, threads, signing key, stream), or
+        another entry of the same assets with ``name_or_precision``: one place that reads those settings."""
+        return cls.from_manifest(params.assets or ASSETS_DIR, name_or_precision or params.name, threads=params.threads,
+                                 public_key_file=params.manifest_public_key or None, stream=params.stream)
+
+    @classmethod
     def from_file(cls, path: str | os.PathLike, threads: int = 1, classes: Sequence[str] | None = None
                   ) -> "Engine":
         """An ONNX file without a manifest (no hash check); classes from its metadata."""

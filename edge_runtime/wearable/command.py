@@ -24,7 +24,6 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 from edge_runtime.cli import CliError
-from edge_runtime.core.manifest import ASSETS_DIR
 
 if TYPE_CHECKING:
     from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
@@ -198,8 +197,7 @@ def _load_classifier(cfg) -> Engine:
     from edge_runtime.config import ConfigError
     from edge_runtime.wearable.classifier import Engine
 
-    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads,
-                                  public_key_file=cfg.model.manifest_public_key or None, stream=cfg.model.stream)
+    engine = Engine.from_params(cfg.model)
     unknown = sorted(set(cfg.alerts.never_alert) - set(engine.classes))
     if unknown:
         raise ConfigError(f"[alerts] never_alert: {unknown} are not classes of {engine.name} ({', '.join(engine.classes)})")

@@ -446,7 +446,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def cmd(a) -> int:
     from edge_runtime import config
-    from edge_runtime.core.manifest import ASSETS_DIR
     from edge_runtime.wearable import alerts, classifier, detector, loop, sources  # noqa: F401 - their sections
     from edge_runtime.wearable.classifier import Engine
     from firmware_sim.__main__ import _out_dir
@@ -459,8 +458,7 @@ def cmd(a) -> int:
     cfg = config.load(a.config)
     cfg = config.override(cfg, "model", assets=a.assets, name=a.model)
     out = _out_dir(a.out)
-    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads,
-                                 stream=cfg.model.stream)
+    engine = Engine.from_params(cfg.model)
     early = engine.early_steps != (6,)
     measured = modes if early else tuple(m for m in modes if m != "early") or ("full_window",)
     t_wall = time.perf_counter()
@@ -491,8 +489,7 @@ def cmd(a) -> int:
         "config": {"alerts": _section(cfg.alerts), "detector": _section(cfg.detector)},
         "scores": res["scores"]}
     if a.agreement:
-        other = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, a.agreement, threads=cfg.model.threads,
-                                   stream=cfg.model.stream)
+        other = Engine.from_params(cfg.model, a.agreement)
         report["class_agreement"] = class_agreement(drives, engine, other, cfg.detector)
     if a.step_accuracy:
         report["step_accuracy"] = step_accuracy(drives, engine, cfg.detector, cfg.alerts.class_weights)

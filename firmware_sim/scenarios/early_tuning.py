@@ -536,7 +536,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def cmd(a) -> int:
     from edge_runtime import config
-    from edge_runtime.core.manifest import ASSETS_DIR
     from edge_runtime.wearable import alerts, classifier, detector, loop, sources  # noqa: F401 - their sections
     from edge_runtime.wearable.classifier import Engine
     from firmware_sim.__main__ import _out_dir
@@ -547,8 +546,7 @@ def cmd(a) -> int:
     t_wall = time.perf_counter()
     cfg = config.load(a.config)
     out = _out_dir(a.out)
-    engine = Engine.from_manifest(cfg.model.assets or ASSETS_DIR, cfg.model.name, threads=cfg.model.threads,
-                                 stream=cfg.model.stream)
+    engine = Engine.from_params(cfg.model)
     clf = CachedClassifier(engine, Path(a.cache) if a.cache else None)
     command = "python -m firmware_sim early-tune " + " ".join(
         f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()
