@@ -656,11 +656,12 @@ class RobotLoop:
                 self._retract_distance_m = decision.distance_m
                 self._retract_q0 = self._last_q
             elif self._retract_backfires():
-                # the straight way toward the base once (the unreachable retraction's fallback), with the tool
-                # held where it points now (the given-up retraction's yaw is what swung the arm), then a stop
+                # the straight way toward the base once (the unreachable retraction's fallback), then a stop.
+                # The tool keeps the given-up retraction's yaw: holding the yaw it had on the way (session 11)
+                # gave the controller another fold, which swung the elbow out and stopped the arm half folded
+                # between two workers passing it (hard:200 seed 13 hard_023, seed 11 hard_106)
                 self.counters.backfired += 1
-                held = self._last_yaw if self._last_yaw is not None else self._held_yaw()
-                self._retract = STOP if self._retract_fallback else self._radial_retract(held)
+                self._retract = STOP if self._retract_fallback else self._radial_retract()
                 self._retract_fallback, self._retract_q0 = True, self._last_q
             return self._retract
         self._retract, self._retract_seq, self._unreachable, self._escape_s = None, None, False, -math.inf
@@ -752,13 +753,11 @@ class RobotLoop:
         return self._retraction(eq6_retraction(self.effector_m(), decision.head, self.zones,
                                                self.params.retract_limits, self._last_yaw, self._held_yaw()))
 
-    def _radial_retract(self, held_yaw_rad: float | None = None) -> Motion:
+    def _radial_retract(self) -> Motion:
         """The fallback retraction, straight toward the base's axis
-        (:func:`edge_runtime.robot.hazard.radial_retraction`), the tool at ``held_yaw_rad`` (default: the
-        yaw of the retraction under way)."""
-        held = self._held_yaw() if held_yaw_rad is None else held_yaw_rad
+        (:func:`edge_runtime.robot.hazard.radial_retraction`)."""
         return self._retraction(radial_retraction(self.effector_m(), self.zones, self.params.retract_limits,
-                                                  self._last_yaw, held))
+                                                  self._last_yaw, self._held_yaw()))
 
     def _held_yaw(self) -> float | None:
         """The tool yaw of the retraction under way (a repeat one keeps it), or None."""
