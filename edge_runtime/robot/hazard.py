@@ -744,6 +744,27 @@ class HazardMonitor:
         """whole_body: every person accounted for, at his last valid body (robot frame)."""
         return [seen.person_m for seen in self._seen.values()]
 
+    def escape_people(self) -> list[tuple[np.ndarray, np.ndarray]] | None:
+        """whole_body: everyone accounted for at the last pose frame, as body spheres (centres, radii;
+        robot frame) for planning an escape turn (:func:`plan_escape_turn`): a person seen then at his
+        body; one lost since at his last valid body with every radius grown by how far he can have come
+        since (his speed or ``lost_person_speed_mps``, as :meth:`_lost` judges him: he is not assumed to
+        stand still). None while someone known only by his keypoints' rays is within
+        ``reach_retract_m``: the rays put him anywhere along a metre or more of them, which no turn can be
+        shown to clear in a frame's time (:func:`ray_separation_m` takes milliseconds a call)."""
+        z, t = self.zones, self._last_pose_s
+        if t is None:
+            return []
+        for t_b, d_b, _ in self._bounded.values():
+            if d_b - (z.lost_person_speed_mps + z.iso_robot_speed_mps) * (t - t_b) <= z.reach_retract_m:
+                return None
+        out = []
+        for seen in self._seen.values():
+            centres, radii = body_spheres(seen.person_m)
+            grown_m = max(z.lost_person_speed_mps, seen.speed_mps) * max(t - seen.t_s, 0.0)
+            out.append((centres, radii + grown_m))
+        return out
+
     def invalid(self, t_s: float, reason: str) -> Decision:
         """A frame the lifter (or the input) marked invalid: stop."""
         self._last_pose_s = t_s
@@ -1325,24 +1346,33 @@ SAWYER_J0_RANGE_RAD = math.radians(170.0)
 limits are +-3.0503 rad (174.8 deg), and an IK goal at the limit is refused."""
 
 
-def plan_escape_turn(capsules, bodies, j0_rad: float | None, step_deg: float, min_gain_m: float,
-                     dip_m: float, max_turn_deg: float) -> float | None:
+def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, min_gain_m: float,
+                     dip_m: float, max_turn_deg: float, reach_m: float = math.inf) -> float | None:
     """The turn of the base (rad, j0 alone) that takes the arm (``capsules``, where it is now) clearest of
-    everyone in ``bodies`` (each a (17, 3) body or a (3,) head, robot frame), or None when none gains
-    ``min_gain_m`` of separation. Candidates: every ``step_deg`` both ways, up to ``max_turn_deg`` from
-    here and within :data:`SAWYER_J0_RANGE_RAD` of j0's zero (``j0_rad`` None: not known, the first
-    bound alone). Each is scored by the smallest whole-body separation from anyone at its end; a
-    direction is given up where its sweep passes more than ``dip_m`` nearer someone than the arm is now
-    (the joint-space path of a j0-only goal is that sweep: a side chosen by the hand's ground distance at
-    the end alone turned the arm across a worker, hard:40 seed 5, hard_012). Ties go to the sweep whose
+    everyone in ``people`` (each his body spheres, (centres (n, 3), radii (n,)), robot frame, as the
+    monitor accounts for him: :meth:`HazardMonitor.escape_people`), or None when none gains
+    ``min_gain_m`` of separation from the nearest. Candidates: every ``step_deg`` both ways, up to
+    ``max_turn_deg`` from here and within :data:`SAWYER_J0_RANGE_RAD` of j0's zero (``j0_rad`` None: not
+    known, the first bound alone). Each is scored by the smallest whole-body separation from anyone at
+    its end; a direction is given up where its sweep passes more than ``dip_m`` nearer anyone than he
+    is now or than ``reach_m`` (``[zones] reach_retract_m``), whichever is nearer, each person against
+    his own separation (the joint-space path of a j0-only goal is that sweep: a side chosen by the
+    hand's ground distance at the end alone turned the arm across a worker, hard:40 seed 5, hard_012;
+    a rule on the nearest alone let the sweep close on a second one). Ties go to the sweep whose
     closest pass is clearer."""
-    spheres = [body_spheres(b) for b in bodies]
-    if not spheres:
+    if not people:
         return None
-    centres = np.concatenate([c for c, _ in spheres])
-    radii = np.concatenate([r for _, r in spheres])
+    centres = np.concatenate([c for c, _ in people])
+    radii = np.concatenate([r for _, r in people])
+    starts = np.cumsum([0] + [len(r) for _, r in people[:-1]])  # each person's spheres are contiguous
     step = math.radians(step_deg)
-    here = separation_m(centres, radii, capsules)
+
+    def per_person(clear: np.ndarray) -> np.ndarray:
+        """(..., spheres) clearances -> (..., people) separations."""
+        return np.minimum.reduceat(clear, starts, axis=-1)
+
+    here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
+    floor = np.minimum(here, reach_m) - dip_m
     best = None  # (end separation, closest pass, turn)
     for sign in (1.0, -1.0):
         room = math.radians(max_turn_deg)
@@ -1354,13 +1384,14 @@ def plan_escape_turn(capsules, bodies, j0_rad: float | None, step_deg: float, mi
         turns = sign * step * np.arange(1, n + 1)
         # turning the arm by a is turning everyone by -a about the same axis: one call for every candidate
         moved = np.einsum("kij,nj->kni", _base_rotations(-turns), centres)
-        d = (point_clearance_m(moved.reshape(-1, 3), capsules).reshape(n, -1) - radii[None]).min(axis=1)
-        passed = np.minimum.accumulate(d)
+        d = per_person(point_clearance_m(moved.reshape(-1, 3), capsules).reshape(n, -1) - radii[None])  # (n, P)
+        passed = np.minimum.accumulate(d, axis=0)
+        end, closest = d.min(axis=1), passed.min(axis=1)
         for k in range(n):
-            if passed[k] < here - dip_m:
-                break  # the sweep from here on passes nearer someone than the arm is now
-            if d[k] >= here + min_gain_m and (best is None or (d[k], passed[k]) > best[:2]):
-                best = (float(d[k]), float(passed[k]), float(turns[k]))
+            if (passed[k] < floor).any():
+                break  # the sweep from here on passes nearer someone than he is now
+            if end[k] >= here.min() + min_gain_m and (best is None or (end[k], closest[k]) > best[:2]):
+                best = (float(end[k]), float(closest[k]), float(turns[k]))
     return None if best is None else best[2]
 
 

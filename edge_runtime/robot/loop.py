@@ -146,24 +146,31 @@ class LoopParams:
     where the retraction began), is replaced by the retraction straight toward the base, and that
     one by a stop: the controller moves its joints along a straight line to its IK solution, and a
     far solution swings the hand through the cell (hard:200 seed 3, hard_109: toward a passing
-    worker, 0.081 m). That straight retraction keeps the tool where it points when the first one is
-    given up, not the yaw the first one was turning it to: finishing that turn swung the elbow through
-    the worker (hard:40 seed 5, hard_012, after an escape turn)."""
-    escape_step_deg: float = config.setting(5.0, config.within(0, 180))
+    worker, 0.081 m). An escape turn is held to ``escape_dip_m`` instead, and stopped."""
+    escape_step_deg: float = config.setting(5.0, config.within(0.5, 30, "deg"))
     """whole_body: the escape turn (``[zones] escape_deg``) weighs turns of the base every this many
     degrees both ways (deg): at 1 m from the axis 5 deg is 0.09 m of sweep between two candidates."""
-    escape_min_gain_m: float = config.setting(0.05, config.NON_NEGATIVE)
+    escape_min_gain_m: float = config.setting(0.05, config.within(0, 1, "m"))
     """whole_body: the arm turns only to where its separation from everyone is at least this much (m)
     larger than now: a smaller gain is within keypoint noise and not worth moving for."""
-    escape_dip_m: float = config.setting(0.02, config.NON_NEGATIVE)
-    """whole_body: an escape turn may pass at most this much (m) nearer someone than the arm is now on
-    its way (candidates are weighed every ``escape_step_deg``, so a sweep's closest pass is known to a
-    few cm); a turn that would pass nearer is not taken."""
-    escape_replan_s: float = config.setting(0.5, config.NON_NEGATIVE)
+    escape_dip_m: float = config.setting(0.02, config.within(0, 0.2, "m"))
+    """whole_body: an escape turn may pass at most this much (m) nearer anyone than he is from the arm
+    now on its way (candidates are weighed every ``escape_step_deg``, so a sweep's closest pass is
+    known to a few cm); a turn that would pass nearer is not taken, and a turn under way that has
+    brought the arm this much nearer someone by its own motion is stopped (the controller's IK need not
+    turn the first joint alone: 2-3 mm of other motion per degree in the simulated Sawyer)."""
+    escape_turn_max_deg: float = config.setting(30.0, config.within(1, 180, "deg"))
+    """whole_body: one escape command turns the base at most this far (deg) toward the planned end; the
+    rest is planned again from where the arm then is. The controller reaches a turned hand target by
+    its own IK, and the larger the turn the further that strays from turning the first joint alone
+    (0.05-0.08 m of arm at 30 deg, 0.2-0.28 m at 90 deg; a +165 deg target was reached by turning
+    -128 deg, the other way round)."""
+    escape_replan_s: float = config.setting(0.5, config.within(0.05, 5, "s"))
     """whole_body: while level 2 lasts and someone is within ``[zones] reach_retract_m``, the escape is
     planned again from where the arm is once its last turn or retraction is done or it was stopped,
-    at most this often (s): an arm stopped half folded on a worker's side stood there while he reached
-    into it (hard:40 seed 5, hard_012), where turned about its base it cleared him."""
+    at most this often (s), whether or not the last plan found a turn: an arm stopped half folded on a
+    worker's side stood there while he reached into it (hard:40 seed 5, hard_012), where turned about
+    its base it cleared him."""
     retract_max_radius_m: float = config.setting(0.7, config.POSITIVE)
     """Retraction targets further than this from the base's axis (ground distance, m) are
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
@@ -265,7 +272,13 @@ class LoopCounters:
     unseen: int = 0
     """People in a frame whose lift was invalid (each judged from his last valid pose)."""
     backfired: int = 0
-    """Retractions replaced by a stop because they carried the arm toward someone (``retract_backfire_m``)."""
+    """Retractions replaced by a stop because they carried the arm toward someone (``retract_backfire_m``;
+    escape turns included, ``escape_dip_m``)."""
+    escapes: int = 0
+    """whole_body: escape turns about the base commanded (``[zones] escape_deg``)."""
+    escapes_stopped: int = 0
+    """Escape turns stopped because they brought the arm nearer someone than planned (``escape_dip_m``) or
+    the arm refused them."""
 
 
 @dataclass
@@ -336,6 +349,7 @@ class RobotLoop:
         self._retract_distance_m = math.inf
         self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
         self._escape_s = -math.inf  # when this level 2 last planned an escape turn (clock, s)
+        self._escaping = False  # the retraction under way is an escape turn
         self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
@@ -646,26 +660,38 @@ class RobotLoop:
 
     def _desired_motion(self, state: State, decision: Decision) -> Motion:
         if state == State.NORMAL:
-            self._retract, self._retract_seq, self._unreachable, self._escape_s = None, None, False, -math.inf
+            self._end_level2()
             return self._task_motion()
         if state == State.LEVEL2:
             escape = self._escape(decision)
             if escape is not None or self._retract is None or self._retract_again(decision):
                 self._retract = escape or self._retract_motion(decision)
+                self._escaping = escape is not None
                 self._retract_fallback = False
                 self._retract_distance_m = decision.distance_m
                 self._retract_q0 = self._last_q
             elif self._retract_backfires():
-                # the straight way toward the base once (the unreachable retraction's fallback), then a stop.
-                # The tool keeps the given-up retraction's yaw: holding the yaw it had on the way (session 11)
-                # gave the controller another fold, which swung the elbow out and stopped the arm half folded
-                # between two workers passing it (hard:200 seed 13 hard_023, seed 11 hard_106)
                 self.counters.backfired += 1
-                self._retract = STOP if self._retract_fallback else self._radial_retract()
-                self._retract_fallback, self._retract_q0 = True, self._last_q
+                if self._escaping:
+                    # the turn came nearer someone than its plan allows (the controller's IK need not turn
+                    # the first joint alone): stopped where it is, planned again from there (_escape)
+                    self.counters.escapes_stopped += 1
+                    self._retract, self._escaping = STOP, False
+                else:
+                    # the straight way toward the base once (the unreachable retraction's fallback), then a
+                    # stop. The tool keeps the given-up retraction's yaw: holding the yaw it had on the way
+                    # gave the controller another fold, which swung the elbow out and stopped the arm half
+                    # folded between two workers passing it (hard:200 seed 13 hard_023, seed 11 hard_106)
+                    self._retract = STOP if self._retract_fallback else self._radial_retract()
+                    self._retract_fallback, self._retract_q0 = True, self._last_q
             return self._retract
-        self._retract, self._retract_seq, self._unreachable, self._escape_s = None, None, False, -math.inf
+        self._end_level2()
         return STOP
+
+    def _end_level2(self) -> None:
+        """Level 2 is over: no retraction, escape or refusal carries over to the next one."""
+        self._retract, self._retract_seq, self._unreachable, self._escape_s = None, None, False, -math.inf
+        self._escaping = False
 
     def _task_motion(self) -> Motion:
         p = self.params
@@ -703,8 +729,11 @@ class RobotLoop:
         model (:func:`edge_runtime.robot.hazard.plan_escape_turn`: the links from the joint angles it
         reports, the end effector alone before it has reported any): a worker who stands at the cell
         and reaches for the tool reached the folded arm in front of him (hard:200 seed 3, hard_101
-        0.033 m, hard_195 0.061 m). Planned again while level 2 lasts, at most every
-        ``escape_replan_s``. None otherwise (nothing gains ``escape_min_gain_m``)."""
+        0.033 m, hard_195 0.061 m). One command turns it at most ``escape_turn_max_deg`` toward the planned
+        end; planned again while level 2 lasts, at most every ``escape_replan_s`` (a plan that found
+        nothing too: each costs milliseconds of the frame). None otherwise (nothing gains
+        ``escape_min_gain_m``, or someone known only by his rays is within reach:
+        :meth:`edge_runtime.robot.hazard.HazardMonitor.escape_people`)."""
         r, z, p = self._retract, self.zones, self.params
         if (z.separation != "whole_body" or z.escape_deg <= 0 or r is None or self._unreachable
                 or self._last_effector is None or self._last_yaw is None or decision.head is None
@@ -717,20 +746,23 @@ class RobotLoop:
         now = self.clock()
         if now - self._escape_s < p.escape_replan_s:
             return None
+        self._escape_s = now
+        people = self.monitor.escape_people()
+        if not people:
+            return None
         q = self._last_q
         caps = arm_capsules(q) if q is not None else effector_capsule(self._last_effector)
-        # everyone at his last valid body, and the nearest as the decision has him (a person bounded by his rays
-        # alone is there only as where he stands)
-        people = [*self.monitor.bodies(), decision.head.position_m]
         turn = plan_escape_turn(caps, people, None if q is None else float(q[0]), p.escape_step_deg,
-                                p.escape_min_gain_m, p.escape_dip_m, z.escape_deg)
+                                p.escape_min_gain_m, p.escape_dip_m, z.escape_deg, z.reach_retract_m)
         if turn is None:
             return None
-        self._escape_s = now
-        return self._retraction(turned_retraction(self._last_effector, self._last_yaw, turn))
+        most = math.radians(p.escape_turn_max_deg)
+        self.counters.escapes += 1
+        return self._retraction(turned_retraction(self._last_effector, self._last_yaw, min(max(turn, -most), most)))
 
     def _retract_backfires(self) -> bool:
-        """Has the retraction under way brought the arm ``retract_backfire_m`` closer to anyone
+        """Has the retraction under way brought the arm ``retract_backfire_m`` (an escape turn:
+        ``escape_dip_m``) closer to anyone
         within the retraction's reach, by its own motion? (Everyone the monitor accounts for, at his
         last valid body, against the arm where it is now and where the retraction began.)"""
         r, q0, q = self._retract, self._retract_q0, self._last_q
@@ -738,11 +770,13 @@ class RobotLoop:
         if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None or z.separation != "whole_body":
             return False
         reach = z.body_retract_distance_m + z.retract_lead_s * z.lost_person_speed_mps
+        # an escape turn was planned to come no nearer anyone than escape_dip_m: held to that
+        allowed_m = self.params.escape_dip_m if self._escaping else self.params.retract_backfire_m
         now_caps, start_caps = arm_capsules(q), arm_capsules(q0)
         for body in self.monitor.bodies():
             centres, radii = body_spheres(body)
             now = separation_m(centres, radii, now_caps)
-            if now < reach and now < separation_m(centres, radii, start_caps) - self.params.retract_backfire_m:
+            if now < reach and now < separation_m(centres, radii, start_caps) - allowed_m:
                 return True
         return False
 
@@ -769,10 +803,14 @@ class RobotLoop:
 
     def _retract_refused(self) -> None:
         """The controller (or the link) refused the retraction: try the radial fallback once,
-        then stop (reason ``retract_unreachable``)."""
+        then stop (reason ``retract_unreachable``). A refused escape turn is a stop, and the turn is
+        planned again from there (:meth:`_escape`): it is not the retraction that got nowhere."""
         self.counters.unreachable += 1
         self._retract_seq = None
-        if self._retract_fallback:
+        if self._escaping:
+            self.counters.escapes_stopped += 1
+            self._retract, self._escaping = STOP, False
+        elif self._retract_fallback:
             self._unreachable = True
             self._retract = STOP
         else:
