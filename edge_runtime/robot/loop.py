@@ -146,7 +146,9 @@ class LoopParams:
     where the retraction began), is replaced by the retraction straight toward the base, and that
     one by a stop: the controller moves its joints along a straight line to its IK solution, and a
     far solution swings the hand through the cell (hard:200 seed 3, hard_109: toward a passing
-    worker, 0.081 m). An escape turn is held to ``escape_dip_m`` instead, and stopped."""
+    worker, 0.081 m). An escape turn that does so is stopped and planned again from where it stopped
+    (holding it to ``escape_dip_m`` instead stopped turns as they began, over and over, and left the
+    arm half folded by a worker: hard:200 seed 13, hard_064)."""
     escape_step_deg: float = config.setting(5.0, config.within(0.5, 30, "deg"))
     """whole_body: the escape turn (``[zones] escape_deg``) weighs turns of the base every this many
     degrees both ways (deg): at 1 m from the axis 5 deg is 0.09 m of sweep between two candidates."""
@@ -156,9 +158,7 @@ class LoopParams:
     escape_dip_m: float = config.setting(0.02, config.within(0, 0.2, "m"))
     """whole_body: an escape turn may pass at most this much (m) nearer anyone than he is from the arm
     now on its way (candidates are weighed every ``escape_step_deg``, so a sweep's closest pass is
-    known to a few cm); a turn that would pass nearer is not taken, and a turn under way that has
-    brought the arm this much nearer someone by its own motion is stopped (the controller's IK need not
-    turn the first joint alone: 2-3 mm of other motion per degree in the simulated Sawyer)."""
+    known to a few cm); a turn that would pass nearer is not taken."""
     escape_turn_max_deg: float = config.setting(30.0, config.within(1, 180, "deg"))
     """whole_body: one escape command turns the base at most this far (deg) toward the planned end; the
     rest is planned again from where the arm then is. The controller reaches a turned hand target by
@@ -761,8 +761,7 @@ class RobotLoop:
         return self._retraction(turned_retraction(self._last_effector, self._last_yaw, min(max(turn, -most), most)))
 
     def _retract_backfires(self) -> bool:
-        """Has the retraction under way brought the arm ``retract_backfire_m`` (an escape turn:
-        ``escape_dip_m``) closer to anyone
+        """Has the retraction (or escape turn) under way brought the arm ``retract_backfire_m`` closer to anyone
         within the retraction's reach, by its own motion? (Everyone the monitor accounts for, at his
         last valid body, against the arm where it is now and where the retraction began.)"""
         r, q0, q = self._retract, self._retract_q0, self._last_q
@@ -770,13 +769,11 @@ class RobotLoop:
         if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None or z.separation != "whole_body":
             return False
         reach = z.body_retract_distance_m + z.retract_lead_s * z.lost_person_speed_mps
-        # an escape turn was planned to come no nearer anyone than escape_dip_m: held to that
-        allowed_m = self.params.escape_dip_m if self._escaping else self.params.retract_backfire_m
         now_caps, start_caps = arm_capsules(q), arm_capsules(q0)
         for body in self.monitor.bodies():
             centres, radii = body_spheres(body)
             now = separation_m(centres, radii, now_caps)
-            if now < reach and now < separation_m(centres, radii, start_caps) - allowed_m:
+            if now < reach and now < separation_m(centres, radii, start_caps) - self.params.retract_backfire_m:
                 return True
         return False
 
