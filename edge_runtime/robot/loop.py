@@ -272,13 +272,13 @@ class LoopCounters:
     unseen: int = 0
     """People in a frame whose lift was invalid (each judged from his last valid pose)."""
     backfired: int = 0
-    """Retractions replaced by a stop because they carried the arm toward someone (``retract_backfire_m``;
-    escape turns included, ``escape_dip_m``)."""
+    """Retractions (escape turns included) replaced by a stop because they carried the arm toward someone
+    (``retract_backfire_m``)."""
     escapes: int = 0
     """whole_body: escape turns about the base commanded (``[zones] escape_deg``)."""
     escapes_stopped: int = 0
-    """Escape turns stopped because they brought the arm nearer someone than planned (``escape_dip_m``) or
-    the arm refused them."""
+    """Escape turns stopped because they carried the arm toward someone (``retract_backfire_m``) or the arm
+    refused them."""
 
 
 @dataclass
@@ -673,8 +673,8 @@ class RobotLoop:
             elif self._retract_backfires():
                 self.counters.backfired += 1
                 if self._escaping:
-                    # the turn came nearer someone than its plan allows (the controller's IK need not turn
-                    # the first joint alone): stopped where it is, planned again from there (_escape)
+                    # the turn carried the arm toward someone (the controller's IK need not turn the first
+                    # joint alone, or he moved): stopped where it is, planned again from there (_escape)
                     self.counters.escapes_stopped += 1
                     self._retract, self._escaping = STOP, False
                 else:
