@@ -27,8 +27,9 @@ Two ways to protect people (``[zones] separation``):
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
   ``retract_lead_s``. After a retraction the arm works again once the person has been
   beyond both exit distances for ``dwell_s``. Someone still within ``reach_retract_m`` of a
-  finished retraction turns the arm about its base, away from him (``escape_deg``,
-  :func:`escape_retraction`); a retraction whose joint motion carries the arm toward someone is
+  finished (or stopped) retraction turns the arm about its base to where its whole body is clearest
+  of everyone, without sweeping past anyone nearer than it is (``escape_deg``, :func:`plan_escape_turn`;
+  planned again while level 2 lasts); a retraction whose joint motion carries the arm toward someone is
   replaced (:class:`edge_runtime.robot.loop.RobotLoop`, ``retract_backfire_m``).
   **People the camera loses** (hidden, out of view, or lifted invalidly while others are
   lifted): each is judged by his reachable set, his last valid body with every joint
@@ -227,11 +228,12 @@ class ZoneParams:
     suite hard:60 seed 5: 0.9 m gave 1.29x stop-only's productive share, 0.75 m 1.36x, both without
     a collision); with the full-speed T_s (shipped) S_p at the slowest speed is 1.13 m and this only
     turns a stop into a retraction for someone standing within reach."""
-    escape_deg: float = config.setting(120.0, config.within(0, 180))
-    """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done makes it
-    turn about its base until the hand's bearing is this far from his (deg; 0: never): folded in
-    front of him the arm is within his reach (an arm reaching 0.75-1.05 m from a pelvis 1.4 m out),
-    beside or behind the base it is not."""
+    escape_deg: float = config.setting(180.0, config.within(0, 180))
+    """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done (or that was
+    stopped) makes it turn about its base by at most this much (deg; 0: never), to where it is clearest
+    of everyone (:func:`plan_escape_turn`; ``[robot_loop] escape_*``): folded in front of him the arm is
+    within his reach (an arm reaching 0.75-1.05 m from a pelvis 1.4 m out), beside or behind the base it
+    is not. 180: as far as the arm's first joint turns."""
     approach_speed_mps: float = config.setting(0.3, config.NON_NEGATIVE)
     """whole_body: a person "keeps coming" when his head moves toward the end effector faster
     than this (m/s; above the tracker's 0.1 m/s of velocity noise)."""
@@ -741,6 +743,27 @@ class HazardMonitor:
     def bodies(self) -> list[np.ndarray]:
         """whole_body: every person accounted for, at his last valid body (robot frame)."""
         return [seen.person_m for seen in self._seen.values()]
+
+    def escape_people(self) -> list[tuple[np.ndarray, np.ndarray]] | None:
+        """whole_body: everyone accounted for at the last pose frame, as body spheres (centres, radii;
+        robot frame) for planning an escape turn (:func:`plan_escape_turn`): a person seen then at his
+        body; one lost since at his last valid body with every radius grown by how far he can have come
+        since (his speed or ``lost_person_speed_mps``, as :meth:`_lost` judges him: he is not assumed to
+        stand still). None while someone known only by his keypoints' rays is within
+        ``reach_retract_m``: the rays put him anywhere along a metre or more of them, which no turn can be
+        shown to clear in a frame's time (:func:`ray_separation_m` takes milliseconds a call)."""
+        z, t = self.zones, self._last_pose_s
+        if t is None:
+            return []
+        for t_b, d_b, _ in self._bounded.values():
+            if d_b - (z.lost_person_speed_mps + z.iso_robot_speed_mps) * (t - t_b) <= z.reach_retract_m:
+                return None
+        out = []
+        for seen in self._seen.values():
+            centres, radii = body_spheres(seen.person_m)
+            grown_m = max(z.lost_person_speed_mps, seen.speed_mps) * max(t - seen.t_s, 0.0)
+            out.append((centres, radii + grown_m))
+        return out
 
     def invalid(self, t_s: float, reason: str) -> Decision:
         """A frame the lifter (or the input) marked invalid: stop."""
@@ -1301,27 +1324,81 @@ def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: Re
     return _retraction(target, limits, tool_yaw_rad, held_yaw_rad)
 
 
-def escape_retraction(effector_m, head: HeadEstimate, tool_yaw_rad: float | None,
-                      escape_deg: float, side: float | None = None) -> Retraction | None:
-    """Someone stands within reach of an arm that has retracted as far as Eq. 6 takes it: the arm
-    turns about the base's axis, as a whole (the hand's target and the tool's yaw turned by the same
-    angle: for the arm, its first joint alone), until its hand's bearing is ``escape_deg`` from his,
-    on the side it is on already (never across in front of him), or on ``side`` (+1 or -1: the
-    sign of the hand's bearing less his). None when it is that far already (within 15 deg) or
-    where the tool points is unknown."""
-    eff = np.asarray(effector_m, float)
-    if tool_yaw_rad is None:
+def turned_capsules(capsules, turn_rad: float):
+    """The arm's ``capsules`` turned about the base's axis (the robot frame's y) by ``turn_rad``: its
+    first joint (j0) turned alone, every link with it. A positive turn raises a point's bearing
+    ``atan2(x, z)`` (the tool's yaw turns with it)."""
+    a, b, r = capsules
+    rot = _base_rotations([turn_rad])[0]
+    return a @ rot.T, b @ rot.T, r
+
+
+def _base_rotations(turns_rad) -> np.ndarray:
+    """(n, 3, 3) rotations about the robot frame's y axis, each raising a bearing ``atan2(x, z)`` by its turn."""
+    t = np.asarray(turns_rad, float)
+    c, s_ = np.cos(t), np.sin(t)
+    one, zero = np.ones_like(t), np.zeros_like(t)
+    return np.stack([np.stack([c, zero, s_], -1), np.stack([zero, one, zero], -1), np.stack([-s_, zero, c], -1)], -2)
+
+
+SAWYER_J0_RANGE_RAD = math.radians(170.0)
+"""The escape turns the Sawyer's first joint within this of zero either way (rad): its description's
+limits are +-3.0503 rad (174.8 deg), and an IK goal at the limit is refused."""
+
+
+def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, min_gain_m: float,
+                     dip_m: float, max_turn_deg: float, reach_m: float = math.inf) -> float | None:
+    """The turn of the base (rad, j0 alone) that takes the arm (``capsules``, where it is now) clearest of
+    everyone in ``people`` (each his body spheres, (centres (n, 3), radii (n,)), robot frame, as the
+    monitor accounts for him: :meth:`HazardMonitor.escape_people`), or None when none gains
+    ``min_gain_m`` of separation from the nearest. Candidates: every ``step_deg`` both ways, up to
+    ``max_turn_deg`` from here and within :data:`SAWYER_J0_RANGE_RAD` of j0's zero (``j0_rad`` None: not
+    known, the first bound alone). Each is scored by the smallest whole-body separation from anyone at
+    its end; a direction is given up where its sweep passes more than ``dip_m`` nearer anyone than he
+    is now or than ``reach_m`` (``[zones] reach_retract_m``), whichever is nearer, each person against
+    his own separation (the joint-space path of a j0-only goal is that sweep: a side chosen by the
+    hand's ground distance at the end alone turned the arm across a worker, hard:40 seed 5, hard_012;
+    a rule on the nearest alone let the sweep close on a second one). Ties go to the sweep whose
+    closest pass is clearer."""
+    if not people:
         return None
-    g, p = ground(eff), ground(head.position_m)
-    bearing_e, bearing_p = math.atan2(g[0], g[1]), math.atan2(p[0], p[1])
-    off = math.remainder(bearing_e - bearing_p, 2 * math.pi)
-    turn = math.copysign(math.radians(escape_deg), side if side else off if off != 0 else 1.0) - off
-    if abs(turn) < math.radians(15.0):
-        return None
-    c, s_ = math.cos(turn), math.sin(turn)
-    target = eff.copy()
-    target[[0, 2]] = (c * g[0] + s_ * g[1], -s_ * g[0] + c * g[1])
-    return Retraction(target, tool_yaw_rad + turn)
+    centres = np.concatenate([c for c, _ in people])
+    radii = np.concatenate([r for _, r in people])
+    starts = np.cumsum([0] + [len(r) for _, r in people[:-1]])  # each person's spheres are contiguous
+    step = math.radians(step_deg)
+
+    def per_person(clear: np.ndarray) -> np.ndarray:
+        """(..., spheres) clearances -> (..., people) separations."""
+        return np.minimum.reduceat(clear, starts, axis=-1)
+
+    here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
+    floor = np.minimum(here, reach_m) - dip_m
+    best = None  # (end separation, closest pass, turn)
+    for sign in (1.0, -1.0):
+        room = math.radians(max_turn_deg)
+        if j0_rad is not None:
+            room = min(room, SAWYER_J0_RANGE_RAD - sign * j0_rad)
+        n = int(math.floor(room / step + 1e-9))
+        if n < 1:
+            continue
+        turns = sign * step * np.arange(1, n + 1)
+        # turning the arm by a is turning everyone by -a about the same axis: one call for every candidate
+        moved = np.einsum("kij,nj->kni", _base_rotations(-turns), centres)
+        d = per_person(point_clearance_m(moved.reshape(-1, 3), capsules).reshape(n, -1) - radii[None])  # (n, P)
+        passed = np.minimum.accumulate(d, axis=0)
+        end, closest = d.min(axis=1), passed.min(axis=1)
+        for k in range(n):
+            if (passed[k] < floor).any():
+                break  # the sweep from here on passes nearer someone than he is now
+            if end[k] >= here.min() + min_gain_m and (best is None or (end[k], closest[k]) > best[:2]):
+                best = (float(end[k]), float(closest[k]), float(turns[k]))
+    return None if best is None else best[2]
+
+
+def turned_retraction(effector_m, tool_yaw_rad: float, turn_rad: float) -> Retraction:
+    """The hand's target and the tool's yaw of the arm turned about the base's axis by ``turn_rad``
+    (:func:`turned_capsules`): the same height, the same distance from the axis."""
+    return Retraction(_base_rotations([turn_rad])[0] @ np.asarray(effector_m, float), tool_yaw_rad + turn_rad)
 
 
 def radial_retraction(effector_m, zones: ZoneParams, limits: RetractLimits, tool_yaw_rad: float | None,
