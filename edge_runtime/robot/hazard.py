@@ -549,6 +549,8 @@ class HazardMonitor:
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
         """How often the pose stream went stale."""
+        self.bounds_refused = 0
+        """Lost people's ray bounds that contradicted their reachable set and were not heard (:meth:`_lost`)."""
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -706,7 +708,11 @@ class HazardMonitor:
         (ISO 13855's approach speeds): nothing the camera lost is assumed to have stood still, and
         once that set is within the protective distance the arm stops (``person_lost``). In view
         with rays that bound him (``bounds``: id -> :func:`ray_separation_m`), the larger of the
-        two bounds counts: each holds on its own."""
+        two bounds counts, but only a ray bound his track allows: he cannot be further than his last
+        body's separation plus ``v (t - t_seen)`` either. A bound beyond that contradicts his track
+        (a keypoint on the wrong person or thing, a ray through a miscalibrated camera: hard:200
+        seed 1 had bounds of 11 m for a worker 1.25 m from the arm) and is not heard
+        (``bounds_refused``): the reachable set alone counts."""
         z = self.zones
         bounds = bounds or {}
         out = []
@@ -719,10 +725,13 @@ class HazardMonitor:
                 self._trackers.pop(wid, None)
                 continue
             speed = max(z.lost_person_speed_mps, seen.speed_mps)
-            d = separation_m(*body_spheres(seen.person_m), caps) - speed * age
-            point = None
+            last = separation_m(*body_spheres(seen.person_m), caps)
+            d, point = last - speed * age, None
             if bounds.get(wid) is not None:  # in view: where his rays say he stands (retract away from it)
-                d, point = max(d, bounds[wid][0]), bounds[wid][1]
+                if bounds[wid][0] <= last + speed * age:
+                    d, point = max(d, bounds[wid][0]), bounds[wid][1]
+                else:
+                    self.bounds_refused += 1
             out.append((wid, d, speed, point))
         return out
 

@@ -271,6 +271,9 @@ class LoopCounters:
     """Speed overrides sent (whole-body speed scaling)."""
     unseen: int = 0
     """People in a frame whose lift was invalid (each judged from his last valid pose)."""
+    bounds_refused: int = 0
+    """Lost people's ray bounds not heard because their track says they cannot be that far
+    (``HazardMonitor.bounds_refused``)."""
     backfired: int = 0
     """Retractions (escape turns included) replaced by a stop because they carried the arm toward someone
     (``retract_backfire_m``)."""
@@ -514,6 +517,7 @@ class RobotLoop:
         m = self.monitor
         reason = "retract_unreachable" if self._unreachable and m.state == State.LEVEL2 else m.reason
         self.counters.stale = m.stale_events
+        self.counters.bounds_refused = m.bounds_refused
         return {"state": m.state.name, "reason": reason, "link": self.link_state,
                 "link_error": self.link_error, "command_alarm": self.command_alarm, "fault": self.fault,
                 "waypoint": self._waypoint, **vars(self.counters)}
