@@ -828,3 +828,24 @@ def test_a_lost_person_in_view_within_reach_by_his_rays_makes_the_arm_retract_aw
     d = mon.observe(2.5, {}, EFF, unseen={0: "missing_joints: left_wrist"}, rays={0: rays_of(body_facing_arm(0.6))})
     assert d.state == State.LEVEL2 and d.worker == 0 and d.head.position_m[2] > EFF[2]
 
+
+
+def test_a_lost_persons_ray_bound_beyond_what_his_track_allows_is_not_heard():
+    z = WHOLE_BODY
+    mon = ready_body(z, 1.42)
+    settle(mon, body_facing_arm(1.42))
+    # his lift goes invalid and his keypoints put him 5 m out a frame later: he cannot have gone that far (a
+    # keypoint on the wrong person, a miscalibrated ray); his reachable set, not that bound, stops the arm
+    far = {0: rays_of(body_facing_arm(5.0))}
+    d = mon.observe(1.0, {}, EFF, unseen={0: "missing_joints: left_hip"}, rays=far)
+    assert d.state == State.LEVEL1 and d.reason.startswith("person_lost")
+    assert mon.bounds_refused == 1
+    # rays his track allows (he stands where he was last lifted) are heard: they keep him off the arm after his
+    # reachable set alone would have stopped it (test above: a lost person 3 m out stops it within lost_hold_s)
+    mon2 = ready_body(z, 3.0)
+    settle(mon2, body_facing_arm(3.0))
+    same = {0: rays_of(body_facing_arm(3.0))}
+    held = [mon2.observe(1.0 + i / FPS, {}, EFF, unseen={0: "missing_joints: left_hip"}, rays=same)
+            for i in range(int((z.lost_hold_s - 0.1) * FPS))]
+    assert mon2.bounds_refused == 0
+    assert all(d.state == State.NORMAL for d in held)
