@@ -560,7 +560,22 @@ def fit(head_cam_m, ankle_cam_m, params: CalibrationParams = CalibrationParams()
         A, b = _fit_pnp(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]))
     else:
         A, b = _fit_similarity(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]), params.scale)
-    return Calibration(A, b, params.method, height, heads, ankles, params, tuple(frames))
+    cal = Calibration(A, b, params.method, height, heads, ankles, params, tuple(frames))
+    if cal.method == "pnp":  # rigid refuses collinear heads above; pnp fits rays, so it judges its residuals
+        residual_m = max(max(v) for v in cal.residuals_m().values())
+        if not residual_m <= MAX_PNP_RESIDUAL_M:  # NaN fails too
+            raise CalibrationError(f"the pnp fit misses a marker's ray by {residual_m:.2f} m (at most "
+                                   f"{MAX_PNP_RESIDUAL_M} m): mislabelled or collinear stands")
+    return cal
+
+
+MAX_PNP_RESIDUAL_M = 0.3
+"""A pnp fit, labelled or not, passes only when every marker target is within this of its ray
+(:meth:`Calibration.residuals_m`). Right fits at a real detector's noise: 0.016-0.066 m (development
+seed 4 of ``firmware_sim head-error``, labelled, 10 placements). Session 12's review: pnp accepted
+collinear head positions (camera 52 deg off, residual 0.41 m) and the heads of two markers swapped
+(56.7 deg off, 1.04 m) that ``rigid`` refuses or would. Without labels the stricter
+:data:`MAX_UNLABELLED_RESIDUAL_M` applies as well."""
 
 
 def _across_rays_m(a_cam_m, b_cam_m) -> float:

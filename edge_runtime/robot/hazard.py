@@ -753,19 +753,21 @@ class HazardMonitor:
         """whole_body: every person accounted for, at his last valid body (robot frame)."""
         return [seen.person_m for seen in self._seen.values()]
 
-    def escape_people(self) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    def escape_people(self, sweep_m: float) -> list[tuple[np.ndarray, np.ndarray]] | None:
         """whole_body: everyone accounted for at the last pose frame, as body spheres (centres, radii;
         robot frame) for planning an escape turn (:func:`plan_escape_turn`): a person seen then at his
         body; one lost since at his last valid body with every radius grown by how far he can have come
         since (his speed or ``lost_person_speed_mps``, as :meth:`_lost` judges him: he is not assumed to
-        stand still). None while someone known only by his keypoints' rays is within
-        ``reach_retract_m``: the rays put him anywhere along a metre or more of them, which no turn can be
-        shown to clear in a frame's time (:func:`ray_separation_m` takes milliseconds a call)."""
+        stand still). None while someone known only by his keypoints' rays is within ``reach_retract_m``
+        plus ``sweep_m`` (how far the turn can carry any point of the arm): the rays put him anywhere
+        along a metre or more of them, which no turn can be shown to clear in a frame's time
+        (:func:`ray_separation_m` takes milliseconds a call). (Before session 12 the turn's sweep was
+        left out: its review had a person bounded at 0.88 m swept to 0.66 m by a planned turn.)"""
         z, t = self.zones, self._last_pose_s
         if t is None:
             return []
         for t_b, d_b, _ in self._bounded.values():
-            if d_b - (z.lost_person_speed_mps + z.iso_robot_speed_mps) * (t - t_b) <= z.reach_retract_m:
+            if d_b - (z.lost_person_speed_mps + z.iso_robot_speed_mps) * (t - t_b) <= z.reach_retract_m + sweep_m:
                 return None
         out = []
         for seen in self._seen.values():
@@ -1086,6 +1088,13 @@ RAY_MAX_SAMPLES = 48
 on a segment 4.7 m long."""
 RAY_MAX_RANGE_M = 30.0
 """Ray segments end this far (ground distance, m) from the camera: further out nobody is near the arm."""
+RAY_KEYPOINT_ERROR_M = 0.25
+"""A keypoint's ray passes within this of its joint (m, on the body): 2.5 times a real detector's
+error at the hips, its loosest joint (COCO's keypoint sigma 0.107 at a person's scale of about
+1 m), more than twice its error at the ankles or head. Keypoints are not exact: a bound that takes
+the rays as exact lay above the truth in 166 of 1,968 frames of people lost within 1.5 m of the
+arm (hard:200 seed 1, session 12's review), by up to 2.2 m. A gross error beyond this (a keypoint on
+another person) is caught where the anchors then disagree (no bound) or by a lost person's track."""
 RAY_MIN_SLOPE = math.sin(math.radians(2.0))
 """A ray flatter than this (sine of its angle to the horizontal) bounds nothing: its floor or
 head-height crossing is too ill-conditioned."""
@@ -1122,75 +1131,90 @@ def ray_ground_range_m(origin_m, direction, heights_m: tuple[float, float], floo
 
 def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     """A lower bound of the separation (m) of a person from the arm's ``capsules`` from his
-    keypoints' rays alone, and where he stands (the middle of his anchors' segments, for Eq. 6's
-    direction), or None when his rays bound nothing. Where he can be:
+    keypoints' rays alone, and where he stands (the middle of his feet's segments, for Eq. 6's
+    direction), or None when his rays bound nothing. Each joint he shows is within
+    :data:`RAY_KEYPOINT_ERROR_M` of its ray (e below). Where he can be:
 
-    * each ankle he shows is on its ray between ``ray_ankle_heights_m`` above the floor (a foot
-      down or in the air), a range of ground distance from the camera; so are his hips and pelvis
-      between ``ray_hip_heights_m`` and his head between ``ray_head_heights_m``;
+    * each ankle he shows is near its ray where the ray is between ``ray_ankle_heights_m`` above
+      the floor (a foot down or in the air), each widened by e: a range of ground distance from
+      the camera; so are his hips and pelvis with ``ray_hip_heights_m`` and his head with
+      ``ray_head_heights_m``;
     * every joint of him is within ``ray_body_extent_m`` (ground distance) of the foot on the
       ground (and that foot within ``ray_stride_m`` of the other one when one ankle alone is
-      seen), of his hips and of his head: so each joint he shows is on its own ray within the
+      seen), of his hips and of his head: so each joint he shows is near its own ray within the
       ranges above widened by that (where they all overlap), and every joint (shown or not)
       stands over the floor within that of each such anchor's floor points;
-    * showing no ankle, hip, pelvis or head, each joint he shows is on its ray between the floor and
-      ``ray_joint_heights_m`` (a raised wrist), and every joint of him within its bones of it;
-    * two joints he shows are no further apart than the bones between them (``JOINT_REACH_M``):
-      the points of each joint's ray segment that no point of a related one's is that close to
-      are dropped (:func:`_consistent`), and a joint he does not show is within its bones of one
-      he does.
+    * showing no ankle, hip, pelvis or head, each joint he shows is near its ray between the floor and
+      ``ray_joint_heights_m`` (a raised wrist), and every joint of him within its bones of it.
+      (Narrowing each joint's segment to where its neighbours' rays are within a bone of it, as
+      before session 12, took the rays as exact: rays a degree off were "near" only close to the
+      camera, which pulled the segments toward it; with e allowed at every bone it narrows nothing.)
 
-    The bound is the smallest of these regions' clearance from the capsules, less each joint's
-    body radius (``BODY_RADII_M``; limb midpoints too). Where he stands is None without an ankle, hip,
-    pelvis or head anchor: a ray's whole way to the floor says too little to retract away from."""
+    Anchors whose regions do not overlap contradict a body (a keypoint on someone or something
+    else): None, nothing is bounded. The bound is the smallest of these regions' clearance from the
+    capsules, less e and each joint's body radius (``BODY_RADII_M``; limb midpoints too). Where he
+    stands is None without a foot anchor: a head's or hip's height band runs a metre or more along
+    a ray, past him, so its middle can lie behind the arm (retracting away from it would carry the
+    arm into him)."""
     u, o = rays.directions, np.asarray(rays.origin_m, float)
+    e = RAY_KEYPOINT_ERROR_M
     seen = np.isfinite(u).all(axis=1)
     g = np.hypot(u[:, 0], u[:, 2])
     if (g[seen] < 1e-9).any():  # a ray straight down or up: that joint is anywhere below or above the camera
         return None
+
+    def ray_range(j: int, heights: tuple[float, float]):
+        """Ground distances of the ray points within e of the joint's heights: the joint is within e of them."""
+        return ray_ground_range_m(o, u[j], (heights[0] - e, heights[1] + e), rays.floor_y_m)
+
     # anchors: joints whose height above the floor is known within a band, each group with the ground distance
-    # every joint of him is within of it
+    # every joint of him is within of it (and e: the joint is off the ray point)
     feet = [j for j in (L_ANKLE, R_ANKLE) if seen[j]]
     groups = [(feet, zones.ray_ankle_heights_m, zones.ray_body_extent_m + (zones.ray_stride_m if len(feet) == 1 else 0)),
               ([j for j in (HIP_JOINT, R_HIP, L_HIP) if seen[j]], zones.ray_hip_heights_m, zones.ray_body_extent_m),
               ([HEAD_JOINT] if seen[HEAD_JOINT] else [], zones.ray_head_heights_m, zones.ray_body_extent_m)]
     ranges, regions = {}, []
     for joints_, heights, extent in groups:
-        got = {j: ray_ground_range_m(o, u[j], heights, rays.floor_y_m) for j in joints_}
+        got = {j: ray_range(j, heights) for j in joints_}
         got = {j: r for j, r in got.items() if r is not None}
         if got:
             ranges.update(got)
-            regions.append((min(r[0] for r in got.values()) - extent, max(r[1] for r in got.values()) + extent,
+            regions.append((min(r[0] for r in got.values()) - extent - e, max(r[1] for r in got.values()) + extent + e,
                             list(got), extent))
-    placed = bool(regions)  # where he stands is known well enough to retract away from it
     if not regions:  # no anchor: each seen joint is between the floor and a raised wrist, the rest within its bones
         for j in np.flatnonzero(seen):
-            r = ray_ground_range_m(o, u[j], zones.ray_joint_heights_m, rays.floor_y_m)
+            r = ray_range(j, zones.ray_joint_heights_m)
             if r is not None:
                 ranges[j] = r
-                regions.append((r[0] - JOINT_REACH_M[j].max(), r[1] + JOINT_REACH_M[j].max(), [j],
-                                float(JOINT_REACH_M[j].max())))
+                reach = float(JOINT_REACH_M[j].max())
+                regions.append((r[0] - reach - e, r[1] + reach + e, [j], reach))
     if not regions:  # nothing crosses the floor or its band of heights
         return None
     near, far = max(r[0] for r in regions), min(r[1] for r in regions)  # each region holds all of him
-    if near > far:  # the anchors disagree (a stray keypoint): the loosest
-        near, far = min(r[0] for r in regions), max(r[1] for r in regions)
+    if near > far:  # the anchors disagree: a keypoint is not his
+        return None
     near, far = max(near, 0.0), min(far, RAY_MAX_RANGE_M)
-    # each seen joint's distance along its ray (m): an anchor on its own range, every other joint within the region
-    span = {j: tuple(v / g[j] for v in ranges.get(j, (near, far))) for j in np.flatnonzero(seen)}
-    span = _consistent(span, u) or span
+    # each seen joint's ray points (distance along the ray, m): an anchor's within its own range, every joint's
+    # within e of the region that holds him
+    span = {}
+    for j in np.flatnonzero(seen):
+        lo, hi = max(near - e, 0.0), far + e
+        if j in ranges:
+            lo, hi = max(lo, ranges[j][0]), min(hi, ranges[j][1])
+        if lo > hi:  # an anchor's ray never comes near where the others hold him
+            return None
+        span[j] = (lo / g[j], hi / g[j])
     joints = np.array(sorted(span))
     lo, hi = np.array([span[j] for j in joints]).T
     t = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, RAY_MAX_SAMPLES)[None, :]    # (J, S)
-    half = 0.5 * (hi - lo) / (RAY_MAX_SAMPLES - 1)  # every point of a segment is within this of a sample
+    half = 0.5 * (hi - lo) / (RAY_MAX_SAMPLES - 1) + e  # every joint is within this of a sample of its ray
     pts = o + t[..., None] * u[joints][:, None, :]                                             # (J, S, 3)
     c = point_clearance_m(pts.reshape(-1, 3), capsules).reshape(t.shape) - half[:, None]
     clear = np.full(17, -np.inf)
     clear[joints] = c.min(axis=1)
-    # where he stands, for the retraction's direction: the middle of his anchors' segments (the point of his
-    # segments nearest the arm may lie beyond it, the far end of a ray that passes the arm)
-    anchored = np.isin(joints, list(ranges))
-    stands = (o + 0.5 * (lo + hi)[anchored, None] * u[joints[anchored]]).mean(axis=0) if placed else None
+    # where he stands, for the retraction's direction: the middle of his feet's segments
+    on_feet = np.isin(joints, [j for j in feet if j in ranges])
+    stands = (o + 0.5 * (lo + hi)[on_feet, None] * u[joints[on_feet]]).mean(axis=0) if on_feet.any() else None
     # every joint stands over the floor within an anchor group's extent of where it stands (the arm seen from above)
     flat = np.array([1.0, 0.0, 1.0])
     a, b, r = capsules
@@ -1202,50 +1226,6 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     d = min(float((joint - BODY_RADII_M).min()),
             float((limb - 0.5 * (BODY_RADII_M[a_] + BODY_RADII_M[b_])).min()))
     return d, stands
-
-
-def _consistent(span: dict, u: np.ndarray, passes: int = 3) -> dict | None:
-    """Each seen joint's interval of distance along its ray (``span``: joint -> (lo, hi) m; ``u``
-    the rays' unit directions, all from the camera centre) narrowed to where a related seen joint
-    is within the bones between them (``JOINT_REACH_M``). Related: each seen joint and its nearest
-    seen ancestor in the skeleton (``PARENTS``), both ways, every pair at once, ``passes`` times: a
-    chain from the ankles up to the wrists. Within one ray's interval the points near enough to
-    another ray's segment are an interval again (the distance is convex), found on
-    ``RAY_MAX_SAMPLES`` samples and widened by half their spacing (the distance changes no faster
-    than the point moves). None when that leaves a joint nothing (the keypoints contradict a body:
-    a swapped or stray keypoint): nothing is narrowed then."""
-    joints = sorted(span)
-    first, second = [], []
-    for j in joints:
-        k = PARENTS[j]
-        while k >= 0 and k not in span:
-            k = PARENTS[k]
-        if k >= 0:
-            first += [j, k]
-            second += [k, j]
-    if not first:
-        return span
-    i_, k_ = np.array(first), np.array(second)
-    lo, hi = np.full(17, np.nan), np.full(17, np.nan)
-    lo[joints], hi[joints] = zip(*(span[j] for j in joints))
-    cos = (u[i_] * u[k_]).sum(axis=1)[:, None]
-    reach = JOINT_REACH_M[i_, k_][:, None]
-    frac = np.linspace(0.0, 1.0, RAY_MAX_SAMPLES)[None, :]
-    for _ in range(passes):
-        t = lo[i_][:, None] + (hi[i_] - lo[i_])[:, None] * frac
-        s_ = np.clip(t * cos, lo[k_][:, None], hi[k_][:, None])   # the nearest point of the other's segment
-        gap = np.sqrt(np.maximum(t * t + s_ * s_ - 2 * t * s_ * cos, 0.0))
-        h = 0.5 * (t[:, 1] - t[:, 0])
-        keep = gap <= reach + h[:, None]
-        if not keep.any(axis=1).all():
-            return None
-        new_lo = np.where(keep, t, np.inf).min(axis=1) - h
-        new_hi = np.where(keep, t, -np.inf).max(axis=1) + h
-        np.maximum.at(lo, i_, new_lo)
-        np.minimum.at(hi, i_, new_hi)
-        if (lo[joints] > hi[joints]).any():
-            return None
-    return {j: (float(lo[j]), float(hi[j])) for j in joints}
 
 
 # ----------------------------------------------------------------------------------------------

@@ -751,16 +751,18 @@ class RobotLoop:
         if now - self._escape_s < p.escape_replan_s:
             return None
         self._escape_s = now
-        people = self.monitor.escape_people()
-        if not people:
-            return None
         q = self._last_q
         caps = arm_capsules(q) if q is not None else effector_capsule(self._last_effector)
+        most = math.radians(p.escape_turn_max_deg)
+        a, b, radii = caps  # the arm's farthest point from the base's axis, and how far one turn carries it
+        arm_radius_m = float(np.hypot(np.r_[a[:, 0], b[:, 0]], np.r_[a[:, 2], b[:, 2]]).max() + radii.max())
+        people = self.monitor.escape_people(sweep_m=2.0 * arm_radius_m * math.sin(0.5 * most))
+        if not people:
+            return None
         turn = plan_escape_turn(caps, people, None if q is None else float(q[0]), p.escape_step_deg,
                                 p.escape_min_gain_m, p.escape_dip_m, z.escape_deg, z.reach_retract_m)
         if turn is None:
             return None
-        most = math.radians(p.escape_turn_max_deg)
         self.counters.escapes += 1
         return self._retraction(turned_retraction(self._last_effector, self._last_yaw, min(max(turn, -most), most)))
 

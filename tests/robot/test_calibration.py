@@ -120,7 +120,7 @@ def test_save_and_load_keep_everything(tmp_path):
     path = tmp_path / "cal.json"
     cal.save(path)
     data = json.loads(path.read_text())
-    assert data["version"] == 1 and data["method"] == "rigid" and len(data["inputs"]["head_cam_m"]) == 3
+    assert data["version"] == 1 and data["method"] == "pnp" and len(data["inputs"]["head_cam_m"]) == 3
     assert data["worker_height_m"] == pytest.approx(cal.worker_height_m)
     assert set(data["residuals_m"]) == {"head", "ankle"} and data["inputs"]["frames_per_marker"] == [60, 60, 60]
     again = Calibration.load(path)
@@ -193,6 +193,10 @@ def test_degenerate_inputs_are_refused():
     line = np.stack([heads[0], heads[1], 2 * heads[1] - heads[0]])
     with pytest.raises(CalibrationError, match="collinear"):  # the lifted positions' fits (pnp uses rays only)
         fit(line, ankles, CalibrationParams(method="rigid"))
+    with pytest.raises(CalibrationError, match="misses a marker's ray"):  # pnp: by its residuals
+        fit(line, ankles, CalibrationParams(method="pnp"))
+    with pytest.raises(CalibrationError, match="misses a marker's ray"):  # two markers' stands swapped
+        fit(heads[[0, 2, 1]], ankles, CalibrationParams(method="pnp"))
     bad = heads.copy()
     bad[1, 0] = np.nan
     with pytest.raises(CalibrationError, match="non-finite"):

@@ -12,6 +12,7 @@ from edge_runtime.robot.hazard import (
     ARM_LINK_RADII_M,
     JOINT_REACH_M,
     MIRROR,
+    RAY_KEYPOINT_ERROR_M,
     REQUIRED_JOINTS,
     HazardMonitor,
     HeadEstimate,
@@ -604,7 +605,10 @@ def rays_of(body, camera_m=CAMERA_M, hide=()):
     return PersonRays(np.asarray(camera_m, float), d, FLOOR_Y)
 
 
-def test_the_ray_bound_never_exceeds_the_true_separation():
+@pytest.mark.parametrize("keypoint_error_m", [0.0, RAY_KEYPOINT_ERROR_M])
+def test_the_ray_bound_never_exceeds_the_true_separation(keypoint_error_m):
+    """Exact keypoints, and keypoints up to RAY_KEYPOINT_ERROR_M off their joints on the body (a real detector's
+    error: the bound of main before session 12 was above the truth for 1 case in 10 of these)."""
     from firmware_sim.people import human
 
     rng = np.random.default_rng(3)
@@ -623,7 +627,9 @@ def test_the_ray_bound_never_exceeds_the_true_separation():
         cam = np.array([rng.uniform(-4, 4), rng.uniform(0.1, 2.1), rng.uniform(4, 9)])
         hide = rng.choice(17, size=int(rng.integers(0, 5) if rng.random() < 0.6 else rng.integers(13, 17)),
                           replace=False)  # a few joints hidden, or all but one to four (at the picture's edge)
-        bound = ray_separation_m(rays_of(body, cam, hide), caps, WHOLE_BODY)
+        off = rng.normal(size=body.shape)
+        off *= keypoint_error_m * rng.uniform(0, 1, (17, 1)) ** (1 / 3) / np.linalg.norm(off, axis=1, keepdims=True)
+        bound = ray_separation_m(rays_of(body + off, cam, hide), caps, WHOLE_BODY)
         if bound is not None:
             checked += 1
             assert bound[0] <= separation_of(body) + 1e-9
@@ -635,13 +641,14 @@ def test_anchored_rays_bound_a_person_within_his_body_extent_of_where_he_stands(
     body = body_facing_arm(4.0)
     sep = separation_of(body)
     d, point = ray_separation_m(rays_of(body), caps, WHOLE_BODY)
-    # the region reaches toward the arm by at most the body extent plus the ankle band's spread on the floor
-    assert sep - 1.6 < d < sep
+    # the region reaches toward the arm by at most the body extent, the ankle band's spread on the floor and the
+    # keypoints' error (twice: the foot off its ray, the joint off its own)
+    assert sep - WHOLE_BODY.ray_body_extent_m - 2 * RAY_KEYPOINT_ERROR_M - 0.4 < d < sep
     assert point is not None and point[2] > EFF[2]                     # where he stands: his side
     # ankles alone (the rest hidden): looser; no ankle seen: his hips and head bound him
     only_feet = [j for j in range(17) if j not in (3, 6)]
     d_feet, _ = ray_separation_m(rays_of(body, hide=only_feet), caps, WHOLE_BODY)
-    assert sep - WHOLE_BODY.ray_body_extent_m - 0.6 < d_feet < d
+    assert sep - WHOLE_BODY.ray_body_extent_m - 2 * RAY_KEYPOINT_ERROR_M - 0.6 < d_feet <= d
     d_upper, _ = ray_separation_m(rays_of(body, hide=(3, 6)), caps, WHOLE_BODY)
     assert d_upper < sep
     # no ankle, hip, pelvis or head: any joint he shows is between the floor and a raised wrist, the rest within
@@ -675,7 +682,7 @@ def test_a_person_never_lifted_whose_ray_region_reaches_the_protective_distance_
     z = WHOLE_BODY
     v_stop = z.min_speed_fraction * z.iso_robot_speed_mps
     seen = set()
-    for sep in (1.5, 2.0, 2.5, 2.6, 2.7, 2.8, 2.9, 3.0, 4.0, 5.0):
+    for sep in (1.5, 2.0, 2.5, 3.0, 3.2, 3.4, 3.6, 3.8, 4.0, 5.0):
         mon = ready_body(z, 6.0)
         rays = rays_of(body_facing_arm(sep))
         bound = ray_separation_m(rays, effector_capsule(EFF), z)[0]
@@ -779,23 +786,27 @@ def test_the_escape_plan_counts_a_lost_person_by_how_far_he_can_have_come_and_no
     z = WHOLE_BODY
     mon = ready_body(z, 6.0)   # worker 0, seen at 6 m until t = -10 + dwell
     t_seen = mon._last_pose_s
-    (centres, radii), = mon.escape_people()
+    (centres, radii), = mon.escape_people(sweep_m=0.65)
     assert np.allclose(radii, body_spheres(body_facing_arm(6.0))[1])  # seen in the last frame: his body as it is
     # a frame without him 0.5 s later: lost, each sphere grown by his reach since (lost_person_speed_mps at least)
     mon.observe(t_seen + 0.5, {}, EFF)
-    (_, grown), = mon.escape_people()
+    (_, grown), = mon.escape_people(sweep_m=0.65)
     assert np.allclose(grown - radii, 0.5 * z.lost_person_speed_mps)
-    # someone in view whom the lifter never lifted, bounded only by his keypoints' rays, within reach: no plan can
-    # be shown to clear him in a frame's time, so none is made
-    near_rays = rays_of(body_facing_arm(1.3))
-    assert ray_separation_m(near_rays, effector_capsule(EFF), z)[0] <= z.reach_retract_m
-    mon.observe(t_seen + 0.6, {}, EFF, unseen={1: "x"}, rays={1: near_rays})
-    assert mon.escape_people() is None
-    # the same far beyond reach does not stop the planning
+    # someone in view whom the lifter never lifted, bounded only by his keypoints' rays, within reach of the arm
+    # or of where the turn carries it: no plan can be shown to clear him in a frame's time, so none is made
+    for sep, sweep_m in ((2.5, 0.0), (3.4, 0.65)):
+        rays = rays_of(body_facing_arm(sep))
+        bound = ray_separation_m(rays, effector_capsule(EFF), z)[0]
+        assert (bound <= z.reach_retract_m) == (sweep_m == 0.0) and bound <= z.reach_retract_m + sweep_m
+        near = ready_body(z, 6.0)
+        near.observe(near._last_pose_s + 0.1, {0: body_facing_arm(6.0)}, EFF, unseen={1: "x"}, rays={1: rays})
+        assert near.escape_people(sweep_m) is None
+        assert len(near.escape_people(0.0 if sweep_m else -1.0)) == 1     # beyond a shorter sweep he does not count
+    # far beyond reach he does not stop the planning
     far = ready_body(z, 6.0)
     far.observe(far._last_pose_s + 0.1, {0: body_facing_arm(6.0)}, EFF, unseen={1: "x"},
                 rays={1: rays_of(body_facing_arm(5.0))})
-    assert len(far.escape_people()) == 1
+    assert len(far.escape_people(sweep_m=0.65)) == 1
 
 
 def test_the_escape_turn_keeps_each_worker_as_clear_as_he_is_or_out_of_reach_not_only_the_nearest():
@@ -841,10 +852,10 @@ def test_a_lost_persons_ray_bound_beyond_what_his_track_allows_is_not_heard():
     assert d.state == State.LEVEL1 and d.reason.startswith("person_lost")
     assert mon.bounds_refused == 1
     # rays his track allows (he stands where he was last lifted) are heard: they keep him off the arm after his
-    # reachable set alone would have stopped it (test above: a lost person 3 m out stops it within lost_hold_s)
-    mon2 = ready_body(z, 3.0)
-    settle(mon2, body_facing_arm(3.0))
-    same = {0: rays_of(body_facing_arm(3.0))}
+    # reachable set alone would have stopped it (4.5 m out, that set reaches the protective distance in 1.5 s)
+    mon2 = ready_body(z, 4.5)
+    settle(mon2, body_facing_arm(4.5))
+    same = {0: rays_of(body_facing_arm(4.5))}
     held = [mon2.observe(1.0 + i / FPS, {}, EFF, unseen={0: "missing_joints: left_hip"}, rays=same)
             for i in range(int((z.lost_hold_s - 0.1) * FPS))]
     assert mon2.bounds_refused == 0
