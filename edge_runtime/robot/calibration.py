@@ -92,13 +92,14 @@ class CalibrationParams:
     ankle_height_m: float = config.setting(0.07, config.within(0, 0.2))
     """Height of the ankle joints above the floor (m; 0.039 of body height). The
     dissertation puts the ankle midpoint on the marker (0); this lifts it to the joint."""
-    method: str = "pnp"
-    """"rigid" (SVD similarity over six points), "eq2" (the dissertation's) or "pnp" (the camera
-    pose from the six points' directions only, cv2.solvePnP; scale 1; the default). ``pnp`` halves
-    the head error of ``rigid`` (fresh seed 23: 0.190 / 0.537 m against 0.324 / 1.067 m, median /
-    p95; reports/robot/head_error.md); both hrc collisions of ``rigid`` in hard:200 seed 13 came with
-    heads placed 0.52 and 1.64 m off (median over the scenario; reports/hrc/report.md, Session 12). Session 10's ``pnp`` candidate
-    failed with the fused anchoring, which stays off."""
+    method: str = "rigid"
+    """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
+    "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1). ``pnp``
+    halves the head error (fresh seed 23: 0.190 / 0.537 m against 0.324 / 1.067 m, median / p95;
+    reports/robot/head_error.md) but has not passed a closed-loop validation: in session 10 with the
+    fused anchoring (fresh hrc seed 11: 2 collisions in hard:200), and in session 12's development
+    runs it added collisions where ``rigid`` had none (reports/hrc/report.md, Session 12), so the
+    validated ``rigid`` stays the default."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)

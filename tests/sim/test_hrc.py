@@ -257,7 +257,6 @@ def test_a_new_lifter_model_voids_the_validation(tmp_path):
 
 
 PENDING_REVALIDATION: dict = {
-    "calibration": {"method": "pnp"},
     "zones": {"escape_deg": 180.0},
     "robot_loop": {"escape_step_deg": 5.0, "escape_min_gain_m": 0.05, "escape_dip_m": 0.02, "escape_replan_s": 0.5,
                    "escape_turn_max_deg": 30.0},
