@@ -95,9 +95,11 @@ class CalibrationParams:
     method: str = "rigid"
     """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
     "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1). ``pnp``
-    halves the head error (reports/robot/head_error.md) but, with the fused anchoring, failed its
-    closed-loop validation in session 10 (fresh hrc seed 11: 2 collisions in hard:200;
-    reports/hrc/report.md), so the validated ``rigid`` stays the default."""
+    halves the head error (fresh seed 23: 0.190 / 0.537 m against 0.324 / 1.067 m, median / p95;
+    reports/robot/head_error.md) but has not passed a closed-loop validation: in session 10 with the
+    fused anchoring (fresh hrc seed 11: 2 collisions in hard:200), and in session 12's development
+    runs it added collisions where ``rigid`` had none (reports/hrc/report.md, Session 12), so the
+    validated ``rigid`` stays the default."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)
@@ -559,7 +561,22 @@ def fit(head_cam_m, ankle_cam_m, params: CalibrationParams = CalibrationParams()
         A, b = _fit_pnp(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]))
     else:
         A, b = _fit_similarity(np.vstack([heads, ankles]), np.vstack([head_r, ankle_r]), params.scale)
-    return Calibration(A, b, params.method, height, heads, ankles, params, tuple(frames))
+    cal = Calibration(A, b, params.method, height, heads, ankles, params, tuple(frames))
+    if cal.method == "pnp":  # rigid refuses collinear heads above; pnp fits rays, so it judges its residuals
+        residual_m = max(max(v) for v in cal.residuals_m().values())
+        if not residual_m <= MAX_PNP_RESIDUAL_M:  # NaN fails too
+            raise CalibrationError(f"the pnp fit misses a marker's ray by {residual_m:.2f} m (at most "
+                                   f"{MAX_PNP_RESIDUAL_M} m): mislabelled or collinear stands")
+    return cal
+
+
+MAX_PNP_RESIDUAL_M = 0.3
+"""A pnp fit, labelled or not, passes only when every marker target is within this of its ray
+(:meth:`Calibration.residuals_m`). Right fits at a real detector's noise: 0.016-0.066 m (development
+seed 4 of ``firmware_sim head-error``, labelled, 10 placements). Session 12's review: pnp accepted
+collinear head positions (camera 52 deg off, residual 0.41 m) and the heads of two markers swapped
+(56.7 deg off, 1.04 m) that ``rigid`` refuses or would. Without labels the stricter
+:data:`MAX_UNLABELLED_RESIDUAL_M` applies as well."""
 
 
 def _across_rays_m(a_cam_m, b_cam_m) -> float:

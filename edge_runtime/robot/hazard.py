@@ -27,8 +27,9 @@ Two ways to protect people (``[zones] separation``):
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
   ``retract_lead_s``. After a retraction the arm works again once the person has been
   beyond both exit distances for ``dwell_s``. Someone still within ``reach_retract_m`` of a
-  finished retraction turns the arm about its base, away from him (``escape_deg``,
-  :func:`escape_retraction`); a retraction whose joint motion carries the arm toward someone is
+  finished (or stopped) retraction turns the arm about its base to where its whole body is clearest
+  of everyone, without sweeping past anyone nearer than it is (``escape_deg``, :func:`plan_escape_turn`;
+  planned again while level 2 lasts); a retraction whose joint motion carries the arm toward someone is
   replaced (:class:`edge_runtime.robot.loop.RobotLoop`, ``retract_backfire_m``).
   **People the camera loses** (hidden, out of view, or lifted invalidly while others are
   lifted): each is judged by his reachable set, his last valid body with every joint
@@ -227,11 +228,12 @@ class ZoneParams:
     suite hard:60 seed 5: 0.9 m gave 1.29x stop-only's productive share, 0.75 m 1.36x, both without
     a collision); with the full-speed T_s (shipped) S_p at the slowest speed is 1.13 m and this only
     turns a stop into a retraction for someone standing within reach."""
-    escape_deg: float = config.setting(120.0, config.within(0, 180))
-    """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done makes it
-    turn about its base until the hand's bearing is this far from his (deg; 0: never): folded in
-    front of him the arm is within his reach (an arm reaching 0.75-1.05 m from a pelvis 1.4 m out),
-    beside or behind the base it is not."""
+    escape_deg: float = config.setting(180.0, config.within(0, 180))
+    """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done (or that was
+    stopped) makes it turn about its base by at most this much (deg; 0: never), to where it is clearest
+    of everyone (:func:`plan_escape_turn`; ``[robot_loop] escape_*``): folded in front of him the arm is
+    within his reach (an arm reaching 0.75-1.05 m from a pelvis 1.4 m out), beside or behind the base it
+    is not. 180: as far as the arm's first joint turns."""
     approach_speed_mps: float = config.setting(0.3, config.NON_NEGATIVE)
     """whole_body: a person "keeps coming" when his head moves toward the end effector faster
     than this (m/s; above the tracker's 0.1 m/s of velocity noise)."""
@@ -547,6 +549,8 @@ class HazardMonitor:
         self.last = Decision(self.state, self.reason)
         self.stale_events = 0
         """How often the pose stream went stale."""
+        self.bounds_refused = 0
+        """Lost people's ray bounds that contradicted their reachable set and were not heard (:meth:`_lost`)."""
 
     # -- inputs ---------------------------------------------------------------------------
 
@@ -704,7 +708,11 @@ class HazardMonitor:
         (ISO 13855's approach speeds): nothing the camera lost is assumed to have stood still, and
         once that set is within the protective distance the arm stops (``person_lost``). In view
         with rays that bound him (``bounds``: id -> :func:`ray_separation_m`), the larger of the
-        two bounds counts: each holds on its own."""
+        two bounds counts, but only a ray bound his track allows: he cannot be further than his last
+        body's separation plus ``v (t - t_seen)`` either. A bound beyond that contradicts his track
+        (a keypoint on the wrong person or thing, a ray through a miscalibrated camera: hard:200
+        seed 1 had bounds of 11 m for a worker 1.25 m from the arm) and is not heard
+        (``bounds_refused``): the reachable set alone counts."""
         z = self.zones
         bounds = bounds or {}
         out = []
@@ -717,10 +725,13 @@ class HazardMonitor:
                 self._trackers.pop(wid, None)
                 continue
             speed = max(z.lost_person_speed_mps, seen.speed_mps)
-            d = separation_m(*body_spheres(seen.person_m), caps) - speed * age
-            point = None
+            last = separation_m(*body_spheres(seen.person_m), caps)
+            d, point = last - speed * age, None
             if bounds.get(wid) is not None:  # in view: where his rays say he stands (retract away from it)
-                d, point = max(d, bounds[wid][0]), bounds[wid][1]
+                if bounds[wid][0] <= last + speed * age:
+                    d, point = max(d, bounds[wid][0]), bounds[wid][1]
+                else:
+                    self.bounds_refused += 1
             out.append((wid, d, speed, point))
         return out
 
@@ -741,6 +752,29 @@ class HazardMonitor:
     def bodies(self) -> list[np.ndarray]:
         """whole_body: every person accounted for, at his last valid body (robot frame)."""
         return [seen.person_m for seen in self._seen.values()]
+
+    def escape_people(self, sweep_m: float) -> list[tuple[np.ndarray, np.ndarray]] | None:
+        """whole_body: everyone accounted for at the last pose frame, as body spheres (centres, radii;
+        robot frame) for planning an escape turn (:func:`plan_escape_turn`): a person seen then at his
+        body; one lost since at his last valid body with every radius grown by how far he can have come
+        since (his speed or ``lost_person_speed_mps``, as :meth:`_lost` judges him: he is not assumed to
+        stand still). None while someone known only by his keypoints' rays is within ``reach_retract_m``
+        plus ``sweep_m`` (how far the turn can carry any point of the arm): the rays put him anywhere
+        along a metre or more of them, which no turn can be shown to clear in a frame's time
+        (:func:`ray_separation_m` takes milliseconds a call). (Before session 12 the turn's sweep was
+        left out: its review had a person bounded at 0.88 m swept to 0.66 m by a planned turn.)"""
+        z, t = self.zones, self._last_pose_s
+        if t is None:
+            return []
+        for t_b, d_b, _ in self._bounded.values():
+            if d_b - (z.lost_person_speed_mps + z.iso_robot_speed_mps) * (t - t_b) <= z.reach_retract_m + sweep_m:
+                return None
+        out = []
+        for seen in self._seen.values():
+            centres, radii = body_spheres(seen.person_m)
+            grown_m = max(z.lost_person_speed_mps, seen.speed_mps) * max(t - seen.t_s, 0.0)
+            out.append((centres, radii + grown_m))
+        return out
 
     def invalid(self, t_s: float, reason: str) -> Decision:
         """A frame the lifter (or the input) marked invalid: stop."""
@@ -1054,6 +1088,13 @@ RAY_MAX_SAMPLES = 48
 on a segment 4.7 m long."""
 RAY_MAX_RANGE_M = 30.0
 """Ray segments end this far (ground distance, m) from the camera: further out nobody is near the arm."""
+RAY_KEYPOINT_ERROR_M = 0.25
+"""A keypoint's ray passes within this of its joint (m, on the body): 2.5 times a real detector's
+error at the hips, its loosest joint (COCO's keypoint sigma 0.107 at a person's scale of about
+1 m), more than twice its error at the ankles or head. Keypoints are not exact: a bound that takes
+the rays as exact lay above the truth in 166 of 1,968 frames of people lost within 1.5 m of the
+arm (hard:200 seed 1, session 12's review), by up to 2.2 m. A gross error beyond this (a keypoint on
+another person) is caught where the anchors then disagree (no bound) or by a lost person's track."""
 RAY_MIN_SLOPE = math.sin(math.radians(2.0))
 """A ray flatter than this (sine of its angle to the horizontal) bounds nothing: its floor or
 head-height crossing is too ill-conditioned."""
@@ -1090,75 +1131,90 @@ def ray_ground_range_m(origin_m, direction, heights_m: tuple[float, float], floo
 
 def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     """A lower bound of the separation (m) of a person from the arm's ``capsules`` from his
-    keypoints' rays alone, and where he stands (the middle of his anchors' segments, for Eq. 6's
-    direction), or None when his rays bound nothing. Where he can be:
+    keypoints' rays alone, and where he stands (the middle of his feet's segments, for Eq. 6's
+    direction), or None when his rays bound nothing. Each joint he shows is within
+    :data:`RAY_KEYPOINT_ERROR_M` of its ray (e below). Where he can be:
 
-    * each ankle he shows is on its ray between ``ray_ankle_heights_m`` above the floor (a foot
-      down or in the air), a range of ground distance from the camera; so are his hips and pelvis
-      between ``ray_hip_heights_m`` and his head between ``ray_head_heights_m``;
+    * each ankle he shows is near its ray where the ray is between ``ray_ankle_heights_m`` above
+      the floor (a foot down or in the air), each widened by e: a range of ground distance from
+      the camera; so are his hips and pelvis with ``ray_hip_heights_m`` and his head with
+      ``ray_head_heights_m``;
     * every joint of him is within ``ray_body_extent_m`` (ground distance) of the foot on the
       ground (and that foot within ``ray_stride_m`` of the other one when one ankle alone is
-      seen), of his hips and of his head: so each joint he shows is on its own ray within the
+      seen), of his hips and of his head: so each joint he shows is near its own ray within the
       ranges above widened by that (where they all overlap), and every joint (shown or not)
       stands over the floor within that of each such anchor's floor points;
-    * showing no ankle, hip, pelvis or head, each joint he shows is on its ray between the floor and
-      ``ray_joint_heights_m`` (a raised wrist), and every joint of him within its bones of it;
-    * two joints he shows are no further apart than the bones between them (``JOINT_REACH_M``):
-      the points of each joint's ray segment that no point of a related one's is that close to
-      are dropped (:func:`_consistent`), and a joint he does not show is within its bones of one
-      he does.
+    * showing no ankle, hip, pelvis or head, each joint he shows is near its ray between the floor and
+      ``ray_joint_heights_m`` (a raised wrist), and every joint of him within its bones of it.
+      (Narrowing each joint's segment to where its neighbours' rays are within a bone of it, as
+      before session 12, took the rays as exact: rays a degree off were "near" only close to the
+      camera, which pulled the segments toward it; with e allowed at every bone it narrows nothing.)
 
-    The bound is the smallest of these regions' clearance from the capsules, less each joint's
-    body radius (``BODY_RADII_M``; limb midpoints too). Where he stands is None without an ankle, hip,
-    pelvis or head anchor: a ray's whole way to the floor says too little to retract away from."""
+    Anchors whose regions do not overlap contradict a body (a keypoint on someone or something
+    else): None, nothing is bounded. The bound is the smallest of these regions' clearance from the
+    capsules, less e and each joint's body radius (``BODY_RADII_M``; limb midpoints too). Where he
+    stands is None without a foot anchor: a head's or hip's height band runs a metre or more along
+    a ray, past him, so its middle can lie behind the arm (retracting away from it would carry the
+    arm into him)."""
     u, o = rays.directions, np.asarray(rays.origin_m, float)
+    e = RAY_KEYPOINT_ERROR_M
     seen = np.isfinite(u).all(axis=1)
     g = np.hypot(u[:, 0], u[:, 2])
     if (g[seen] < 1e-9).any():  # a ray straight down or up: that joint is anywhere below or above the camera
         return None
+
+    def ray_range(j: int, heights: tuple[float, float]):
+        """Ground distances of the ray points within e of the joint's heights: the joint is within e of them."""
+        return ray_ground_range_m(o, u[j], (heights[0] - e, heights[1] + e), rays.floor_y_m)
+
     # anchors: joints whose height above the floor is known within a band, each group with the ground distance
-    # every joint of him is within of it
+    # every joint of him is within of it (and e: the joint is off the ray point)
     feet = [j for j in (L_ANKLE, R_ANKLE) if seen[j]]
     groups = [(feet, zones.ray_ankle_heights_m, zones.ray_body_extent_m + (zones.ray_stride_m if len(feet) == 1 else 0)),
               ([j for j in (HIP_JOINT, R_HIP, L_HIP) if seen[j]], zones.ray_hip_heights_m, zones.ray_body_extent_m),
               ([HEAD_JOINT] if seen[HEAD_JOINT] else [], zones.ray_head_heights_m, zones.ray_body_extent_m)]
     ranges, regions = {}, []
     for joints_, heights, extent in groups:
-        got = {j: ray_ground_range_m(o, u[j], heights, rays.floor_y_m) for j in joints_}
+        got = {j: ray_range(j, heights) for j in joints_}
         got = {j: r for j, r in got.items() if r is not None}
         if got:
             ranges.update(got)
-            regions.append((min(r[0] for r in got.values()) - extent, max(r[1] for r in got.values()) + extent,
+            regions.append((min(r[0] for r in got.values()) - extent - e, max(r[1] for r in got.values()) + extent + e,
                             list(got), extent))
-    placed = bool(regions)  # where he stands is known well enough to retract away from it
     if not regions:  # no anchor: each seen joint is between the floor and a raised wrist, the rest within its bones
         for j in np.flatnonzero(seen):
-            r = ray_ground_range_m(o, u[j], zones.ray_joint_heights_m, rays.floor_y_m)
+            r = ray_range(j, zones.ray_joint_heights_m)
             if r is not None:
                 ranges[j] = r
-                regions.append((r[0] - JOINT_REACH_M[j].max(), r[1] + JOINT_REACH_M[j].max(), [j],
-                                float(JOINT_REACH_M[j].max())))
+                reach = float(JOINT_REACH_M[j].max())
+                regions.append((r[0] - reach - e, r[1] + reach + e, [j], reach))
     if not regions:  # nothing crosses the floor or its band of heights
         return None
     near, far = max(r[0] for r in regions), min(r[1] for r in regions)  # each region holds all of him
-    if near > far:  # the anchors disagree (a stray keypoint): the loosest
-        near, far = min(r[0] for r in regions), max(r[1] for r in regions)
+    if near > far:  # the anchors disagree: a keypoint is not his
+        return None
     near, far = max(near, 0.0), min(far, RAY_MAX_RANGE_M)
-    # each seen joint's distance along its ray (m): an anchor on its own range, every other joint within the region
-    span = {j: tuple(v / g[j] for v in ranges.get(j, (near, far))) for j in np.flatnonzero(seen)}
-    span = _consistent(span, u) or span
+    # each seen joint's ray points (distance along the ray, m): an anchor's within its own range, every joint's
+    # within e of the region that holds him
+    span = {}
+    for j in np.flatnonzero(seen):
+        lo, hi = max(near - e, 0.0), far + e
+        if j in ranges:
+            lo, hi = max(lo, ranges[j][0]), min(hi, ranges[j][1])
+        if lo > hi:  # an anchor's ray never comes near where the others hold him
+            return None
+        span[j] = (lo / g[j], hi / g[j])
     joints = np.array(sorted(span))
     lo, hi = np.array([span[j] for j in joints]).T
     t = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, RAY_MAX_SAMPLES)[None, :]    # (J, S)
-    half = 0.5 * (hi - lo) / (RAY_MAX_SAMPLES - 1)  # every point of a segment is within this of a sample
+    half = 0.5 * (hi - lo) / (RAY_MAX_SAMPLES - 1) + e  # every joint is within this of a sample of its ray
     pts = o + t[..., None] * u[joints][:, None, :]                                             # (J, S, 3)
     c = point_clearance_m(pts.reshape(-1, 3), capsules).reshape(t.shape) - half[:, None]
     clear = np.full(17, -np.inf)
     clear[joints] = c.min(axis=1)
-    # where he stands, for the retraction's direction: the middle of his anchors' segments (the point of his
-    # segments nearest the arm may lie beyond it, the far end of a ray that passes the arm)
-    anchored = np.isin(joints, list(ranges))
-    stands = (o + 0.5 * (lo + hi)[anchored, None] * u[joints[anchored]]).mean(axis=0) if placed else None
+    # where he stands, for the retraction's direction: the middle of his feet's segments
+    on_feet = np.isin(joints, [j for j in feet if j in ranges])
+    stands = (o + 0.5 * (lo + hi)[on_feet, None] * u[joints[on_feet]]).mean(axis=0) if on_feet.any() else None
     # every joint stands over the floor within an anchor group's extent of where it stands (the arm seen from above)
     flat = np.array([1.0, 0.0, 1.0])
     a, b, r = capsules
@@ -1170,50 +1226,6 @@ def ray_separation_m(rays: PersonRays, capsules, zones: ZoneParams):
     d = min(float((joint - BODY_RADII_M).min()),
             float((limb - 0.5 * (BODY_RADII_M[a_] + BODY_RADII_M[b_])).min()))
     return d, stands
-
-
-def _consistent(span: dict, u: np.ndarray, passes: int = 3) -> dict | None:
-    """Each seen joint's interval of distance along its ray (``span``: joint -> (lo, hi) m; ``u``
-    the rays' unit directions, all from the camera centre) narrowed to where a related seen joint
-    is within the bones between them (``JOINT_REACH_M``). Related: each seen joint and its nearest
-    seen ancestor in the skeleton (``PARENTS``), both ways, every pair at once, ``passes`` times: a
-    chain from the ankles up to the wrists. Within one ray's interval the points near enough to
-    another ray's segment are an interval again (the distance is convex), found on
-    ``RAY_MAX_SAMPLES`` samples and widened by half their spacing (the distance changes no faster
-    than the point moves). None when that leaves a joint nothing (the keypoints contradict a body:
-    a swapped or stray keypoint): nothing is narrowed then."""
-    joints = sorted(span)
-    first, second = [], []
-    for j in joints:
-        k = PARENTS[j]
-        while k >= 0 and k not in span:
-            k = PARENTS[k]
-        if k >= 0:
-            first += [j, k]
-            second += [k, j]
-    if not first:
-        return span
-    i_, k_ = np.array(first), np.array(second)
-    lo, hi = np.full(17, np.nan), np.full(17, np.nan)
-    lo[joints], hi[joints] = zip(*(span[j] for j in joints))
-    cos = (u[i_] * u[k_]).sum(axis=1)[:, None]
-    reach = JOINT_REACH_M[i_, k_][:, None]
-    frac = np.linspace(0.0, 1.0, RAY_MAX_SAMPLES)[None, :]
-    for _ in range(passes):
-        t = lo[i_][:, None] + (hi[i_] - lo[i_])[:, None] * frac
-        s_ = np.clip(t * cos, lo[k_][:, None], hi[k_][:, None])   # the nearest point of the other's segment
-        gap = np.sqrt(np.maximum(t * t + s_ * s_ - 2 * t * s_ * cos, 0.0))
-        h = 0.5 * (t[:, 1] - t[:, 0])
-        keep = gap <= reach + h[:, None]
-        if not keep.any(axis=1).all():
-            return None
-        new_lo = np.where(keep, t, np.inf).min(axis=1) - h
-        new_hi = np.where(keep, t, -np.inf).max(axis=1) + h
-        np.maximum.at(lo, i_, new_lo)
-        np.minimum.at(hi, i_, new_hi)
-        if (lo[joints] > hi[joints]).any():
-            return None
-    return {j: (float(lo[j]), float(hi[j])) for j in joints}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1301,27 +1313,81 @@ def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: Re
     return _retraction(target, limits, tool_yaw_rad, held_yaw_rad)
 
 
-def escape_retraction(effector_m, head: HeadEstimate, tool_yaw_rad: float | None,
-                      escape_deg: float, side: float | None = None) -> Retraction | None:
-    """Someone stands within reach of an arm that has retracted as far as Eq. 6 takes it: the arm
-    turns about the base's axis, as a whole (the hand's target and the tool's yaw turned by the same
-    angle: for the arm, its first joint alone), until its hand's bearing is ``escape_deg`` from his,
-    on the side it is on already (never across in front of him), or on ``side`` (+1 or -1: the
-    sign of the hand's bearing less his). None when it is that far already (within 15 deg) or
-    where the tool points is unknown."""
-    eff = np.asarray(effector_m, float)
-    if tool_yaw_rad is None:
+def turned_capsules(capsules, turn_rad: float):
+    """The arm's ``capsules`` turned about the base's axis (the robot frame's y) by ``turn_rad``: its
+    first joint (j0) turned alone, every link with it. A positive turn raises a point's bearing
+    ``atan2(x, z)`` (the tool's yaw turns with it)."""
+    a, b, r = capsules
+    rot = _base_rotations([turn_rad])[0]
+    return a @ rot.T, b @ rot.T, r
+
+
+def _base_rotations(turns_rad) -> np.ndarray:
+    """(n, 3, 3) rotations about the robot frame's y axis, each raising a bearing ``atan2(x, z)`` by its turn."""
+    t = np.asarray(turns_rad, float)
+    c, s_ = np.cos(t), np.sin(t)
+    one, zero = np.ones_like(t), np.zeros_like(t)
+    return np.stack([np.stack([c, zero, s_], -1), np.stack([zero, one, zero], -1), np.stack([-s_, zero, c], -1)], -2)
+
+
+SAWYER_J0_RANGE_RAD = math.radians(170.0)
+"""The escape turns the Sawyer's first joint within this of zero either way (rad): its description's
+limits are +-3.0503 rad (174.8 deg), and an IK goal at the limit is refused."""
+
+
+def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, min_gain_m: float,
+                     dip_m: float, max_turn_deg: float, reach_m: float = math.inf) -> float | None:
+    """The turn of the base (rad, j0 alone) that takes the arm (``capsules``, where it is now) clearest of
+    everyone in ``people`` (each his body spheres, (centres (n, 3), radii (n,)), robot frame, as the
+    monitor accounts for him: :meth:`HazardMonitor.escape_people`), or None when none gains
+    ``min_gain_m`` of separation from the nearest. Candidates: every ``step_deg`` both ways, up to
+    ``max_turn_deg`` from here and within :data:`SAWYER_J0_RANGE_RAD` of j0's zero (``j0_rad`` None: not
+    known, the first bound alone). Each is scored by the smallest whole-body separation from anyone at
+    its end; a direction is given up where its sweep passes more than ``dip_m`` nearer anyone than he
+    is now or than ``reach_m`` (``[zones] reach_retract_m``), whichever is nearer, each person against
+    his own separation (the joint-space path of a j0-only goal is that sweep: a side chosen by the
+    hand's ground distance at the end alone turned the arm across a worker, hard:40 seed 5, hard_012;
+    a rule on the nearest alone let the sweep close on a second one). Ties go to the sweep whose
+    closest pass is clearer."""
+    if not people:
         return None
-    g, p = ground(eff), ground(head.position_m)
-    bearing_e, bearing_p = math.atan2(g[0], g[1]), math.atan2(p[0], p[1])
-    off = math.remainder(bearing_e - bearing_p, 2 * math.pi)
-    turn = math.copysign(math.radians(escape_deg), side if side else off if off != 0 else 1.0) - off
-    if abs(turn) < math.radians(15.0):
-        return None
-    c, s_ = math.cos(turn), math.sin(turn)
-    target = eff.copy()
-    target[[0, 2]] = (c * g[0] + s_ * g[1], -s_ * g[0] + c * g[1])
-    return Retraction(target, tool_yaw_rad + turn)
+    centres = np.concatenate([c for c, _ in people])
+    radii = np.concatenate([r for _, r in people])
+    starts = np.cumsum([0] + [len(r) for _, r in people[:-1]])  # each person's spheres are contiguous
+    step = math.radians(step_deg)
+
+    def per_person(clear: np.ndarray) -> np.ndarray:
+        """(..., spheres) clearances -> (..., people) separations."""
+        return np.minimum.reduceat(clear, starts, axis=-1)
+
+    here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
+    floor = np.minimum(here, reach_m) - dip_m
+    best = None  # (end separation, closest pass, turn)
+    for sign in (1.0, -1.0):
+        room = math.radians(max_turn_deg)
+        if j0_rad is not None:
+            room = min(room, SAWYER_J0_RANGE_RAD - sign * j0_rad)
+        n = int(math.floor(room / step + 1e-9))
+        if n < 1:
+            continue
+        turns = sign * step * np.arange(1, n + 1)
+        # turning the arm by a is turning everyone by -a about the same axis: one call for every candidate
+        moved = np.einsum("kij,nj->kni", _base_rotations(-turns), centres)
+        d = per_person(point_clearance_m(moved.reshape(-1, 3), capsules).reshape(n, -1) - radii[None])  # (n, P)
+        passed = np.minimum.accumulate(d, axis=0)
+        end, closest = d.min(axis=1), passed.min(axis=1)
+        for k in range(n):
+            if (passed[k] < floor).any():
+                break  # the sweep from here on passes nearer someone than he is now
+            if end[k] >= here.min() + min_gain_m and (best is None or (end[k], closest[k]) > best[:2]):
+                best = (float(end[k]), float(closest[k]), float(turns[k]))
+    return None if best is None else best[2]
+
+
+def turned_retraction(effector_m, tool_yaw_rad: float, turn_rad: float) -> Retraction:
+    """The hand's target and the tool's yaw of the arm turned about the base's axis by ``turn_rad``
+    (:func:`turned_capsules`): the same height, the same distance from the axis."""
+    return Retraction(_base_rotations([turn_rad])[0] @ np.asarray(effector_m, float), tool_yaw_rad + turn_rad)
 
 
 def radial_retraction(effector_m, zones: ZoneParams, limits: RetractLimits, tool_yaw_rad: float | None,

@@ -33,7 +33,10 @@ LEVEL2     ``retract(P_eff + L)`` on entry (Eq. 6; again when it  red, 4000 Hz 8
            by :mod:`edge_runtime.robot.hazard`; if the
            controller reports it unreachable, one retraction
            straight toward the base, and if that is refused too:
-           ``stop()`` (``retract_unreachable``)
+           ``stop()`` (``retract_unreachable``); someone within
+           reach of the folded or stopped arm: a turn about the
+           base to where it is clearest (planned again while
+           level 2 lasts, ``escape_*``)
 FAULT      ``stop()`` (pose stale / invalid / no pose yet, or a    yellow
            person in view never lifted validly)
 =========  =====================================================  ==================
@@ -85,12 +88,13 @@ from edge_runtime.robot.hazard import (
     ZoneParams,
     arm_capsules,
     body_spheres,
+    effector_capsule,
     enough_joints,
     eq6_retraction,
-    escape_retraction,
-    ground,
+    plan_escape_turn,
     radial_retraction,
     separation_m,
+    turned_retraction,
 )
 from edge_runtime.robot.rays import lifter_rays
 
@@ -142,7 +146,31 @@ class LoopParams:
     where the retraction began), is replaced by the retraction straight toward the base, and that
     one by a stop: the controller moves its joints along a straight line to its IK solution, and a
     far solution swings the hand through the cell (hard:200 seed 3, hard_109: toward a passing
-    worker, 0.081 m)."""
+    worker, 0.081 m). An escape turn that does so is stopped and planned again from where it stopped
+    (holding it to ``escape_dip_m`` instead stopped turns as they began, over and over, and left the
+    arm half folded by a worker: hard:200 seed 13, hard_064)."""
+    escape_step_deg: float = config.setting(5.0, config.within(0.5, 30, "deg"))
+    """whole_body: the escape turn (``[zones] escape_deg``) weighs turns of the base every this many
+    degrees both ways (deg): at 1 m from the axis 5 deg is 0.09 m of sweep between two candidates."""
+    escape_min_gain_m: float = config.setting(0.05, config.within(0, 1, "m"))
+    """whole_body: the arm turns only to where its separation from everyone is at least this much (m)
+    larger than now: a smaller gain is within keypoint noise and not worth moving for."""
+    escape_dip_m: float = config.setting(0.02, config.within(0, 0.2, "m"))
+    """whole_body: an escape turn may pass at most this much (m) nearer anyone than he is from the arm
+    now on its way (candidates are weighed every ``escape_step_deg``, so a sweep's closest pass is
+    known to a few cm); a turn that would pass nearer is not taken."""
+    escape_turn_max_deg: float = config.setting(30.0, config.within(1, 180, "deg"))
+    """whole_body: one escape command turns the base at most this far (deg) toward the planned end; the
+    rest is planned again from where the arm then is. The controller reaches a turned hand target by
+    its own IK, and the larger the turn the further that strays from turning the first joint alone
+    (0.05-0.08 m of arm at 30 deg, 0.2-0.28 m at 90 deg; a +165 deg target was reached by turning
+    -128 deg, the other way round)."""
+    escape_replan_s: float = config.setting(0.5, config.within(0.05, 5, "s"))
+    """whole_body: while level 2 lasts and someone is within ``[zones] reach_retract_m``, the escape is
+    planned again from where the arm is once its last turn or retraction is done or it was stopped,
+    at most this often (s), whether or not the last plan found a turn: an arm stopped half folded on a
+    worker's side stood there while he reached into it (hard:40 seed 5, hard_012), where turned about
+    its base it cleared him."""
     retract_max_radius_m: float = config.setting(0.7, config.POSITIVE)
     """Retraction targets further than this from the base's axis (ground distance, m) are
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
@@ -243,8 +271,17 @@ class LoopCounters:
     """Speed overrides sent (whole-body speed scaling)."""
     unseen: int = 0
     """People in a frame whose lift was invalid (each judged from his last valid pose)."""
+    bounds_refused: int = 0
+    """Lost people's ray bounds not heard because their track says they cannot be that far
+    (``HazardMonitor.bounds_refused``)."""
     backfired: int = 0
-    """Retractions replaced by a stop because they carried the arm toward someone (``retract_backfire_m``)."""
+    """Retractions (escape turns included) replaced by a stop because they carried the arm toward someone
+    (``retract_backfire_m``)."""
+    escapes: int = 0
+    """whole_body: escape turns about the base commanded (``[zones] escape_deg``)."""
+    escapes_stopped: int = 0
+    """Escape turns stopped because they carried the arm toward someone (``retract_backfire_m``) or the arm
+    refused them."""
 
 
 @dataclass
@@ -314,7 +351,8 @@ class RobotLoop:
         self._retract_fallback = False
         self._retract_distance_m = math.inf
         self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
-        self._escaped = False  # this level 2 has turned the arm about its base once already
+        self._escape_s = -math.inf  # when this level 2 last planned an escape turn (clock, s)
+        self._escaping = False  # the retraction under way is an escape turn
         self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
@@ -479,6 +517,7 @@ class RobotLoop:
         m = self.monitor
         reason = "retract_unreachable" if self._unreachable and m.state == State.LEVEL2 else m.reason
         self.counters.stale = m.stale_events
+        self.counters.bounds_refused = m.bounds_refused
         return {"state": m.state.name, "reason": reason, "link": self.link_state,
                 "link_error": self.link_error, "command_alarm": self.command_alarm, "fault": self.fault,
                 "waypoint": self._waypoint, **vars(self.counters)}
@@ -625,24 +664,38 @@ class RobotLoop:
 
     def _desired_motion(self, state: State, decision: Decision) -> Motion:
         if state == State.NORMAL:
-            self._retract, self._retract_seq, self._unreachable, self._escaped = None, None, False, False
+            self._end_level2()
             return self._task_motion()
         if state == State.LEVEL2:
             escape = self._escape(decision)
             if escape is not None or self._retract is None or self._retract_again(decision):
-                self._escaped |= escape is not None
                 self._retract = escape or self._retract_motion(decision)
+                self._escaping = escape is not None
                 self._retract_fallback = False
                 self._retract_distance_m = decision.distance_m
                 self._retract_q0 = self._last_q
             elif self._retract_backfires():
-                # the straight way toward the base once (the unreachable retraction's fallback), then a stop
                 self.counters.backfired += 1
-                self._retract = STOP if self._retract_fallback else self._radial_retract()
-                self._retract_fallback, self._retract_q0 = True, self._last_q
+                if self._escaping:
+                    # the turn carried the arm toward someone (the controller's IK need not turn the first
+                    # joint alone, or he moved): stopped where it is, planned again from there (_escape)
+                    self.counters.escapes_stopped += 1
+                    self._retract, self._escaping = STOP, False
+                else:
+                    # the straight way toward the base once (the unreachable retraction's fallback), then a
+                    # stop. The tool keeps the given-up retraction's yaw: holding the yaw it had on the way
+                    # gave the controller another fold, which swung the elbow out and stopped the arm half
+                    # folded between two workers passing it (hard:200 seed 13 hard_023, seed 11 hard_106)
+                    self._retract = STOP if self._retract_fallback else self._radial_retract()
+                    self._retract_fallback, self._retract_q0 = True, self._last_q
             return self._retract
-        self._retract, self._retract_seq, self._unreachable, self._escaped = None, None, False, False
+        self._end_level2()
         return STOP
+
+    def _end_level2(self) -> None:
+        """Level 2 is over: no retraction, escape or refusal carries over to the next one."""
+        self._retract, self._retract_seq, self._unreachable, self._escape_s = None, None, False, -math.inf
+        self._escaping = False
 
     def _task_motion(self) -> Motion:
         p = self.params
@@ -674,35 +727,47 @@ class RobotLoop:
         return nxt.kind is MotionKind.RETRACT and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
 
     def _escape(self, decision: Decision) -> Motion | None:
-        """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done (Eq. 6
-        takes it no further: it stops short of the base's axis) or was stopped makes the arm turn
-        about its base, away from him (:func:`edge_runtime.robot.hazard.escape_retraction`), once
-        while in level 2: a worker who stands at the cell and reaches for the tool reached the
-        folded arm in front of him (hard:200 seed 3, hard_101 0.033 m, hard_195 0.061 m). None
-        otherwise."""
-        r, z = self._retract, self.zones
-        if (z.separation != "whole_body" or z.escape_deg <= 0 or r is None or self._escaped or self._unreachable
-                or self._last_effector is None or decision.head is None or decision.distance_m > z.reach_retract_m):
+        """whole_body: someone within ``reach_retract_m`` of an arm whose retraction (or escape turn) is
+        done (Eq. 6 takes it no further: it stops short of the base's axis) or that was stopped makes
+        the arm turn about its base to where it is clearest of everyone accounted for, on its own
+        model (:func:`edge_runtime.robot.hazard.plan_escape_turn`: the links from the joint angles it
+        reports, the end effector alone before it has reported any): a worker who stands at the cell
+        and reaches for the tool reached the folded arm in front of him (hard:200 seed 3, hard_101
+        0.033 m, hard_195 0.061 m). One command turns it at most ``escape_turn_max_deg`` toward the planned
+        end; planned again while level 2 lasts, at most every ``escape_replan_s`` (a plan that found
+        nothing too: each costs milliseconds of the frame). None otherwise (nothing gains
+        ``escape_min_gain_m``, or someone known only by his rays is within reach:
+        :meth:`edge_runtime.robot.hazard.HazardMonitor.escape_people`)."""
+        r, z, p = self._retract, self.zones, self.params
+        if (z.separation != "whole_body" or z.escape_deg <= 0 or r is None or self._unreachable
+                or self._last_effector is None or self._last_yaw is None or decision.head is None
+                or decision.distance_m > z.reach_retract_m):
             return None
-        # after a retraction that is done, or one that was stopped (it carried the arm toward someone)
+        # after a retraction or turn that is done, or one that was stopped (it carried the arm toward someone)
         if r.kind is MotionKind.RETRACT and np.linalg.norm(self._last_effector - r.position_m) \
-                > self.params.waypoint_tolerance_m:
+                > p.waypoint_tolerance_m:
             return None
-        # either way round, whichever takes the hand furthest from everyone (on the ground); never one that
-        # takes it nearer anyone than it is (a colleague on the other side: hard:200 seed 1, hard_163)
-        people = [ground(decision.head.position_m)[None], *(ground(b[np.isfinite(b).all(axis=1)]).reshape(-1, 2)
-                                                              for b in map(np.atleast_2d, self.monitor.bodies()))]
-        gap = lambda p: min(float(np.linalg.norm(q - ground(p), axis=1).min()) for q in people)  # noqa: E731
-        best, here = None, gap(self._last_effector)
-        for side in (1.0, -1.0):
-            e = escape_retraction(self._last_effector, decision.head, self._last_yaw, z.escape_deg, side)
-            if e is not None and gap(e.position_m) > here and (best is None or gap(e.position_m) > gap(best.position_m)):
-                best = e
-        return None if best is None else Motion(MotionKind.RETRACT, _vec3(best.position_m),
-                                                self.params.task_pitch_rad, best.yaw_rad)
+        now = self.clock()
+        if now - self._escape_s < p.escape_replan_s:
+            return None
+        self._escape_s = now
+        q = self._last_q
+        caps = arm_capsules(q) if q is not None else effector_capsule(self._last_effector)
+        most = math.radians(p.escape_turn_max_deg)
+        a, b, radii = caps  # the arm's farthest point from the base's axis, and how far one turn carries it
+        arm_radius_m = float(np.hypot(np.r_[a[:, 0], b[:, 0]], np.r_[a[:, 2], b[:, 2]]).max() + radii.max())
+        people = self.monitor.escape_people(sweep_m=2.0 * arm_radius_m * math.sin(0.5 * most))
+        if not people:
+            return None
+        turn = plan_escape_turn(caps, people, None if q is None else float(q[0]), p.escape_step_deg,
+                                p.escape_min_gain_m, p.escape_dip_m, z.escape_deg, z.reach_retract_m)
+        if turn is None:
+            return None
+        self.counters.escapes += 1
+        return self._retraction(turned_retraction(self._last_effector, self._last_yaw, min(max(turn, -most), most)))
 
     def _retract_backfires(self) -> bool:
-        """Has the retraction under way brought the arm ``retract_backfire_m`` closer to anyone
+        """Has the retraction (or escape turn) under way brought the arm ``retract_backfire_m`` closer to anyone
         within the retraction's reach, by its own motion? (Everyone the monitor accounts for, at his
         last valid body, against the arm where it is now and where the retraction began.)"""
         r, q0, q = self._retract, self._retract_q0, self._last_q
@@ -741,10 +806,14 @@ class RobotLoop:
 
     def _retract_refused(self) -> None:
         """The controller (or the link) refused the retraction: try the radial fallback once,
-        then stop (reason ``retract_unreachable``)."""
+        then stop (reason ``retract_unreachable``). A refused escape turn is a stop, and the turn is
+        planned again from there (:meth:`_escape`): it is not the retraction that got nowhere."""
         self.counters.unreachable += 1
         self._retract_seq = None
-        if self._retract_fallback:
+        if self._escaping:
+            self.counters.escapes_stopped += 1
+            self._retract, self._escaping = STOP, False
+        elif self._retract_fallback:
             self._unreachable = True
             self._retract = STOP
         else:

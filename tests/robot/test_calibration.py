@@ -193,6 +193,10 @@ def test_degenerate_inputs_are_refused():
     line = np.stack([heads[0], heads[1], 2 * heads[1] - heads[0]])
     with pytest.raises(CalibrationError, match="collinear"):  # the lifted positions' fits (pnp uses rays only)
         fit(line, ankles, CalibrationParams(method="rigid"))
+    with pytest.raises(CalibrationError, match="misses a marker's ray"):  # pnp: by its residuals
+        fit(line, ankles, CalibrationParams(method="pnp"))
+    with pytest.raises(CalibrationError, match="misses a marker's ray"):  # two markers' stands swapped
+        fit(heads[[0, 2, 1]], ankles, CalibrationParams(method="pnp"))
     bad = heads.copy()
     bad[1, 0] = np.nan
     with pytest.raises(CalibrationError, match="non-finite"):

@@ -6,12 +6,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from support.robot import EFF, FPS, HEAD_Y, head_at
+from support.robot import EFF, FPS, HEAD_Y, anchored_worker, head_at
 
 from edge_runtime.robot.hazard import (
     ARM_LINK_RADII_M,
     JOINT_REACH_M,
     MIRROR,
+    RAY_KEYPOINT_ERROR_M,
     REQUIRED_JOINTS,
     HazardMonitor,
     HeadEstimate,
@@ -26,14 +27,16 @@ from edge_runtime.robot.hazard import (
     body_spheres,
     effector_capsule,
     eq6_retraction,
-    escape_retraction,
     limit_turn,
+    plan_escape_turn,
     radial_retraction,
     ray_separation_m,
     retract_direction,
     separation_m,
     step_outside_radius,
     tool_yaw_toward_base,
+    turned_capsules,
+    turned_retraction,
 )
 
 DISSERTATION = ZoneParams(retract_time_s=1.0, separation="head")  # the dissertation's head-to-effector zones
@@ -602,7 +605,10 @@ def rays_of(body, camera_m=CAMERA_M, hide=()):
     return PersonRays(np.asarray(camera_m, float), d, FLOOR_Y)
 
 
-def test_the_ray_bound_never_exceeds_the_true_separation():
+@pytest.mark.parametrize("keypoint_error_m", [0.0, RAY_KEYPOINT_ERROR_M])
+def test_the_ray_bound_never_exceeds_the_true_separation(keypoint_error_m):
+    """Exact keypoints, and keypoints up to RAY_KEYPOINT_ERROR_M off their joints on the body (a real detector's
+    error: the bound of main before session 12 was above the truth for 1 case in 10 of these)."""
     from firmware_sim.people import human
 
     rng = np.random.default_rng(3)
@@ -621,7 +627,9 @@ def test_the_ray_bound_never_exceeds_the_true_separation():
         cam = np.array([rng.uniform(-4, 4), rng.uniform(0.1, 2.1), rng.uniform(4, 9)])
         hide = rng.choice(17, size=int(rng.integers(0, 5) if rng.random() < 0.6 else rng.integers(13, 17)),
                           replace=False)  # a few joints hidden, or all but one to four (at the picture's edge)
-        bound = ray_separation_m(rays_of(body, cam, hide), caps, WHOLE_BODY)
+        off = rng.normal(size=body.shape)
+        off *= keypoint_error_m * rng.uniform(0, 1, (17, 1)) ** (1 / 3) / np.linalg.norm(off, axis=1, keepdims=True)
+        bound = ray_separation_m(rays_of(body + off, cam, hide), caps, WHOLE_BODY)
         if bound is not None:
             checked += 1
             assert bound[0] <= separation_of(body) + 1e-9
@@ -633,13 +641,14 @@ def test_anchored_rays_bound_a_person_within_his_body_extent_of_where_he_stands(
     body = body_facing_arm(4.0)
     sep = separation_of(body)
     d, point = ray_separation_m(rays_of(body), caps, WHOLE_BODY)
-    # the region reaches toward the arm by at most the body extent plus the ankle band's spread on the floor
-    assert sep - 1.6 < d < sep
+    # the region reaches toward the arm by at most the body extent, the ankle band's spread on the floor and the
+    # keypoints' error (twice: the foot off its ray, the joint off its own)
+    assert sep - WHOLE_BODY.ray_body_extent_m - 2 * RAY_KEYPOINT_ERROR_M - 0.4 < d < sep
     assert point is not None and point[2] > EFF[2]                     # where he stands: his side
     # ankles alone (the rest hidden): looser; no ankle seen: his hips and head bound him
     only_feet = [j for j in range(17) if j not in (3, 6)]
     d_feet, _ = ray_separation_m(rays_of(body, hide=only_feet), caps, WHOLE_BODY)
-    assert sep - WHOLE_BODY.ray_body_extent_m - 0.6 < d_feet < d
+    assert sep - WHOLE_BODY.ray_body_extent_m - 2 * RAY_KEYPOINT_ERROR_M - 0.6 < d_feet <= d
     d_upper, _ = ray_separation_m(rays_of(body, hide=(3, 6)), caps, WHOLE_BODY)
     assert d_upper < sep
     # no ankle, hip, pelvis or head: any joint he shows is between the floor and a raised wrist, the rest within
@@ -673,7 +682,7 @@ def test_a_person_never_lifted_whose_ray_region_reaches_the_protective_distance_
     z = WHOLE_BODY
     v_stop = z.min_speed_fraction * z.iso_robot_speed_mps
     seen = set()
-    for sep in (1.5, 2.0, 2.5, 2.6, 2.7, 2.8, 2.9, 3.0, 4.0, 5.0):
+    for sep in (1.5, 2.0, 2.5, 3.0, 3.2, 3.4, 3.6, 3.8, 4.0, 5.0):
         mon = ready_body(z, 6.0)
         rays = rays_of(body_facing_arm(sep))
         bound = ray_separation_m(rays, effector_capsule(EFF), z)[0]
@@ -708,19 +717,118 @@ def test_a_ray_bound_shrinks_like_a_lost_persons_reachable_set_when_his_rays_sto
     assert d.state == State.LEVEL1 and d.reason.startswith("person_unlifted: 1")
 
 
-def test_the_escape_turns_the_folded_arm_about_its_base_away_from_the_person():
-    person = HeadEstimate(0.0, np.array([0.3, HEAD_Y, 1.4]), np.zeros(3), np.zeros(3))
-    hand = np.array([0.05, 0.14, 0.35])
-    e = escape_retraction(hand, person, 0.2, 120.0)
-    bearing = lambda p: math.degrees(math.atan2(p[0], p[2]))  # noqa: E731
-    off = bearing(e.position_m) - bearing(person.position_m)
-    assert off == pytest.approx(-120.0)                               # on the side the hand was on (left of him)
-    assert np.linalg.norm(e.position_m[[0, 2]]) == pytest.approx(np.linalg.norm(hand[[0, 2]]))
-    assert e.position_m[1] == hand[1]
-    turn = math.radians(bearing(e.position_m) - bearing(hand))
-    assert e.yaw_rad == pytest.approx(0.2 + turn)                     # the whole arm turns: the tool with it
-    assert escape_retraction(e.position_m, person, e.yaw_rad, 120.0) is None   # there already
-    assert escape_retraction(hand, person, None, 120.0) is None      # where the tool points is unknown
+FOLDED_Q = np.array([0.0, -0.3, 0.0, 2.2, 0.0, 0.6, 0.0])
+"""A retracted Sawyer: the hand 0.28 m from the base's axis, the elbow 0.49 m out."""
+
+
+def test_a_turn_of_the_base_is_its_first_joint_alone():
+    caps = arm_capsules(FOLDED_Q)
+    for turn in (0.7, -2.1):
+        q = FOLDED_Q + [turn, 0, 0, 0, 0, 0, 0]
+        for got, want in zip(turned_capsules(caps, turn), arm_capsules(q)):
+            assert np.allclose(got, want, atol=1e-12)
+        hand = arm_points_m(FOLDED_Q)[-2]
+        r = turned_retraction(hand, 0.2, turn)
+        assert np.allclose(r.position_m, arm_points_m(q)[-2], atol=1e-12)   # where the hand goes: j0 turned
+        assert r.yaw_rad == pytest.approx(0.2 + turn)                        # the tool turns with it
+
+
+def spheres(people):
+    """Each person's body spheres, as the planner takes them."""
+    return [body_spheres(p) for p in people]
+
+
+def sweep_m(caps, people, turn_rad, step_deg=0.25):
+    """The separation (m) of each of ``people`` from the arm along its turn about the base, finely sampled:
+    (samples, people)."""
+    turns = np.linspace(0.0, turn_rad, int(abs(math.degrees(turn_rad)) / step_deg) + 2)
+    return np.array([[separation_m(c, r, turned_capsules(caps, a)) for c, r in spheres(people)] for a in turns])
+
+
+@pytest.mark.parametrize("second", [False, True], ids=["alone", "a_colleague_behind_the_base"])
+def test_the_escape_turn_never_sweeps_through_a_worker_standing_at_the_arms_side(second):
+    caps = arm_capsules(FOLDED_Q)
+    hand_bearing = math.degrees(math.atan2(*arm_points_m(FOLDED_Q)[-2][[0, 2]]))
+    turned = 0
+    for bearing in range(-180, 180, 15):   # he stands beside the folded arm, all round it, within reach
+        b = math.radians(hand_bearing + bearing)
+        people = [anchored_worker((0.9 * math.sin(b), 0.9 * math.cos(b)), heading=b + math.pi)]
+        if second:  # and another one 1.6 m out on the far side of the base from him
+            people.append(anchored_worker((-1.6 * math.sin(b), -1.6 * math.cos(b)), heading=b))
+        here = sweep_m(caps, people, 0.0)[0]
+        turn = plan_escape_turn(caps, spheres(people), 0.0, 5.0, 0.05, 0.02, 180.0)
+        if turn is None:
+            continue
+        turned += 1
+        path = sweep_m(caps, people, turn)
+        assert path[-1].min() >= here.min() + 0.05                       # clearer of everyone where it ends
+        assert (path.min(axis=0) >= here - 0.02 - 0.01).all(), bearing  # nobody nearer on its way (0.01: sampling)
+        assert abs(FOLDED_Q[0] + turn) <= math.radians(170.0) + 1e-9
+    assert turned >= 8   # with him in front of the arm or beside it, it turns away
+
+
+def test_the_escape_turn_goes_the_long_way_round_rather_than_across_him():
+    # he stands at the side the arm would turn to first on the short way to the clearest end
+    caps = arm_capsules(FOLDED_Q)
+    hand = arm_points_m(FOLDED_Q)[-2]
+    b = math.atan2(hand[0], hand[2]) + math.radians(70.0)
+    him = anchored_worker((0.9 * math.sin(b), 0.9 * math.cos(b)), heading=b + math.pi)
+    turn = plan_escape_turn(caps, spheres([him]), 0.0, 5.0, 0.05, 0.02, 180.0)
+    assert turn is not None and turn < 0                                  # away from him
+    assert sweep_m(caps, [him], math.radians(70.0)).min() < sweep_m(caps, [him], 0.0)[0, 0] - 0.1  # toward him: nearer
+    # within the joint's range: from j0 at -168 deg the turn away from him has no room, and toward him it passes nearer
+    assert plan_escape_turn(caps, spheres([him]), math.radians(-168.0), 5.0, 0.05, 0.02, 180.0) is None
+    assert plan_escape_turn(caps, [], 0.0, 5.0, 0.05, 0.02, 180.0) is None  # nobody to escape from
+    assert plan_escape_turn(caps, spheres([him]), 0.0, 5.0, 0.05, 0.02, 0.0) is None  # escape_deg 0: never
+
+
+def test_the_escape_plan_counts_a_lost_person_by_how_far_he_can_have_come_and_none_known_by_rays_alone():
+    z = WHOLE_BODY
+    mon = ready_body(z, 6.0)   # worker 0, seen at 6 m until t = -10 + dwell
+    t_seen = mon._last_pose_s
+    (centres, radii), = mon.escape_people(sweep_m=0.65)
+    assert np.allclose(radii, body_spheres(body_facing_arm(6.0))[1])  # seen in the last frame: his body as it is
+    # a frame without him 0.5 s later: lost, each sphere grown by his reach since (lost_person_speed_mps at least)
+    mon.observe(t_seen + 0.5, {}, EFF)
+    (_, grown), = mon.escape_people(sweep_m=0.65)
+    assert np.allclose(grown - radii, 0.5 * z.lost_person_speed_mps)
+    # someone in view whom the lifter never lifted, bounded only by his keypoints' rays, within reach of the arm
+    # or of where the turn carries it: no plan can be shown to clear him in a frame's time, so none is made
+    for sep, sweep_m in ((2.5, 0.0), (3.4, 0.65)):
+        rays = rays_of(body_facing_arm(sep))
+        bound = ray_separation_m(rays, effector_capsule(EFF), z)[0]
+        assert (bound <= z.reach_retract_m) == (sweep_m == 0.0) and bound <= z.reach_retract_m + sweep_m
+        near = ready_body(z, 6.0)
+        near.observe(near._last_pose_s + 0.1, {0: body_facing_arm(6.0)}, EFF, unseen={1: "x"}, rays={1: rays})
+        assert near.escape_people(sweep_m) is None
+        assert len(near.escape_people(0.0 if sweep_m else -1.0)) == 1     # beyond a shorter sweep he does not count
+    # far beyond reach he does not stop the planning
+    far = ready_body(z, 6.0)
+    far.observe(far._last_pose_s + 0.1, {0: body_facing_arm(6.0)}, EFF, unseen={1: "x"},
+                rays={1: rays_of(body_facing_arm(5.0))})
+    assert len(far.escape_people(sweep_m=0.65)) == 1
+
+
+def test_the_escape_turn_keeps_each_worker_as_clear_as_he_is_or_out_of_reach_not_only_the_nearest():
+    caps = arm_capsules(FOLDED_Q)
+    hand = arm_points_m(FOLDED_Q)[-2]
+    b = math.atan2(hand[0], hand[2])
+    him = anchored_worker((0.9 * math.sin(b), 0.9 * math.cos(b)), heading=b + math.pi)   # at the folded arm's front
+    REACH_M = WHOLE_BODY.reach_retract_m  # noqa: N806
+    checked = 0
+    for side in range(30, 181, 10):   # a colleague further out, anywhere round the base
+        for sign in (1, -1):
+            c = b + sign * math.radians(side)
+            colleague = anchored_worker((1.25 * math.sin(c), 1.25 * math.cos(c)), heading=c + math.pi)
+            here = sweep_m(caps, [him, colleague], 0.0)[0]
+            turn = plan_escape_turn(caps, spheres([him, colleague]), 0.0, 5.0, 0.05, 0.02, 180.0, REACH_M)
+            if turn is None:
+                continue
+            checked += 1
+            path = sweep_m(caps, [him, colleague], turn)
+            # neither nearer on its way than he is or than reach_retract_m (0.01: the 5 deg sampling)
+            assert (path.min(axis=0) >= np.minimum(here, REACH_M) - 0.02 - 0.01).all(), (side, sign)
+    assert checked >= 10
 
 
 def test_a_lost_person_in_view_within_reach_by_his_rays_makes_the_arm_retract_away_from_him():
@@ -731,3 +839,24 @@ def test_a_lost_person_in_view_within_reach_by_his_rays_makes_the_arm_retract_aw
     d = mon.observe(2.5, {}, EFF, unseen={0: "missing_joints: left_wrist"}, rays={0: rays_of(body_facing_arm(0.6))})
     assert d.state == State.LEVEL2 and d.worker == 0 and d.head.position_m[2] > EFF[2]
 
+
+
+def test_a_lost_persons_ray_bound_beyond_what_his_track_allows_is_not_heard():
+    z = WHOLE_BODY
+    mon = ready_body(z, 1.42)
+    settle(mon, body_facing_arm(1.42))
+    # his lift goes invalid and his keypoints put him 5 m out a frame later: he cannot have gone that far (a
+    # keypoint on the wrong person, a miscalibrated ray); his reachable set, not that bound, stops the arm
+    far = {0: rays_of(body_facing_arm(5.0))}
+    d = mon.observe(1.0, {}, EFF, unseen={0: "missing_joints: left_hip"}, rays=far)
+    assert d.state == State.LEVEL1 and d.reason.startswith("person_lost")
+    assert mon.bounds_refused == 1
+    # rays his track allows (he stands where he was last lifted) are heard: they keep him off the arm after his
+    # reachable set alone would have stopped it (4.5 m out, that set reaches the protective distance in 1.5 s)
+    mon2 = ready_body(z, 4.5)
+    settle(mon2, body_facing_arm(4.5))
+    same = {0: rays_of(body_facing_arm(4.5))}
+    held = [mon2.observe(1.0 + i / FPS, {}, EFF, unseen={0: "missing_joints: left_hip"}, rays=same)
+            for i in range(int((z.lost_hold_s - 0.1) * FPS))]
+    assert mon2.bounds_refused == 0
+    assert all(d.state == State.NORMAL for d in held)

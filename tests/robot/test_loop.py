@@ -612,12 +612,152 @@ def test_someone_within_reach_of_a_finished_retraction_turns_the_arm_about_its_b
     loop, link, clock = make_whole_body()
     # he walks up to the tool and stays within reach of it (nothing further toward the base helps)
     where = lambda t: at_tool_height(0.8 + (6.0 if t < 2 else max(0.3, 3.0 - 1.5 * (t - 2))))  # noqa: E731
-    drive_poses(loop, link, clock, lambda t: [(0, lifted(where(t)))], 5.0)
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(where(t)))], 9.0)
     retracts = [np.array(c[1]) for c in link.calls if c[0] == "retract"]
-    assert len(retracts) >= 2
+    assert len(retracts) >= 3
     bearing = lambda p: math.degrees(math.atan2(p[0], p[2]))  # noqa: E731
-    first, turned = retracts[0], retracts[1]
+    first, turns = retracts[0], retracts[1:]
     assert abs(bearing(first)) < 1.0                                    # Eq. 6: straight back from him, toward the base
-    assert abs(abs(bearing(turned) - bearing(where(5.0)[0])) - ZoneParams().escape_deg) < 1.0  # then 120 deg from him
-    assert np.linalg.norm(turned[[0, 2]]) == pytest.approx(np.linalg.norm(first[[0, 2]]), abs=1e-6)
-    assert loop.status()["backfired"] == 0
+    # then round the base (the arm as a whole: the same distance from its axis) to where it is clearest of him,
+    # away from him (the fake arm reports no joint angles: its hand stands for it), at most
+    # escape_turn_max_deg (30) a command, each planned again from where the last one ended, all one way
+    steps = np.diff([bearing(p) for p in [first, *turns]])
+    assert (np.abs(steps) <= 30.0 + 1e-6).all() and (np.sign(steps) == np.sign(steps[0])).all()
+    # until he is out of its reach (reach_retract_m): a quarter turn from him here
+    assert abs(bearing(turns[-1]) - bearing(where(9.0)[0])) >= 89.0
+    for turned in turns:
+        assert np.linalg.norm(turned[[0, 2]]) == pytest.approx(np.linalg.norm(first[[0, 2]]), abs=1e-6)
+    assert loop.status()["backfired"] == 0 and loop.status()["escapes"] == len(turns)
+
+
+def at_point(x, z):
+    """(17, 3) joints all at one point at the effector's height (as :func:`at_tool_height`)."""
+    j = np.zeros((17, 3))
+    j[:] = (x, 0.14, z)
+    return j
+
+
+def test_the_escape_is_planned_again_while_level_2_lasts_as_he_walks_round_the_base():
+    loop, link, clock = make_whole_body()
+
+    def where(t):  # up to the tool, then round the base 0.75 m from its axis, within reach of the arm all along
+        if t < 7.0:
+            return at_point(0.0, 6.8 if t < 2 else max(0.75, 3.8 - 1.5 * (t - 2)))
+        a = min(math.pi, 0.9 * (t - 7.0))
+        return at_point(0.75 * math.sin(a), 0.75 * math.cos(a))
+
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(where(t)))], 7.0)
+    before = len(link.calls)
+    frames = drive_poses(loop, link, clock, lambda t: [(0, lifted(where(t)))], 12.0)
+    entry = next(i for i, f in enumerate(frames) if f.state == "LEVEL2")
+    assert all(f.state == "LEVEL2" for f in frames[entry:int(3.5 * 30)])   # one level 2 while he walks round
+    # the turns about the base in it: retractions that keep the hand's distance from the axis and turn the tool
+    # by as much as its bearing (the arm turned as a whole)
+    turns = [(np.array(c[1]), c[3]) for c in link.calls[before:] if c[0] == "retract"]
+    rotations = [(p, y) for (p0, y0), (p, y) in zip(turns, turns[1:])
+                 if abs(np.hypot(p[0], p[2]) - np.hypot(p0[0], p0[2])) < 0.04
+                 and abs(math.remainder(math.atan2(p[0], p[2]) - math.atan2(p0[0], p0[2]) - (y - y0), 2 * math.pi)) < 0.05]
+    assert len(rotations) >= 2
+    bearing = lambda p: math.degrees(math.atan2(p[0], p[2]))  # noqa: E731
+    him = where(12.0)[0]
+    assert abs(math.remainder(math.radians(bearing(turns[-1][0]) - bearing(him)), 2 * math.pi)) > math.radians(90.0)
+
+
+def _backfiring_at(him):
+    """A whole-body loop whose Eq. 6 retraction from ``him`` the controller swings toward him: the arm's
+    postures turned away from him, to his side and at him (each well nearer him than the last), a step
+    that puts the fake arm in one (``to(q, yaw=None)``) and one that drives the loop on and gives the stops
+    and retractions it sent (``drive(t_end)``)."""
+    from dataclasses import replace
+
+    posture = lambda j0: np.array([j0, -0.5, 0.0, 1.2, 0.0, 0.4, 0.0])  # noqa: E731
+    q_away, q_side, q_at = (posture(math.radians(a)) for a in (180.0, 45.0, 0.0))
+    loop, link, clock = make_whole_body()
+
+    def to(q, yaw=None):
+        link._state = replace(link._state, joint_positions_rad=q, **({} if yaw is None else {"yaw_rad": yaw}))
+
+    def drive(t_end):
+        n = len(link.calls)
+        drive_poses(loop, link, clock, lambda t: [(0, lifted(him))], t_end)
+        return [c for c in link.calls[n:] if c[0] in ("stop", "retract")]
+
+    to(q_away)
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(at_point(0.0, 8.0)))], 2.0)
+    return loop, link, (q_away, q_side, q_at), to, drive
+
+
+def test_a_backfired_retraction_falls_back_straight_and_a_stopped_arm_turns_clear_of_him():
+    from edge_runtime.robot.hazard import arm_capsules, body_spheres, separation_m, turned_capsules
+
+    him = at_point(0.0, 1.0)
+    sep = lambda q: separation_m(*body_spheres(him), arm_capsules(q))  # noqa: E731
+    loop, link, (q_away, q_side, q_at), to, drive = _backfiring_at(him)
+    assert sep(q_away) < ZoneParams().reach_retract_m and sep(q_side) < sep(q_away) - 0.2 and sep(q_at) < sep(q_side) - 0.2
+    eq6 = drive(2.2)[0]
+    assert eq6[0] == "retract"
+    # the controller's joint-space path swings the arm toward him, the tool half way through its turn
+    to(q_side, eq6[3] / 2 + 0.3)
+    fallback = drive(2.3)[0]
+    assert loop.status()["backfired"] == 1 and fallback[0] == "retract"
+    # straight toward the base, the tool kept at the given-up retraction's yaw (holding the yaw it had on the way gave
+    # the controller another fold: hard:200 seed 13 hard_023)
+    assert np.hypot(fallback[1][0], fallback[1][2]) < np.hypot(*link.state.ee_position_m[[0, 2]]) - 0.1
+    assert abs(math.remainder(math.atan2(fallback[1][0], fallback[1][2])
+                              - math.atan2(*link.state.ee_position_m[[0, 2]]), 2 * math.pi)) < 1e-6
+    assert fallback[3] == pytest.approx(eq6[3])
+    # the straight retraction swings it nearer still: a stop, then (planned again from where it stopped) a turn
+    # about the base clear of him
+    to(q_at)
+    hand, yaw = link.state.ee_position_m.copy(), link.state.yaw_rad
+    after = drive(2.4)
+    assert loop.status()["backfired"] == 2 and after[0][0] == "stop" and after[1][0] == "retract"
+    target, turned_yaw = np.array(after[1][1]), after[1][3]
+    turn = math.remainder(math.atan2(target[0], target[2]) - math.atan2(hand[0], hand[2]), 2 * math.pi)
+    assert np.hypot(target[0], target[2]) == pytest.approx(np.hypot(hand[0], hand[2])) and target[1] == pytest.approx(hand[1])
+    assert math.remainder(turned_yaw - yaw - turn, 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+    assert abs(turn) <= math.radians(30.0) + 1e-9                       # escape_turn_max_deg a command
+    assert separation_m(*body_spheres(him), turned_capsules(arm_capsules(q_at), turn)) > sep(q_at) + 0.3
+    assert loop.status()["escapes"] == 1
+
+
+def _turning_from(him):
+    """:func:`_backfiring_at` driven to its escape turn (sent at t = 2.4 s)."""
+    loop, link, (_, q_side, q_at), to, drive = _backfiring_at(him)
+    eq6 = drive(2.2)[0]
+    to(q_side, eq6[3])
+    drive(2.3)
+    to(q_at)
+    return loop, link, q_at, to, drive
+
+
+def test_an_escape_turn_that_brings_the_arm_nearer_him_is_stopped_and_planned_again_from_there():
+    from edge_runtime.robot.hazard import arm_capsules, body_spheres, separation_m
+
+    him = at_point(0.0, 1.0)
+    loop, link, q_at, to, drive = _turning_from(him)
+    assert [c[0] for c in drive(2.4)] == ["stop", "retract"] and loop.status()["escapes"] == 1
+    # on its way the controller's IK moves other joints than the base and takes the arm nearer him than where the
+    # turn began, by more than retract_backfire_m
+    nearer = q_at + np.array([0.0, 0.0, -0.2, -0.2, 0.0, 0.0, 0.0])
+    gap = separation_m(*body_spheres(him), arm_capsules(q_at)) - separation_m(*body_spheres(him), arm_capsules(nearer))
+    assert gap > LoopParams().retract_backfire_m
+    to(nearer)
+    link.target = None  # the fake arm stays where it is put
+    assert [c[0] for c in drive(2.5)] == ["stop"] and loop.status()["escapes_stopped"] == 1
+    assert loop.status()["backfired"] == 3     # counted with the retractions' backfires
+    # no straight fallback with the turn's tool yaw: planned again from the stopped posture after escape_replan_s
+    again = drive(3.0)
+    assert again and again[0][0] == "retract" and loop.status()["escapes"] == 2
+
+
+def test_a_refused_escape_turn_is_a_stop_and_the_turn_is_planned_again():
+    loop, link, q_at, to, drive = _turning_from(at_point(0.0, 1.0))
+    link.unreachable_retract = True  # the controller refuses the turned target
+    sent = drive(2.5)
+    assert [c[0] for c in sent] == ["stop", "retract", "stop"]   # no straight fallback with the turn's tool yaw
+    assert loop.status()["escapes_stopped"] == 1 and loop.status()["unreachable"] == 1
+    link.unreachable_retract = False  # it would take a turn again: planned once escape_replan_s has passed
+    again = drive(3.0)
+    assert [c[0] for c in again] == ["retract"] and loop.status()["escapes"] == 2
+    assert loop.status()["reason"] != "retract_unreachable"
