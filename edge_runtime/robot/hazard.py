@@ -1089,7 +1089,7 @@ on a segment 4.7 m long."""
 RAY_MAX_RANGE_M = 30.0
 """Ray segments end this far (ground distance, m) from the camera: further out nobody is near the arm."""
 RAY_KEYPOINT_ERROR_M = 0.25
-"""A keypoint's ray passes within this of its joint (m, on the body): 2.5 times a real detector's
+"""A keypoint's ray passes within this of its joint (m, on the body): 2.3 times a real detector's
 error at the hips, its loosest joint (COCO's keypoint sigma 0.107 at a person's scale of about
 1 m), more than twice its error at the ankles or head. Keypoints are not exact: a bound that takes
 the rays as exact lay above the truth in 166 of 1,968 frames of people lost within 1.5 m of the

@@ -293,7 +293,8 @@ def test_the_shipped_safety_defaults_are_the_validated_ones():
     changes named in :data:`PENDING_REVALIDATION` are let through, and only while validated.json lacks them.
     The record says whether the must-hold (0 collisions in every run) held; it cannot say so while a run
     collided. Session 12 shipped a configuration whose fresh-seed runs had 1 collision (hard:200 MAVLink,
-    seed 17) because the configuration before had 2 on the same seed (CAN): the README reports it as not met."""
+    seed 17) because the configuration before had 2 (CAN) and 3 (MAVLink) on the same seed: the README reports it as
+    not met."""
     rec = json.loads(VALIDATED.read_text())
     box = hrc.load_box()
     now = hrc.safety_config(box)

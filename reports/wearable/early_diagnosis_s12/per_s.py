@@ -3,7 +3,7 @@ capture of the selection cohort (seed 1000; /tmp/s12w/sel.npz from sel_captures.
 
     PYTHONPATH=/work/main nice -n 10 /work/main/.venv/bin/python /work/notes/s12-w/per_s.py /tmp/s12w/sel.npz OUT_PREFIX
 
-Writes OUT_PREFIX_probs.npz (calibrated probs S=1..6, the runtime's classify_prefixes) and OUT_PREFIX.md.
+Writes OUT_PREFIX_probs.npz (calibrated probs S=1..6, the runtime's classify_prefixes) and a markdown table beside it (OUT_PREFIX + ".md").
 Reads the runtime's class weights and per-step thresholds from the shipped config (edge_runtime.config.load()).
 """
 import json

@@ -3,7 +3,7 @@ simulator's per-event detail kept (Phone look_first, Texting position, Drink str
 
     PYTHONPATH=/work/main nice -n 10 /work/main/.venv/bin/python /work/notes/s12-w/sel_captures.py /tmp/s12w/sel.npz
 
-Captures are labelled exactly as models/dataset.windows_from_stream does (the truth event the trigger falls
+Captures are labelled exactly as windows_from_stream in models/dataset.py does (the truth event the trigger falls
 in, [start - 1 s, end], nearest start; else Other), so the counts must equal the selection cohort's test.npz.
 Also saved: the trigger delay (trigger - event start) of every capture of a distraction, and the onset GT windows.
 """
