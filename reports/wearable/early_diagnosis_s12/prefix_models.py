@@ -1,5 +1,5 @@
 """Is the information there? Prefix-only classifiers trained on the TRAINING cohort (cohort seed 0: its
-ground-truth windows and detector captures, reports/wearable/data/{train,test}.npz, what the shipped model
+ground-truth windows and detector captures: the train and test npz files that models/ writes and the shipped model
 trains on) and scored on every capture of the SELECTION cohort (seed 1000, /tmp/s12w/sel.npz). No held-out data.
 
     PYTHONPATH=/work/main nice -n 10 /work/main/.venv/bin/python /work/notes/s12-w/prefix_models.py OUT_PREFIX [--cnn]
