@@ -355,7 +355,8 @@ VALIDATED_KEYS = ("scenario", "link", "seed", "perception", "camera_hz", "max_sp
 def record_validation(out: dict, path: str | Path, command: str) -> dict:
     """Add this run's figures to the validation record at ``path``: one entry per (scenario, link,
     max speed, perception, camera rate), under the run's ``safety_sha256``. A record made for other
-    safety settings is replaced, not mixed: its figures do not validate these."""
+    safety settings is replaced, not mixed: its figures do not validate these. ``must_hold_met``: no
+    run in the record collided."""
     p = Path(path)
     try:
         rec = json.loads(p.read_text())
@@ -369,6 +370,8 @@ def record_validation(out: dict, path: str | Path, command: str) -> dict:
     key = (f"{out['scenario']} {out['link']} {out['max_speed_mps']:g}mps {out['perception']} {out['camera_hz']:g}hz"
            f" {out['protection']}")
     rec["runs"][key] = {**{k: out[k] for k in VALIDATED_KEYS}, "command": command}
+    # the record says whether the must-hold held in every run it holds (tests/sim/test_hrc.py checks the flag)
+    rec["must_hold_met"] = all(r["collisions"] == 0 for r in rec["runs"].values())
     p.write_text(json.dumps(rec, indent=1, sort_keys=True) + "\n")
     return rec
 

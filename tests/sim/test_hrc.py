@@ -236,7 +236,9 @@ def test_a_validation_record_is_kept_per_safety_configuration(tmp_path):
                                                 "safety_sha256": hrc.safety_sha256(shipped)}
     hrc.record_validation(out, rec_path, "cmd a")
     rec = hrc.record_validation({**out, "link": "mavlink"}, rec_path, "cmd b")
-    assert len(rec["runs"]) == 2
+    assert len(rec["runs"]) == 2 and rec["must_hold_met"]
+    collided = hrc.record_validation({**out, "scenario": "hard:200", "collisions": 1}, rec_path, "cmd d")
+    assert len(collided["runs"]) == 3 and not collided["must_hold_met"]   # one run that collided says so
     other = hrc.record_validation({**out, "safety_sha256": "0" * 64}, rec_path, "cmd c")
     assert list(other["runs"]) == ["front can 2mps lifter 30hz speed_scaled"]   # the old figures do not carry over
 
