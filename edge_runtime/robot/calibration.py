@@ -570,14 +570,6 @@ def fit(head_cam_m, ankle_cam_m, params: CalibrationParams = CalibrationParams()
     return cal
 
 
-MAX_PNP_RESIDUAL_M = 0.3
-"""A pnp fit, labelled or not, passes only when every marker target is within this of its ray
-(:meth:`Calibration.residuals_m`). Right fits at a real detector's noise: 0.016-0.066 m (development
-seed 4 of ``firmware_sim head-error``, labelled, 10 placements). Session 12's review: pnp accepted
-collinear head positions (camera 52 deg off, residual 0.41 m) and the heads of two markers swapped
-(56.7 deg off, 1.04 m) that ``rigid`` refuses or would. Without labels the stricter
-:data:`MAX_UNLABELLED_RESIDUAL_M` applies as well."""
-
 
 def _across_rays_m(a_cam_m, b_cam_m) -> float:
     """How far (m) a point moved across the camera's lines of sight from ``a_cam_m`` to
@@ -681,6 +673,13 @@ STAND_GAP_S = 1.0
 """Standing pieces at most this far apart in time whose rays agree are one stand (:func:`segment_stands`):
 a glitch of a quarter second leaves a hole about this long in the half-second medians. The walk between
 two markers 1 m apart moves the rays far more, so different markers are never joined."""
+MAX_PNP_RESIDUAL_M = 0.3
+"""A pnp fit, labelled or not, passes only when every marker target is within this of its ray
+(:meth:`Calibration.residuals_m`). Right fits at a real detector's noise: 0.016-0.066 m (development
+seed 4 of ``firmware_sim head-error``, labelled, 10 placements). Session 12's review: pnp accepted
+collinear head positions (camera 52 deg off, residual 0.41 m) and the heads of two markers swapped
+(56.7 deg off, 1.04 m) that ``rigid`` refuses or would. Without labels the stricter
+:data:`MAX_UNLABELLED_RESIDUAL_M` applies as well."""
 MAX_UNLABELLED_RESIDUAL_M = {"pnp": 0.12, "rigid": 0.6}
 """A fit of three stands found without labels (:func:`_fit_stands`) passes only when its largest residual
 at the markers (:meth:`Calibration.residuals_m`: pnp the target's distance from its ray, rigid the 3-D

@@ -727,9 +727,10 @@ class HazardMonitor:
             speed = max(z.lost_person_speed_mps, seen.speed_mps)
             last = separation_m(*body_spheres(seen.person_m), caps)
             d, point = last - speed * age, None
-            if bounds.get(wid) is not None:  # in view: where his rays say he stands (retract away from it)
-                if bounds[wid][0] <= last + speed * age:
-                    d, point = max(d, bounds[wid][0]), bounds[wid][1]
+            bound = bounds.get(wid)
+            if bound is not None:  # in view: where his rays say he stands (retract away from it)
+                if bound[0] <= last + speed * age:
+                    d, point = max(d, bound[0]), bound[1]
                 else:
                     self.bounds_refused += 1
             out.append((wid, d, speed, point))

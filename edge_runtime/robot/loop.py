@@ -91,6 +91,7 @@ from edge_runtime.robot.hazard import (
     effector_capsule,
     enough_joints,
     eq6_retraction,
+    ground,
     plan_escape_turn,
     radial_retraction,
     separation_m,
@@ -755,7 +756,7 @@ class RobotLoop:
         caps = arm_capsules(q) if q is not None else effector_capsule(self._last_effector)
         most = math.radians(p.escape_turn_max_deg)
         a, b, radii = caps  # the arm's farthest point from the base's axis, and how far one turn carries it
-        arm_radius_m = float(np.hypot(np.r_[a[:, 0], b[:, 0]], np.r_[a[:, 2], b[:, 2]]).max() + radii.max())
+        arm_radius_m = float(np.linalg.norm(ground(np.vstack([a, b])), axis=1).max() + radii.max())
         people = self.monitor.escape_people(sweep_m=2.0 * arm_radius_m * math.sin(0.5 * most))
         if not people:
             return None
