@@ -82,6 +82,33 @@ class ConvLSTM(nn.Module):
         out, (h, _) = self.lstm(f)
         return self.head(self.dropout(out if all_steps else h[-1]))
 
+    def peeks(self, x: torch.Tensor, frames) -> torch.Tensor:
+        """Logits (N, S, len(frames), K) of the decisions on partial sub-windows ("peeks"): for sub-window
+        s and k of ``frames`` (each in 5..33), the first k frames of sub-window s and the state after the
+        s - 1 complete ones. The conv is unpadded, so its first k - 4 outputs are exactly the conv of the
+        truncated sub-window, and its features are their max; one LSTM step from the committed state reads
+        them, and the state it leaves is not kept (the complete sub-window's step is the committed one)."""
+        y = self.features(x)  # (N, S, C, 29)
+        n, s = y.shape[:2]
+        # the committed state before each sub-window: zeros, then the state after 1..S-1 (h and c)
+        h0 = torch.zeros(1, n, self.lstm.hidden_size, dtype=y.dtype)
+        hs, cs = [h0], [h0]
+        h, c = h0, h0
+        for t in range(s - 1):
+            _, (h, c) = self.lstm(y[:, t:t + 1].amax(dim=3), (h, c))
+            hs.append(h)
+            cs.append(c)
+        h_prev = torch.stack(hs, 2).reshape(1, n * s, -1)
+        c_prev = torch.stack(cs, 2).reshape(1, n * s, -1)
+        logits = []
+        for k in frames:
+            if not 5 <= k <= y.shape[3] + 4:
+                raise ValueError(f"a peek needs 5..{y.shape[3] + 4} frames of a sub-window, got {k}")
+            f = y[..., :k - 4].amax(dim=3).reshape(n * s, 1, -1)
+            o, _ = self.lstm(f, (h_prev, c_prev))
+            logits.append(self.head(self.dropout(o[:, 0])).reshape(n, s, -1))
+        return torch.stack(logits, 2)
+
 
 class CNN(nn.Module):
     """Baseline: the same conv stack, pooled per subsequence, then one dense softmax layer."""

@@ -205,14 +205,17 @@ def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int,
         progress: bool = True, augmentation: bool = True, threads: int | None = 1, desc: str = "",
         shift_fwd: int = SHIFT_FWD, schedule_epochs: int | None = None, on_epoch=None,
         step_loss_weights=None, label_smoothing: float = 0.0, focal_gamma: float = 0.0,
-        rot_deg: float = ROT_DEG, time_warp: float = 0.0):
+        rot_deg: float = ROT_DEG, time_warp: float = 0.0, peek_frames=(), peek_loss_weight: float = 0.5):
     """Train ``arch`` on windows X (N, 700, 3) m/s^2 (or already preprocessed, (N, 6, 33, 3)) with labels
     y; returns the model in eval mode. ``lr`` defaults to ``DEFAULT_LR[arch]``. The cosine decay
     spans ``schedule_epochs`` (default ``epochs``): stopping at an epoch the validation chose keeps
     the schedule it was chosen under. ``on_epoch(epoch, model)`` is called after every epoch.
     ``step_loss_weights``: the ConvLSTM's weight of the decision after 1..6 sub-windows (default
     ``STEP_LOSS_WEIGHTS``; the selection compares others). ``label_smoothing``, ``focal_gamma``: see
-    :class:`WeightedLoss`; ``rot_deg``: the rotation augmentation's reach; ``time_warp``: see :func:`augment`."""
+    :class:`WeightedLoss`; ``rot_deg``: the rotation augmentation's reach; ``time_warp``: see :func:`augment`.
+    ``peek_frames``: the ConvLSTM is also supervised on the decisions after the first k frames of every
+    sub-window, k in ``peek_frames`` (:meth:`models.nets.ConvLSTM.peeks`), each weighted
+    ``peek_loss_weight`` on the scale of ``step_loss_weights``."""
     y = np.asarray(y, dtype=np.int64)
     if arch in LDA_FEATURES:
         return LDAClassifier(n_classes, LDA_FEATURES[arch]).fit(X, y)
@@ -228,7 +231,9 @@ def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int,
     opt = torch.optim.Adam(model.parameters(), lr=DEFAULT_LR[arch] if lr is None else lr)
     loss_fn = WeightedLoss(class_weights(y, n_classes), label_smoothing, focal_gamma)
     sw = STEP_LOSS_WEIGHTS if step_loss_weights is None else tuple(float(w) for w in step_loss_weights)
-    step_w = torch.tensor(sw) / sum(sw) if arch == "convlstm" else None
+    peek_frames = tuple(int(k) for k in peek_frames) if arch == "convlstm" else ()
+    total_w = sum(sw) + len(peek_frames) * len(sw) * peek_loss_weight
+    step_w = torch.tensor(sw) / total_w if arch == "convlstm" else None
     sampler = DistributedSampler(range(len(y)), num_replicas=world, rank=rank, shuffle=True, seed=seed)
     rng = np.random.default_rng([seed, rank])  # augmentation differs per rank
     steps_per_epoch = math.ceil(len(sampler) / batch_size)
@@ -253,6 +258,10 @@ def fit(arch: str, X: np.ndarray, y: np.ndarray, n_classes: int, *, epochs: int,
             else:  # deep supervision: the decision after every sub-window
                 steps = net(xb, all_steps=True)  # (B, 6, K)
                 loss = sum(w * loss_fn(steps[:, s], yb) for s, w in enumerate(step_w))
+                if peek_frames:  # and the decisions on partial sub-windows
+                    peeks = model.peeks(xb, peek_frames)  # (B, 6, P, K)
+                    loss = loss + peek_loss_weight / total_w * sum(
+                        loss_fn(peeks[:, s, j], yb) for s in range(peeks.shape[1]) for j in range(len(peek_frames)))
             opt.zero_grad(set_to_none=True)
             loss.backward()
             nn.utils.clip_grad_norm_(model.parameters(), 5.0)

@@ -42,6 +42,26 @@ def test_convlstm_step_decisions_are_the_prefix_decisions():
         torch.testing.assert_close(steps[:, -1], m(x))
 
 
+def test_convlstm_peeks_are_the_truncated_sub_window_decisions():
+    """A peek after k frames of sub-window s is one LSTM step from the state after the s - 1 complete
+    sub-windows on the conv features of those k frames alone; k = 33 is the committed decision."""
+    torch.manual_seed(0)
+    m = build("convlstm", 6).eval()
+    x = torch.randn(4, 6, 33, 3) * 3.0
+    with torch.no_grad():
+        peeks = m.peeks(x, (5, 11, 33))
+        assert peeks.shape == (4, 6, 3, 6)
+        torch.testing.assert_close(peeks[:, :, 2], m(x, all_steps=True))
+        for s in (1, 4):
+            for j, k in enumerate((5, 11)):
+                f = m.features(x[:, :s, :k]).amax(dim=3)  # sub-windows 1..s, each truncated to k frames ...
+                full = m.features(x[:, :s - 1]).amax(dim=3)  # ... of which only the last stays truncated
+                _, (h, _) = m.lstm(torch.cat([full, f[:, -1:]], dim=1))
+                torch.testing.assert_close(peeks[:, s - 1, j], m.head(h[-1]), rtol=1e-5, atol=1e-5)
+        with pytest.raises(ValueError, match="5..33"):
+            m.peeks(x, (4,))
+
+
 # --------------------------------------------------------------------------- training
 
 @pytest.fixture(scope="module")
@@ -78,6 +98,17 @@ def test_deep_supervision_teaches_early_steps(toy):
     assert steps.shape == (6, len(test.y), 4)
     np.testing.assert_allclose(steps[-1], predict(model, test.X), atol=1e-6)
     assert np.mean(steps[2].argmax(1) == test.y) >= 0.8
+
+
+def test_peek_supervision_changes_training_only_when_asked(toy):
+    """fit's peek_frames adds the partial sub-windows' losses; without it the recipe's weights are today's."""
+    kw = dict(epochs=2, seed=0, progress=False, batch_size=32)
+    plain = fit("convlstm", toy.X, toy.y, 4, **kw)
+    again = fit("convlstm", toy.X, toy.y, 4, peek_frames=(), **kw)
+    peeked = fit("convlstm", toy.X, toy.y, 4, peek_frames=(11, 22), **kw)
+    for a, b in zip(plain.parameters(), again.parameters()):
+        assert torch.equal(a, b)
+    assert any(not torch.equal(a, c) for a, c in zip(plain.parameters(), peeked.parameters()))
 
 
 def test_loso_with_captures_recipe_and_calibration(tmp_path, toy):
