@@ -57,6 +57,25 @@ def test_a_withdrawn_false_alert_and_a_repeat_alert_are_counted(tmp_path):
     assert res["scores"]["early"]["repeat_alerts"] == 0 and res["scores"]["early"]["statuses"]["continued"] == 1
 
 
+def test_an_alert_that_reaches_the_driver_during_a_distraction_is_that_distractions():
+    """A capture set off by an Other motion at 40 s holds a Drink that starts 3 s later: its full-window alert
+    (45.99 s) goes out during the Drink. By trigger alone that is a false alert and a missed Drink; the
+    product's scoring counts it for the Drink, 2.99 s after its onset. The early preliminary alert at 41.62 s,
+    before the Drink, stays a false alert either way."""
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS,
+                          min_confidence_by_steps=SCRIPTED_EARLY_THRESHOLDS)
+    acc = step_signal(9000, [1000, 4000])
+    drive = Drive("steps", acc, [{"start_s": 9.5, "end_s": 14.0, "label": "Phone"},
+                                 {"start_s": 43.0, "end_s": 48.0, "label": "Drink"}], "distraction")
+    res = evaluate([drive], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), cfg, progress=lambda _: None)
+    full, full_trigger = res["scores"]["full_window"], res["scores_by_trigger"]["full_window"]
+    assert (full["event_recall"], full["false_alerts"]) == (1.0, 0)
+    assert (full_trigger["event_recall"], full_trigger["false_alerts"]) == (0.5, 1)
+    assert full["onset_to_first_alert_s"]["median"] == pytest.approx(np.median([15.99 - 9.5, 45.99 - 43.0]), abs=1e-3)
+    early = res["scores"]["early"]
+    assert (early["event_recall"], early["false_alerts"]) == (0.5, 1)
+
+
 def test_held_out_drives_mix_baseline_drives_without_distractions():
     drives = list(held_out_drives(hours=0.2, seed=3, baseline_share=0.5, drive_minutes=3))
     assert [d.kind for d in drives] == ["distraction"] * 2 + ["baseline"] * 2
