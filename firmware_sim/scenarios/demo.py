@@ -85,8 +85,9 @@ def _score_and_plot(out: Path, t, acc, events: list[dict], alerts: Path) -> None
     s = score_alerts(decisions, events)
     png = out / "imu_trace.png"
     plot_trace(t, acc, events, decisions, png)
-    print("== scored against the simulator's truth (event level)")
-    print(f"  distractions {s.distractions}, alerts {s.alerts}: recall {s.recall:.2f}, precision {s.precision:.2f}, "
+    print("== scored against the simulator's truth (event level, by trigger: an alert counts for the distraction "
+          "its capture's trigger falls in, from 1 s before its start to its end)")
+    print(f"  distractions {s.distractions}, alerts {s.alerts}: recall {s.recall:.2f}, precision {s.precision:.2f} (by trigger), "
           f"correct class {s.label_accuracy:.2f} of matched alerts")
     (out / "score.json").write_text(json.dumps(s.as_dict(), indent=2))
     print(f"  wrote {png}, {alerts}, {out / 'score.json'}")

@@ -15,9 +15,11 @@ this command refuses (``drive-eval --seed 2`` measures the shipped choice, once)
    per-step confidence (the manifest's thresholds, or one threshold for every early step), the
    earliest step that may alert, two consecutive steps agreeing, the margin over the second class,
    the full window's threshold and the event hold. Each point is the runtime's own decisions
-   (:class:`~edge_runtime.wearable.loop.WearableLoop` on every drive), scored as ``drive-eval``
-   scores them; the model's outputs are computed once per capture and step and kept
-   (:class:`CachedClassifier`), so only the policy is re-run. The operating point is chosen by
+   (:class:`~edge_runtime.wearable.loop.WearableLoop` on every drive), scored by trigger (an alert
+   counts for the distraction its capture's trigger falls in: drive-eval's ``scores_by_trigger``, not
+   its headline, which also credits a frame that went out during a distraction); the model's outputs
+   are computed once per capture and step and kept (:class:`CachedClassifier`), so only the policy is
+   re-run. The operating point is chosen by
    :data:`RULE` and reported with the setting that ships it; ``imu_trace_validation.png`` shows one
    of its preliminary alerts arriving while the distraction is under way.
 
@@ -153,7 +155,9 @@ def decide(drives: list[Drive], classifier, cfg) -> list[list[dict]]:
 
 
 def score(drives: list[Drive], decisions: list[list[dict]]) -> dict:
-    s = ModeScore()
+    """The figures by trigger (drive-eval's ``scores_by_trigger``): what :data:`RULE` selects with, and
+    what the breakdown's false-alert causes and owners (:func:`_owner`) are counted by."""
+    s = ModeScore(attribution="trigger")
     for drive, ds in zip(drives, decisions):
         s.add(drive, ds)
     return s.as_dict()
@@ -621,7 +625,7 @@ def cmd(a) -> int:
         decided = decide(drives, clf, best)
         example = None
         for drive, ds in zip(drives, decided):  # the IMU trace of a preliminary alert during its distraction
-            example = _better_example(example, "early (chosen)", drive, ds, ModeScore().add(drive, ds))
+            example = _better_example(example, "early (chosen)", drive, ds, ModeScore(attribution="trigger").add(drive, ds))
         if example is not None:
             plot_example(example, out / "imu_trace_validation.png")
         b = breakdown(drives, decided, best.detector.pre_frames, best.imu.sample_rate_hz)

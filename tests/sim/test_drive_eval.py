@@ -9,7 +9,7 @@ from support.early_model import NEUTRAL_WEIGHTS, SCRIPTED_EARLY_THRESHOLDS, Scri
 from edge_runtime import config
 from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
 from firmware_sim.__main__ import main
-from firmware_sim.scenarios.drive_eval import Drive, evaluate, held_out_drives, plot_example
+from firmware_sim.scenarios.drive_eval import MODES, Drive, evaluate, held_out_drives, plot_example
 
 
 def _drive():
@@ -55,6 +55,99 @@ def test_a_withdrawn_false_alert_and_a_repeat_alert_are_counted(tmp_path):
     res = evaluate([drive], Scripted({2: ("Phone", 0.95), 6: ("Phone", 0.9)}), held, modes=("early",),
                    progress=lambda _: None)
     assert res["scores"]["early"]["repeat_alerts"] == 0 and res["scores"]["early"]["statuses"]["continued"] == 1
+
+
+def _one_trigger(events, answers, modes=MODES):
+    """A single trigger at 40 s (an Other motion's, unless a distraction starts within 1 s after it): the
+    early preliminary at S = 2 goes out at 41.62 s, at S = 3 at 42.78 s, the full window at 45.99 s."""
+    cfg = config.override(config.load(None), "alerts", event_hold_s=0.0, class_weights=NEUTRAL_WEIGHTS,
+                          min_confidence_by_steps=SCRIPTED_EARLY_THRESHOLDS)
+    drive = Drive("steps", step_signal(9000, [4000]), events, "distraction")
+    return evaluate([drive], Scripted(answers), cfg, modes=modes, progress=lambda _: None)
+
+
+PHONE = {2: ("Phone", 0.95), 6: ("Phone", 0.9)}
+
+
+def _figures(s):
+    return (s["event_recall"], s["detected_by_frame"], s["false_alerts"], s["onset_to_first_alert_s"]["median"])
+
+
+def test_an_alert_that_reaches_the_driver_during_a_distraction_is_that_distractions():
+    """The capture of an Other motion at 40 s holds a Drink from 43 s: its full-window alert (45.99 s) goes
+    out 2.99 s into the Drink. By trigger alone a false alert and a missed Drink; by frame the Drink's, 2.99 s
+    after its onset, though its class (Phone) is wrong. Early: the preliminary (41.62 s) went out before the
+    onset, its confirmation at 45.99 s during the Drink: the event is the Drink's, from the confirmation, as
+    the full window's is (no mode is scored differently for the same capture)."""
+    res = _one_trigger([{"start_s": 43.0, "end_s": 48.0, "label": "Drink"}], PHONE)
+    for mode in MODES:
+        s = res["scores"][mode]
+        assert _figures(s) == (1.0, 1, 0, pytest.approx(2.99, abs=1e-3))
+        assert (s["first_alerts_by_frame"], s["first_alert_class_accuracy"]) == (1, 0.0)
+        assert _figures(res["scores_by_trigger"][mode]) == (0.0, 0, 1, None)
+
+
+@pytest.mark.parametrize("full_window, credited", [(("Other", 0.9), False), (("Phone", 0.9), True)])
+def test_a_withdrawn_alert_during_a_distraction_is_a_false_alert_and_its_miss_reason_stays_by_trigger(
+        full_window, credited):
+    """A preliminary at S = 3 (42.78 s) goes out 1.58 s into a Drink from 41.2 s (the trigger, 40 s, is more
+    than 1 s before it). Withdrawn by its full window, the event is not the Drink's: a false alert (withdrawn)
+    and a missed Drink, as by trigger, whose reason is its own captures' (none: the detector was paused), not
+    the withdrawn capture's. Confirmed instead, the same frame is the Drink's alert, 1.58 s after its onset."""
+    res = _one_trigger([{"start_s": 41.2, "end_s": 48.0, "label": "Drink"}], {3: ("Phone", 0.95), 6: full_window},
+                       modes=("early",))
+    s = res["scores"]["early"]
+    if credited:
+        assert _figures(s) == (1.0, 1, 0, pytest.approx(1.58, abs=1e-3))
+    else:
+        assert _figures(s) == (0.0, 0, 1, None) and s["false_alerts_withdrawn"] == 1
+        assert s["by_class"]["Drink"] == {"distractions": 1, "alerted": 0,
+                                          "no trigger: detector paused by an earlier capture": 1}
+        assert s["by_class"] == res["scores_by_trigger"]["early"]["by_class"]
+
+
+@pytest.mark.parametrize("onset_s, credited", [(45.0, False), (44.8, True)])
+def test_a_frame_is_credited_only_after_one_sub_window_of_the_distraction(onset_s, credited):
+    """The full window's frame at 45.99 s: 0.99 s after a Drink's onset its decision held less than one
+    sub-window (1.155 s) of it, decided on the Other motion before it: a false alert and a miss; 1.19 s after
+    it, the Drink's alert. Early: the preliminary went out before the onset, its confirmation at the same
+    frame, scored alike."""
+    from firmware_sim.scenarios.drive_eval import SUBWINDOW_S
+
+    assert SUBWINDOW_S == pytest.approx(33 / (200 / 7))
+    res = _one_trigger([{"start_s": onset_s, "end_s": 48.0, "label": "Drink"}], PHONE)
+    for mode in MODES:
+        assert _figures(res["scores"][mode]) == ((1.0, 1, 0, pytest.approx(45.99 - onset_s, abs=1e-3)) if credited
+                                                 else (0.0, 0, 1, None))
+
+
+def test_a_frame_just_after_a_distractions_end_is_a_false_alert():
+    res = _one_trigger([{"start_s": 43.0, "end_s": 45.98, "label": "Drink"}], PHONE)
+    for mode in MODES:
+        assert _figures(res["scores"][mode]) == (0.0, 0, 1, None)
+
+
+def test_an_alert_triggered_in_one_distraction_stays_its_own_when_its_frame_goes_out_in_the_next():
+    """The trigger at 40 s falls in a Phone (39.5..41 s), the full-window frame in a Drink (43..48 s): the
+    alert is the Phone's (late, 6.49 s after its onset), not the Drink's, which is missed; early's
+    confirmation in the Drink is an update of the Phone's alert, not a second alert."""
+    res = _one_trigger([{"start_s": 39.5, "end_s": 41.0, "label": "Phone"},
+                        {"start_s": 43.0, "end_s": 48.0, "label": "Drink"}], PHONE)
+    for mode, latency_s in (("full_window", 6.49), ("early", 2.12)):
+        s = res["scores"][mode]
+        assert _figures(s) == (0.5, 0, 0, pytest.approx(latency_s, abs=1e-3))
+        assert (s["first_alert_class_accuracy"], s["first_alerts_after_the_distraction_ended"], s["repeat_alerts"]) == (
+            1.0, 1, 0)
+        assert s["by_class"]["Drink"]["alerted"] == 0
+
+
+def test_mode_score_takes_its_attribution_explicitly():
+    from firmware_sim.scenarios.drive_eval import ModeScore
+
+    with pytest.raises(TypeError):
+        ModeScore()
+    with pytest.raises(ValueError, match="attribution 'time'"):
+        ModeScore(attribution="time")
 
 
 def test_held_out_drives_mix_baseline_drives_without_distractions():

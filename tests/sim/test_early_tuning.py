@@ -57,9 +57,9 @@ def test_decide_is_the_runtime_replay_and_the_cache_asks_the_model_once():
     # shipped earliest_alert_step (2) and counts for no agreement, so the loop does not compute it
     assert asked == 2 * 5
     assert decide(drives, clf, _cfg(earliest_alert_step=3)) != first and model.calls == asked
-    # the same figures as drive-eval's replay through the publisher
+    # the same figures as drive-eval's replay through the publisher (scored by trigger, as early-tune selects)
     replayed = evaluate(drives, Scripted(answers), _cfg(), modes=("early",), progress=lambda _: None)
-    assert score(drives, first) == replayed["scores"]["early"]
+    assert score(drives, first) == replayed["scores_by_trigger"]["early"]
 
 
 def test_breakdown_says_when_the_trigger_came_which_step_alerted_and_what_set_off_false_alerts():

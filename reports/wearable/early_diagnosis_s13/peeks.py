@@ -175,7 +175,7 @@ def policy_decisions(probs, t_trig, points, *, early_from, threshold, full_thres
 
 
 def evaluate_policy(drives, caps, probs, points, **kw):
-    score = ModeScore()
+    score = ModeScore(attribution="trigger")
     for j, d in enumerate(drives):
         idx = [i for i, c in enumerate(caps) if c[0] == j]
         t = [caps[i][1] / 100 for i in idx]

@@ -16,7 +16,7 @@ for seed in (int(s) for s in sys.argv[1].split(",")):
     res = {}
     for mode in ("full_window", "early"):
         mcfg = config.override(cfg, "alerts", decision=mode)
-        scores = {k: ModeScore(detector=cfg.detector) for k in eng}
+        scores = {k: ModeScore(detector=cfg.detector, attribution="trigger") for k in eng}
         n = changed = changed_alert = 0
         examples = []
         for d in drives:
