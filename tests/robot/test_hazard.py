@@ -636,6 +636,63 @@ def test_the_ray_bound_never_exceeds_the_true_separation(keypoint_error_m):
     assert checked > 150
 
 
+def _fitted_camera(rng, method: str):
+    """A camera 3-8 m from the arm and 1-3 m high, looking at the markers, and the calibration the runtime
+    fits for it from a worker on the markers whose lifted depth is off by a real lifter's error (12 % per
+    stand) and each head and ankle 3 cm across its ray: (camera centre, robot -> camera rotation, calibration)."""
+    from edge_runtime.robot.calibration import CalibrationParams, fit, targets
+
+    bearing = rng.uniform(-1.2, 1.2)
+    cam = np.array([6 * math.sin(bearing), FLOOR_Y + rng.uniform(1.0, 3.0), 1.5 + rng.uniform(3, 8) * math.cos(bearing)])
+    f = np.array([0.3, FLOOR_Y + 0.8, 1.5]) - cam
+    f /= np.linalg.norm(f)
+    x = np.cross([0.0, -1.0, 0.0], f)
+    x /= np.linalg.norm(x)
+    R = np.stack([x, np.cross(f, x), f])                          # rows: the camera's x, y (down), z (forward)
+    params = CalibrationParams(method=method)
+    heads, ankles = (((p - cam) @ R.T) for p in targets(params, rng.uniform(1.45, 1.85)))
+    depth = 1 + 0.12 * rng.standard_normal((3, 1))
+    heads, ankles = ((p + 0.03 * rng.standard_normal(p.shape)) * depth for p in (heads, ankles))
+    return cam, R, fit(heads, ankles, params)
+
+
+@pytest.mark.parametrize("method", ["pnp", "rigid"])
+def test_the_ray_bound_through_a_fitted_calibration(method):
+    """The ray bound takes the calibrated camera as exact. The shipped pnp fit, made from the markers' rays,
+    keeps it below the truth for people near the arm; rigid, which leans on the lifter's depths, turns the
+    camera by degrees and puts some of them metres beyond (session 13: 36 of 1,171 through 30 fitted rigid
+    calibrations, up to 2.7 m; 0 of 1,187 with pnp)."""
+    from firmware_sim.people import human
+
+    rng = np.random.default_rng(5)
+    caps = effector_capsule(EFF)
+    over, checked = [], 0
+    for _ in range(12):
+        cam, R, cal = _fitted_camera(rng, method)
+        for _ in range(25):
+            bearing, dist = rng.uniform(-math.pi, math.pi), rng.uniform(0.6, 4.0)
+            body = human.joints(human.Body.from_height(rng.uniform(1.5, 2.0)),
+                                human.Posture(trunk_flexion_deg=rng.uniform(0, 30)),
+                                pelvis_xz_m=(EFF[0] + dist * math.sin(bearing), EFF[2] + dist * math.cos(bearing)),
+                                heading_rad=rng.uniform(-math.pi, math.pi))
+            off = rng.normal(size=body.shape)
+            off *= RAY_KEYPOINT_ERROR_M * rng.uniform(0, 1, (17, 1)) ** (1 / 3) / np.linalg.norm(off, axis=1, keepdims=True)
+            seen_cam = (body + off - cam) @ R.T
+            if (seen_cam[:, 2] < 0.3).any():
+                continue
+            d = seen_cam @ cal.A.T                                   # the runtime's rays: through the fitted pose
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            bound = ray_separation_m(PersonRays(cal.b.copy(), d, FLOOR_Y), caps, WHOLE_BODY)
+            if bound is not None:
+                checked += 1
+                over.append(bound[0] - separation_of(body))
+    assert checked > 200
+    if method == "pnp":
+        assert max(over) <= 1e-9
+    else:  # the check can fail: the fit the product shipped before session 13 fails it
+        assert max(over) > 0.1
+
+
 def test_anchored_rays_bound_a_person_within_his_body_extent_of_where_he_stands():
     caps = effector_capsule(EFF)
     body = body_facing_arm(4.0)
