@@ -98,10 +98,11 @@ class CalibrationParams:
     the rays the runtime later ranges people along, so its floor crossings hold near the markers,
     next to the arm: the head error halves (fresh seed 23: 0.190 / 0.537 m against ``rigid``'s 0.324 /
     1.067 m, median / p95; reports/robot/head_error.md), and the ray bound of a person not lifted,
-    which takes the calibrated camera as exact, stays below the truth (session 13: 0 of 1,187
-    bodies above it through 30 fitted pnp calibrations, against 36 of 1,171 with ``rigid``, up to
-    2.7 m above). ``rigid``'s fit leans on the lifter's depths, which turn it by 4-5 degrees at a
-    real detector's error. Validated in the closed loop in session 13 (reports/hrc/report.md)."""
+    which takes the calibrated camera as exact, stays below the truth (0 of 1,190 bodies above it
+    through 30 fitted pnp calibrations, against 34 of 1,177 with ``rigid``, up to 4.6 m above;
+    reports/robot/ray_bound_s13.md). ``rigid``'s fit leans on the lifter's depths, which turn it by
+    4-5 degrees at a real detector's error. The hrc suites' fresh-seed runs with it:
+    reports/hrc/report.md, Session 13."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)

@@ -241,11 +241,20 @@ def _stats(values) -> dict:
 
 
 STILL_BEFORE_CONTACT_S = 0.5
-"""A collision counts as "arm moving" (``collisions_arm_moving``) unless the arm had stood still for at
-least this long (s, the monitor's prediction horizon) when the worker's body first came within
-``collision_m`` of it. ISO/TS 15066's speed and separation monitoring asks that the robot be at
-standstill when a person reaches it; a worker reaching into an arm that stopped and retracted
-seconds before is that case. Both counts are reported; the issue's must-hold counts every collision."""
+"""A collision counts as "into a standing arm" only if the arm had stood still for at least this long (s)
+when a worker's body first came within ``collision_m`` of it AND did not move at any step while he was that
+close (``arm_moved_in_contact``: a retract that resumes into him, or an arm that swings its links toward him,
+is an arm moving); every other collision counts in ``collisions_arm_moving``. ISO/TS 15066's speed and
+separation monitoring asks that the robot be at standstill when a person reaches it; a worker reaching into
+an arm that stopped seconds before and stays stopped is that case. 0.5 s, a fixed figure rather than the box's
+``predict_s``: the measure must not move with the configuration it judges. Both counts are reported; the
+issue's must-hold counts every collision."""
+
+
+def arm_was_moving(d: dict) -> bool:
+    """Whether a collided scenario's arm moved into the worker (see :data:`STILL_BEFORE_CONTACT_S`)."""
+    still = d.get("arm_still_at_contact_s")
+    return bool(d.get("arm_moved_in_contact", True) or still is None or still < STILL_BEFORE_CONTACT_S)
 
 
 def summarize(results: list[RunResult], settings: dict) -> dict:
@@ -268,8 +277,8 @@ def summarize(results: list[RunResult], settings: dict) -> dict:
         "collisions": sum(d["collision"] for d in det),
         "collided": [d["name"] for d in det if d["collision"]],
         "arm_still_at_contact_s": {d["name"]: d.get("arm_still_at_contact_s") for d in det if d["collision"]},
-        "collisions_arm_moving": sum(d["collision"] and not (d.get("arm_still_at_contact_s") or 0.0) >= STILL_BEFORE_CONTACT_S
-                                     for d in det),
+        "arm_moved_in_contact": {d["name"]: d.get("arm_moved_in_contact") for d in det if d["collision"]},
+        "collisions_arm_moving": sum(d["collision"] and arm_was_moving(d) for d in det),
         "not_run": {d["name"]: d["not_run"] for d in det if "not_run" in d},
         "min_separation_m": min((d["min_separation_m"] for d in ran), default=None),
         "stops": sum(d["stops"] for d in det),
@@ -359,7 +368,7 @@ def run(scenario: str = "dissertation", link: str = "can", seed: int = 0, runtim
 
 
 VALIDATED_KEYS = ("scenario", "link", "seed", "perception", "camera_hz", "max_speed_mps", "scenarios",
-                  "collisions", "collisions_arm_moving", "arm_still_at_contact_s", "not_run", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms",
+                  "collisions", "not_run", "min_separation_m", "stops", "retracts", "false_alarms", "reaction_ms",
                   "protection", "productive_time_share", "false_stops_per_worker_hour")
 
 

@@ -62,13 +62,15 @@ def test_collisions_say_whether_the_arm_was_still_moving(baseline_front):
     stopped, retracted arm) is counted apart from one with the arm moving; both are collisions."""
     moving = {**baseline_front, "name": "moving", "arm_still_at_contact_s": 0.0}
     just = {**baseline_front, "name": "just stopped", "arm_still_at_contact_s": hrc.STILL_BEFORE_CONTACT_S - 0.1}
+    resumed = {**baseline_front, "name": "resumed", "arm_moved_in_contact": True}  # still at first, then into him
     clear = {**baseline_front, "name": "clear", "collision": False, "collision_steps": 0,
-             "first_collision_s": None, "arm_still_at_contact_s": None}
+             "first_collision_s": None, "arm_still_at_contact_s": None, "arm_moved_in_contact": False}
     empty = np.empty(0)
-    out = hrc.summarize([RunResult(s, empty, empty, empty, empty) for s in (baseline_front, moving, just, clear)], {})
-    assert out["collisions"] == 3 and out["collisions_arm_moving"] == 2
-    assert out["arm_still_at_contact_s"] == {baseline_front["name"]: baseline_front["arm_still_at_contact_s"],
-                                             "moving": 0.0, "just stopped": hrc.STILL_BEFORE_CONTACT_S - 0.1}
+    out = hrc.summarize([RunResult(s, empty, empty, empty, empty)
+                         for s in (baseline_front, moving, just, resumed, clear)], {})
+    assert not baseline_front["arm_moved_in_contact"]
+    assert out["collisions"] == 4 and out["collisions_arm_moving"] == 3
+    assert out["arm_still_at_contact_s"]["just stopped"] == hrc.STILL_BEFORE_CONTACT_S - 0.1
 
 
 HEAD_BOX = replace(hrc.load_box(), zones=replace(ZoneParams(), separation="head"))
