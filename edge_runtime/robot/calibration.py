@@ -18,13 +18,13 @@ Two fits, both giving ``p_robot = A @ p_cam + b``:
   a scale per axis and a rotation, exact at the three markers. With noisy inputs the
   three axes are not orthogonal, so the map shears space, and it rests on four points
   only (three heads and one ankle).
-* ``"rigid"`` (default) -- a least-squares similarity (rotation by SVD, one scale,
+* ``"rigid"`` -- a least-squares similarity (rotation by SVD, one scale,
   translation; Umeyama 1991) over all six correspondences, every head and every ankle
   at every marker. It cannot shear, uses twice the data, and its residuals measure
   how well the recording fits. tests/robot/test_calibration.py compares the two on simulated
   cameras with keypoint noise; the rigid fit's head error is the lower of the two. Set ``scale = false`` to keep the lifter's metric scale (a pure rigid
   transform).
-* ``"pnp"`` -- the camera pose from the directions of the six points only
+* ``"pnp"`` (default) -- the camera pose from the directions of the six points only
   (``cv2.solvePnP`` with identity intrinsics on ``(x/z, y/z)``, started from the rigid
   fit): ignores the lifter's depth, which at a real detector's noise turns the rigid fit by
   4-5 degrees (reports/robot/head_error.md). Scale 1, so use it with the ground anchoring.
@@ -92,14 +92,17 @@ class CalibrationParams:
     ankle_height_m: float = config.setting(0.07, config.within(0, 0.2))
     """Height of the ankle joints above the floor (m; 0.039 of body height). The
     dissertation puts the ankle midpoint on the marker (0); this lifts it to the joint."""
-    method: str = "rigid"
-    """"rigid" (SVD similarity over six points, the default), "eq2" (the dissertation's) or
-    "pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1). ``pnp``
-    halves the head error (fresh seed 23: 0.190 / 0.537 m against 0.324 / 1.067 m, median / p95;
-    reports/robot/head_error.md) but has not passed a closed-loop validation: in session 10 with the
-    fused anchoring (fresh hrc seed 11: 2 collisions in hard:200), and in session 12's development
-    runs it added collisions where ``rigid`` had none (reports/hrc/report.md, Session 12), so the
-    validated ``rigid`` stays the default."""
+    method: str = "pnp"
+    """"pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1; the
+    default), "rigid" (SVD similarity over six points) or "eq2" (the dissertation's). ``pnp`` fits
+    the rays the runtime later ranges people along, so its floor crossings hold near the markers,
+    next to the arm: the head error halves (fresh seed 23: 0.190 / 0.537 m against ``rigid``'s 0.324 /
+    1.067 m, median / p95; reports/robot/head_error.md), and the ray bound of a person not lifted,
+    which takes the calibrated camera as exact, stays below the truth (0 of 1,190 bodies above it
+    through 30 fitted pnp calibrations, against 34 of 1,177 with ``rigid``, up to 4.6 m above;
+    reports/robot/ray_bound_s13.md). ``rigid``'s fit leans on the lifter's depths, which turn it by
+    4-5 degrees at a real detector's error. The hrc suites' fresh-seed runs with it:
+    reports/hrc/report.md, Session 13."""
     scale: bool = True
     """rigid only: estimate one scale factor (corrects a lifter's depth-scale bias)."""
     min_frames: int = config.setting(10, config.AT_LEAST_1)

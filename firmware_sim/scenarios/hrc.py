@@ -240,6 +240,23 @@ def _stats(values) -> dict:
     return {"median": round(float(np.median(v)), 4), "p99": round(float(np.percentile(v, 99)), 4), "n": len(v)}
 
 
+STILL_BEFORE_CONTACT_S = 0.5
+"""A collision counts as "into a standing arm" only if the arm had stood still for at least this long (s)
+when a worker's body first came within ``collision_m`` of it AND did not move at any step while he was that
+close (``arm_moved_in_contact``: a retract that resumes into him, or an arm that swings its links toward him,
+is an arm moving); every other collision counts in ``collisions_arm_moving``. ISO/TS 15066's speed and
+separation monitoring asks that the robot be at standstill when a person reaches it; a worker reaching into
+an arm that stopped seconds before and stays stopped is that case. 0.5 s, a fixed figure rather than the box's
+``predict_s``: the measure must not move with the configuration it judges. Both counts are reported; the
+issue's must-hold counts every collision."""
+
+
+def arm_was_moving(d: dict) -> bool:
+    """Whether a collided scenario's arm moved into the worker (see :data:`STILL_BEFORE_CONTACT_S`)."""
+    still = d.get("arm_still_at_contact_s")
+    return bool(d.get("arm_moved_in_contact", True) or still is None or still < STILL_BEFORE_CONTACT_S)
+
+
 def summarize(results: list[RunResult], settings: dict) -> dict:
     """The contract JSON from per-scenario results."""
     ran = [r.summary for r in results if "not_run" not in r.summary]
@@ -259,6 +276,9 @@ def summarize(results: list[RunResult], settings: dict) -> dict:
         "scenarios": len(det),
         "collisions": sum(d["collision"] for d in det),
         "collided": [d["name"] for d in det if d["collision"]],
+        "arm_still_at_contact_s": {d["name"]: d.get("arm_still_at_contact_s") for d in det if d["collision"]},
+        "arm_moved_in_contact": {d["name"]: d.get("arm_moved_in_contact") for d in det if d["collision"]},
+        "collisions_arm_moving": sum(d["collision"] and arm_was_moving(d) for d in det),
         "not_run": {d["name"]: d["not_run"] for d in det if "not_run" in d},
         "min_separation_m": min((d["min_separation_m"] for d in ran), default=None),
         "stops": sum(d["stops"] for d in det),
@@ -412,7 +432,9 @@ def format_table(result: dict) -> str:
         lines.append(f"protection {result['protection']}: productive time share {result['productive_time_share']}, "
                      f"false stops {result['false_stops']}, per walk-by worker-hour "
                      f"{result['false_stops_per_worker_hour']}")
+    moving = result.get("collisions_arm_moving")
     lines.append(f"collisions {result['collisions']}/{result['scenarios']}"
+                 + ("" if moving is None else f" ({moving} with the arm moving)")
                  + (f" (without the runtime {result['baseline']['collisions']}/{result['scenarios']})" if base else "")
                  + f"; reaction (keypoints in -> command on the link) {react}")
     return "\n".join(lines)
@@ -511,7 +533,7 @@ def _one_line(out: dict) -> str:
     r = out["reaction_ms"]
     return (f"hrc: {out['scenarios']} scenarios ({out['scenario']}), {out['link']} link, camera {out['camera_hz']:g} Hz, "
             f"perception {out['perception']}, runtime {'on' if out['runtime'] else 'OFF'}: collisions "
-            f"{out['collisions']}, not run {len(out['not_run'])}, min separation {out['min_separation_m']} m, "
+            f"{out['collisions']} ({out['collisions_arm_moving']} with the arm moving), not run {len(out['not_run'])}, min separation {out['min_separation_m']} m, "
             f"stops {out['stops']}, "
             f"retracts {out['retracts']}, false alarms {out['false_alarms']}, reaction median {r['median']} ms "
             f"p99 {r['p99']} ms; protection {out['protection']}: productive share {out['productive_time_share']}, "

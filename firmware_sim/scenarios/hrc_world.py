@@ -485,6 +485,8 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     frame_i, deliver = 0, t_cap + world.frame_latency_s
     empty_next = 0.0
     min_clear, collision_steps, first_collision = math.inf, 0, None
+    arm_moved_s, arm_still_at_contact_s = -math.inf, None  # when the arm last moved; how long it had been still
+    arm_moved_in_contact = False  # the arm moved at any step a worker was within collision_m of it
     reaction, entries, false_alarms = [], [], []
     true_enter = {State.LEVEL1: None, State.LEVEL2: None}
     act_at = {State.LEVEL1: None, State.LEVEL2: None}
@@ -542,10 +544,14 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
                         c = clearance_m(Jk, centres, r, ee)
                 if c < min_clear:
                     min_clear = c
+                if arm.moving:
+                    arm_moved_s = k * dt
                 if c < world.collision_m:
                     collision_steps += 1
+                    arm_moved_in_contact |= arm.moving
                     if first_collision is None:
                         first_collision = round(k * dt, 3)
+                        arm_still_at_contact_s = round(min(k * dt - arm_moved_s, k * dt), 3)
                 e = ground(ee)
                 level = loop.monitor.level
                 judge_now = level > prev_level and level in radii
@@ -604,6 +610,7 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
         **sc.describe(), "link": link, "runtime": runtime, "perception": percepts[0].name if percepts else "none",
         "camera_hz": world.camera_hz, "latency_ms": round(1000 * world.frame_latency_s, 1),
         "collision": collision_steps > 0, "collision_steps": collision_steps, "first_collision_s": first_collision,
+        "arm_still_at_contact_s": arm_still_at_contact_s, "arm_moved_in_contact": arm_moved_in_contact,
         "min_separation_m": round(min_clear, 4), **diff,
         "false_alarms": int(sum(false_alarms)), "zone_entries": entries,
         "max_state": max_state.name, "command_delay_s": delays,
@@ -659,7 +666,8 @@ def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult
     """A scenario that could not run (the lifter path's calibration was refused for this camera)."""
     summary = {**sc.describe(), "link": link, "runtime": True, "perception": "lifter", "camera_hz": world.camera_hz,
                "latency_ms": round(1000 * world.frame_latency_s, 1), "not_run": why, "collision": False,
-               "collision_steps": 0, "first_collision_s": None, "min_separation_m": None, "stops": 0, "retracts": 0,
+               "collision_steps": 0, "first_collision_s": None, "arm_still_at_contact_s": None,
+               "arm_moved_in_contact": False, "min_separation_m": None, "stops": 0, "retracts": 0,
                "unreachable": 0, "invalid": 0, "false_alarms": 0, "zone_entries": [], "max_state": "NORMAL",
                "command_delay_s": {"LEVEL1": None, "LEVEL2": None}, "reaction_ms": percentiles([]), "frames": 0,
                "head_error_m": percentiles([], 1.0, (50, 95)), "runtime_cpu_share": None, "calibration_scale": None,

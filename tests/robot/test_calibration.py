@@ -120,7 +120,7 @@ def test_save_and_load_keep_everything(tmp_path):
     path = tmp_path / "cal.json"
     cal.save(path)
     data = json.loads(path.read_text())
-    assert data["version"] == 1 and data["method"] == "rigid" and len(data["inputs"]["head_cam_m"]) == 3
+    assert data["version"] == 1 and data["method"] == "pnp" and len(data["inputs"]["head_cam_m"]) == 3
     assert data["worker_height_m"] == pytest.approx(cal.worker_height_m)
     assert set(data["residuals_m"]) == {"head", "ankle"} and data["inputs"]["frames_per_marker"] == [60, 60, 60]
     again = Calibration.load(path)

@@ -636,6 +636,80 @@ def test_the_ray_bound_never_exceeds_the_true_separation(keypoint_error_m):
     assert checked > 150
 
 
+LIFTED_STAND_DEPTH_SD = 0.05
+"""How far (relative, 1 sd) the lifted depth of a calibration stand is off: what turns a rigid fit by the
+4-6 degrees measured at a real detector's noise (reports/robot/head_error.md: median 4.4-5.3 deg)."""
+
+
+def _fitted_camera(rng, method: str):
+    """A camera 3-8 m from the markers and 1-3 m above the floor, looking at them, and the calibration the
+    runtime fits for it from a worker on the markers whose lifted depth is off by LIFTED_STAND_DEPTH_SD per
+    stand and each head and ankle 3 cm across its ray: (camera centre, robot -> camera rotation, calibration)."""
+    from edge_runtime.robot.calibration import CalibrationParams, fit, targets
+
+    bearing, dist = rng.uniform(-1.2, 1.2), rng.uniform(3, 8)
+    cam = np.array([0.3 + dist * math.sin(bearing), FLOOR_Y + rng.uniform(1.0, 3.0), 1.5 + dist * math.cos(bearing)])
+    f = np.array([0.3, FLOOR_Y + 0.8, 1.5]) - cam
+    f /= np.linalg.norm(f)
+    x = np.cross([0.0, -1.0, 0.0], f)
+    x /= np.linalg.norm(x)
+    R = np.stack([x, np.cross(f, x), f])                          # rows: the camera's x, y (down), z (forward)
+    params = CalibrationParams(method=method)
+    heads, ankles = (((p - cam) @ R.T) for p in targets(params, rng.uniform(1.45, 1.85)))
+    depth = 1 + LIFTED_STAND_DEPTH_SD * rng.standard_normal((3, 1))
+    heads, ankles = ((p + 0.03 * rng.standard_normal(p.shape)) * depth for p in (heads, ankles))
+    return cam, R, fit(heads, ankles, params)
+
+
+def body_near_arm(rng) -> tuple[np.ndarray, np.ndarray]:
+    """A person whose pelvis is 0.6-4 m from the effector, facing anywhere, leaning up to 30 degrees, and
+    his keypoints, each up to RAY_KEYPOINT_ERROR_M off its joint: (joints, keypoints), robot frame."""
+    from firmware_sim.people import human
+
+    bearing, dist = rng.uniform(-math.pi, math.pi), rng.uniform(0.6, 4.0)
+    body = human.joints(human.Body.from_height(rng.uniform(1.5, 2.0)), human.Posture(trunk_flexion_deg=rng.uniform(0, 30)),
+                        pelvis_xz_m=(EFF[0] + dist * math.sin(bearing), EFF[2] + dist * math.cos(bearing)),
+                        heading_rad=rng.uniform(-math.pi, math.pi))
+    off = rng.normal(size=body.shape)
+    off *= RAY_KEYPOINT_ERROR_M * rng.uniform(0, 1, (17, 1)) ** (1 / 3) / np.linalg.norm(off, axis=1, keepdims=True)
+    return body, body + off
+
+
+def _over_truth_through_fitted_calibrations(method: str, seed: int) -> tuple[list[float], int]:
+    """Ray bound minus true separation of people near the arm seen through 12 fitted calibrations."""
+    rng = np.random.default_rng(seed)
+    caps = effector_capsule(EFF)
+    over, checked = [], 0
+    for _ in range(12):
+        cam, R, cal = _fitted_camera(rng, method)
+        for _ in range(25):
+            body, keypoints = body_near_arm(rng)
+            seen_cam = (keypoints - cam) @ R.T
+            if (seen_cam[:, 2] < 0.3).any():
+                continue
+            d = seen_cam @ cal.A.T                                   # the runtime's rays: through the fitted pose
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            bound = ray_separation_m(PersonRays(cal.b.copy(), d, FLOOR_Y), caps, WHOLE_BODY)
+            if bound is not None:
+                checked += 1
+                over.append(bound[0] - separation_of(body))
+    return over, checked
+
+
+def test_the_ray_bound_through_a_fitted_calibration():
+    """The ray bound takes the calibrated camera as exact. The shipped pnp fit, made from the markers' rays,
+    keeps it below the truth for people near the arm; rigid, which leans on the lifter's depths, turns the
+    camera by degrees and puts some of them metres beyond (reports/robot/ray_bound_s13.md: through 30 fitted
+    calibrations of head-error development placements, 34 of 1,177 bodies above the truth with rigid, up to
+    4.6 m; 0 of 1,190 with pnp)."""
+    rigid_over = []
+    for seed in range(4):
+        over, checked = _over_truth_through_fitted_calibrations("pnp", seed)
+        assert checked > 200 and max(over) <= 1e-9, seed
+        rigid_over.append(max(_over_truth_through_fitted_calibrations("rigid", seed)[0]))
+    assert max(rigid_over) > 0.1  # the check can fail: the fit the product shipped before session 13 fails it
+
+
 def test_anchored_rays_bound_a_person_within_his_body_extent_of_where_he_stands():
     caps = effector_capsule(EFF)
     body = body_facing_arm(4.0)
