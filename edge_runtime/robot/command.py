@@ -5,7 +5,7 @@
         [--calibration CAL.json] [--duration S] [--log OUT.jsonl]
     python -m edge_runtime robot --link none [--fast] (--keypoints KP.jsonl | --joints J.jsonl)
         [--calibration CAL.json] --log OUT.jsonl
-    python -m edge_runtime robot --joints|--keypoints RECORDING.jsonl --calibrate CAL.json [--calibration-method pnp]
+    python -m edge_runtime robot --joints|--keypoints RECORDING.jsonl --calibrate CAL.json [--calibration-method rigid|eq2|pnp]
     python -m edge_runtime robot --config BOX.toml --print-config
 
 Inputs (one of):

@@ -228,7 +228,7 @@ def cmd(args) -> int:
             "camera_position_m": np.round(camera.position_m, 3).tolist(), "noise": args.noise,
             "calibration_markers": {"frames": len(cal), "marker_per_frame": labels.tolist()},
             "next": [f"python -m edge_runtime robot --keypoints {d}/calibration.jsonl --intrinsics {d}/camera.json "
-                     f"--calibrate {d}/cal.json --calibration-method pnp",
+                     f"--calibrate {d}/cal.json",
                      f"python -m edge_runtime lift --keypoints {d}/keypoints.jsonl --camera {d}/camera.json "
                      f"--person all --out {d}/lifted.jsonl",
                      f"python -m edge_runtime robot --link none --fast --keypoints {d}/keypoints.jsonl "
