@@ -96,8 +96,8 @@ class CalibrationParams:
     """"pnp" (the camera pose from the six points' directions only, cv2.solvePnP; scale 1; the
     default), "rigid" (SVD similarity over six points) or "eq2" (the dissertation's). ``pnp`` fits
     the rays the runtime later ranges people along, so its floor crossings hold near the markers,
-    next to the arm: the head error halves (fresh seed 23: 0.190 / 0.537 m against ``rigid``'s 0.324 /
-    1.067 m, median / p95; reports/robot/head_error.md), and the ray bound of a person not lifted,
+    next to the arm: the head error falls by 40 % (fresh seed 25: 0.198 / 0.595 m against ``rigid``'s
+    0.328 / 0.931 m, median / p95; reports/robot/head_error.md), and the ray bound of a person not lifted,
     which takes the calibrated camera as exact, stays below the truth (0 of 1,190 bodies above it
     through 30 fitted pnp calibrations, against 34 of 1,177 with ``rigid``, up to 4.6 m above;
     reports/robot/ray_bound_s13.md). ``rigid``'s fit leans on the lifter's depths, which turn it by
