@@ -646,19 +646,16 @@ def _fitted_camera(rng, method: str):
     runtime fits for it from a worker on the markers whose lifted depth is off by LIFTED_STAND_DEPTH_SD per
     stand and each head and ankle 3 cm across its ray: (camera centre, robot -> camera rotation, calibration)."""
     from edge_runtime.robot.calibration import CalibrationParams, fit, targets
+    from firmware_sim.devices.camera import Camera
 
     bearing, dist = rng.uniform(-1.2, 1.2), rng.uniform(3, 8)
-    cam = np.array([0.3 + dist * math.sin(bearing), FLOOR_Y + rng.uniform(1.0, 3.0), 1.5 + dist * math.cos(bearing)])
-    f = np.array([0.3, FLOOR_Y + 0.8, 1.5]) - cam
-    f /= np.linalg.norm(f)
-    x = np.cross([0.0, -1.0, 0.0], f)
-    x /= np.linalg.norm(x)
-    R = np.stack([x, np.cross(f, x), f])                          # rows: the camera's x, y (down), z (forward)
+    camera = Camera.look_at([0.3 + dist * math.sin(bearing), FLOOR_Y + rng.uniform(1.0, 3.0), 1.5 + dist * math.cos(bearing)],
+                            target_m=[0.3, FLOOR_Y + 0.8, 1.5])
     params = CalibrationParams(method=method)
-    heads, ankles = (((p - cam) @ R.T) for p in targets(params, rng.uniform(1.45, 1.85)))
+    heads, ankles = (camera.to_camera(p) for p in targets(params, rng.uniform(1.45, 1.85)))
     depth = 1 + LIFTED_STAND_DEPTH_SD * rng.standard_normal((3, 1))
     heads, ankles = ((p + 0.03 * rng.standard_normal(p.shape)) * depth for p in (heads, ankles))
-    return cam, R, fit(heads, ankles, params)
+    return camera.position_m, camera.R, fit(heads, ankles, params)
 
 
 def body_near_arm(rng) -> tuple[np.ndarray, np.ndarray]:
