@@ -25,19 +25,19 @@ class SignedMAVLink(mavlink2.MAVLink):
     def parse_char(self, c):
         """pymavlink's parser, resynchronising after a stray start byte.
 
-        pymavlink takes any 0xFD as the start of a packet and waits for the length its
-        header claims (up to 280 bytes, several heartbeats' worth on a quiet line), then
-        drops all of it when the CRC fails. Here a start byte whose header has unknown
-        incompat flags is skipped at once, and the bytes behind the start byte of a
-        rejected frame are scanned again. A frame with a message id this dialect does not
-        know is rejected too: pymavlink hands it over unchecked (it has no CRC extra to check
-        it with, and skips the signature check), so stray bytes that look like one would
-        otherwise swallow the genuine packets behind them, even on a signed link.
+        pymavlink takes any 0xFD (MAVLink 2) or 0xFE (MAVLink 1) as the start of a packet
+        and waits for the length its header claims (up to 280 bytes, several heartbeats'
+        worth on a quiet line), then drops all of it when the CRC fails. Here a start byte
+        that cannot begin a packet of this link (:meth:`_false_start`) is skipped at once,
+        and the bytes behind the start byte of a rejected frame are scanned again. A frame
+        with a message id this dialect does not know is rejected too: pymavlink hands it over
+        unchecked (it has no CRC extra to check it with, and skips the signature check), so
+        stray bytes that look like one would otherwise swallow the genuine packets behind
+        them, even on a signed link.
         """
         self.buf.extend(c)
         self.total_bytes_received += len(c)
-        while (self.buf_len() >= 3 and self.buf[self.buf_index] == mavlink2.PROTOCOL_MARKER_V2
-               and self.buf[self.buf_index + 2] & ~mavlink2.MAVLINK_IFLAG_SIGNED):
+        while self._false_start():
             self.buf_index += 1
         m = super().parse_char(b"")
         if m is not None and m.get_type().startswith("UNKNOWN_"):
@@ -50,6 +50,29 @@ class SignedMAVLink(mavlink2.MAVLink):
                 self.buf = bytearray(data[1:]) + self.buf[self.buf_index:]
                 self.buf_index = 0
         return m
+
+    def _false_start(self) -> bool:
+        """Whether the byte at the parse position is a start byte no packet of this link begins with.
+
+        Both ends of every link here speak MAVLink 2 only (signing needs it), so a 0xFE is a
+        stray byte, not a MAVLink 1 packet: a signature's or a timestamp's 0xFE, rescanned
+        behind a damaged frame, made the arm's parser wait for up to 263 bytes and its
+        watchdog trip. A 0xFD is a false start when its header's incompat flags are unknown
+        or its message id is not in the dialect (such a frame would be rejected anyway, see
+        :meth:`parse_char`): decided from the 10-byte header, before the length it claims has
+        arrived. Its length is not checked against the message's: a peer on a newer dialect
+        may send extension fields this one does not know, which pymavlink drops."""
+        n, i = self.buf_len(), self.buf_index
+        if n < 1 or self.buf[i] not in (mavlink2.PROTOCOL_MARKER_V1, mavlink2.PROTOCOL_MARKER_V2):
+            return False
+        if self.buf[i] == mavlink2.PROTOCOL_MARKER_V1:
+            return True
+        if n >= 3 and self.buf[i + 2] & ~mavlink2.MAVLINK_IFLAG_SIGNED:
+            return True
+        if n < mavlink2.HEADER_LEN_V2:
+            return False
+        msg_id = self.buf[i + 7] | self.buf[i + 8] << 8 | self.buf[i + 9] << 16
+        return msg_id not in mavlink2.mavlink_map
 
     def check_signature(self, msgbuf, srcSystem, srcComponent) -> bool:  # noqa: N803 - pymavlink's names
         import hashlib
