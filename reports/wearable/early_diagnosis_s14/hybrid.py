@@ -8,7 +8,8 @@ model did not, revises a preliminary alert at a confident different class, and c
 the full window; a capture triggered while an event is active continues it (full window only, no prefix points).
 
     PYTHONPATH=. python reports/wearable/early_diagnosis_s14/hybrid.py PREFIX.pt[,PREFIX.pt..] HOURS SEED[,SEED] \
-        OUT_PREFIX [--choose-on 1] [--thresholds 0.6,0.7,..] [--agree 1,2,3] [--first 120,..] [--last 280,..]
+        OUT_PREFIX [--choose-on 1] [--thresholds 0.6,0.7,..] [--agree 1,2,3] [--first 120,..] [--last 280,..] \
+        [--max-mean-other 1,0.3,..]
 
 Several checkpoints: the mean of their probabilities (an ensemble). The grid's defaults are round 1's.
 
@@ -107,8 +108,9 @@ def decisions(t_trig, conv, pre, *, pol, thresholds, other_k, prefix=None):
     probabilities (class weights applied) after S = 1..6 sub-windows are ``conv`` (n, 6, K) and whose prefix
     model's at PREFIX_FRAMES are ``pre`` (n, P, K). ``prefix``: None (the shipped policy) or
     {"threshold", "agree", "first", "last"} (indices into PREFIX_FRAMES): a prefix point may open the capture's
-    event when its top class is a distraction with probability >= threshold and the ``agree`` prefix points up
-    to it had that top class."""
+    event when its top class is a distraction with probability >= threshold, the ``agree`` prefix points up
+    to it had that top class and (optional "max_mean_other", round 3: a gate like the shipped ``max_mean_other``)
+    the mean P(Other) of the prefix points so far is at most that."""
     out, ev, seq = [], None, 0
     conv_pts = [(offset_s(needed_frames(s)), 0, s) for s in range(1, N_SUBSEQ + 1)]
     pre_pts = [] if prefix is None else [(offset_s(PREFIX_FRAMES[j]), 1, j)
@@ -119,7 +121,8 @@ def decisions(t_trig, conv, pre, *, pol, thresholds, other_k, prefix=None):
         if ev is not None and (ev.withdrawn or tt > ev.last_end + pol.event_hold_s):
             ev = None
         continues, own = ev is not None, None
-        st = {"agreeing": 0, "last": None, "other_sum": 0.0, "other_n": 0, "p_last": None, "p_agree": 0}
+        st = {"agreeing": 0, "last": None, "other_sum": 0.0, "other_n": 0, "p_last": None, "p_agree": 0,
+              "p_other": 0.0, "p_n": 0}
         for off, kind, i in points:
             t_alert = round(tt + off, 3)
             row = {"t_trigger_s": tt, "t_alert_s": t_alert, "steps": i, "source": "convlstm"}
@@ -130,7 +133,10 @@ def decisions(t_trig, conv, pre, *, pol, thresholds, other_k, prefix=None):
                 lab = int(q.argmax())
                 st["p_agree"] = st["p_agree"] + 1 if lab == st["p_last"] else 1
                 st["p_last"] = lab
-                if CLASSES[lab] in pol.never_alert or q[lab] < prefix["threshold"] or st["p_agree"] < prefix["agree"]:
+                st["p_other"] += float(q[other_k])
+                st["p_n"] += 1
+                if (CLASSES[lab] in pol.never_alert or q[lab] < prefix["threshold"] or st["p_agree"] < prefix["agree"]
+                        or st["p_other"] > prefix.get("max_mean_other", 1.0) * st["p_n"]):
                     continue
                 seq += 1
                 own = ev = Event(tt, seq, lab, t_alert)
@@ -232,9 +238,10 @@ def main(a) -> None:
     def ints(v):
         return [int(x) for x in v.split(",")]
 
-    grid = [{"threshold": t, "agree": k, "first": PREFIX_FRAMES.index(f), "last": PREFIX_FRAMES.index(l_)}
+    grid = [{"threshold": t, "agree": k, "first": PREFIX_FRAMES.index(f), "last": PREFIX_FRAMES.index(l_),
+             "max_mean_other": m}
             for t in [float(x) for x in a.thresholds.split(",")] for k in ints(a.agree) for f in ints(a.first)
-            for l_ in ints(a.last)]
+            for l_ in ints(a.last) for m in [float(x) for x in a.max_mean_other.split(",")]]
     report = {"prefix_model": a.prefix, "hours": a.hours, "seeds": seeds, "choose_on": a.choose_on,
               "thresholds_by_step": thresholds, "prefix_frames": PREFIX_FRAMES, "per_seed": {}}
     for seed in seeds:
@@ -284,4 +291,5 @@ if __name__ == "__main__":
     p.add_argument("--agree", default=",".join(map(str, AGREE)))
     p.add_argument("--first", default=",".join(map(str, FIRST_FRAMES)))
     p.add_argument("--last", default=",".join(map(str, LAST_FRAMES)))
+    p.add_argument("--max-mean-other", default="1.0", help="round 3: gates on the prefix points' mean P(Other)")
     main(p.parse_args())

@@ -1,6 +1,6 @@
 """Tables and the go / no-go of ``hybrid.py``'s JSON (figures read from it, none typed in).
 
-    python reports/wearable/early_diagnosis_s14/summarise.py OUT.json [CHECK_SEED] > OUT.md
+    python reports/wearable/early_diagnosis_s14/summarise.py OUT.json [CHECK_SEED] > OUT/summary.md
 
 GO if on CHECK_SEED (default 5) the policy chosen on the other seed gives a median onset -> first alert <= 2.5 s
 with a first-alert class accuracy >= the shipped policy's and false alerts / h <= the shipped + 0.3 (attribution
@@ -23,7 +23,9 @@ HEAD = ("| recall | first-alert class | median (s) | p95 (s) | false / h (n) | r
 
 
 def policy(r: dict) -> str:
-    return f"t {r['threshold']}, agree {r['agree']}, {r['first_s']:.2f}-{r['last_s']:.2f} s"
+    gate = r.get("max_mean_other", 1.0)
+    return (f"t {r['threshold']}, agree {r['agree']}, {r['first_s']:.2f}-{r['last_s']:.2f} s"
+            + (f", mean P(Other) <= {gate}" if gate < 1.0 else ""))
 
 
 def main(path: str, check: int = 5) -> None:
@@ -70,7 +72,7 @@ def main(path: str, check: int = 5) -> None:
 
     groups = {}
     for i, r in enumerate(rows):
-        groups.setdefault((r["threshold"], r["agree"]), []).append(i)
+        groups.setdefault((r["threshold"], r["agree"], r.get("max_mean_other", 1.0)), []).append(i)
     for _, idx in sorted(groups.items()):
         el = [i for i in idx if eligible(rows[i])]
         i = min(el or idx, key=lambda i: rows[i]["scores"]["frame"]["onset_to_first_alert_s"]["median"])
