@@ -90,6 +90,15 @@ def _loop_figure(lp: dict) -> str:
         s += f", {lp['captures']} capture(s)"
     if "peak_rss_mb" in lp:
         s += f"; peak RSS {lp['peak_rss_mb']:.1f} MiB"
+    if "escapes" in lp:
+        s += (f"; {lp['commands']:,} commands: {lp['speed_changes']} speed overrides, {lp['stops']} stops, "
+              f"{lp['retracts']} retractions ({lp['escapes']} escape turns), {lp['unacked']} unacknowledged")
+    if lp.get("p99_note"):
+        s += f" [{lp['p99_note']}]"
+    if lp.get("by_kind"):
+        s += "; by kind: " + ", ".join(
+            f"{k} n {v['n']} p50 {v['p50_us']:,.1f} p99 {v['p99_us']:,.1f} max {v['max_us']:,.1f} us"
+            + (" (p99 of < 100)" if v["n"] < 100 else "") for k, v in lp["by_kind"].items())
     return s
 
 

@@ -1,0 +1,161 @@
+"""bench.robot_cycle: the robot scenario's commands, the CAN link with its arm stand-in, the reaction rows.
+
+Timings are never asserted: the scenario runs on a simulated clock (``RobotConfig.simulated``) that
+jumps from deadline to deadline, so what is checked is what the runtime sent and how it is counted.
+"""
+import os
+
+import numpy as np
+import pytest
+
+from bench.arm_echo import HEARTBEAT_FRAME, ArmEcho, StampedBus, command_sent_s
+from bench.report import format_markdown
+from bench.robot_cycle import (
+    ARM_POSTURE_RAD,
+    KINDS,
+    P99_MIN_N,
+    RobotConfig,
+    command_row,
+    lifter_entry,
+    measure_robot,
+    run_cycle,
+)
+from bench.robot_scenario import prepare_workers
+from bench.sweep import BenchOptions
+from edge_runtime.core.manifest import ASSETS_DIR, load_manifest
+from edge_runtime.robot.link.base import LinkConfig
+from edge_runtime.robot.link.can import CanRobotLink
+
+SCENE_KINDS = {"speed", "stop", "retract", "escape", "resume"}
+"""What the shipped configuration sends in reply to the two workers' frames."""
+
+
+def _lifter():
+    if not (ASSETS_DIR / "manifest.json").exists():
+        return None
+    return lifter_entry(load_manifest(ASSETS_DIR)["models"])
+
+
+def _config(tmp_path, seconds: float) -> RobotConfig:
+    lifter = _lifter()
+    npz = prepare_workers(tmp_path / "workers.npz", seconds, lifter, seed=1)
+    return RobotConfig(str(npz), seconds, lifter=lifter["precision"] if lifter else "", simulated=True)
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory):
+    """The default run's length (240 s) of the scenario on the simulated clock, through the shipped
+    lifter when there is one (about a minute of CPU)."""
+    return run_cycle(_config(tmp_path_factory.mktemp("robot"), BenchOptions().robot_s))
+
+
+def test_workers_file_holds_both_workers_for_the_run(tmp_path):
+    lifter = _lifter()
+    data = np.load(prepare_workers(tmp_path / "w.npz", 10.0, lifter, seed=1))
+    assert data["joints_robot_m"].shape == (300, 2, 17, 3)
+    if lifter is not None:
+        kp = data["keypoints_px"]
+        assert kp.shape == (300, 2, 17, 3) and np.all(kp[..., 2] == 1.0)
+        w, h = lifter["camera"]["width_px"], lifter["camera"]["height_px"]
+        assert np.all((kp[..., 0] >= 0) & (kp[..., 0] < w) & (kp[..., 1] >= 0) & (kp[..., 1] < h))
+
+
+def test_scenario_makes_the_runtime_send_every_kind_of_command(default_run):
+    assert SCENE_KINDS <= set(default_run.kinds)
+    assert set(default_run.kinds) <= set(KINDS) and set(default_run.tick_kinds) <= set(KINDS)
+    st = default_run.loop.status()
+    # every command reached the arm over the CAN codec and was acknowledged: none re-sent, no fault
+    assert st["unacked"] == 0 and st["retries"] == 0 and st["fault"] == "" and st["link"] == "ok"
+    assert default_run.echo.rejected == 0
+    assert st["escapes"] >= default_run.kinds.count("escape") + default_run.tick_kinds.count("escape")
+    # the arm answered every command the loop counted (alarms, resumes and moves included)
+    assert sum(default_run.echo.commands.values()) == st["commands"]
+    assert len(default_run.cycle_s) == int(BenchOptions().robot_s) * 30 and len(default_run.reaction_s) == len(default_run.kinds)
+
+
+def test_reaction_rows_count_every_commanding_frame(default_run):
+    row = command_row("robot_reaction", default_run.reaction_s, default_run.kinds, "what")
+    assert row["n"] == len(default_run.kinds) == sum(v["n"] for v in row["by_kind"].values())
+    assert set(row["by_kind"]) == set(default_run.kinds)
+
+
+def test_default_run_has_enough_samples_for_a_p99(default_run):
+    assert RobotConfig("x").seconds == BenchOptions().robot_s
+    assert len(default_run.reaction_s) >= 300
+    # every kind of the scene more than once, and the speed overrides alone enough for their own p99
+    assert all(default_run.kinds.count(k) >= 10 for k in SCENE_KINDS)
+    assert default_run.kinds.count("speed") >= P99_MIN_N
+
+
+def test_a_p99_of_few_samples_is_labelled():
+    few = command_row("robot_reaction", [0.001] * 5, ["stop"] * 5, "what")
+    assert few["n"] == 5 and str(P99_MIN_N) in few["p99_note"] and "not a p99" in few["p99_note"]
+    many = command_row("robot_reaction", [0.001] * P99_MIN_N, ["speed"] * P99_MIN_N, "what")
+    assert "p99_note" not in many and many["by_kind"]["speed"]["n"] == P99_MIN_N
+    report = {"machine": {"cpu": "c", "cores": 2, "cpus_used": [0], "load_avg_1_5_15": [0, 0, 0], "python": "3",
+                          "onnxruntime": "1", "torch": None},
+              "method": {"command": "python -m bench", "n": 1, "warmup": 1}, "results": [], "skipped": [],
+              "loops": [few, many]}
+    md = format_markdown(report)
+    assert "(n 5)" in md and "not a p99" in md and "stop n 5" in md and "(p99 of < 100)" in md
+    assert f"speed n {P99_MIN_N} " in md
+
+
+def test_arm_echo_acknowledges_commands_sent_by_the_product_link():
+    channel = f"test-echo-{os.getpid()}"
+    now = [0.0]
+    bus = StampedBus(channel, clock=lambda: now[0])
+    echo = ArmEcho(channel, ARM_POSTURE_RAD)
+    link = CanRobotLink(bus=bus, config=LinkConfig(heartbeat_period_s=None), clock=lambda: now[0])
+    try:
+        echo.serve(now[0])
+        link.poll()
+        assert link.link_ok
+        seqs = [link.resume(), link.set_speed(0.3), link.move_to((0.3, 0.1, 0.6), 0.0, 0.0), link.stop()]
+        heartbeat_id = link.codec.db.get_message_by_name(HEARTBEAT_FRAME).frame_id
+        now[0] = 0.01
+        link.heartbeat()
+        # the last command frame, not the heartbeat after it, is when the command was on the link
+        assert command_sent_s(bus.sent, heartbeat_id) == 0.0 and bus.sent[-1] == (0.01, heartbeat_id)
+        echo.serve(now[0])
+        link.poll()
+        assert [link.result(s) for s in seqs] == ["ok"] * 4
+        assert echo.commands == {"resume": 1, "speed": 1, "move": 1, "stop": 1} and echo.rejected == 0
+        assert echo.state.mode == "stopped" and abs(echo.speed_mps - 0.3) < 1e-3
+    finally:
+        link.close()
+        bus.shutdown()
+        echo.close()
+
+
+def test_arm_echo_turns_its_links_toward_a_retraction_target():
+    from edge_runtime.robot.hazard import arm_points_m
+
+    channel = f"test-echo-turn-{os.getpid()}"
+    bus = StampedBus(channel)
+    echo = ArmEcho(channel, ARM_POSTURE_RAD)
+    link = CanRobotLink(bus=bus, config=LinkConfig(heartbeat_period_s=None), clock=lambda: 0.0)
+    try:
+        hand = echo.hand_m.copy()
+        c, s = np.cos(0.5), np.sin(0.5)
+        target = np.array([c * hand[0] + s * hand[2], hand[1], -s * hand[0] + c * hand[2]])  # turned about y
+        link.retract(tuple(target), 0.0, 0.0)  # accepted while stopped, as the controller does
+        for k in range(300):
+            echo.serve(k * 0.01)
+        assert np.allclose(echo.hand_m, target, atol=1e-3)  # the DBC's 0.1 mm
+        tool = arm_points_m(echo.state.joint_positions_rad)[-2]
+        bearing = lambda p: np.arctan2(p[0], p[2])  # noqa: E731
+        assert abs(bearing(tool) - bearing(target)) < 1e-3
+    finally:
+        link.close()
+        bus.shutdown()
+        echo.close()
+
+
+def test_measure_robot_rows(tmp_path):
+    rows = {r["name"]: r for r in measure_robot(_config(tmp_path, 8.0))}
+    assert set(rows) == {"robot_30hz", "robot_reaction", "robot_tick_command"}
+    r = rows["robot_30hz"]
+    assert r["frames"] == r["n"] == 240 and r["unacked"] == 0 and r["arm_rejected"] == 0
+    assert "CAN link" in r["what"] and "virtual bus" in rows["robot_reaction"]["what"]
+    assert rows["robot_reaction"]["n"] == sum(v["n"] for v in rows["robot_reaction"]["by_kind"].values())
