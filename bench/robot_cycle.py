@@ -36,7 +36,8 @@ time is not counted in the runtime's share.
     for the frames that caused a command: keypoints in -> the ``send()`` of the frame's last
     command frame on the bus returned; overall and per kind of command (``by_kind``: n, p50,
     p99, max; :data:`KINDS`). A p99 from fewer than :data:`P99_MIN_N` samples is labelled as such
-    (``p99_note``).
+    (``p99_note``). ``from_feed``: the same frames timed from ``feed_people``'s own ``t_in_s``,
+    after tracking (what ``python -m edge_runtime robot`` reports as a frame's reaction).
 ``robot_tick_command``
     the same for the control ticks that sent a command, from the tick's start: escape turns are
     planned again on a timer (``[robot_loop] escape_replan_s``), which runs out as often in a tick
@@ -267,6 +268,9 @@ class _Run:
     late_s: list = field(default_factory=list)
     """Per frame: how long after its due time it started (s)."""
     reaction_s: list = field(default_factory=list)
+    feed_reaction_s: list = field(default_factory=list)
+    """The same frames from ``feed_people``'s own ``t_in_s`` (after tracking), as the robot command's
+    ``FrameRecord`` measures its reaction (s)."""
     kinds: list = field(default_factory=list)
     tick_s: list = field(default_factory=list)
     """Per tick that sent a command: tick start -> its last command frame's ``send()`` returned (s)."""
@@ -321,6 +325,8 @@ def run_cycle(cfg: RobotConfig) -> _Run:
                                  {fid for _, fid in bus.sent}, mode_id)
                     (run.tick_s if k < 0 else run.reaction_s).append(t_sent - t_in)
                     (run.tick_kinds if k < 0 else run.kinds).append(kind)
+                    if k >= 0:
+                        run.feed_reaction_s.append(t_sent - rec.t_in_s)
                 del bus.sent[:]
     finally:
         link.close()
@@ -352,8 +358,10 @@ def measure_robot(cfg: RobotConfig) -> list[dict]:
              "what": r.what + f", ticks at {TICK_RATE_HZ:g} Hz, the shipped configuration, the product's CAN link on "
                      "python-can's virtual bus (an in-process arm stand-in answers in the tick slots; its CPU "
                      "left out of cpu_share_pct)"},
-            command_row("robot_reaction", r.reaction_s, r.kinds,
-                        "keypoints in (handed to the tracker) -> " + ON_THE_LINK + "; frames that caused a command"),
+            {**command_row("robot_reaction", r.reaction_s, r.kinds,
+                           "keypoints in (handed to the tracker) -> " + ON_THE_LINK + "; frames that caused a command"),
+             "from_feed": {k: v for k, v in summarize(np.asarray(r.feed_reaction_s) * 1e9).items()
+                           if k in ("n", "p50_us", "p99_us", "max_us")}},
             command_row("robot_tick_command", r.tick_s, r.tick_kinds,
                         "a 10 ms control tick that sent a command (escape turns replanned on their timer, "
                         "waypoints, staleness): tick start -> " + ON_THE_LINK)]

@@ -70,7 +70,8 @@ def test_scenario_makes_the_runtime_send_every_kind_of_command(default_run):
     assert st["escapes"] >= default_run.kinds.count("escape") + default_run.tick_kinds.count("escape")
     # the arm answered every command the loop counted (alarms, resumes and moves included)
     assert sum(default_run.echo.commands.values()) == st["commands"]
-    assert len(default_run.cycle_s) == int(BenchOptions().robot_s) * 30 and len(default_run.reaction_s) == len(default_run.kinds)
+    assert len(default_run.cycle_s) == int(BenchOptions().robot_s) * 30
+    assert len(default_run.reaction_s) == len(default_run.kinds) == len(default_run.feed_reaction_s)
 
 
 def test_reaction_rows_count_every_commanding_frame(default_run):
@@ -158,4 +159,5 @@ def test_measure_robot_rows(tmp_path):
     r = rows["robot_30hz"]
     assert r["frames"] == r["n"] == 240 and r["unacked"] == 0 and r["arm_rejected"] == 0
     assert "CAN link" in r["what"] and "virtual bus" in rows["robot_reaction"]["what"]
-    assert rows["robot_reaction"]["n"] == sum(v["n"] for v in rows["robot_reaction"]["by_kind"].values())
+    reaction = rows["robot_reaction"]
+    assert reaction["n"] == sum(v["n"] for v in reaction["by_kind"].values()) == reaction["from_feed"]["n"]
