@@ -11,7 +11,7 @@ What the box will do, per shipped model and per loop:
   deadline misses, peak memory), the detector per sample, the alert latency
   (last sample of a capture -> alert frame on the CAN bus), the robot cycle at 30 Hz and its
   reaction (keypoints in -> command frame on the CAN bus, per kind of command; two simulated
-  workers, 240 s by default so that at least 300 frames cause a command);
+  workers, 300 s by default so that at least 300 frames cause a command);
 * a per-model profile: int8 against fp32 (file size, memory, latency, ratios).
 
 Prints a table; ``--json`` writes {"machine", "method", "results", "skipped",
@@ -53,9 +53,9 @@ def build_parser() -> OneLineParser:
     p.add_argument("--no-openvino", action="store_true", help="skip the OpenVINO rows")
     p.add_argument("--no-loops", action="store_true", help="skip the loop costs")
     p.add_argument("--realtime", type=positive_float, default=None, metavar="S",
-                   help="seconds of the real-time wearable and robot loops (default 15 and 240)")
+                   help="seconds of the real-time wearable and robot loops (default 15 and 300)")
     p.add_argument("--robot-seconds", type=positive_float, default=None, metavar="S",
-                   help="seconds of the real-time robot loop alone (default 240, enough for 300 frames that cause "
+                   help="seconds of the real-time robot loop alone (default 300, enough for 300 frames that cause "
                         "a command; overrides --realtime for the robot)")
     p.add_argument("--read-period", type=float, default=None, metavar="S",
                    help="feed the real-time wearable loop in the blocks a live IMU source read every S seconds "

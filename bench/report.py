@@ -98,6 +98,9 @@ def _loop_figure(lp: dict) -> str:
     if (lp.get("from_feed") or {}).get("n"):
         f = lp["from_feed"]
         s += f"; from feed_people's own t_in (after tracking) p50 {f['p50_us']:,.1f} us, p99 {f['p99_us']:,.1f} us"
+    if (lp.get("frame_cpu") or {}).get("n"):
+        f = lp["frame_cpu"]
+        s += f"; the frames' CPU time p50 {f['p50_us']:,.1f} us, p99 {f['p99_us']:,.1f} us"
     if lp.get("by_kind"):
         s += "; by kind: " + ", ".join(
             f"{k} n {v['n']} p50 {v['p50_us']:,.1f} p99 {v['p99_us']:,.1f} max {v['max_us']:,.1f} us"

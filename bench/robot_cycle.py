@@ -37,7 +37,9 @@ time is not counted in the runtime's share.
     command frame on the bus returned; overall and per kind of command (``by_kind``: n, p50,
     p99, max; :data:`KINDS`). A p99 from fewer than :data:`P99_MIN_N` samples is labelled as such
     (``p99_note``). ``from_feed``: the same frames timed from ``feed_people``'s own ``t_in_s``,
-    after tracking (what ``python -m edge_runtime robot`` reports as a frame's reaction).
+    after tracking (what ``python -m edge_runtime robot`` reports as a frame's reaction);
+    ``frame_cpu``: their CPU time (the thread's, the whole frame), which preemption by other
+    processes does not lengthen.
 ``robot_tick_command``
     the same for the control ticks that sent a command, from the tick's start: escape turns are
     planned again on a timer (``[robot_loop] escape_replan_s``), which runs out as often in a tick
@@ -74,7 +76,7 @@ class RobotConfig:
     worker_npz: str
     """joints_robot_m (T, P, 17, 3) at 30 Hz; keypoints_px (T, P, 17, 3) when a lifter is shipped
     (:func:`bench.robot_scenario.prepare_workers`)."""
-    seconds: float = 240.0
+    seconds: float = 300.0
     """Length of the real-time run (s)."""
     assets: str = ""
     """Assets directory ('' = the shipped ones)."""
@@ -268,6 +270,9 @@ class _Run:
     late_s: list = field(default_factory=list)
     """Per frame: how long after its due time it started (s)."""
     reaction_s: list = field(default_factory=list)
+    frame_cpu_s: list = field(default_factory=list)
+    """The same frames' CPU time (this thread's, keypoints in -> ``feed_people`` returned, s): what
+    the code costs, whatever else the machine runs (a preempted frame's wall time is longer)."""
     feed_reaction_s: list = field(default_factory=list)
     """The same frames from ``feed_people``'s own ``t_in_s`` (after tracking), as the robot command's
     ``FrameRecord`` measures its reaction (s)."""
@@ -312,9 +317,9 @@ def run_cycle(cfg: RobotConfig) -> _Run:
                 if k < 0:
                     echo.serve(clock())
                 before = _counters(loop)
-                t_in = clock()
+                cpu_in, t_in = time.thread_time(), clock()
                 rec = loop.tick() if k < 0 else feed(loop, k)
-                t_out = clock()
+                t_out, cpu_out = clock(), time.thread_time()
                 t_sent = command_sent_s(bus.sent, heartbeat_id)
                 if k >= 0:
                     run.cycle_s.append(t_out - t_in)
@@ -327,6 +332,7 @@ def run_cycle(cfg: RobotConfig) -> _Run:
                     (run.tick_kinds if k < 0 else run.kinds).append(kind)
                     if k >= 0:
                         run.feed_reaction_s.append(t_sent - rec.t_in_s)
+                        run.frame_cpu_s.append(cpu_out - cpu_in)
                 del bus.sent[:]
     finally:
         link.close()
@@ -334,6 +340,11 @@ def run_cycle(cfg: RobotConfig) -> _Run:
         echo.close()
     run.wall_s, run.cpu_pct = cpu.wall_s, cpu.pct
     return run
+
+
+def _short(times_s: list[float]) -> dict:
+    """n, p50, p99 and max (us) of ``times_s``."""
+    return {k: v for k, v in summarize(np.asarray(times_s) * 1e9).items() if k in ("n", "p50_us", "p99_us", "max_us")}
 
 
 ON_THE_LINK = ("the send() of its last command frame on the bus returned (the product's CanRobotLink on python-can's "
@@ -360,8 +371,7 @@ def measure_robot(cfg: RobotConfig) -> list[dict]:
                      "left out of cpu_share_pct)"},
             {**command_row("robot_reaction", r.reaction_s, r.kinds,
                            "keypoints in (handed to the tracker) -> " + ON_THE_LINK + "; frames that caused a command"),
-             "from_feed": {k: v for k, v in summarize(np.asarray(r.feed_reaction_s) * 1e9).items()
-                           if k in ("n", "p50_us", "p99_us", "max_us")}},
+             "from_feed": _short(r.feed_reaction_s), "frame_cpu": _short(r.frame_cpu_s)},
             command_row("robot_tick_command", r.tick_s, r.tick_kinds,
                         "a 10 ms control tick that sent a command (escape turns replanned on their timer, "
                         "waypoints, staleness): tick start -> " + ON_THE_LINK)]

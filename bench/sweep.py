@@ -48,7 +48,7 @@ class BenchOptions:
     """Length of the simulated drive for the detector and alert-latency figures (min)."""
     realtime_s: float = 15.0
     """Length of the real-time 100 Hz wearable stretch (s)."""
-    robot_s: float = 240.0
+    robot_s: float = 300.0
     """Length of the real-time 30 Hz robot stretch (s): long enough for at least 300 frames that cause a
     command (``bench.robot_scenario``'s workers; the shipped configuration sends a command only when
     what the arm should do changes, about 1.6 a second here)."""

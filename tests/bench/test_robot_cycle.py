@@ -44,7 +44,7 @@ def _config(tmp_path, seconds: float) -> RobotConfig:
 
 @pytest.fixture(scope="module")
 def default_run(tmp_path_factory):
-    """The default run's length (240 s) of the scenario on the simulated clock, through the shipped
+    """The default run's length (300 s) of the scenario on the simulated clock, through the shipped
     lifter when there is one (about a minute of CPU)."""
     return run_cycle(_config(tmp_path_factory.mktemp("robot"), BenchOptions().robot_s))
 
@@ -161,3 +161,4 @@ def test_measure_robot_rows(tmp_path):
     assert "CAN link" in r["what"] and "virtual bus" in rows["robot_reaction"]["what"]
     reaction = rows["robot_reaction"]
     assert reaction["n"] == sum(v["n"] for v in reaction["by_kind"].values()) == reaction["from_feed"]["n"]
+    assert reaction["frame_cpu"]["n"] == reaction["n"]
