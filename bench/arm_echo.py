@@ -23,15 +23,17 @@ the loop behave as it does against an arm:
   and its escape-turn planning (:func:`edge_runtime.robot.hazard.plan_escape_turn`) see an arm that
   turns where it is sent; its reach in and out is not modelled (the hand position is).
 
-The driver calls :meth:`ArmEcho.serve` in the loop's 100 Hz tick slots, before ``tick()``: the
-answers reach the runtime through its own ``poll()``, outside the frame being timed (the frame's
-reaction ends when its command's ``send()`` returned, not when the arm answered). The echo's CPU
+The driver calls :meth:`ArmEcho.serve` at 100 Hz in slots of its own, between the loop's ticks and
+outside any timed frame or tick: the state and the answers reach the runtime through its own
+``poll()`` in the next frame or tick, which decodes them as on a box (the frame's reaction ends
+when its command's ``send()`` returned, not when the arm answered). The echo's CPU
 time is kept (``cpu_s``) so the bench can report the runtime's share without it.
 """
 from __future__ import annotations
 
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -56,6 +58,24 @@ class StampedBus(VirtualBus):
         self.sent.append((self.clock(), msg.arbitration_id))
 
 
+@contextmanager
+def arm_on_bus(channel: str, posture_rad, clock=time.perf_counter, link_config=None):
+    """(bus, arm, link): a :class:`StampedBus` on ``channel``, an :class:`ArmEcho` at its far end and the
+    product's ``CanRobotLink`` on the bus (``link_config``: default ``LinkConfig()``), all closed after."""
+    from edge_runtime.robot.link.base import LinkConfig
+    from edge_runtime.robot.link.can import CanRobotLink
+
+    bus = StampedBus(channel, clock=clock)
+    echo = ArmEcho(channel, posture_rad)
+    link = CanRobotLink(bus=bus, config=link_config or LinkConfig(), clock=clock)
+    try:
+        yield bus, echo, link
+    finally:
+        link.close()
+        bus.shutdown()
+        echo.close()
+
+
 def command_sent_s(sent: list[tuple[float, int]], heartbeat_id: int) -> float | None:
     """When the last frame of ``sent`` that is not a heartbeat was handed to the bus (None: none was)."""
     return next((t for t, fid in reversed(sent) if fid != heartbeat_id), None)
@@ -65,7 +85,7 @@ class ArmEcho:
     """See the module docstring. ``posture_rad``: the working posture (7,) whose turns about the
     base the echo reports; the hand starts where that posture puts it."""
 
-    def __init__(self, channel: str, posture_rad, state_period_s: float = 0.01):
+    def __init__(self, channel: str, posture_rad):
         from edge_runtime.robot.hazard import arm_points_m
         from edge_runtime.robot.link.protocol import RobotCanCodec, blank_state
 
@@ -79,7 +99,6 @@ class ArmEcho:
         turned = arm_points_m(self.q0 + np.array([0.1, 0, 0, 0, 0, 0, 0]))[-2]
         self._j0_sign = math.copysign(1.0, math.atan2(turned[0], turned[2]) - self._bearing0)
         self.state = replace(blank_state(), joint_positions_rad=self.q0.copy(), ee_position_m=self.hand_m.copy())
-        self.state_period_s = state_period_s
         self.target_m: np.ndarray | None = None
         self.speed_mps = 1.0
         self._orient: dict | None = None

@@ -12,8 +12,10 @@ other walks across the cell and back, so that the runtime sends every kind of co
 configuration sends: speed overrides (speed-and-separation monitoring), alarms, stops,
 retractions, escape turns about the base and resumes.
 
-The camera stands 7 m in front of the base looking along -z; its pixels are the lifter's
-canonical camera (the manifest's ``camera``), so no undistortion is needed. The camera -> robot
+The camera stands 7 m in front of the base looking along -z. Its keypoints come as the robot command
+gets them on a box (:func:`box_camera`): in ``[camera] keypoint_format`` order (shipped: COCO), seen by
+the ``[camera] intrinsics`` camera or else a 100-degree 1280 x 720 one, so the tracker and the lifter
+convert to H36M and to the lifter's canonical camera as they do there. The camera -> robot
 transform is the simulated camera's known pose, as a :class:`Calibration` with the box's
 ``[calibration]`` settings (its floor anchoring runs as on the box). Without a shipped lifter
 the simulator's robot-frame joints are fed directly (``feed_joints``), and the row says so.
@@ -22,8 +24,10 @@ The link is the product's: :class:`edge_runtime.robot.link.can.CanRobotLink` on 
 in-process ``virtual`` bus (no network), frames encoded by the product's codec (cantools,
 ``robot_link.dbc``, E2E Profile 1); the bus stamps when each ``send()`` returned
 (:class:`bench.arm_echo.StampedBus`). A minimal arm (:class:`bench.arm_echo.ArmEcho`) answers
-every command and reports its state in the 10 ms tick slots, outside the timed frames; its CPU
-time is not counted in the runtime's share.
+every command and reports its state at 100 Hz in its own slots, :data:`ARM_OFFSET_S` after each
+tick (outside the timed frames and ticks), so that, as on a box, some frames find a state to decode
+in their ``poll()`` before they command (with the frames locked to the ticks here, one in three)
+and every tick finds one; its CPU time is not counted in the runtime's share.
 
 ``robot_30hz``
     per camera frame, keypoints handed to the tracker -> ``feed_people`` returned
@@ -33,13 +37,16 @@ time is not counted in the runtime's share.
     after their due time (a tick before them, the sleep's wake-up); peak resident memory; the
     loop's command counters.
 ``robot_reaction``
-    for the frames that caused a command: keypoints in -> the ``send()`` of the frame's last
-    command frame on the bus returned; overall and per kind of command (``by_kind``: n, p50,
+    for the frames that caused a command: keypoints in (the loop picks the frame up) -> the
+    ``send()`` of the frame's last command frame on the bus returned; overall and per kind of command (``by_kind``: n, p50,
     p99, max; :data:`KINDS`). A p99 from fewer than :data:`P99_MIN_N` samples is labelled as such
     (``p99_note``). ``from_feed``: the same frames timed from ``feed_people``'s own ``t_in_s``,
     after tracking (what ``python -m edge_runtime robot`` reports as a frame's reaction);
     ``frame_cpu``: their CPU time (the thread's, the whole frame), which preemption by other
-    processes does not lengthen.
+    processes does not lengthen. ``from_due``: the same frames from when their keypoints were due
+    (the frame's schedule time), so a tick or an earlier frame it waited for counts: the issue's
+    "keypoints in -> command on the link" is judged on this one (``judged_on``).
+    ``scenario``: :data:`SCENARIO` (``python -m bench --compare`` does not compare rows of another).
 ``robot_tick_command``
     the same for the control ticks that sent a command, from the tick's start: escape turns are
     planned again on a timer (``[robot_loop] escape_replan_s``), which runs out as often in a tick
@@ -63,19 +70,29 @@ from bench.timing import CpuShare, peak_rss_mb, sleep_until, summarize
 from edge_runtime.robot.link.base import LinkInterface
 
 TICK_RATE_HZ = 100.0
+ARM_OFFSET_S = 0.005
+"""The arm's state goes out at 100 Hz this long after each tick: half a tick period, as a box's arm
+runs on its own clock and its frames arrive at any phase of the runtime's ticks."""
+SCENARIO = "two_workers_can_v2"
+"""What the robot rows measure; changed whenever their meaning changes (v1: the two workers and the CAN link
+with the arm answering right before each tick, session 14; before: one walker and a recording link), so that
+``--compare`` does not call a change of method a regression."""
 P99_MIN_N = 100
 """A p99 needs at least this many samples to say anything (one in a hundred)."""
 KINDS = ("speed", "alarm", "stop", "retract", "escape", "resume", "move")
 """Kinds of command a frame can cause (the frame's last command; "escape": a retraction that is an
 escape turn about the base; "resume": a task move after a stop or retraction, with its resume)."""
-__all__ = ["CAMERA_FROM_ROBOT", "CAMERA_POSITION_M", "FRAME_RATE_HZ", "prepare_workers"]
+__all__ = ["ARM_POSTURE_RAD", "KINDS", "P99_MIN_N", "SCENARIO", "RobotConfig", "command_row", "lifter_entry",
+           "measure_robot", "robot_rows", "run_cycle",
+           # re-exported for bench/holds.py
+           "CAMERA_FROM_ROBOT", "CAMERA_POSITION_M", "FRAME_RATE_HZ", "prepare_workers"]
 
 
 @dataclass(frozen=True)
 class RobotConfig:
     worker_npz: str
-    """joints_robot_m (T, P, 17, 3) at 30 Hz; keypoints_px (T, P, 17, 3) when a lifter is shipped
-    (:func:`bench.robot_scenario.prepare_workers`)."""
+    """joints_robot_m (T, P, 17, 3) at 30 Hz; keypoints_px (T, P, 17, 3) when a lifter is shipped, seen by
+    :func:`box_camera` (:func:`bench.robot_scenario.prepare_workers`)."""
     seconds: float = 300.0
     """Length of the real-time run (s)."""
     assets: str = ""
@@ -88,6 +105,8 @@ class RobotConfig:
     simulated: bool = False
     """Jump from deadline to deadline on a simulated clock instead of sleeping (tests: the same
     scenario and commands in a fraction of the time; its timings mean nothing)."""
+    zones: dict = field(default_factory=dict)
+    """``[zones]`` settings to use instead of the shipped ones (tests: e.g. ``stop_time_scales``)."""
 
 
 def lifter_entry(entries: list[dict], precision: str = "int8") -> dict | None:
@@ -145,22 +164,47 @@ class _TimedLink(LinkInterface):
         """Nobody receives the heartbeat's runtime state here."""
 
 
+TICK, ARM = -1, -2
+"""Schedule slots that are not frames: a control tick, the arm stand-in's state."""
+
+
 def _schedule(seconds: float) -> list[tuple[float, int]]:
-    """(due time from the start in s, frame index or -1 for a tick), in time order."""
+    """(due time from the start in s, frame index, or :data:`TICK` / :data:`ARM`), in time order (a tick
+    before a frame due at the same instant)."""
     frames = [(k / FRAME_RATE_HZ, k) for k in range(int(seconds * FRAME_RATE_HZ))]
-    ticks = [(j / TICK_RATE_HZ, -1) for j in range(int(seconds * TICK_RATE_HZ))]
-    return sorted(frames + ticks)
+    ticks = [(j / TICK_RATE_HZ, TICK) for j in range(int(seconds * TICK_RATE_HZ))]
+    arm = [(j / TICK_RATE_HZ + ARM_OFFSET_S, ARM) for j in range(int(seconds * TICK_RATE_HZ))]
+    return sorted(frames + ticks + arm)
 
 
-def _box():
-    """The shipped box configuration with every robot section registered (as the robot command loads it)."""
+BOX_IMAGE_PX = (1280, 720)
+"""The image size the robot command assumes for a keypoint file without ``[camera] intrinsics``."""
+
+
+def box_camera(box):
+    """(camera model, keypoint format) the robot command uses with ``box``'s ``[camera]`` settings
+    (``edge_runtime/robot/command.py``: the intrinsics file, else a 100-degree camera)."""
+    from edge_runtime.robot.keypoints import CameraModel
+
+    cam = box.camera
+    model = CameraModel.from_json(cam.intrinsics) if cam.intrinsics else CameraModel.from_fov(*BOX_IMAGE_PX)
+    return model, cam.keypoint_format
+
+
+def _box(zones: dict | None = None):
+    """The shipped box configuration with every robot section registered (as the robot command loads it),
+    ``zones`` replacing some ``[zones]`` settings."""
+    from dataclasses import replace
+
     import edge_runtime.robot.calibration  # noqa: F401 - each import registers its section
+    import edge_runtime.robot.camera_source  # noqa: F401
     import edge_runtime.robot.keypoints  # noqa: F401
     import edge_runtime.robot.lifter  # noqa: F401
     import edge_runtime.robot.loop  # noqa: F401
     from edge_runtime import config
 
-    return config.load(None)
+    box = config.load(None)
+    return replace(box, zones=replace(box.zones, **zones)) if zones else box
 
 
 def _known_calibration(params):
@@ -186,12 +230,17 @@ class _Frames:
             from dataclasses import replace
 
             params = replace(box.lifter, precision=cfg.lifter, threads=1)
-            self.lifter = PeopleLifter(StreamingLifter.from_manifest(cfg.assets or ASSETS_DIR, params))
-            self.tracker = PersonTracker(box.people, keypoint_format="h36m")  # the simulator's joint order
+            camera, fmt = box_camera(box)
+            # as edge_runtime/robot/command.py builds them: the conversions to H36M and to the lifter's
+            # canonical camera (undistortion included) are part of every frame's cost
+            self.lifter = PeopleLifter(StreamingLifter.from_manifest(cfg.assets or ASSETS_DIR, params, camera=camera,
+                                                                     keypoint_format=fmt))
+            self.tracker = PersonTracker(box.people, keypoint_format=fmt)
             self.frames = data["keypoints_px"]
             self.person = Person
-            self.what = (f"{len(self.frames[0])} simulated workers' keypoints -> PersonTracker -> lifter-{cfg.lifter} "
-                         "per person (1 thread) -> RobotLoop.feed_people")
+            self.what = (f"{len(self.frames[0])} simulated workers' {fmt.upper()} keypoints ({camera.width_px} x "
+                         f"{camera.height_px} camera) -> PersonTracker -> lifter-{cfg.lifter} per person (1 thread) "
+                         "-> RobotLoop.feed_people")
         else:
             self.lifter = None
             self.frames = data["joints_robot_m"]
@@ -273,6 +322,8 @@ class _Run:
     frame_cpu_s: list = field(default_factory=list)
     """The same frames' CPU time (this thread's, keypoints in -> ``feed_people`` returned, s): what
     the code costs, whatever else the machine runs (a preempted frame's wall time is longer)."""
+    due_reaction_s: list = field(default_factory=list)
+    """The same frames from their due time (schedule time: when the keypoints were there), s."""
     feed_reaction_s: list = field(default_factory=list)
     """The same frames from ``feed_people``'s own ``t_in_s`` (after tracking), as the robot command's
     ``FrameRecord`` measures its reaction (s)."""
@@ -289,55 +340,55 @@ def run_cycle(cfg: RobotConfig) -> _Run:
     """The frames and ticks of ``cfg.seconds`` (module docstring): in real time, or with
     ``cfg.simulated`` on a clock that jumps from deadline to deadline (the same commands when the
     machine keeps up; no timing)."""
-    from bench.arm_echo import HEARTBEAT_FRAME, ArmEcho, StampedBus, command_sent_s
-    from edge_runtime.robot.link.base import LinkConfig
-    from edge_runtime.robot.link.can import CanRobotLink
-    from edge_runtime.robot.loop import RobotLoop
+    from bench.arm_echo import arm_on_bus
 
     sim = _SimClock() if cfg.simulated else None
     clock, wait = (sim, sim.wait_until) if sim else (time.perf_counter, sleep_until)
-    box = _box()
+    box = _box(cfg.zones)
     feed = _Frames(cfg, box, np.load(cfg.worker_npz))
     channel = f"bench-robot-{os.getpid()}-{id(cfg)}"
-    bus = StampedBus(channel, clock=clock)
-    echo = ArmEcho(channel, cfg.arm_posture_rad or ARM_POSTURE_RAD)
-    link = CanRobotLink(bus=bus, config=LinkConfig(), clock=clock)
+    with arm_on_bus(channel, cfg.arm_posture_rad or ARM_POSTURE_RAD, clock) as (bus, echo, link):
+        return _cycle(cfg, clock, wait, box, feed, bus, echo, link)
+
+
+def _cycle(cfg: RobotConfig, clock, wait, box, feed, bus, echo, link) -> _Run:
+    """:func:`run_cycle` with its bus, arm stand-in and link open."""
+    from bench.arm_echo import HEARTBEAT_FRAME, command_sent_s
+    from edge_runtime.robot.loop import RobotLoop
+
     ids = {m.name: m.frame_id for m in link.codec.db.messages}
     heartbeat_id, mode_id = ids[HEARTBEAT_FRAME], ids["ROBOT_MODE_CMD"]
     calibration = _known_calibration(box.calibration) if feed.lifter is not None else None
     loop = RobotLoop(link, calibration=calibration, zones=box.zones, tracker=box.tracker, params=box.robot_loop,
                      clock=clock)
     run = _Run(loop, echo, feed.what)
-    try:
-        with CpuShare() as cpu:
-            t_start = clock()
-            echo.serve(t_start)  # the arm's first state, so the link is up from the first frame
-            for due, k in _schedule(cfg.seconds):
-                wait(t_start + due)
-                if k < 0:
-                    echo.serve(clock())
-                before = _counters(loop)
-                cpu_in, t_in = time.thread_time(), clock()
-                rec = loop.tick() if k < 0 else feed(loop, k)
-                t_out, cpu_out = clock(), time.thread_time()
-                t_sent = command_sent_s(bus.sent, heartbeat_id)
+    with CpuShare() as cpu:
+        t_start = clock()
+        echo.serve(t_start)  # the arm's first state, so the link is up from the first frame
+        for due, k in _schedule(cfg.seconds):
+            wait(t_start + due)
+            if k == ARM:  # the arm's own slot: outside every timed frame and tick
+                echo.serve(clock())
+                continue
+            before = _counters(loop)
+            cpu_in, t_in = time.thread_time(), clock()
+            rec = loop.tick() if k == TICK else feed(loop, k)
+            t_out, cpu_out = clock(), time.thread_time()
+            t_sent = command_sent_s(bus.sent, heartbeat_id)
+            if k >= 0:
+                run.cycle_s.append(t_out - t_in)
+                run.late_s.append(t_in - (t_start + due))
+                run.misses += t_out > t_start + due + 1.0 / FRAME_RATE_HZ
+            if t_sent is not None and (k < 0 or rec.command is not None):
+                kind = _kind(None if k < 0 else rec.command, before, _counters(loop),
+                             {fid for _, fid in bus.sent}, mode_id)
+                (run.tick_s if k < 0 else run.reaction_s).append(t_sent - t_in)
+                (run.tick_kinds if k < 0 else run.kinds).append(kind)
                 if k >= 0:
-                    run.cycle_s.append(t_out - t_in)
-                    run.late_s.append(t_in - (t_start + due))
-                    run.misses += t_out > t_start + due + 1.0 / FRAME_RATE_HZ
-                if t_sent is not None and (k < 0 or rec.command is not None):
-                    kind = _kind(None if k < 0 else rec.command, before, _counters(loop),
-                                 {fid for _, fid in bus.sent}, mode_id)
-                    (run.tick_s if k < 0 else run.reaction_s).append(t_sent - t_in)
-                    (run.tick_kinds if k < 0 else run.kinds).append(kind)
-                    if k >= 0:
-                        run.feed_reaction_s.append(t_sent - rec.t_in_s)
-                        run.frame_cpu_s.append(cpu_out - cpu_in)
-                del bus.sent[:]
-    finally:
-        link.close()
-        bus.shutdown()
-        echo.close()
+                    run.feed_reaction_s.append(t_sent - rec.t_in_s)
+                    run.due_reaction_s.append(t_sent - (t_start + due))
+                    run.frame_cpu_s.append(cpu_out - cpu_in)
+            del bus.sent[:]
     run.wall_s, run.cpu_pct = cpu.wall_s, cpu.pct
     return run
 
@@ -349,7 +400,7 @@ def _short(times_s: list[float]) -> dict:
 
 ON_THE_LINK = ("the send() of its last command frame on the bus returned (the product's CanRobotLink on python-can's "
                "virtual bus, frames encoded by its cantools/DBC + E2E codec; an in-process arm stand-in acknowledges "
-               "them in the tick slots, outside the timed frames)")
+               "them and sends its state at 100 Hz in slots of its own, outside the timed frames and ticks)")
 
 
 def measure_robot(cfg: RobotConfig) -> list[dict]:
@@ -358,7 +409,12 @@ def measure_robot(cfg: RobotConfig) -> list[dict]:
     st = r.loop.status()
     runtime_pct = round(r.cpu_pct - 100.0 * r.echo.cpu_s / max(r.wall_s, 1e-9), 2)
     late = np.asarray(r.late_s, float)
-    return [{"name": "robot_30hz", "rate_hz": FRAME_RATE_HZ, "seconds": round(r.wall_s, 2), "frames": len(r.cycle_s),
+    from edge_runtime import config
+
+    tag = {"scenario": SCENARIO, "zones_changed": dict(cfg.zones)} if cfg.zones else {"scenario": SCENARIO}
+    # config.load(None) reads an installed box's own file when there is one: say which configuration ran
+    source = str(config.SYSTEM_PATH) if config.SYSTEM_PATH.is_file() else "the shipped defaults"
+    return [{"name": "robot_30hz", **tag, "configuration": source, "rate_hz": FRAME_RATE_HZ, "seconds": round(r.wall_s, 2), "frames": len(r.cycle_s),
              "cpu_share_pct": runtime_pct, "cpu_share_with_arm_pct": r.cpu_pct, "deadline_misses": r.misses,
              "start_late_p99_us": round(float(np.percentile(late, 99)) * 1e6, 1) if late.size else None,
              **summarize(np.asarray(r.cycle_s) * 1e9), "peak_rss_mb": peak_rss_mb(), "commands": st["commands"],
@@ -366,15 +422,17 @@ def measure_robot(cfg: RobotConfig) -> list[dict]:
              "speed_changes": st["speed_changes"], "acked": st["acked"], "unacked": st["unacked"],
              "retries": st["retries"], "fault": st["fault"], "arm_answered": r.echo.commands,
              "arm_rejected": r.echo.rejected,
-             "what": r.what + f", ticks at {TICK_RATE_HZ:g} Hz, the shipped configuration, the product's CAN link on "
-                     "python-can's virtual bus (an in-process arm stand-in answers in the tick slots; its CPU "
-                     "left out of cpu_share_pct)"},
+             "what": r.what + f", ticks at {TICK_RATE_HZ:g} Hz, {source}, the product's CAN link on "
+                     "python-can's virtual bus (an in-process arm stand-in answers and sends its state at 100 Hz, "
+                     "5 ms after each tick; its CPU left out of cpu_share_pct)"},
             {**command_row("robot_reaction", r.reaction_s, r.kinds,
-                           "keypoints in (handed to the tracker) -> " + ON_THE_LINK + "; frames that caused a command"),
-             "from_feed": _short(r.feed_reaction_s), "frame_cpu": _short(r.frame_cpu_s)},
-            command_row("robot_tick_command", r.tick_s, r.tick_kinds,
-                        "a 10 ms control tick that sent a command (escape turns replanned on their timer, "
-                        "waypoints, staleness): tick start -> " + ON_THE_LINK)]
+                           "keypoints in (the loop picks the frame up and hands it to the tracker) -> " + ON_THE_LINK
+                           + "; frames that caused a command"), **tag,
+             "from_due": _short(r.due_reaction_s), "from_feed": _short(r.feed_reaction_s),
+             "frame_cpu": _short(r.frame_cpu_s), "judged_on": "from_due"},
+            {**command_row("robot_tick_command", r.tick_s, r.tick_kinds,
+                           "a 10 ms control tick that sent a command (escape turns replanned on their timer, "
+                           "waypoints, staleness): tick start -> " + ON_THE_LINK), **tag}]
 
 
 def robot_rows(seconds: float, assets: Path, entries: list[dict], seed: int, workdir: Path) -> list[dict]:
@@ -385,7 +443,7 @@ def robot_rows(seconds: float, assets: Path, entries: list[dict], seed: int, wor
     if importlib.util.find_spec("edge_runtime.robot.loop") is None:
         return [not_available("robot_30hz", "edge_runtime.robot.loop is not importable")]
     lifter = lifter_entry(entries)
-    npz = prepare_workers(workdir / "workers.npz", seconds, lifter, seed)
+    npz = prepare_workers(workdir / "workers.npz", seconds, lifter, seed, *box_camera(_box()))
     try:
         return run_child("robot", asdict(RobotConfig(str(npz), seconds, str(assets),
                                                      lifter["precision"] if lifter else "", _arm_posture())))

@@ -17,11 +17,12 @@ arm's base at the origin.
   and a second person in every frame.
 
 The mix was chosen to give many commands a second, not to be typical of a cell: the shipped
-configuration sends a command only when what the arm should do changes, and the default 300 s
-of this gives about 400 frames that cause one (seed 1 on the simulated clock: 419, 231 of them
-speed overrides, 67 stops, 53 retractions, 32 escape turns, 36 resumes; in real time on a loaded
-machine fewer, as late frames merge changes: 299 in 240 s where the simulated clock gave 347). Both workers are always in the camera's view; their pixels are the lifter's canonical
-camera's (score 1). The paths repeat until the run's length is covered.
+configuration sends a command only when what the arm should do changes. How many of each kind
+a run gives depends on the configuration (with ``[zones] stop_time_scales`` on, the arm works
+slowly closer in and the reacher makes it retract rather than stop, so stops become rare) and, in
+real time on a loaded machine, on the load (late frames merge changes): the report of a run says
+what it got. Both workers are always in the camera's view, noise-free (score 1): no lift is ever
+invalid, so the unseen-person path is not timed. The paths repeat until the run's length is covered.
 """
 from __future__ import annotations
 
@@ -51,14 +52,22 @@ PASS_XZ_M = ((-2.4, 2.05), (-1.8, 1.75), (-1.2, 2.05), (-0.6, 1.75), (0.0, 2.05)
 slow end of the speed-scaling band, its far ones beyond it."""
 
 
-def project(joints_m: np.ndarray, camera: dict) -> np.ndarray:
-    """Pixels (..., 17, 3: u, v, score 1) of robot-frame joints in the lifter's canonical camera
-    (``camera``: the manifest entry's ``camera``) at :data:`CAMERA_POSITION_M`."""
-    from edge_runtime.robot.keypoints import CameraModel
+def project(joints_m: np.ndarray, camera, keypoint_format: str = "h36m") -> np.ndarray:
+    """Pixels (..., 17, 3: u, v, score 1) of robot-frame H36M joints seen by ``camera`` (a
+    ``CameraModel``, or a manifest entry's ``camera`` dict) at :data:`CAMERA_POSITION_M`, in
+    ``keypoint_format`` order ("coco": eyes and ears placed on the head as the simulated camera does)."""
+    from edge_runtime.robot.keypoints import CameraModel, h36m_to_coco_3d
 
-    cam = CameraModel.from_dict(camera)
-    p = (np.asarray(joints_m, float) - np.asarray(CAMERA_POSITION_M)) @ CAMERA_FROM_ROBOT.T
-    uv = p[..., :2] / p[..., 2:3] * [cam.fx_px, cam.fy_px] + [cam.cx_px, cam.cy_px]
+    cam = camera if isinstance(camera, CameraModel) else CameraModel.from_dict(camera)
+    pts = h36m_to_coco_3d(joints_m) if keypoint_format == "coco" else np.asarray(joints_m, float)
+    p = (pts - np.asarray(CAMERA_POSITION_M)) @ CAMERA_FROM_ROBOT.T
+    if cam.dist:  # what a lens with this distortion puts on the sensor
+        import cv2
+
+        uv, _ = cv2.projectPoints(p.reshape(-1, 3), np.zeros(3), np.zeros(3), cam.K, cam.dist_array)
+        uv = uv.reshape(p.shape[:-1] + (2,))
+    else:
+        uv = p[..., :2] / p[..., 2:3] * [cam.fx_px, cam.fy_px] + [cam.cx_px, cam.cy_px]
     return np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
 
 
@@ -90,10 +99,12 @@ def _repeated(cycle: np.ndarray, n: int, offset: int = 0) -> np.ndarray:
     return cycle[(np.arange(n) + offset) % len(cycle)]
 
 
-def prepare_workers(out_npz: str | Path, seconds: float, lifter: dict | None, seed: int = 0) -> Path:
+def prepare_workers(out_npz: str | Path, seconds: float, lifter: dict | None, seed: int = 0, camera=None,
+                    keypoint_format: str = "h36m") -> Path:
     """Both workers' robot-frame joints ``joints_robot_m`` (T, 2, 17, 3) at 30 Hz for ``seconds`` and,
-    for ``lifter`` (a manifest entry), their pixels ``keypoints_px`` (T, 2, 17, 3) in its canonical
-    camera. Uses firmware_sim (parent process only)."""
+    when a ``lifter`` (a manifest entry) is shipped, their pixels ``keypoints_px`` (T, 2, 17, 3) seen by
+    ``camera`` (a ``CameraModel``; None: the lifter's canonical camera) in ``keypoint_format`` order.
+    Uses firmware_sim (parent process only)."""
     rng = np.random.default_rng(seed)
     n = max(1, int(round(seconds * FRAME_RATE_HZ)))
     reacher, passer = _reacher_cycle(rng), _passer_cycle(rng)
@@ -101,6 +112,6 @@ def prepare_workers(out_npz: str | Path, seconds: float, lifter: dict | None, se
     joints = np.stack([_repeated(reacher, n), _repeated(passer, n, len(passer) // 3)], axis=1)
     data = {"joints_robot_m": joints}
     if lifter is not None:
-        data["keypoints_px"] = project(joints, lifter["camera"])
+        data["keypoints_px"] = project(joints, lifter["camera"] if camera is None else camera, keypoint_format)
     np.savez(out_npz, **data)
     return Path(out_npz)
