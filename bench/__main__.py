@@ -1,4 +1,4 @@
-"""python -m bench [--threads N ...] [--cpus 0,1] [--busy-cpus 1] [--quick] [--json OUT.json] [--markdown OUT.md] [--compare OLD.json]
+"""python -m bench [--threads N ...] [--cpus 0,1] [--busy-cpus 1] [--quick] [--robot-seconds S] [--json OUT.json] [--markdown OUT.md] [--compare OLD.json]
 
 What the box will do, per shipped model and per loop:
 
@@ -9,7 +9,9 @@ What the box will do, per shipped model and per loop:
   configuration in a child process of its own);
 * loop costs: the wearable loop at 100 Hz in real time (CPU share of one core,
   deadline misses, peak memory), the detector per sample, the alert latency
-  (last sample of a capture -> alert frame on the CAN bus), the robot cycle at 30 Hz;
+  (last sample of a capture -> alert frame on the CAN bus), the robot cycle at 30 Hz and its
+  reaction (keypoints in -> command frame on the CAN bus, per kind of command; two simulated
+  workers, 300 s by default so that at least 300 frames cause a command);
 * a per-model profile: int8 against fp32 (file size, memory, latency, ratios).
 
 Prints a table; ``--json`` writes {"machine", "method", "results", "skipped",
@@ -51,7 +53,10 @@ def build_parser() -> OneLineParser:
     p.add_argument("--no-openvino", action="store_true", help="skip the OpenVINO rows")
     p.add_argument("--no-loops", action="store_true", help="skip the loop costs")
     p.add_argument("--realtime", type=positive_float, default=None, metavar="S",
-                   help="seconds of the real-time wearable and robot loops (default 15 and 10)")
+                   help="seconds of the real-time wearable and robot loops (default 15 and 300)")
+    p.add_argument("--robot-seconds", type=positive_float, default=None, metavar="S",
+                   help="seconds of the real-time robot loop alone (default 300, enough for 300 frames that cause "
+                        "a command; overrides --realtime for the robot)")
     p.add_argument("--read-period", type=float, default=None, metavar="S",
                    help="feed the real-time wearable loop in the blocks a live IMU source read every S seconds "
                         "hands over (default: the box's [imu] read_period_s; 0: one sample at a time)")
@@ -95,6 +100,8 @@ def cmd(a) -> int:
     sizes = {"n": a.n, "warmup": a.warmup, "rounds": a.rounds, **(QUICK if a.quick else {})}
     if a.realtime:
         sizes.update(realtime_s=a.realtime, robot_s=a.realtime)
+    if a.robot_seconds:
+        sizes.update(robot_s=a.robot_seconds)
     opts = BenchOptions(assets=a.assets or "", threads=tuple(a.threads), use_torch=not a.no_torch,
                         use_openvino=not a.no_openvino, models=a.models, loops=not a.no_loops, seed=a.seed,
                         read_period_s=a.read_period,

@@ -90,6 +90,26 @@ def _loop_figure(lp: dict) -> str:
         s += f", {lp['captures']} capture(s)"
     if "peak_rss_mb" in lp:
         s += f"; peak RSS {lp['peak_rss_mb']:.1f} MiB"
+    if "escapes" in lp:
+        s += (f"; {lp['commands']:,} commands: {lp['speed_changes']} speed overrides, {lp['stops']} stops, "
+              f"{lp['retracts']} retractions ({lp['escapes']} escape turns), {lp['unacked']} unacknowledged")
+    if lp.get("p99_note"):
+        s += f" [{lp['p99_note']}]"
+    if (lp.get("from_due") or {}).get("n"):
+        f = lp["from_due"]
+        s += (f"; from when the keypoints were due (the frame's schedule time, waits for ticks and late starts "
+              f"included) p50 {f['p50_us']:,.1f} us, p99 {f['p99_us']:,.1f} us, max {f['max_us']:,.1f} us"
+              + (" (the figure the 5 ms is judged on)" if lp.get("judged_on") == "from_due" else ""))
+    if (lp.get("from_feed") or {}).get("n"):
+        f = lp["from_feed"]
+        s += f"; from feed_people's own t_in (after tracking) p50 {f['p50_us']:,.1f} us, p99 {f['p99_us']:,.1f} us"
+    if (lp.get("frame_cpu") or {}).get("n"):
+        f = lp["frame_cpu"]
+        s += f"; the frames' CPU time p50 {f['p50_us']:,.1f} us, p99 {f['p99_us']:,.1f} us"
+    if lp.get("by_kind"):
+        s += "; by kind: " + ", ".join(
+            f"{k} n {v['n']} p50 {v['p50_us']:,.1f} p99 {v['p99_us']:,.1f} max {v['max_us']:,.1f} us"
+            + (" (p99 of < 100)" if v["n"] < 100 else "") for k, v in lp["by_kind"].items())
     return s
 
 
@@ -166,6 +186,10 @@ def compare(new: dict, old: dict, tolerance: float = 0.10) -> tuple[list[str], i
         nonlocal regressions
         if a is None or b is None:
             lines.append(f"{label:<48} {'only in new' if b is None else 'only in old'}")
+            return
+        if a.get("scenario") != b.get("scenario"):  # same name, another measurement (bench/robot_cycle.py SCENARIO)
+            lines.append(f"{label:<48} not comparable (scenario {b.get('scenario') or 'untagged'} -> "
+                         f"{a.get('scenario') or 'untagged'})")
             return
         parts = []
         for k in COMPARED:

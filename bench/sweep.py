@@ -48,8 +48,10 @@ class BenchOptions:
     """Length of the simulated drive for the detector and alert-latency figures (min)."""
     realtime_s: float = 15.0
     """Length of the real-time 100 Hz wearable stretch (s)."""
-    robot_s: float = 10.0
-    """Length of the real-time 30 Hz robot stretch (s)."""
+    robot_s: float = 300.0
+    """Length of the real-time 30 Hz robot stretch (s): long enough for at least 300 frames that cause a
+    command (``bench.robot_scenario``'s workers; the shipped configuration sends a command only when
+    what the arm should do changes, about 1.6 a second here)."""
     read_period_s: float | None = None
     """The live IMU source's read period the 100 Hz wearable stretch is fed at (None: the box's
     ``[imu] read_period_s``; 0: one sample at a time)."""
