@@ -299,6 +299,8 @@ def test_the_fallback_goes_straight_toward_the_base_but_not_inside_the_min_radiu
 # -- whole-body separation and speed and separation monitoring --------------------------------
 
 WHOLE_BODY = ZoneParams()
+FULL_SPEED_TS = ZoneParams(stop_time_scales=False)
+"""The full-speed stopping time at every speed (shipped before session 14): S_p 1.13-1.31 m."""
 """The shipped default: whole-body separation with speed scaling."""
 
 
@@ -376,7 +378,7 @@ def settled_at(z, seps):
 
 
 def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops():
-    z = WHOLE_BODY                                                     # shipped: the full-speed T_s at every speed
+    z = FULL_SPEED_TS
     scales, states = settled_at(z, (4.0, 1.55, 1.45, 1.35, 1.2, 1.1, 1.0))
     assert scales[0] == 1.0 and states[0] == State.NORMAL
     working = [s for s, st in zip(scales, states) if st == State.NORMAL]
@@ -385,13 +387,13 @@ def test_a_standing_worker_slows_the_arm_then_stops_it_and_stop_only_only_stops(
     assert states[-2] == State.LEVEL1                                  # within S_p of the slowest speed
     assert State.LEVEL2 not in states[:-1]                             # standing beyond reach: no retraction
     assert states[-1] == State.LEVEL2                                  # standing within reach_retract_m: retract
-    only = ZoneParams(speed_scaling=False)
+    only = replace(FULL_SPEED_TS, speed_scaling=False)
     d = settle(ready_body(only), body_facing_arm(1.45))
     assert d.state == State.LEVEL1 and d.speed_scale == 1.0            # where the scaled arm still works
 
 
 def test_with_the_speed_dependent_stopping_time_a_slow_arm_works_on_until_the_worker_is_within_reach():
-    z = replace(WHOLE_BODY, stop_time_scales=True)
+    z = WHOLE_BODY                                                     # shipped: T_s shrinks with the arm's speed
     assert z.body_protective_distance_m(z.min_speed_fraction * z.iso_robot_speed_mps) < z.reach_retract_m
     seps = (4.0, 1.55, 1.45, 1.35, 1.2, 1.1, 1.0, 0.9)
     scales, states = settled_at(z, seps)
@@ -401,16 +403,16 @@ def test_with_the_speed_dependent_stopping_time_a_slow_arm_works_on_until_the_wo
     assert all(a > b for a, b in zip(scales[:last + 1], scales[1:last + 1])) and 0.0 < scales[last] < 0.5
     assert separation_of(body_facing_arm(seps[last])) > z.reach_retract_m
     assert separation_of(body_facing_arm(seps[last + 1])) <= z.reach_retract_m
-    assert settled_at(WHOLE_BODY, seps)[1][last] == State.LEVEL1          # where the full-speed T_s stops it
+    assert settled_at(FULL_SPEED_TS, seps)[1][last] == State.LEVEL1       # where the full-speed T_s stops it
 
 
-def test_the_stopping_time_shrinks_with_the_arms_speed_when_asked():
-    z = replace(WHOLE_BODY, stop_time_scales=True)
+def test_the_stopping_time_shrinks_with_the_arms_speed():
+    z = WHOLE_BODY
     assert z.stop_time_s(z.iso_robot_speed_mps) == z.iso_stop_time_s and z.stop_time_s(0.0) == 0.0
     # at 10 % speed: S_p = 1.6 (0.15 + 0.03) + 0.06 (0.15 + 0.015) + 0.41 = 0.708 m; at full 1.31 m
     assert z.body_protective_distance_m(0.06) == pytest.approx(1.6 * 0.18 + 0.06 * 0.165 + 0.41)
     assert z.body_protective_distance_m(0.6) == pytest.approx(1.31)
-    fixed = WHOLE_BODY  # shipped: the full-speed T_s at every speed
+    fixed = FULL_SPEED_TS
     assert fixed.body_protective_distance_m(0.06) == pytest.approx(1.6 * 0.45 + 0.06 * 0.3 + 0.41)
     for v in (0.0, 0.06, 0.3, 0.6):  # the quadratic S_p is inverted too
         assert z.allowed_speed_mps(z.body_protective_distance_m(v)) == pytest.approx(v)
