@@ -208,26 +208,29 @@ class ZoneParams:
     """whole_body: how long before he would reach ``body_retract_distance_m`` the retraction
     starts (s). The Sawyer needs about 2 s to finish a retraction but moves its hand half of the
     way in the first second, at up to 0.6 m/s; a slower walker lets the arm work longer."""
-    stop_time_scales: bool = False
+    stop_time_scales: bool = True
     """whole_body: T_s in S_p shrinks with the arm's speed (``iso_stop_time_s`` from full speed,
     proportionally less from a slower one: a constant deceleration, T_s(v_r) = 0.3 s x v_r / 0.6 m/s and
     S_s = v_r T_s / 2), so the arm may work slowly closer in (S_p 0.71 m at 10 % speed, 1.31 m at full
     speed, against 1.13-1.31 m with the full-speed T_s throughout). As a model of the arm it is
     conservative: the simulated Sawyer (full joint speed in 0.25 s, its speed override scaling every
     joint's limit) stops doing the cell's task from 0.6 m/s in 0.13 s with no point of it travelling more
-    than 0.041 m, from 0.06 m/s in 0.013 s (tests/sim/test_sawyer.py checks it at 10-100 % speed). Off:
-    with it the arm worked 1.24x as long as stop-only in hard:200 seed 1 (session 9; 1.29-1.36x on
-    hard:60 seed 5 in session 7), but a worker walking up to the tool reached the arm in hard:200 seed 3
-    (hard_075, 0.045 m; 0.621 m without it), as two did in seed 1 in session 7 (hard_038 0.088 m,
-    hard_084 0.084 m): the arm working on closer in leaves it elsewhere when a retraction starts."""
+    than 0.041 m, from 0.06 m/s in 0.013 s (tests/sim/test_sawyer.py checks it at 10-100 % speed).
+    On since session 14. Off before: with the ``rigid`` calibration, workers reached a slow arm in
+    development runs (sessions 7 and 9: hard_038, hard_084, hard_075), since a person placed up to metres
+    too far (reports/robot/ray_bound_s13.md) let the arm work on closer in. With ``pnp`` (session 13)
+    those scenarios clear (0.378, 0.192, 0.606 m), and on development seeds it collided no more than the
+    full-speed T_s (seed 15: 2 against 3, the two it shares; seed 13: 0 against 1) while the arm worked
+    1.33x as long as stop-only on seed 19 (0.410 against 0.310; full-speed T_s 1.08x):
+    reports/hrc/s14_sts/. ``python -m firmware_sim hrc`` validates this default (reports/hrc/validated.json)."""
     reach_retract_m: float = config.setting(0.85, config.NON_NEGATIVE)
     """whole_body: anyone whose separation is below this (m) makes the arm retract (Eq. 6), coming
     or not: he can reach it faster than the camera and the lifter see an arm move (ISO 13855's
     850 mm reach, C), so the arm does not work, even slowly, within his reach. Chosen with
     ``stop_time_scales`` on, where it bounds the band in which the arm works slowly (development
     suite hard:60 seed 5: 0.9 m gave 1.29x stop-only's productive share, 0.75 m 1.36x, both without
-    a collision); with the full-speed T_s (shipped) S_p at the slowest speed is 1.13 m and this only
-    turns a stop into a retraction for someone standing within reach."""
+    a collision; shipped with it since session 14); with the full-speed T_s S_p at the slowest speed
+    is 1.13 m and this only turns a stop into a retraction for someone standing within reach."""
     escape_deg: float = config.setting(180.0, config.within(0, 180))
     """whole_body: someone within ``reach_retract_m`` of an arm whose retraction is done (or that was
     stopped) makes it turn about its base by at most this much (deg; 0: never), to where it is clearest

@@ -211,15 +211,13 @@ def test_a_speed_limit_slows_every_motion_and_zero_holds_the_arm():
 @pytest.mark.parametrize("share", [1.0, 0.6, 0.3, 0.1])
 def test_the_runtimes_stopping_model_covers_the_arm_at_every_speed(share):
     """The runtime's speed-dependent T_s(v_r) and S_s = v_r T_s / 2 ([zones] stop_time_scales,
-    hazard.ZoneParams.stop_time_s, ISO/TS 15066 speed and separation monitoring; the shipped full-speed
-    T_s is longer still) are at least what the arm needs to stop from a speed override of ``share`` x full
+    hazard.ZoneParams.stop_time_s, shipped since session 14; ISO/TS 15066 speed and separation
+    monitoring) are at least what the arm needs to stop from a speed override of ``share`` x full
     speed while it does the cell's task (between its waypoints, where the runtime scales its speed): time
     to rest, and how far any of its collision spheres travels meanwhile."""
-    from dataclasses import replace
-
     from firmware_sim.scenarios.hrc_world import box_config, hard_scenarios, task_start_posture
 
-    zones, loop = replace(box_config().zones, stop_time_scales=True), box_config().robot_loop
+    zones, loop = box_config().zones, box_config().robot_loop
     v_r = share * zones.iso_robot_speed_mps
     t_s = zones.stop_time_s(v_r)
     task = hard_scenarios(1, 0)[0].task_m
