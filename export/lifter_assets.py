@@ -383,6 +383,8 @@ def _quantise(model, fp32_path: Path, splits: dict, a, d: Path, say) -> tuple[Pa
         ", ".join(f"{k} {mm[k]:.1f} mm {p50[k]:.0f} us" for k in mm) + f"; fp32 {p50['fp32']:.0f} us -> {best}")
     quantization = {
         "method": best, "description": comp.results[best]["description"],
+        "reduce_range": comp.results[best]["reduce_range"],
+        "integer_kernel_drift": comp.results[best]["integer_kernel_drift"],
         "calibration": f"{len(calib)} windows of training subjects and cameras (MinMax)",
         "rule": f"fastest candidate within max({MAX_INT8_LOSS_MM} mm, {MAX_INT8_LOSS_REL:.0%}) MPJPE of fp32, "
                 "else the most accurate",

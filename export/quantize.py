@@ -19,6 +19,10 @@ Candidates (:data:`VARIANTS`), each built from the same fp32 graph after
 * ``qdq_all``            static QDQ on the conv stack and the dense head (QGemm);
 * ``qdq_all+dyn_lstm``   qdq_all, then DynamicQuantizeLSTM.
 
+Every candidate has 7-bit weights (``reduce_range``): x86 CPUs without VNNI saturate u8 x s8
+dot products with 8-bit weights, so a build faithful here could drift on a box; each candidate's
+:func:`integer_kernel_drift` (integer kernels against the same QDQ graph in float) is recorded.
+
 Choice (:func:`choose`): every candidate is timed on onnxruntime with one
 intra-op thread at batch 1, interleaved in rounds so that they share the
 machine's noise; candidates whose predictions drift from fp32 (argmax
@@ -190,14 +194,17 @@ def _quiet_root_logger():
 
 
 def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant | str,
-                  calib: np.ndarray | list[dict[str, np.ndarray]], *, pre_processed: str | Path | None = None, describe: bool = True) -> Path:
+                  calib: np.ndarray | list[dict[str, np.ndarray]], *, pre_processed: str | Path | None = None,
+                  describe: bool = True, reduce_range: bool | None = None) -> Path:
     """Quantise ``fp32_path`` with ``variant`` into ``out_path``; metadata carried over.
 
     ``calib`` holds calibration inputs of the graph's (single) input, or feeds of all its inputs
     (a list of {input name: array}, :class:`FeedReader`). ``describe`` appends the
     variant's description to the doc string (the ConvLSTM assets carry it; the lifter's never
-    did, and their bytes stay as shipped)."""
+    did, and their bytes stay as shipped). ``reduce_range`` overrides the variant's (to rebuild
+    an entry made before 7-bit weights, see :attr:`export.variants.Variant.reduce_range`)."""
     v = VARIANTS[variant] if isinstance(variant, str) else variant
+    rr = v.reduce_range if reduce_range is None else reduce_range
     fp32_path, out_path = Path(fp32_path), Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as td:
@@ -215,7 +222,7 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
                 quantize_static(str(cur), str(stage), reader,
                                 quant_format=QuantFormat.QDQ, op_types_to_quantize=ops, per_channel=v.per_channel,
                                 activation_type=QuantType.QInt8 if v.activation == "int8" else QuantType.QUInt8,
-                                weight_type=QuantType.QInt8,
+                                weight_type=QuantType.QInt8, reduce_range=rr,
                                 calibrate_method=CalibrationMethod.MinMax,
                                 nodes_to_exclude=v.keep_fp32(model) if v.keep_fp32 else None,
                                 extra_options={"CalibTensorRangeSymmetric": False})
@@ -223,7 +230,7 @@ def build_variant(fp32_path: str | Path, out_path: str | Path, variant: Variant 
             if v.dynamic_ops:
                 stage = Path(td) / "dynamic.onnx"
                 quantize_dynamic(str(cur), str(stage), op_types_to_quantize=list(v.dynamic_ops),
-                                 per_channel=False, weight_type=QuantType.QInt8)
+                                 per_channel=False, weight_type=QuantType.QInt8, reduce_range=rr)
                 cur = stage
         q = onnx.load(str(cur))
     meta = get_metadata(fp32_path)
@@ -295,6 +302,27 @@ def latency_stats(times_ns: np.ndarray) -> dict:
             "mean_us": float(times_ns.mean() / 1e3), "n": int(len(times_ns))}
 
 
+def integer_kernel_drift(model_path: str | Path, feed: dict[str, np.ndarray]) -> float:
+    """Mean absolute difference, over all outputs at ``feed``, between onnxruntime running the int8
+    graph with its integer kernels (QLinearConv, QGemm, ...: what the box runs) and the same QDQ
+    graph computed in float (graph optimisations off: DequantizeLinear, the fp32 op, QuantizeLinear).
+    Near 0 where the CPU's int8 dot products are exact; large where they saturate (u8 x s8 with
+    8-bit weights on x86 without VNNI, :attr:`export.variants.Variant.reduce_range`). The drift of
+    a dynamic graph is 0 by construction (its integer ops have no float form)."""
+    so = ort.SessionOptions()
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_DISABLE_ALL
+    so.intra_op_num_threads, so.log_severity_level = 1, 3
+    as_float = ort.InferenceSession(str(model_path), so, providers=["CPUExecutionProvider"])
+    integer = open_session(model_path)
+    return float(np.mean([np.abs(a - b).mean() for a, b in zip(integer.run(None, feed), as_float.run(None, feed))]))
+
+
+def _probe(calib: np.ndarray | list[dict[str, np.ndarray]], input_name: str, n: int = 64) -> dict[str, np.ndarray]:
+    """The first ``n`` calibration inputs as a feed (realistic, and inside the calibrated ranges)."""
+    first = calib[0] if isinstance(calib, list) else {input_name: calib}
+    return {k: np.ascontiguousarray(v[:n], dtype=np.float32) for k, v in first.items()}
+
+
 @dataclass
 class Comparison:
     """What :func:`compare_variants` found.
@@ -316,11 +344,14 @@ def compare_variants(fp32_path: str | Path, variants: Sequence[Variant], calib: 
     """Build every variant of ``fp32_path`` into ``out_dir/<stem><name>.onnx``, score each
     (``score(session)``: the caller's accuracy against fp32), then time fp32 and the variants at
     ``feed`` on ``threads`` onnxruntime thread(s), interleaved in rounds so that they share the
-    machine's noise. A variant the graph does not support is skipped, not fatal."""
+    machine's noise. A variant the graph does not support is skipped, not fatal. Each result also
+    records the variant's ``reduce_range`` and its :func:`integer_kernel_drift` on this CPU at
+    the first calibration inputs."""
     fp32_path, out_dir = Path(fp32_path), Path(out_dir)
     paths: dict[str, Path] = {}
     results: dict[str, dict] = {}
     sessions = {"fp32": open_session(fp32_path, threads)}
+    probe = _probe(calib, sessions["fp32"].get_inputs()[0].name)
     with tempfile.TemporaryDirectory() as td:
         pre = _preprocess_model(fp32_path, Path(td) / "pre.onnx")
         for v in variants:
@@ -338,7 +369,8 @@ def compare_variants(fp32_path: str | Path, variants: Sequence[Variant], calib: 
             paths[v.name] = path
             sessions[v.name] = open_session(path, threads)
             results[v.name] = {"description": v.description, **score(sessions[v.name]),
-                               "size_bytes": path.stat().st_size, **rep}
+                               "reduce_range": v.reduce_range, "size_bytes": path.stat().st_size,
+                               "integer_kernel_drift": integer_kernel_drift(path, probe), **rep}
     runners = {k: (lambda s=s: s.run(outputs, feed)) for k, s in sessions.items()}
     times = interleaved_calls(runners, n_timing, rounds=5, warmup=warmup)
     return Comparison(paths, results, {k: latency_stats(t) for k, t in times.items()})
@@ -458,6 +490,8 @@ def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, 
         "per_channel": v.per_channel if v.static else False,
         "activation_type": v.activation,
         "weight_type": "int8",
+        "reduce_range": v.reduce_range,
+        "integer_kernel_drift": c["integer_kernel_drift"],
         "calibration": {"method": "MinMax", "windows": int(n_calib),
                         "reader": "export.quantize.WindowReader (preprocessed capture windows)"},
         "pre_process": "onnxruntime.quantization.shape_inference.quant_pre_process",

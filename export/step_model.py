@@ -236,7 +236,7 @@ def quantise_step(fp32_path: Path, int8_path: Path, calib_X: np.ndarray, eval_X:
         int8_path.write_bytes(comp.paths[chosen].read_bytes())
     c = comp.results[chosen]
     keep = ("int8_operators", "fp32_operators", "runtime_op_types", "agreement_by_steps", "macro_f1_by_steps",
-            "macro_f1_delta")
+            "macro_f1_delta", "reduce_range", "integer_kernel_drift")
     return {"method": chosen, "description": c["description"], **{k: c[k] for k in keep},
             "calibration": {"method": "MinMax", "windows": int(len(calib_X)),
                             "reader": "export.quantize.FeedReader: each sub-window with the fp32 state before it"},

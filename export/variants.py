@@ -26,6 +26,12 @@ class Variant:
     per_channel: bool = True                 #: per-channel weight scales (static)
     activation: str = "uint8"                #: static activations, "uint8" or "int8" (weights are int8)
     keep_fp32: Callable[[onnx.ModelProto], list[str]] | None = None  #: names of the nodes left fp32
+    reduce_range: bool = True
+    """7-bit weights. On x86 CPUs without VNNI (AVX2, AVX-512F) onnxruntime's u8 x s8 kernels add
+    pairs of products in int16 (vpmaddubsw), which saturates when 2 x 255 x |w| > 32767: a model
+    faithful on the machine that built it can drift on such a box (the toy lifter's int8 error
+    grew 2.6x on an AVX2-only EPYC). With |w| <= 64 no pair can saturate, on every CPU. The
+    shipped entries that lack ``quantization.reduce_range`` were built before, with 8-bit weights."""
 
     @property
     def static(self) -> bool:

@@ -147,6 +147,20 @@ def test_int8_graph_holds_int8_ops_and_agrees_with_fp32(toy_onnx, tmp_path):
     assert q.read_bytes() == q2.read_bytes()
 
 
+def test_int8_weights_are_7_bit_so_no_cpu_saturates_them(toy_onnx, tmp_path):
+    """x86 without VNNI adds pairs of u8 x s8 products in int16: 8-bit weights can saturate there,
+    7-bit weights cannot. The integer kernels then compute what the QDQ graph says, on any CPU."""
+    fp, X, _ = toy_onnx
+    q = qz.build_variant(fp, tmp_path / "m.int8.onnx", "qdq_conv", X[:64])
+    w = [onnx.numpy_helper.to_array(i) for i in onnx.load(str(q)).graph.initializer
+         if i.data_type == onnx.TensorProto.INT8]
+    assert w and max(int(np.abs(a.astype(np.int16)).max()) for a in w) <= 64
+    assert qz.integer_kernel_drift(q, {"imu": X[:64]}) < 1e-4
+    full = qz.build_variant(fp, tmp_path / "m.full.onnx", "qdq_conv", X[:64], reduce_range=False)
+    assert max(int(np.abs(onnx.numpy_helper.to_array(i).astype(np.int16)).max())
+               for i in onnx.load(str(full)).graph.initializer if i.data_type == onnx.TensorProto.INT8) > 64
+
+
 def test_dynamic_variant_quantises_the_lstm(toy_onnx, tmp_path):
     fp, X, _ = toy_onnx
     q = qz.build_variant(fp, tmp_path / "dyn.onnx", "qdq_conv+dyn_lstm", X[:32])
@@ -164,7 +178,8 @@ def test_choose_measures_and_reports(toy_onnx, tmp_path):
     assert set(cands) == {"qdq_conv", "qdq_conv+dyn_lstm"}
     for c in cands.values():
         assert c["p50_us"] > 0 and 0 <= c["agreement"] <= 1 and "int8_operators" in c
-    assert rep["int8_operators"] and (tmp_path / "c.onnx").exists()
+        assert c["reduce_range"] is True and c["integer_kernel_drift"] < 1e-4
+    assert rep["reduce_range"] is True and rep["int8_operators"] and (tmp_path / "c.onnx").exists()
     with pytest.raises(qz.QuantizeError):
         qz.choose(fp, tmp_path / "d.onnx", X[:8], eval_x=X, variants=["nope"])
 

@@ -9,7 +9,7 @@ import torch
 from support import REPO_ROOT
 
 from export import lifter_assets as la
-from export.quantize import build_variant
+from export.quantize import build_variant, integer_kernel_drift
 from models.lifter import (
     LifterConfig,
     LifterNet,
@@ -121,6 +121,7 @@ def test_onnx_parity_and_int8_error_on_a_tiny_model(tmp_path, tiny_data):
         assert err < 0.1 * spread, cand.name                   # int8 tracks fp32 closely ...
         assert np.abs(root8 - root32).max() < 0.1 * max(1.0, np.abs(root32).max())
         assert not np.allclose(pose8, pose32)                  # ... but is not the fp32 graph
+        assert integer_kernel_drift(q, {"keypoints_2d": x[:64]}) < 1e-4  # and no CPU saturates it
     assert la.choose_int8(100.0, {"a": 101.0, "b": 100.5, "c": 130.0}, {"a": 50, "b": 40, "c": 10}) == "b"
     assert la.choose_int8(100.0, {"c": 130.0, "d": 120.0}, {"c": 10, "d": 90}) == "d"
 
