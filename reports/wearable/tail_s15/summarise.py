@@ -168,8 +168,10 @@ def examples(d, n_per=2) -> list[str]:
             continue
         seen[key] += 1
         trig = ", ".join(f"{t:+.2f}" for t in r["own_triggers_rel_s"]) or "none"
+        t0 = r["first_overlap_trigger_rel_s"]
         if r["first_overlap_owner"] not in ("this", None):
-            trig = f"busy: capture from {r['first_overlap_trigger_rel_s']:+.2f}; own {trig}"
+            trig = (f"busy: capture from {t0:+.2f}; own {trig}" if t0 < -1.0
+                    else f"first capture {t0:+.2f}, after the end; own {trig}")
         steps = r.get("steps") or r.get("first_own_steps") or r.get("first_overlap_steps")
         out.append(f"| {d['seed']} | {r['drive'].replace('drive seed ', '')} | {r['label']} | {r['onset_s']:.1f} | {r['duration_s']:.1f} | "
                    f"{r['cause']} | {trig} | {r.get('S', '–')} | {r.get('latency_s', 'missed')} | {fmt_steps(steps)} |")
@@ -189,30 +191,30 @@ def write_csv(d, path: Path) -> None:
                        + [f"{x['label']} {x['conf']:.3f}" for x in st[1:]])
 
 
-def levers_table(path: Path) -> list[str]:
-    d = json.loads(path.read_text())
-    out = [f"seed {d['seed']}, {d['hours']:g} h", "",
-           "| lever | median / p95 (s) | p90 (s) | first alerts ≤ 3.5 s (of all distractions) | event recall | first-alert class (Phone = Texting) | false alerts (/h) | repeat |",
-           "|---|---|---:|---:|---:|---|---|---:|"]
-    for r in d["levers"]:
-        out.append(f"| {r['lever']} | {r['median_s']:.2f} / {r['p95_s']:.2f} | {r['p90_s']:.2f} | {r['within_3_5_s_of_all']:.3f} | "
-                   f"{r['event_recall']:.4f} | {r['class_accuracy']:.4f} ({r['class_accuracy_phone_eq_texting']:.4f}) | "
-                   f"{r['false_alerts']} ({r['false_alerts_per_hour']:.2f}) | {r['repeat_alerts']} |")
-    return out
+LEVER_HEAD = ("| lever | median / p95 (s) | p90 (s) | first alerts ≤ 3.5 s (of all distractions) | event recall | "
+              "first-alert class (Phone = Texting) | false alerts (/h) | repeat |", "|---|---|---:|---:|---:|---|---|---:|")
+ORACLE_HEAD = ("| detector | triggers / h | no own trigger | busy at onset | trigger delay p50 / p90 / p95 (s) | "
+               "oracle at S = 2: median / p95 (s), ≤ 3.5 s of all | oracle at S = 3: median / p95 (s), ≤ 3.5 s of all |",
+               "|---|---:|---:|---:|---|---|---|")
 
 
-def oracle_table(path: Path) -> list[str]:
+def lever_row(r: dict) -> str:
+    return (f"| {r['lever']} | {r['median_s']:.2f} / {r['p95_s']:.2f} | {r['p90_s']:.2f} | {r['within_3_5_s_of_all']:.3f} | "
+            f"{r['event_recall']:.4f} | {r['class_accuracy']:.4f} ({r['class_accuracy_phone_eq_texting']:.4f}) | "
+            f"{r['false_alerts']} ({r['false_alerts_per_hour']:.2f}) | {r['repeat_alerts']} |")
+
+
+def oracle_row(r: dict) -> str:
+    t, o2, o3 = r["trigger_delay_s"], r["oracle_S2"], r["oracle_S3"]
+    return (f"| {r['setting']} | {r['triggers_per_hour']} | {r['no_own_trigger']} | {r['detector_busy_at_onset']} | "
+            f"{t['50']} / {t['90']} / {t['95']} | {o2['median_s']} / {o2['p95_s']}, {o2['within_3_5_s_of_all']:.3f} | "
+            f"{o3['median_s']} / {o3['p95_s']}, {o3['within_3_5_s_of_all']:.3f} |")
+
+
+def run_table(path: Path, key: str, head: tuple[str, str], row) -> list[str]:
+    """levers.py's (key "levers") or oracle.py's (key "settings") output as a Markdown table."""
     d = json.loads(path.read_text())
-    out = [f"seed {d['seed']}, {d['hours']:g} h", "",
-           "| detector | triggers / h | no own trigger | busy at onset | trigger delay p50 / p90 / p95 (s) | oracle at S = 2: median / p95 (s), ≤ 3.5 s of all | oracle at S = 3: median / p95 (s), ≤ 3.5 s of all |",
-           "|---|---:|---:|---:|---|---|---|"]
-    for r in d["settings"]:
-        t = r["trigger_delay_s"]
-        o2, o3 = r["oracle_S2"], r["oracle_S3"]
-        out.append(f"| {r['setting']} | {r['triggers_per_hour']} | {r['no_own_trigger']} | {r['detector_busy_at_onset']} | "
-                   f"{t['50']} / {t['90']} / {t['95']} | {o2['median_s']} / {o2['p95_s']}, {o2['within_3_5_s_of_all']:.3f} | "
-                   f"{o3['median_s']} / {o3['p95_s']}, {o3['within_3_5_s_of_all']:.3f} |")
-    return out
+    return [f"seed {d['seed']}, {d['hours']:g} h", "", *head, *(row(r) for r in d[key])]
 
 
 def main(argv=None) -> int:
@@ -223,9 +225,9 @@ def main(argv=None) -> int:
     p.add_argument("--oracle", nargs="*", default=[], help="oracle.py outputs: their tables only")
     a = p.parse_args(argv)
     for x in a.levers:
-        print("\n".join(levers_table(Path(x))) + "\n")
+        print("\n".join(run_table(Path(x), "levers", LEVER_HEAD, lever_row)) + "\n")
     for x in a.oracle:
-        print("\n".join(oracle_table(Path(x))) + "\n")
+        print("\n".join(run_table(Path(x), "settings", ORACLE_HEAD, oracle_row)) + "\n")
     runs = [json.loads(Path(x).read_text()) for x in a.runs]
     if not runs:
         return 0
