@@ -65,6 +65,7 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core import strict_json
+from edge_runtime.core.numeric import median
 from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, HIP, L_ANKLE, R_ANKLE
 from edge_runtime.errors import ConfigError, InputError
 
@@ -350,7 +351,7 @@ class FloorAnchor:
                 self.tracks.append(t)
             if reason is None and p.anchor_min_scale < k < p.anchor_max_scale:
                 t.factors.append(k)
-            t.k = float(np.median(t.factors)) if t.factors else k
+            t.k = float(median(t.factors)) if t.factors else k
             out[i] = cal.apply(t.k * flat[i])
             if np.isfinite(out[i][HIP]).all():
                 t.root_m = out[i][HIP]

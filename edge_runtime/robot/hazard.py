@@ -512,6 +512,9 @@ class _Seen:
     t_s: float
     person_m: np.ndarray
     speed_mps: float
+    spheres: tuple
+    """:func:`body_spheres` of ``person_m`` (centres, radii; read-only), made once per frame: the lost-person
+    check, the escape plan and the loop's backfire check use them at every frame and tick."""
 
 
 @dataclass
@@ -624,7 +627,8 @@ class HazardMonitor:
         self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
         for wid, est in ests.items():
-            centres, radii = body_spheres(people[wid])
+            person_m = np.asarray(people[wid], float)
+            centres, radii = _frozen(body_spheres(person_m))
             v_g = ground(est.velocity_mps)
             speed = float(np.linalg.norm(v_g))
             toward = eff_g - ground(est.position_m)
@@ -632,7 +636,7 @@ class HazardMonitor:
             # now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
             v3 = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]])
             d = float(separation_per_shift_m(centres, radii, v3, (0.0, z.predict_s), caps).min())
-            self._seen[wid] = _Seen(t_s, np.asarray(people[wid], float), speed)
+            self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii))
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
             # approach speed covers over the retraction's lead. (His path over the lead instead, so that a
@@ -728,7 +732,7 @@ class HazardMonitor:
                 self._trackers.pop(wid, None)
                 continue
             speed = max(z.lost_person_speed_mps, seen.speed_mps)
-            last = separation_m(*body_spheres(seen.person_m), caps)
+            last = separation_m(*seen.spheres, caps)
             d, point = last - speed * age, None
             bound = bounds.get(wid)
             if bound is not None:  # in view: where his rays say he stands (retract away from it)
@@ -757,6 +761,10 @@ class HazardMonitor:
         """whole_body: every person accounted for, at his last valid body (robot frame)."""
         return [seen.person_m for seen in self._seen.values()]
 
+    def people_spheres(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """whole_body: :func:`body_spheres` of each of :meth:`bodies` (read-only arrays, made once per frame)."""
+        return [seen.spheres for seen in self._seen.values()]
+
     def escape_people(self, sweep_m: float) -> list[tuple[np.ndarray, np.ndarray]] | None:
         """whole_body: everyone accounted for at the last pose frame, as body spheres (centres, radii;
         robot frame) for planning an escape turn (:func:`plan_escape_turn`): a person seen then at his
@@ -775,7 +783,7 @@ class HazardMonitor:
                 return None
         out = []
         for seen in self._seen.values():
-            centres, radii = body_spheres(seen.person_m)
+            centres, radii = seen.spheres
             grown_m = max(z.lost_person_speed_mps, seen.speed_mps) * max(t - seen.t_s, 0.0)
             out.append((centres, radii + grown_m))
         return out
@@ -928,9 +936,34 @@ def arm_points_m(q_rad) -> np.ndarray:
 
 
 def arm_capsules(q_rad) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The arm as capsules: segment starts (9, 3), ends (9, 3) and radii (9,), robot frame (m)."""
-    p = arm_points_m(q_rad)
-    return p[:-1], p[1:], np.asarray(ARM_LINK_RADII_M)
+    """The arm as capsules: segment starts (9, 3), ends (9, 3) and radii (9,), robot frame (m); read-only
+    arrays, the same ones for the same joint angles (the arm reports them at 100 Hz, and a frame, the ticks
+    between frames and the retraction's backfire check ask for the same few: :data:`_CAPSULE_CACHE`)."""
+    q = np.asarray(q_rad, float).reshape(7)
+    key = q.tobytes()
+    caps = _CAPSULE_CACHE.get(key)
+    if caps is None:
+        p = arm_points_m(q)
+        p.setflags(write=False)
+        caps = (p[:-1], p[1:], _ARM_LINK_RADII)
+        if len(_CAPSULE_CACHE) >= _CAPSULE_CACHE_SIZE:
+            del _CAPSULE_CACHE[next(iter(_CAPSULE_CACHE))]  # the oldest
+        _CAPSULE_CACHE[key] = caps
+    return caps
+
+
+_CAPSULE_CACHE: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+""":func:`arm_capsules` by the joint angles' bytes (the arm's now, where its retraction began, ...)."""
+_CAPSULE_CACHE_SIZE = 8
+_ARM_LINK_RADII = np.asarray(ARM_LINK_RADII_M, float)
+_ARM_LINK_RADII.setflags(write=False)
+
+
+def _frozen(arrays: tuple) -> tuple:
+    """``arrays`` made read-only (they are kept and shared: nobody may change them in place)."""
+    for a in arrays:
+        a.setflags(write=False)
+    return arrays
 
 
 def effector_capsule(effector_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -950,9 +983,14 @@ def body_spheres(person_m) -> tuple[np.ndarray, np.ndarray]:
     known = np.isfinite(p).all(axis=1)
     if not known.all():
         return _bounded_spheres(p, known)
-    a, b = np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS])
+    a, b = _LIMB_ENDS
     centres = np.concatenate([p, 0.5 * (p[a] + p[b])])
-    return centres, np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[a] + BODY_RADII_M[b])])
+    return centres, _BODY_SPHERE_RADII_M.copy()
+
+
+_LIMB_ENDS = (np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS]))
+_BODY_SPHERE_RADII_M = np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[_LIMB_ENDS[0]] + BODY_RADII_M[_LIMB_ENDS[1]])])
+""":func:`body_spheres`' radii of a whole skeleton: the joints', then the limb midpoints'."""
 
 
 MAX_MISSING_JOINTS = 0
@@ -1052,19 +1090,52 @@ def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_
 
 def point_clearance_m(points_m: np.ndarray, capsules) -> np.ndarray:
     """Distance (m) of each point (N, 3) from the nearest capsule's surface: (N,)."""
+    p = np.asarray(points_m, float)
+    return _clearance_xyz(p[:, 0], p[:, 1], p[:, 2], capsules)
+
+
+def _clearance_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, capsules) -> np.ndarray:
+    """:func:`point_clearance_m` of the points (``x``, ``y``, ``z``: (N,) each).
+
+    The same arithmetic as the textbook form (kept in tests/robot/test_hazard.py, which pins the two to the
+    bit)::
+
+        ab = b - a; ap = p[:, None] - a[None]; den = max((ab * ab).sum(-1), 1e-12)
+        t = clip((ap * ab).sum(-1) / den, 0, 1); (norm(ap - t[..., None] * ab, axis=-1) - r).min(axis=1)
+
+    on one (N, K) array per coordinate, every sum of three in numpy's order ((x + y) + z): numpy's reductions
+    over an axis of 3 cost ten times the arithmetic (the escape plan's 1,800 points x 9 capsules)."""
     a, b, r = capsules
     ab = b - a
-    ap = np.asarray(points_m, float)[:, None, :] - a[None]
     den = np.maximum((ab * ab).sum(-1), 1e-12)
-    t = np.clip((ap * ab[None]).sum(-1) / den, 0.0, 1.0)
-    return (np.linalg.norm(ap - t[..., None] * ab[None], axis=-1) - r[None]).min(axis=1)
+    ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
+    bx, by, bz = ab[:, 0], ab[:, 1], ab[:, 2]
+    apx = x[:, None] - ax
+    apy = y[:, None] - ay
+    apz = z[:, None] - az
+    t = apx * bx
+    t += apy * by
+    t += apz * bz
+    t /= den
+    np.clip(t, 0.0, 1.0, out=t)
+    dx = apx - t * bx
+    dy = apy - t * by
+    dz = apz - t * bz
+    dx *= dx
+    dy *= dy
+    dz *= dz
+    dx += dy
+    dx += dz
+    np.sqrt(dx, out=dx)
+    dx -= r
+    return dx.min(axis=1)
 
 
 def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
     """Smallest surface-to-surface distance (m) between spheres (``centres_m`` (N, 3),
     ``radii_m`` (N,)) and capsules (starts (K, 3), ends (K, 3), radii (K,)); negative when
     they overlap."""
-    return float(separation_per_shift_m(centres_m, radii_m, np.zeros(3), (0.0,), capsules)[0])
+    return float((point_clearance_m(centres_m, capsules) - radii_m).min())
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1334,6 +1405,9 @@ def _base_rotations(turns_rad) -> np.ndarray:
     return np.stack([np.stack([c, zero, s_], -1), np.stack([zero, one, zero], -1), np.stack([-s_, zero, c], -1)], -2)
 
 
+ESCAPE_FIRST_CANDIDATES = 8
+""":func:`plan_escape_turn` weighs this many candidates of a direction first and the rest only when the sweep
+gets past them (it often passes nearer someone within a few steps; the results are the same either way)."""
 SAWYER_J0_RANGE_RAD = math.radians(170.0)
 """The escape turns the Sawyer's first joint within this of zero either way (rad): its description's
 limits are +-3.0503 rad (174.8 deg), and an IK goal at the limit is refused."""
@@ -1365,6 +1439,7 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
         return np.minimum.reduceat(clear, starts, axis=-1)
 
     here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
+    x, y, z = centres[:, 0], centres[:, 1], centres[:, 2]
     floor = np.minimum(here, reach_m) - dip_m
     best = None  # (end separation, closest pass, turn)
     for sign in (1.0, -1.0):
@@ -1375,16 +1450,32 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
         if n < 1:
             continue
         turns = sign * step * np.arange(1, n + 1)
-        # turning the arm by a is turning everyone by -a about the same axis: one call for every candidate
-        moved = np.einsum("kij,nj->kni", _base_rotations(-turns), centres)
-        d = per_person(point_clearance_m(moved.reshape(-1, 3), capsules).reshape(n, -1) - radii[None])  # (n, P)
-        passed = np.minimum.accumulate(d, axis=0)
-        end, closest = d.min(axis=1), passed.min(axis=1)
-        for k in range(n):
-            if (passed[k] < floor).any():
-                break  # the sweep from here on passes nearer someone than he is now
-            if end[k] >= here.min() + min_gain_m and (best is None or (end[k], closest[k]) > best[:2]):
-                best = (float(end[k]), float(closest[k]), float(turns[k]))
+        cos, sin = np.cos(-turns), np.sin(-turns)
+        gain = here.min() + min_gain_m
+        prev = None  # the closest pass so far of each person, up to the chunk before
+        for lo, hi in ((0, min(n, ESCAPE_FIRST_CANDIDATES)), (min(n, ESCAPE_FIRST_CANDIDATES), n)):
+            if lo >= hi:
+                break
+            # turning the arm by a is turning everyone by -a about the same axis (y): a chunk of candidates at once,
+            # each coordinate as _base_rotations(-turns) applied to the centres gives it (tests pin them to the bit)
+            c, s_ = cos[lo:hi, None], sin[lo:hi, None]
+            moved_x, moved_z = c * x + s_ * z, -s_ * x + c * z                                 # (chunk, spheres)
+            moved_y = np.broadcast_to(y, moved_x.shape)
+            clear = _clearance_xyz(moved_x.ravel(), moved_y.ravel(), moved_z.ravel(), capsules).reshape(hi - lo, -1)
+            d = per_person(clear - radii[None])                                                  # (chunk, P)
+            passed = np.minimum.accumulate(d, axis=0)
+            if prev is not None:
+                passed = np.minimum(passed, prev[None])
+            prev = passed[-1]
+            # the sweep ends before the first candidate whose way there passes nearer someone than he is now
+            stop = (passed < floor).any(axis=1)
+            n_ok = int(np.argmax(stop)) if stop.any() else hi - lo
+            for e_k, c_k, t_k in zip(d.min(axis=1)[:n_ok].tolist(), passed.min(axis=1)[:n_ok].tolist(),
+                                     turns[lo:lo + n_ok].tolist()):
+                if e_k >= gain and (best is None or (e_k, c_k) > best[:2]):
+                    best = (e_k, c_k, t_k)
+            if n_ok < hi - lo:
+                break
     return None if best is None else best[2]
 
 

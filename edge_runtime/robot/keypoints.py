@@ -109,6 +109,7 @@ import numpy as np
 from edge_runtime import config
 from edge_runtime.core import skeleton as sk
 from edge_runtime.core import strict_json
+from edge_runtime.core.numeric import median
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
 
@@ -214,15 +215,30 @@ def _map(c: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def coco_to_h36m(kp) -> np.ndarray:
-    """COCO-17 (..., 17, 2|3) -> H36M-17 (..., 17, 3), joint by joint as the module docstring says."""
+    """COCO-17 (..., 17, 2|3) -> H36M-17 (..., 17, 3), joint by joint as the module docstring says.
+
+    One person's frame (17, 3) is remembered (:data:`_H36M_MEMO`): the person tracker and his lifter convert
+    the same keypoints in each frame; the second gets a copy of the first's result."""
     c = as_keypoints(kp)
+    key = c.tobytes() if c.shape == (N_JOINTS, 3) else None
+    if key is not None and (hit := _H36M_MEMO.get(key)) is not None:
+        return hit.copy()
     out = _map(c, W_EARS)
     # the eyes stand in for the ears when they score higher, or when the ears are not there
     from_eyes = _map(c, W_EYES[HEAD:HEAD + 1])[..., 0, :]
     ears_score = out[..., HEAD, 2]
     use_eyes = np.isfinite(from_eyes[..., 0]) & ~(ears_score >= EYES_FOR_EARS * from_eyes[..., 2])  # NaN: eyes
     out[..., HEAD, :] = np.where(use_eyes[..., None], from_eyes, out[..., HEAD, :])
+    if key is not None:
+        if len(_H36M_MEMO) >= _H36M_MEMO_SIZE:
+            del _H36M_MEMO[next(iter(_H36M_MEMO))]  # the oldest
+        _H36M_MEMO[key] = out.copy()
     return out
+
+
+_H36M_MEMO: dict[bytes, np.ndarray] = {}
+""":func:`coco_to_h36m` of the last few (17, 3) frames, by their float64 bytes."""
+_H36M_MEMO_SIZE = 16
 
 
 def to_h36m(kp, fmt: str) -> np.ndarray:
@@ -542,7 +558,7 @@ class PersonTracker:
         if both.sum() < 2:
             return math.inf
         # the median: a swinging limb or one gross keypoint error must not decide who is who
-        d = float(np.median(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
+        d = float(median(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
         gate = p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0)
         return d / gate if d <= gate else math.inf
 

@@ -115,6 +115,7 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
+from edge_runtime.core.numeric import median
 from edge_runtime.core.onnx import session_from_manifest
 from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS, PARENTS
 from edge_runtime.robot.hazard import enough_joints
@@ -447,7 +448,7 @@ class StreamingLifter:
             # (each from its own last keypoint): the person walks on while a hand is hidden
             again = ok & (self._age == 0)  # seen in the previous frame too
             if again.any():
-                step = np.median(norm[ok_norm][again[idx[ok_norm]]] - self._last_seen[again], axis=0)
+                step = median(norm[ok_norm][again[idx[ok_norm]]] - self._last_seen[again], axis=0)
                 self._moved[~ok] += step
             self._moved[ok] = 0.0
             self._last_seen[idx[ok_norm]] = norm[ok_norm]

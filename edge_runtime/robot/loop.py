@@ -87,7 +87,6 @@ from edge_runtime.robot.hazard import (
     TrackerParams,
     ZoneParams,
     arm_capsules,
-    body_spheres,
     effector_capsule,
     enough_joints,
     eq6_retraction,
@@ -354,6 +353,7 @@ class RobotLoop:
         self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
         self._escape_s = -math.inf  # when this level 2 last planned an escape turn (clock, s)
         self._escaping = False  # the retraction under way is an escape turn
+        self._separations: dict = {}  # _separation's memory
         self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
@@ -777,12 +777,25 @@ class RobotLoop:
             return False
         reach = z.body_retract_distance_m + z.retract_lead_s * z.lost_person_speed_mps
         now_caps, start_caps = arm_capsules(q), arm_capsules(q0)
-        for body in self.monitor.bodies():
-            centres, radii = body_spheres(body)
-            now = separation_m(centres, radii, now_caps)
-            if now < reach and now < separation_m(centres, radii, start_caps) - self.params.retract_backfire_m:
+        for spheres in self.monitor.people_spheres():
+            now = self._separation(spheres, now_caps)
+            if now < reach and now < self._separation(spheres, start_caps) - self.params.retract_backfire_m:
                 return True
         return False
+
+    def _separation(self, spheres, caps) -> float:
+        """:func:`edge_runtime.robot.hazard.separation_m` of a person's body spheres (the monitor's, made once per
+        frame) from the arm's capsules (:func:`edge_runtime.robot.hazard.arm_capsules`'s, the same for the same
+        joint angles), both read-only: remembered, since the backfire check asks at every tick (100 Hz) for the
+        same bodies (30 Hz) against the same few arm states (where the retraction began, where the arm is)."""
+        key = (id(spheres), id(caps))
+        hit = self._separations.get(key)
+        if hit is None or hit[0] is not spheres or hit[1] is not caps:
+            if len(self._separations) >= 32:
+                self._separations.clear()
+            hit = (spheres, caps, separation_m(*spheres, caps))  # holding both keeps their ids unique
+            self._separations[key] = hit
+        return hit[2]
 
     def _retract_motion(self, decision: Decision) -> Motion:
         """Eq. 6's retraction from the effector (:func:`edge_runtime.robot.hazard.eq6_retraction`)."""
