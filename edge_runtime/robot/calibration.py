@@ -210,7 +210,8 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     lower = np.argmin(rays[:, 1])
     # both feet down: two independent rays halve the floor crossing's variance; a raised foot's
     # ray would put the skeleton too far, so only the lower ankle counts then
-    feet = rays if np.ptp(rays[:, 1]) <= ANCHOR_LEVEL_FEET_M else rays[[lower]]
+    heights = rays[:, 1]
+    feet = rays if heights.max() - heights.min() <= ANCHOR_LEVEL_FEET_M else rays[[lower]]  # np.ptp's arithmetic
     drop_m = b[1] - (params.floor_y_m + params.ankle_height_m)
     if not drop_m >= params.anchor_min_camera_height_m:
         return 1.0, ANCHOR_CAMERA_LOW
@@ -220,7 +221,13 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     k = np.exp(log_floor)
     if np.isfinite(ANCHOR_LIFTER_DEPTH_SD):  # the fusion (off as shipped: the floor rays alone, no work per frame)
         k = _nearer_to_arm(j[HIP] @ A.T, b, k, np.exp(_fused_with_lifter(log_floor, feet, drop_m)))
-    return float(np.clip(k, params.anchor_min_scale, params.anchor_max_scale)), None
+    # np.clip's arithmetic (min(max(k, lo), hi), a NaN k kept) on floats
+    k = float(k)
+    if k < params.anchor_min_scale:
+        k = float(params.anchor_min_scale)
+    if k > params.anchor_max_scale:
+        k = float(params.anchor_max_scale)
+    return k, None
 
 
 def _fused_with_lifter(log_floor: float, feet: np.ndarray, drop_m: float) -> float:

@@ -109,7 +109,7 @@ import numpy as np
 from edge_runtime import config
 from edge_runtime.core import skeleton as sk
 from edge_runtime.core import strict_json
-from edge_runtime.core.numeric import median
+from edge_runtime.core.numeric import median, norms2
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
 
@@ -201,17 +201,34 @@ W_EYES = _weights({**_ROWS, HEAD: _head_row((C_L_EYE, C_R_EYE))})
 """The same with the head from the eyes."""
 
 
-def _map(c: np.ndarray, w: np.ndarray) -> np.ndarray:
+def _sources(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(``w != 0``, (H, S) the COCO keypoints each row of ``w`` sums (its nonzero weights) padded with its first)."""
+    rows = [np.flatnonzero(r) for r in w]
+    n = max(len(r) for r in rows)
+    return w != 0, np.array([np.concatenate([r, np.repeat(r[:1], n - len(r))]) for r in rows])
+
+
+def _map(c: np.ndarray, w: np.ndarray, sources: tuple | None = None, prepared=None) -> np.ndarray:
     """H36M (..., 17, 3) = ``w`` applied to COCO (..., 17, 3); a joint's score is the lowest
-    score among its sources, and it is NaN when any source coordinate or score is NaN."""
-    used = w != 0
+    score among its sources, and it is NaN when any source coordinate or score is NaN.
+
+    ``sources`` is ``_sources(w)`` (given for the module's fixed weights): a joint's badness is then
+    gathered from its few sources instead of weighed over all 17 (an any: the same booleans). The score
+    stays a min over all 17 (inf where unused): a min over only the sources could pick the other zero of
+    a -0.0 / 0.0 tie. ``prepared`` is ``_prepared(c)``, when the caller maps ``c`` twice."""
+    used, sources = _sources(w) if sources is None else sources
+    filled, fin = _prepared(c) if prepared is None else prepared
+    out = np.empty(c.shape[:-2] + (len(w), 3))
+    out[..., :2] = np.einsum("hc,...cd->...hd", w, filled)
+    out[..., 2] = np.min(np.where(used, c[..., None, :, 2], np.inf), axis=-1)  # NaN propagates
+    out[~fin[..., sources].all(axis=-1)] = np.nan
+    return out
+
+
+def _prepared(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(COCO x, y with non-finite coordinates 0, whether both coordinates are finite) for :func:`_map`."""
     finite = np.isfinite(c[..., :2])
-    xy = np.einsum("hc,...cd->...hd", w, np.where(finite, c[..., :2], 0.0))
-    bad = np.einsum("hc,...c->...h", used, ~finite.all(axis=-1)) > 0
-    score = np.min(np.where(used, c[..., None, :, 2], np.inf), axis=-1)  # NaN propagates
-    xy[bad] = np.nan
-    score[bad] = np.nan
-    return np.concatenate([xy, score[..., None]], axis=-1)
+    return np.where(finite, c[..., :2], 0.0), finite[..., 0] & finite[..., 1]
 
 
 def coco_to_h36m(kp) -> np.ndarray:
@@ -223,9 +240,10 @@ def coco_to_h36m(kp) -> np.ndarray:
     key = c.tobytes() if c.shape == (N_JOINTS, 3) else None
     if key is not None and (hit := _H36M_MEMO.get(key)) is not None:
         return hit.copy()
-    out = _map(c, W_EARS)
+    prepared = _prepared(c)
+    out = _map(c, W_EARS, _SOURCES_EARS, prepared)
     # the eyes stand in for the ears when they score higher, or when the ears are not there
-    from_eyes = _map(c, W_EYES[HEAD:HEAD + 1])[..., 0, :]
+    from_eyes = _map(c, W_EYES[HEAD:HEAD + 1], _SOURCES_EYES_HEAD, prepared)[..., 0, :]
     ears_score = out[..., HEAD, 2]
     use_eyes = np.isfinite(from_eyes[..., 0]) & ~(ears_score >= EYES_FOR_EARS * from_eyes[..., 2])  # NaN: eyes
     out[..., HEAD, :] = np.where(use_eyes[..., None], from_eyes, out[..., HEAD, :])
@@ -235,6 +253,9 @@ def coco_to_h36m(kp) -> np.ndarray:
         _H36M_MEMO[key] = out.copy()
     return out
 
+
+_SOURCES_EARS = _sources(W_EARS)
+_SOURCES_EYES_HEAD = _sources(W_EYES[HEAD:HEAD + 1])
 
 _H36M_MEMO: dict[bytes, np.ndarray] = {}
 """:func:`coco_to_h36m` of the last few (17, 3) frames, by their float64 bytes."""
@@ -485,6 +506,7 @@ def _seen(kp: np.ndarray, min_score: float) -> np.ndarray:
     return np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= min_score)
 
 
+
 class PersonTracker:
     """Stable ids for the people of successive frames (see "Who is who" in the module docstring).
 
@@ -517,26 +539,27 @@ class PersonTracker:
                 self.rejected += 1
                 continue
             kp = to_h36m(kp, self.keypoint_format)  # tracked on the lifter's joints: one set of bones
-            if _seen(kp, p.min_score).sum() < p.min_joints:
+            seen = _seen(kp, p.min_score)  # once per detection: the cost, the follow and the size use it
+            if seen.sum() < p.min_joints:
                 self.rejected += 1
                 continue
-            dets.append((person, kp))
-        assigned = _assign({(tid, i): self._cost(tr, kp, t_s) for tid, tr in self.tracks.items()
-                            for i, (_, kp) in enumerate(dets)})
+            dets.append((person, kp, seen))
+        assigned = _assign({(tid, i): self._cost(tr, kp, t_s, seen) for tid, tr in self.tracks.items()
+                            for i, (_, kp, seen) in enumerate(dets)})
         out = []
-        for i, (person, kp) in enumerate(dets):
+        for i, (person, kp, seen) in enumerate(dets):
             tid = assigned.get(i)
             if tid is None:
                 tid = next(self._ids)
                 self.created += 1
-                self.tracks[tid] = _Track(tid, np.where(_seen(kp, p.min_score)[:, None], kp[:, :2], np.nan),
-                                          _size_px(kp, p.min_score), t_s)
+                self.tracks[tid] = _Track(tid, np.where(seen[:, None], kp[:, :2], np.nan),
+                                          _size_px(kp, p.min_score, seen), t_s)
             else:
-                self._follow(self.tracks[tid], kp, t_s)
+                self._follow(self.tracks[tid], kp, t_s, seen)
             out.append(replace(person, id=tid, source_id=person.id))
         return out
 
-    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float) -> float:
+    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None) -> float:
         """Median distance of the detection's keypoints from the track's prediction, in track
         sizes, as a fraction of the track's gate (which grows while it is unseen); inf beyond
         the gate or without common joints.
@@ -554,27 +577,29 @@ class PersonTracker:
         if len(tr.xy) != len(kp):
             return math.inf
         pred = tr.predicted(t_s, p.max_predict_s)
-        both = _seen(kp, p.min_score) & np.isfinite(pred).all(axis=1)
+        both = (_seen(kp, p.min_score) if seen is None else seen) & np.isfinite(pred).all(axis=1)
         if both.sum() < 2:
             return math.inf
         # the median: a swinging limb or one gross keypoint error must not decide who is who
-        d = float(median(np.linalg.norm(kp[both, :2] - pred[both], axis=1))) / tr.size_px
+        d = float(median(norms2(kp[both, :2] - pred[both]))) / tr.size_px
         gate = p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0)
         return d / gate if d <= gate else math.inf
 
-    def _follow(self, tr: _Track, kp: np.ndarray, t_s: float) -> None:
+    def _follow(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None) -> None:
         p = self.params
-        seen = _seen(kp, p.min_score)
+        if seen is None:
+            seen = _seen(kp, p.min_score)
         dt = t_s - tr.t_s
         both = seen & np.isfinite(tr.xy).all(axis=1)
         if dt > 0 and both.any():
-            v = np.mean(kp[both, :2] - tr.xy[both], axis=0) / dt
+            step = kp[both, :2] - tr.xy[both]
+            v = step.sum(axis=0) / len(step) / dt  # np.mean's own arithmetic (a sum, then / the count)
             a = p.velocity_smoothing
             tr.velocity_pxps = a * v + (1 - a) * tr.velocity_pxps
         # joints not seen now keep their last position, moved with the person
         moved = tr.xy + tr.velocity_pxps * max(dt, 0.0)
         tr.xy = np.where(seen[:, None], kp[:, :2], moved)
-        tr.size_px = _size_px(kp, p.min_score)
+        tr.size_px = _size_px(kp, p.min_score, seen)
         tr.t_s = t_s
 
 
@@ -583,6 +608,9 @@ _BONES = ((L_SHOULDER, sk.L_HIP, 0.288), (R_SHOULDER, sk.R_HIP, 0.288), (sk.L_HI
           (L_SHOULDER, sk.L_ELBOW, 0.186), (R_SHOULDER, sk.R_ELBOW, 0.186), (sk.L_ELBOW, sk.L_WRIST, 0.146),
           (sk.R_ELBOW, sk.R_WRIST, 0.146))
 """(H36M joint, H36M joint, length as a fraction of body height; docs/design.md section 5)."""
+_BONE_A = np.array([a for a, _, _ in _BONES])
+_BONE_B = np.array([b for _, b, _ in _BONES])
+_BONE_FRAC = [frac for _, _, frac in _BONES]
 
 
 MAX_EXACT_ASSIGNMENT = 4
@@ -620,15 +648,19 @@ def _assign(costs: dict[tuple[int, int], float]) -> dict[int, int]:
     return best(0, frozenset())[2]
 
 
-def _size_px(kp: np.ndarray, min_score: float) -> float:
+def _size_px(kp: np.ndarray, min_score: float, seen: np.ndarray | None = None) -> float:
     """A person's size in the image (px), whichever of his joints are seen: the largest body
     height his seen bones imply (bone length / its fraction of the height; the largest,
     because a bone seen end-on looks short, never long), else his keypoints' box diagonal.
     A partly hidden person so keeps his size (a box of his visible joints would shrink)."""
-    seen = _seen(kp, min_score)
-    heights = [np.linalg.norm(kp[a, :2] - kp[b, :2]) / frac for a, b, frac in _BONES if seen[a] and seen[b]]
-    if len(heights) >= 2:
-        return max(float(np.sort(heights)[-2]), 1.0)  # the second largest: one bad keypoint cannot inflate it
+    if seen is None:
+        seen = _seen(kp, min_score)
+    both = np.flatnonzero(seen[_BONE_A] & seen[_BONE_B])
+    if len(both) >= 2:
+        bones = kp[_BONE_A[both], :2] - kp[_BONE_B[both], :2]
+        # a vector's np.linalg.norm is sqrt(dot(v, v)): the same dot, and a correctly rounded sqrt
+        heights = sorted([math.sqrt(v.dot(v)) / _BONE_FRAC[i] for v, i in zip(bones, both.tolist())])
+        return max(heights[-2], 1.0)  # the second largest: one bad keypoint cannot inflate it
     xy = kp[seen, :2]
     return max(float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0))), 1.0)
 

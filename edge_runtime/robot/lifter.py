@@ -115,7 +115,7 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
-from edge_runtime.core.numeric import median
+from edge_runtime.core.numeric import median, norms2
 from edge_runtime.core.onnx import session_from_manifest
 from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS, PARENTS
 from edge_runtime.robot.hazard import enough_joints
@@ -507,10 +507,13 @@ class StreamingLifter:
         if model_joints is not None and tol > 0:
             f = np.array([cam.fx_px, cam.fy_px])
             toward = model_joints[:, :2] / model_joints[:, 2:3] * f + (cam.cx_px, cam.cy_px) - px
-            dist = np.linalg.norm(toward, axis=1, keepdims=True)
+            dist = norms2(toward)[:, None]  # np.linalg.norm(toward, axis=1, keepdims=True) to the bit
             px = px + toward * np.minimum(1.0, tol / np.maximum(dist, 1e-9))
-        return np.column_stack([(px[:, 0] - cam.cx_px) / cam.fx_px, (px[:, 1] - cam.cy_px) / cam.fy_px,
-                                np.ones(N_JOINTS)])
+        rays = np.empty((N_JOINTS, 3))
+        rays[:, 0] = (px[:, 0] - cam.cx_px) / cam.fx_px
+        rays[:, 1] = (px[:, 1] - cam.cy_px) / cam.fy_px
+        rays[:, 2] = 1.0
+        return rays
 
     def _invalid(self, t_s: float, reason: str, observed: np.ndarray | None) -> LiftedPose:
         self.stats.invalid[reason.split(":", 1)[0]] += 1

@@ -34,3 +34,16 @@ def test_median_hands_anything_else_to_numpy():
     b = np.arange(12.0).reshape(3, 4)
     assert same(median(b, axis=1), np.median(b, axis=1))
     assert same(median([3, 1, 2]), np.median([3, 1, 2]))
+
+
+def test_norms2_is_numpys_row_norm():
+    from edge_runtime.core.numeric import norms2
+    rng = np.random.default_rng(1507)
+    for case in range(2000):
+        d = rng.normal(0, 1, (int(rng.integers(0, 20)), 2)) * 10.0 ** rng.uniform(-200, 200)
+        for value in (np.nan, np.inf, -np.inf, -0.0, 0.0, 1e-320):
+            d[rng.random(d.shape) < 0.03] = value
+        with np.errstate(all="ignore"):
+            want = np.linalg.norm(d, axis=1)
+            got = norms2(d)
+        assert got.dtype == want.dtype and got.shape == want.shape and got.tobytes() == want.tobytes(), case
