@@ -66,7 +66,7 @@ from onnxruntime.quantization import (
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
 from bench.timing import interleaved_calls
-from edge_runtime.core.onnx import open_session
+from edge_runtime.core.onnx import open_session, session_options
 from export.onnx_export import INPUT_NAME, PROBS, get_metadata, op_counts, set_metadata
 from export.opsets import declare_used_opsets
 from export.variants import Variant
@@ -309,9 +309,8 @@ def integer_kernel_drift(model_path: str | Path, feed: dict[str, np.ndarray]) ->
     Near 0 where the CPU's int8 dot products are exact; large where they saturate (u8 x s8 with
     8-bit weights on x86 without VNNI, :attr:`export.variants.Variant.reduce_range`). The drift of
     a dynamic graph is 0 by construction (its integer ops have no float form)."""
-    so = ort.SessionOptions()
+    so = session_options(1)
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_DISABLE_ALL
-    so.intra_op_num_threads, so.log_severity_level = 1, 3
     as_float = ort.InferenceSession(str(model_path), so, providers=["CPUExecutionProvider"])
     integer = open_session(model_path)
     return float(np.mean([np.abs(a - b).mean() for a, b in zip(integer.run(None, feed), as_float.run(None, feed))]))

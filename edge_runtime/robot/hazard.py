@@ -110,6 +110,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from edge_runtime import config
+from edge_runtime.core.memo import Recent
 from edge_runtime.core.skeleton import HEAD as HEAD_JOINT
 from edge_runtime.core.skeleton import HIP as HIP_JOINT
 from edge_runtime.core.skeleton import L_ANKLE, L_HIP, L_SHOULDER, PARENTS, R_ANKLE, R_HIP, R_SHOULDER, SPINE, THORAX
@@ -945,16 +946,12 @@ def arm_capsules(q_rad) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if caps is None:
         p = arm_points_m(q)
         p.setflags(write=False)
-        caps = (p[:-1], p[1:], _ARM_LINK_RADII)
-        if len(_CAPSULE_CACHE) >= _CAPSULE_CACHE_SIZE:
-            del _CAPSULE_CACHE[next(iter(_CAPSULE_CACHE))]  # the oldest
-        _CAPSULE_CACHE[key] = caps
+        caps = _CAPSULE_CACHE.put(key, (p[:-1], p[1:], _ARM_LINK_RADII))
     return caps
 
 
-_CAPSULE_CACHE: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+_CAPSULE_CACHE: Recent[tuple[np.ndarray, np.ndarray, np.ndarray]] = Recent(8)
 """:func:`arm_capsules` by the joint angles' bytes (the arm's now, where its retraction began, ...)."""
-_CAPSULE_CACHE_SIZE = 8
 _ARM_LINK_RADII = np.asarray(ARM_LINK_RADII_M, float)
 _ARM_LINK_RADII.setflags(write=False)
 

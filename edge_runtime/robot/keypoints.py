@@ -109,6 +109,7 @@ import numpy as np
 from edge_runtime import config
 from edge_runtime.core import skeleton as sk
 from edge_runtime.core import strict_json
+from edge_runtime.core.memo import Recent
 from edge_runtime.core.numeric import median, norms2
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
@@ -248,18 +249,15 @@ def coco_to_h36m(kp) -> np.ndarray:
     use_eyes = np.isfinite(from_eyes[..., 0]) & ~(ears_score >= EYES_FOR_EARS * from_eyes[..., 2])  # NaN: eyes
     out[..., HEAD, :] = np.where(use_eyes[..., None], from_eyes, out[..., HEAD, :])
     if key is not None:
-        if len(_H36M_MEMO) >= _H36M_MEMO_SIZE:
-            del _H36M_MEMO[next(iter(_H36M_MEMO))]  # the oldest
-        _H36M_MEMO[key] = out.copy()
+        _H36M_MEMO.put(key, out.copy())
     return out
 
 
 _SOURCES_EARS = _sources(W_EARS)
 _SOURCES_EYES_HEAD = _sources(W_EYES[HEAD:HEAD + 1])
 
-_H36M_MEMO: dict[bytes, np.ndarray] = {}
+_H36M_MEMO: Recent[np.ndarray] = Recent(16)
 """:func:`coco_to_h36m` of the last few (17, 3) frames, by their float64 bytes."""
-_H36M_MEMO_SIZE = 16
 
 
 def to_h36m(kp, fmt: str) -> np.ndarray:
@@ -504,7 +502,6 @@ class _Track:
 
 def _seen(kp: np.ndarray, min_score: float) -> np.ndarray:
     return np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= min_score)
-
 
 
 class PersonTracker:

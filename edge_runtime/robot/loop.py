@@ -76,6 +76,7 @@ from typing import TYPE_CHECKING, Callable, Protocol
 import numpy as np
 
 from edge_runtime import config
+from edge_runtime.core.memo import Recent
 from edge_runtime.core.skeleton import HEAD, JOINTS
 from edge_runtime.robot.hazard import (
     Decision,
@@ -353,7 +354,7 @@ class RobotLoop:
         self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
         self._escape_s = -math.inf  # when this level 2 last planned an escape turn (clock, s)
         self._escaping = False  # the retraction under way is an escape turn
-        self._separations: dict = {}  # _separation's memory
+        self._separations: Recent[tuple] = Recent(32)  # _separation's memory
         self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
@@ -791,10 +792,8 @@ class RobotLoop:
         key = (id(spheres), id(caps))
         hit = self._separations.get(key)
         if hit is None or hit[0] is not spheres or hit[1] is not caps:
-            if len(self._separations) >= 32:
-                self._separations.clear()
-            hit = (spheres, caps, separation_m(*spheres, caps))  # holding both keeps their ids unique
-            self._separations[key] = hit
+            # holding both keeps their ids unique while remembered
+            hit = self._separations.put(key, (spheres, caps, separation_m(*spheres, caps)))
         return hit[2]
 
     def _retract_motion(self, decision: Decision) -> Motion:

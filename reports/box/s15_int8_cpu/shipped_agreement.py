@@ -1,5 +1,5 @@
 import sys, time, numpy as np
-sys.path.insert(0, "/work/main")
+sys.path.insert(0, ".")
 from edge_runtime.core.manifest import ASSETS_DIR, verify_all, select_model
 from edge_runtime.wearable.classifier import preprocess
 from export.assets import cohort_of, calibration_windows
