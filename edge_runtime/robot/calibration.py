@@ -386,12 +386,12 @@ class FloorAnchor:
     def _given_before(self, flat: np.ndarray) -> list[int | None]:
         """For each skeleton of ``flat`` (P, 17, 3), the first track (index) whose last skeleton it equals,
         ``np.array_equal``'s way (every number ``==``, so one with a NaN never equals, and -0.0 equals 0.0),
-        or None: all tracks and skeletons in one comparison."""
-        known = [n for n, t in enumerate(self.tracks) if t.last_in is not None]
-        if not known or not len(flat):
-            return [None] * len(flat)
-        equal = (flat[:, None] == np.stack([self.tracks[n].last_in for n in known])[None]).all(axis=(2, 3))
-        return [next((n for n, hit in zip(known, row) if hit), None) for row in equal.tolist()]
+        or None. A new frame's skeleton differs from the last ones in its first number already: that one
+        Python comparison settles the usual pair, the whole arrays are compared only when it is equal."""
+        known = [(n, t.last_in, t.last_in.item(0)) for n, t in enumerate(self.tracks) if t.last_in is not None]
+        firsts = flat[:, 0, 0].tolist()
+        return [next((n for n, last, x0 in known if x0 == f0 and (last == j).all()), None)
+                for j, f0 in zip(flat, firsts)]
 
 
 @dataclass

@@ -630,7 +630,7 @@ def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray
         return [_finish([lf], [r], pose[i:i + 1], root[i:i + 1], dt)[0]
                 for i, (lf, r) in enumerate(zip(lifters, ready))]
     model_joints = pose.reshape(n, N_JOINTS, 3).astype(np.float64) + root.reshape(n, 1, 3)
-    finite = np.isfinite(model_joints).all(axis=(1, 2)).tolist()
+    finite = np.isfinite(model_joints.reshape(n, -1)).all(axis=1).tolist()
     nearest_m = model_joints[:, :, 2].min(axis=1).tolist()
     out: list = [None] * n
     good = []
