@@ -1,6 +1,8 @@
 """Small numeric helpers for the per-frame path, each with numpy's own result to the bit."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -31,3 +33,24 @@ def norms2(d: np.ndarray) -> np.ndarray:
     addition ``x*x + y*y`` (tests/core/test_numeric.py pins the two together)."""
     x, y = d[:, 0], d[:, 1]
     return np.sqrt(x * x + y * y)
+
+
+def median_floats(values) -> float:
+    """:func:`median` of a few (at least one) numbers, on Python floats: the middle of the sorted numbers, or
+    ``(lo + hi) / 2`` of the middle two, NaN when any is NaN; the same IEEE operations, without building an
+    array (the floor anchoring's per-person factor and the lifter's image motion, every frame). Signed zeros,
+    where neither is numpy's to the bit: when ``-0.0`` and ``0.0`` tie in the middle, which of the two comes
+    out follows Python's stable sort here and numpy's sort in :func:`median`; and ``np.median`` itself sums
+    from ``+0.0`` (a median of ``-0.0`` alone is ``0.0`` there, ``-0.0`` here and in :func:`median`). All equal
+    under ``==``; tests/core/test_numeric_small.py pins the rest to the bit."""
+    s = sorted(values)
+    if any(v != v for v in s):
+        return math.nan
+    h = len(s) // 2
+    return float(s[h]) if len(s) % 2 else (s[h - 1] + s[h]) / 2.0
+
+
+def median_columns(a: np.ndarray) -> np.ndarray:
+    """``median(a, axis=0)`` of a float64 (n, k) array with n >= 1 (:func:`median_floats` per column): the
+    lifter's image-motion step, from a handful of joints' two coordinates."""
+    return np.array([median_floats(column) for column in a.T.tolist()])

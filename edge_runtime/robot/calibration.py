@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 from collections import Counter, deque
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -65,7 +66,7 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core import strict_json
-from edge_runtime.core.numeric import median
+from edge_runtime.core.numeric import median_floats
 from edge_runtime.core.skeleton import BASE_HEIGHT_M, HEAD, HIP, L_ANKLE, R_ANKLE
 from edge_runtime.errors import ConfigError, InputError
 
@@ -198,28 +199,35 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     """
     j = np.asarray(joints_cam_m, float).reshape(-1, 3)
     A, b = np.asarray(A, float), np.asarray(b, float)
-    ankles = j[[L_ANKLE, R_ANKLE]]
-    rays = ankles @ A.T                                  # camera centre -> ankle, robot frame
-    ok = np.isfinite(rays).all(axis=1)
+    # camera centre -> ankle, robot frame; the two rays' arithmetic goes on in Python floats (the same IEEE
+    # operations as numpy's on these few numbers, without its per-call cost; tests/robot/test_calibration_fast.py)
+    rays = (j[_ANKLES] @ A.T).tolist()
+    ok = [math.isfinite(x) and math.isfinite(y) and math.isfinite(z) for x, y, z in rays]
     if observed is not None:
-        seen = ok & np.asarray(observed, bool)[[L_ANKLE, R_ANKLE]]
-        ok = seen if seen.any() else ok
-    if not ok.any():
+        obs = np.asarray(observed, bool)
+        seen = [ok[0] and bool(obs[L_ANKLE]), ok[1] and bool(obs[R_ANKLE])]
+        ok = seen if seen[0] or seen[1] else ok
+    rays = [r for r, keep in zip(rays, ok) if keep]
+    if not rays:
         return 1.0, ANCHOR_NO_ANKLE
-    rays = rays[ok]
-    lower = np.argmin(rays[:, 1])
     # both feet down: two independent rays halve the floor crossing's variance; a raised foot's
-    # ray would put the skeleton too far, so only the lower ankle counts then
-    heights = rays[:, 1]
-    feet = rays if heights.max() - heights.min() <= ANCHOR_LEVEL_FEET_M else rays[[lower]]  # np.ptp's arithmetic
+    # ray would put the skeleton too far, so only the lower ankle counts then (np.argmin's first lowest,
+    # np.ptp's max - min)
+    heights = [r[1] for r in rays]
+    lower = 1 if len(rays) == 2 and heights[1] < heights[0] else 0
+    feet = rays if max(heights) - min(heights) <= ANCHOR_LEVEL_FEET_M else [rays[lower]]
     drop_m = b[1] - (params.floor_y_m + params.ankle_height_m)
     if not drop_m >= params.anchor_min_camera_height_m:
         return 1.0, ANCHOR_CAMERA_LOW
-    if (-feet[:, 1] < np.sin(np.radians(params.anchor_min_ray_deg)) * np.linalg.norm(feet, axis=1)).any():
+    # np.linalg.norm(feet, axis=1) is sqrt((x*x + y*y) + z*z), summed in that order (the tests pin it)
+    steep = _sin_deg(params.anchor_min_ray_deg)
+    if any(-y < steep * math.sqrt((x * x + y * y) + z * z) for x, y, z in feet):
         return 1.0, ANCHOR_RAY_FLAT
-    log_floor = float(np.mean(np.log(drop_m / -feet[:, 1])))
+    logs = np.log(np.array([drop_m / -y for _, y, _ in feet])).tolist()  # numpy's log, as before
+    log_floor = logs[0] if len(logs) == 1 else (logs[0] + logs[1]) / 2  # np.mean's sum, then / n
     k = np.exp(log_floor)
     if np.isfinite(ANCHOR_LIFTER_DEPTH_SD):  # the fusion (off as shipped: the floor rays alone, no work per frame)
+        feet = np.array(feet)
         k = _nearer_to_arm(j[HIP] @ A.T, b, k, np.exp(_fused_with_lifter(log_floor, feet, drop_m)))
     # np.clip's arithmetic (min(max(k, lo), hi), a NaN k kept) on floats
     k = float(k)
@@ -228,6 +236,18 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     if k > params.anchor_max_scale:
         k = float(params.anchor_max_scale)
     return k, None
+
+
+_ANKLES = np.array([L_ANKLE, R_ANKLE])
+_SIN_DEG: dict[float, np.float64] = {}
+
+
+def _sin_deg(deg: float) -> np.float64:
+    """``np.sin(np.radians(deg))``, remembered per angle (the anchoring's guard asks for the same one each frame)."""
+    v = _SIN_DEG.get(deg)
+    if v is None:
+        v = _SIN_DEG[deg] = np.sin(np.radians(deg))
+    return v
 
 
 def _fused_with_lifter(log_floor: float, feet: np.ndarray, drop_m: float) -> float:
@@ -329,9 +349,7 @@ class FloorAnchor:
         seen = [None] * len(flat) if observed is None else np.asarray(observed, bool).reshape(-1, 17)
         out = np.empty_like(flat)
         todo, taken = [], set()
-        for i, j in enumerate(flat):
-            again = next((n for n, t in enumerate(self.tracks) if t.last_in is not None
-                          and np.array_equal(t.last_in, j)), None)
+        for i, again in enumerate(self._given_before(flat)):
             if again is None:
                 todo.append(i)
             else:
@@ -358,12 +376,22 @@ class FloorAnchor:
                 self.tracks.append(t)
             if reason is None and p.anchor_min_scale < k < p.anchor_max_scale:
                 t.factors.append(k)
-            t.k = float(median(t.factors)) if t.factors else k
+            t.k = median_floats(t.factors) if t.factors else k
             out[i] = cal.apply(t.k * flat[i])
             if np.isfinite(out[i][HIP]).all():
                 t.root_m = out[i][HIP]
             t.last_in, t.last_out = flat[i].copy(), out[i].copy()
         return out
+
+    def _given_before(self, flat: np.ndarray) -> list[int | None]:
+        """For each skeleton of ``flat`` (P, 17, 3), the first track (index) whose last skeleton it equals,
+        ``np.array_equal``'s way (every number ``==``, so one with a NaN never equals, and -0.0 equals 0.0),
+        or None. A new frame's skeleton differs from the last ones in its first number already: that one
+        Python comparison settles the usual pair, the whole arrays are compared only when it is equal."""
+        known = [(n, t.last_in, t.last_in.item(0)) for n, t in enumerate(self.tracks) if t.last_in is not None]
+        firsts = flat[:, 0, 0].tolist()
+        return [next((n for n, last, x0 in known if x0 == f0 and (last == j).all()), None)
+                for j, f0 in zip(flat, firsts)]
 
 
 @dataclass

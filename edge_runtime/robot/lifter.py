@@ -42,7 +42,8 @@ Streaming
 A causal ring buffer holds the last ``receptive_field`` (27) frames; each camera
 frame costs ONE onnxruntime call on a (1, 27, 17, 2) view of it (no copy: every
 frame is written twice into a buffer of 2 x 27 slots, so the last 27 are always
-contiguous). The output for frame t equals a batch run of the model over the
+contiguous; :class:`PeopleLifter` stacks every person's window of a frame into one
+call). The output for frame t equals a batch run of the model over the
 sequence padded at its start.
 
 Start-up padding: after a start or a reset the first usable frame is replicated
@@ -101,7 +102,11 @@ Several people
 memory and clock: one :class:`StreamingLifter` per id, all sharing one onnxruntime
 session and one :class:`LifterStats`. A person's window only ever holds his own frames;
 a person who is not in a frame is not pushed (he is absent, not "missing joints"), and
-his lifter is dropped after ``lost_timeout_s`` without him.
+his lifter is dropped after ``lost_timeout_s`` without him. The windows of every person lifted in a
+frame go to onnxruntime together, as one (N, 27, 17, 2) batch, when the model's batch dimension is
+symbolic (the shipped lifters': each person's output is the same to the bit as his own batch-1 call,
+tests/robot/test_lifter_batch.py; session 16 measured one call for two people at 0.31 ms of CPU against
+2 x 0.22 ms for two, int8); a model whose batch is fixed gets one call per person.
 """
 from __future__ import annotations
 
@@ -115,11 +120,11 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
-from edge_runtime.core.numeric import median, norms2
+from edge_runtime.core.numeric import median_columns, norms2
 from edge_runtime.core.onnx import session_from_manifest
 from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS, PARENTS
 from edge_runtime.robot.hazard import enough_joints
-from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, image_to_canonical, to_h36m
+from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, to_h36m
 
 LIFTER_ARCH = "lifter"
 INPUT_NAME = "keypoints_2d"
@@ -220,7 +225,8 @@ class LiftedPose:
     warming_up: bool = False
     """The buffer still holds start-up padding (fewer than 27 real frames since a reset)."""
     infer_s: float = 0.0
-    """Time of this frame's onnxruntime call (s); 0 when the model was not run."""
+    """Time of this frame's onnxruntime call (s), which :class:`PeopleLifter` shares among everyone lifted
+    in the frame; 0 when the model was not run."""
     held: np.ndarray | None = None
     """(17,) bool: the joint was not seen in this frame and stands at its last observation
     (its ray); False for observed joints and for every joint of an invalid frame."""
@@ -277,6 +283,7 @@ class LifterStats:
     restarts: int = 0
     """Full restarts: the timestamps went back by more than lost_timeout_s (a new stream)."""
     inferences: int = 0
+    """Windows lifted (one a person and frame, however many went in one call)."""
     infer_s: float = 0.0
     """Total onnxruntime time (s)."""
 
@@ -310,6 +317,7 @@ class StreamingLifter:
         self.camera = camera
         _check_session(session, self.receptive_field, self.source)
         self._outputs = [POSE_OUTPUT, ROOT_OUTPUT]
+        self._batches = _symbolic_batch(session)
         self.stats = LifterStats()
         self._period_s = 1.0 / params.frame_rate_hz
         r = self.receptive_field
@@ -372,6 +380,14 @@ class StreamingLifter:
         """One camera frame: ``keypoints`` (17, 3) x, y (pixels of ``camera``), score in the
         lifter's ``keypoint_format``, (17, 2) for all scores 1, or None when nobody was
         seen. Returns the 3D pose for this frame, or an invalid result saying why."""
+        ready = self._prepare(t_s, keypoints)
+        if isinstance(ready, LiftedPose):
+            return ready
+        return _finish([self], [ready], *_lift(self, [self]))[0]
+
+    def _prepare(self, t_s: float, keypoints) -> LiftedPose | tuple:
+        """Everything of :meth:`push` before the model: the frame's verdict when it is invalid, else what
+        :func:`_finish` needs once the model has run on :meth:`window` (``(t_s, observed, held, missing)``)."""
         st = self.stats
         st.frames += 1
         t_s = float(t_s)
@@ -385,22 +401,26 @@ class StreamingLifter:
         self._last_t = t_s
         self._frames_since_buffered += steps
         observed, why = self._observe(keypoints)
-        self._age[~observed] += steps
-        held = ~observed & (self._age <= self.params.hold_frames)
-        stale = ~observed & ~held
         if self._buffered_t is not None and t_s - self._buffered_t > self.params.lost_timeout_s + 1e-9:
             st.resets += 1  # lost for too long: the buffer no longer describes this person's recent motion
             self.reset()
-        if stale.any() and (why is not None or not enough_joints(~stale)):
-            if why is None:
-                why = f"{MISSING_JOINTS}: " + ", ".join(JOINTS[j] for j in np.flatnonzero(stale))
-            return self._invalid(t_s, why, observed)
-        st.joints_held += int(held.sum())
-        st.joints_missing += int(stale.sum())
         frame = self._last_seen.astype(np.float32)
-        self._impute(frame, stale)
+        if why is None and observed.all():  # every joint seen (the usual frame): nothing held, aged or imputed
+            held, stale = np.zeros(N_JOINTS, bool), np.zeros(N_JOINTS, bool)
+        else:
+            self._age[~observed] += steps
+            held = ~observed & (self._age <= self.params.hold_frames)
+            stale = ~observed & ~held
+            if stale.any():
+                if why is not None or not enough_joints(~stale):
+                    if why is None:
+                        why = f"{MISSING_JOINTS}: " + ", ".join(JOINTS[j] for j in np.flatnonzero(stale))
+                    return self._invalid(t_s, why, observed)
+                st.joints_missing += int(stale.sum())
+                self._impute(frame, stale)
+            st.joints_held += int(held.sum())
         self._buffer(frame)
-        return self._run(t_s, observed, held, stale)
+        return t_s, observed, held, stale
 
     def _impute(self, frame: np.ndarray, stale: np.ndarray) -> None:
         """The model's input for joints missing beyond ``hold_frames`` (in place): the last keypoint
@@ -436,23 +456,34 @@ class StreamingLifter:
             self.stats.wrong_joint_count += 1
             return np.zeros(N_JOINTS, bool), f"{JOINT_COUNT}: keypoints of shape {kp.shape}, expected (17, 3)"
         kp = to_h36m(kp, self.keypoint_format)
-        ok = np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= self.params.min_score)  # NaN score: False
-        if ok.any():
-            norm = image_to_canonical(kp[ok], self.camera, self.canonical_camera)
-            # undistortion may fail far outside the image; a point beyond MAX_NORMALISED is no joint
-            # this camera saw, and float32 would make a huge one inf in the model's input
-            ok_norm = np.isfinite(norm).all(axis=1) & (np.abs(norm) <= MAX_NORMALISED).all(axis=1)
-            idx = np.flatnonzero(ok)
-            ok[idx[~ok_norm]] = False
-            # the image motion of the joints seen now and at their previous sighting moves the joints not seen
-            # (each from its own last keypoint): the person walks on while a hand is hidden
-            again = ok & (self._age == 0)  # seen in the previous frame too
-            if again.any():
-                step = median(norm[ok_norm][again[idx[ok_norm]]] - self._last_seen[again], axis=0)
-                self._moved[~ok] += step
-            self._moved[ok] = 0.0
-            self._last_seen[idx[ok_norm]] = norm[ok_norm]
-            self._age[idx[ok_norm]] = 0
+        finite = np.isfinite(kp)
+        ok = finite[:, 0] & finite[:, 1] & (kp[:, 2] >= self.params.min_score)  # NaN score: False
+        if ok.all():  # the usual frame: no row to leave out
+            norm = self._pixel_maps().normalised(kp)
+        else:
+            if not ok.any():
+                return ok, None
+            # the rows left out stay NaN: each keypoint is mapped on its own, so mapping only the
+            # rows kept gives them the same values
+            norm = np.full((N_JOINTS, 2), np.nan)
+            norm[ok] = self._pixel_maps().normalised(kp[ok])
+        # undistortion may fail far outside the image; a point beyond MAX_NORMALISED is no joint
+        # this camera saw, and float32 would make a huge one inf in the model's input
+        fine = np.abs(norm) <= MAX_NORMALISED  # NaN: False
+        ok &= fine[:, 0] & fine[:, 1]
+        if ok.all():
+            self._moved[:] = 0.0
+            self._last_seen[:] = norm
+            self._age[:] = 0
+            return ok, None
+        # the image motion of the joints seen now and at their previous sighting moves the joints not seen
+        # (each from its own last keypoint): the person walks on while a hand is hidden
+        again = ok & (self._age == 0)  # seen in the previous frame too
+        if again.any():
+            self._moved[~ok] += median_columns(norm[again] - self._last_seen[again])
+        self._moved[ok] = 0.0
+        self._last_seen[ok] = norm[ok]
+        self._age[ok] = 0
         return ok, None
 
     def _buffer(self, frame: np.ndarray) -> None:
@@ -472,48 +503,19 @@ class StreamingLifter:
         self._buffered_t = self._last_t
         self._frames_since_buffered = 0
 
-    def _run(self, t_s: float, observed: np.ndarray, held: np.ndarray, missing: np.ndarray) -> LiftedPose:
-        x = self.window()[None]
-        t0 = time.perf_counter()
-        pose, root = self.session.run(self._outputs, {INPUT_NAME: x})
-        dt = time.perf_counter() - t0
-        st = self.stats
-        st.inferences += 1
-        st.infer_s += dt
-        model_joints = pose.reshape(N_JOINTS, 3).astype(np.float64) + root.reshape(3)
-        if not np.isfinite(model_joints).all():
-            return self._invalid(t_s, "model_output: non-finite joints", observed)
-        if model_joints[:, 2].min() < MIN_DEPTH_M:
-            return self._invalid(t_s, f"model_output: a joint {model_joints[:, 2].min():.2f} m in front of the "
-                                      "camera", observed)
-        joints = self._rays(model_joints) * model_joints[:, 2:3]
-        # a missing joint's ray is its imputed keypoint's: the model's own joint is as good a guess
-        joints[missing] = model_joints[missing]
-        warming = self.warming_up
-        st.valid += 1
-        st.warming_up += warming
-        return LiftedPose(t_s, joints, joints[HIP].copy(), True, None, observed, warming, dt, held, model_joints,
-                          missing)
+    def _pixel_maps(self) -> "_PixelMaps":
+        """The constants of this lifter's pixel conversions (made again if its cameras or parameters changed)."""
+        m = self.__dict__.get("_maps")
+        if m is None or not m.made_for(self.camera, self.canonical_camera, self.params):
+            m = self._maps = _PixelMaps(self.camera, self.canonical_camera, self.params)
+        return m
 
     def _rays(self, model_joints: np.ndarray | None = None) -> np.ndarray:
         """(17, 3) canonical-camera rays (x/z, y/z, 1) of this frame's keypoints (observed or held):
         the model's input for the last frame, un-normalised (``normalize_screen`` inverted). With
         ``model_joints`` each ray is turned toward the model joint's own projection by at most
         ``ray_tolerance_px`` (input-camera pixels, converted with the focal lengths' ratio)."""
-        cam = self.canonical_camera
-        half_w = cam.width_px / 2
-        px = (self._last_seen + (1.0, cam.height_px / cam.width_px)) * half_w
-        tol = self.params.ray_tolerance_px * cam.fx_px / (self.camera.fx_px if self.camera is not None else cam.fx_px)
-        if model_joints is not None and tol > 0:
-            f = np.array([cam.fx_px, cam.fy_px])
-            toward = model_joints[:, :2] / model_joints[:, 2:3] * f + (cam.cx_px, cam.cy_px) - px
-            dist = norms2(toward)[:, None]  # np.linalg.norm(toward, axis=1, keepdims=True) to the bit
-            px = px + toward * np.minimum(1.0, tol / np.maximum(dist, 1e-9))
-        rays = np.empty((N_JOINTS, 3))
-        rays[:, 0] = (px[:, 0] - cam.cx_px) / cam.fx_px
-        rays[:, 1] = (px[:, 1] - cam.cy_px) / cam.fy_px
-        rays[:, 2] = 1.0
-        return rays
+        return _rays_of(StreamingLifter._pixel_maps(self), self._last_seen, model_joints)
 
     def _invalid(self, t_s: float, reason: str, observed: np.ndarray | None) -> LiftedPose:
         self.stats.invalid[reason.split(":", 1)[0]] += 1
@@ -537,7 +539,7 @@ class StreamingLifter:
         other.__dict__.update({k: v for k, v in self.__dict__.items()
                                if k in ("session", "entry", "params", "source", "name", "precision",
                                         "keypoint_format", "receptive_field", "canonical_camera", "camera",
-                                        "_outputs", "stats", "_period_s")})
+                                        "_outputs", "stats", "_period_s", "_batches", "_maps")})
         r = self.receptive_field
         other._ring = np.zeros((2 * r, N_JOINTS, 2), np.float32)
         other._last_seen = np.zeros((N_JOINTS, 2), np.float64)
@@ -578,17 +580,133 @@ class PeopleLifter:
         """Lift each person (objects with ``id`` and ``keypoints``) with his own window. A
         person absent for longer than ``lost_timeout_s`` loses his lifter (his window would
         be reset anyway); a shorter absence is bridged like any hole."""
-        out = []
+        out, ready = [], []
         for person in people:
             lifter = self.lifters.get(person.id)
             if lifter is None:
                 lifter = self.lifters[person.id] = self.template.sibling()
-            out.append((person.id, lifter.push(t_s, person.keypoints)))
+            r = lifter._prepare(t_s, person.keypoints)
+            out.append((person.id, r))
+            if not isinstance(r, LiftedPose):
+                ready.append((len(out) - 1, lifter, r))
+        if ready:
+            lifters = [lf for _, lf, _ in ready]
+            if self.template._batches:
+                finished = _finish(lifters, [r for _, _, r in ready], *_lift(self.template, lifters))
+            else:  # a model of a fixed batch size: one call per person
+                finished = [_finish([lf], [r], *_lift(lf, [lf]))[0] for _, lf, r in ready]
+            for (k, _, _), pose_k in zip(ready, finished):
+                out[k] = (out[k][0], pose_k)
         timeout = self.template.params.lost_timeout_s
         for pid in [k for k, lf in self.lifters.items() if lf._last_t is None or not
                     (t_s - timeout <= lf._last_t <= t_s)]:
             del self.lifters[pid]
         return out
+
+
+def _lift(lifter: StreamingLifter, lifters: list[StreamingLifter]) -> tuple[np.ndarray, np.ndarray, float]:
+    """One onnxruntime call of ``lifter``'s session on the windows of ``lifters`` (each prepared for this
+    frame), in order: (pose_3d (N, 1, 17, 3), root_3d (N, 1, 3), the call's time in s), counted in the
+    shared :class:`LifterStats` (``inferences`` per window, ``infer_s`` per call)."""
+    x = lifters[0].window()[None] if len(lifters) == 1 else np.stack([lf.window() for lf in lifters])
+    t0 = time.perf_counter()
+    pose, root = lifter.session.run(lifter._outputs, {INPUT_NAME: x})
+    dt = time.perf_counter() - t0
+    st = lifter.stats
+    st.inferences += len(lifters)
+    st.infer_s += dt
+    return pose, root, dt
+
+
+def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray, root: np.ndarray,
+            dt: float) -> list[LiftedPose]:
+    """Each lifter's pose of this frame from one onnxruntime call on their windows (``pose`` (N, 1, 17, 3),
+    ``root`` (N, 1, 3), ``dt`` the call's time) and what each one's :meth:`StreamingLifter._prepare`
+    returned. Everyone's arithmetic in one go (element by element, so each person's numbers are those of his
+    own); lifters of other cameras or parameters than the first's (never siblings) each on their own."""
+    n = len(lifters)
+    maps = lifters[0]._pixel_maps()
+    if any(not lf._pixel_maps().made_for(*maps.cameras, maps.params) for lf in lifters[1:]):
+        return [_finish([lf], [r], pose[i:i + 1], root[i:i + 1], dt)[0]
+                for i, (lf, r) in enumerate(zip(lifters, ready))]
+    model_joints = pose.reshape(n, N_JOINTS, 3).astype(np.float64) + root.reshape(n, 1, 3)
+    finite = np.isfinite(model_joints.reshape(n, -1)).all(axis=1).tolist()
+    nearest_m = model_joints[:, :, 2].min(axis=1).tolist()
+    out: list = [None] * n
+    good = []
+    for i, (lf, (t_s, observed, _, _)) in enumerate(zip(lifters, ready)):
+        if not finite[i]:
+            out[i] = lf._invalid(t_s, "model_output: non-finite joints", observed)
+        elif nearest_m[i] < MIN_DEPTH_M:
+            out[i] = lf._invalid(t_s, f"model_output: a joint {nearest_m[i]:.2f} m in front of the camera",
+                                 observed)
+        else:
+            good.append(i)
+    if not good:
+        return out
+    model_joints = model_joints if len(good) == n else model_joints[good]
+    seen = np.stack([lifters[i]._last_seen for i in good])
+    joints = _rays_of(maps, seen, model_joints) * model_joints[..., 2:3]
+    for k, i in enumerate(good):
+        lf, (t_s, observed, held, missing) = lifters[i], ready[i]
+        if missing.any():
+            # a missing joint's ray is its imputed keypoint's: the model's own joint is as good a guess
+            joints[k][missing] = model_joints[k][missing]
+        st = lf.stats
+        warming = lf.warming_up
+        st.valid += 1
+        st.warming_up += warming
+        out[i] = LiftedPose(t_s, joints[k], joints[k, HIP].copy(), True, None, observed, warming, dt, held,
+                            model_joints[k], missing)
+    return out
+
+
+def _rays_of(maps: "_PixelMaps", last_seen: np.ndarray, model_joints: np.ndarray | None) -> np.ndarray:
+    """:meth:`StreamingLifter._rays` of keypoints ``last_seen`` (..., 17, 2) (normalised) and ``model_joints``
+    (..., 17, 3) or None: one person's or several people's at once, element by element the same."""
+    px = (last_seen + maps.screen_offset) * maps.half_width_px
+    if model_joints is not None and maps.tolerance_px > 0:
+        toward = model_joints[..., :2] / model_joints[..., 2:3] * maps.focal_px + maps.centre_px - px
+        # np.linalg.norm(toward, axis=-1, keepdims=True) to the bit
+        dist = norms2(toward.reshape(-1, 2)).reshape(toward.shape[:-1] + (1,))
+        px = px + toward * np.minimum(1.0, maps.tolerance_px / np.maximum(dist, 1e-9))
+    rays = np.empty(px.shape[:-1] + (3,))
+    rays[..., :2] = (px - maps.centre_px) / maps.focal_px
+    rays[..., 2] = 1.0
+    return rays
+
+
+class _PixelMaps:
+    """A lifter's pixel conversions' constants, made once instead of in every frame: VideoPose3D's
+    normalisation (:func:`edge_runtime.robot.keypoints.normalize_screen`: ``p / w * 2 - (1, h / w)``, the
+    same operations on the same numbers) and its inverse, the canonical camera's focal lengths and
+    centre, and the ray tolerance in canonical pixels."""
+
+    def __init__(self, camera: CameraModel | None, canonical: CameraModel, params: LifterParams):
+        self.cameras, self.params = (camera, canonical), params
+        self.width_px = canonical.width_px
+        self.screen_offset = np.array([1.0, canonical.height_px / canonical.width_px])
+        self.half_width_px = canonical.width_px / 2
+        self.focal_px = np.array([canonical.fx_px, canonical.fy_px], np.float64)
+        self.centre_px = np.array([canonical.cx_px, canonical.cy_px], np.float64)
+        self.tolerance_px = params.ray_tolerance_px * canonical.fx_px / (camera.fx_px if camera is not None
+                                                                         else canonical.fx_px)
+
+    def made_for(self, camera, canonical, params) -> bool:
+        return self.cameras[0] is camera and self.cameras[1] is canonical and self.params is params
+
+    def normalised(self, kp: np.ndarray) -> np.ndarray:
+        """:func:`edge_runtime.robot.keypoints.image_to_canonical` of (n, 3) float64 keypoints, to the bit."""
+        camera, canonical = self.cameras
+        px = kp[:, :2] if camera is None else camera.to_camera(kp[:, :2], canonical)
+        return px / self.width_px * 2 - self.screen_offset
+
+
+def _symbolic_batch(session) -> bool:
+    """Whether the lifter input's batch dimension is symbolic (a name or None), so that the windows of
+    several people can go in one call; a fixed one (an int) takes one window at a time."""
+    shape = next((i.shape for i in session.get_inputs() if i.name == INPUT_NAME), None)
+    return bool(shape) and not isinstance(shape[0], int)
 
 
 def padded_windows(frames: np.ndarray, receptive_field: int) -> np.ndarray:

@@ -25,15 +25,22 @@ def keypoint_rays(keypoints, camera: CameraModel | None, canonical: CameraModel,
     if kp.ndim != 2 or kp.shape[0] != N_JOINTS or kp.shape[1] not in (2, 3):
         return out
     if kp.shape[1] == 2:
-        kp = np.column_stack([kp, np.ones(N_JOINTS)])
+        with_score = np.ones((N_JOINTS, 3))
+        with_score[:, :2] = kp
+        kp = with_score
     kp = to_h36m(kp, keypoint_format)
-    ok = np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= min_score)
+    finite = np.isfinite(kp)
+    ok = finite[:, 0] & finite[:, 1] & (kp[:, 2] >= min_score)
     if not ok.any():
         return out
     px = kp[ok, :2] if camera is None else camera.to_camera(kp[ok, :2], canonical)
     c = canonical
-    out[ok] = np.column_stack([(px[:, 0] - c.cx_px) / c.fx_px, (px[:, 1] - c.cy_px) / c.fy_px, np.ones(len(px))])
-    out[~np.isfinite(out).all(axis=1)] = np.nan
+    rays = np.ones((len(px), 3))
+    rays[:, 0] = (px[:, 0] - c.cx_px) / c.fx_px
+    rays[:, 1] = (px[:, 1] - c.cy_px) / c.fy_px
+    finite = np.isfinite(rays)
+    rays[~(finite[:, 0] & finite[:, 1])] = np.nan
+    out[ok] = rays
     return out
 
 
