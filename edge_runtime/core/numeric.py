@@ -1,4 +1,5 @@
-"""Small numeric helpers for the per-frame path, each with numpy's own result to the bit."""
+"""Small numeric helpers for the per-frame path, each with numpy's own result to the bit (the medians: but for
+the sign of a zero result, which compares equal and changes no decision)."""
 from __future__ import annotations
 
 import math
@@ -7,7 +8,8 @@ import numpy as np
 
 
 def median(a, axis: int | None = None):
-    """``np.median(a, axis)`` of a small float64 array (None or 0 for ``axis``), to the bit, about ten times
+    """``np.median(a, axis)`` of a small float64 array (None or 0 for ``axis``), to the bit but for the sign of
+    a zero result (numpy's mean adds from +0.0, so a middle value of -0.0 comes out +0.0 there), about ten times
     faster: numpy's median spends some 40 us per call on its generality, and the robot's per-frame path takes
     three medians of a handful of numbers per person (the tracker's match cost, the lifter's image motion, the
     floor anchoring's factor). The same arithmetic: the middle value of the sorted numbers, or the mean of the
