@@ -541,8 +541,12 @@ class PersonTracker:
                 self.rejected += 1
                 continue
             dets.append((person, kp, seen))
-        assigned = _assign({(tid, i): self._cost(tr, kp, t_s, seen) for tid, tr in self.tracks.items()
-                            for i, (_, kp, seen) in enumerate(dets)})
+        costs = {}
+        for tid, tr in self.tracks.items():
+            ahead = self._ahead(tr, t_s) if dets else None  # once per track, not per detection
+            for i, (_, kp, seen) in enumerate(dets):
+                costs[tid, i] = self._cost(tr, kp, t_s, seen, ahead)
+        assigned = _assign(costs)
         out = []
         for i, (person, kp, seen) in enumerate(dets):
             tid = assigned.get(i)
@@ -553,10 +557,19 @@ class PersonTracker:
                                           _size_px(kp, p.min_score, seen), t_s)
             else:
                 self._follow(self.tracks[tid], kp, t_s, seen)
-            out.append(replace(person, id=tid, source_id=person.id))
+            # dataclasses.replace's result, built directly for a plain Person (replace costs ten times as much)
+            out.append(Person(person.keypoints, tid, person.id) if type(person) is Person
+                       else replace(person, id=tid, source_id=person.id))
         return out
 
-    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None) -> float:
+    def _ahead(self, tr: _Track, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """(the track's keypoints predicted at ``t_s``, which of them are finite): :meth:`_cost`'s for every
+        detection."""
+        pred = tr.predicted(t_s, self.params.max_predict_s)
+        return pred, np.isfinite(pred).all(axis=1)
+
+    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None,
+              ahead: tuple | None = None) -> float:
         """Median distance of the detection's keypoints from the track's prediction, in track
         sizes, as a fraction of the track's gate (which grows while it is unseen); inf beyond
         the gate or without common joints.
@@ -573,8 +586,8 @@ class PersonTracker:
         p = self.params
         if len(tr.xy) != len(kp):
             return math.inf
-        pred = tr.predicted(t_s, p.max_predict_s)
-        both = (_seen(kp, p.min_score) if seen is None else seen) & np.isfinite(pred).all(axis=1)
+        pred, finite = self._ahead(tr, t_s) if ahead is None else ahead  # ahead: _ahead(tr, t_s), given
+        both = (_seen(kp, p.min_score) if seen is None else seen) & finite
         if both.sum() < 2:
             return math.inf
         # the median: a swinging limb or one gross keypoint error must not decide who is who
