@@ -631,16 +631,20 @@ class HazardMonitor:
         entry, nearest = State.NORMAL, (math.inf, None, None)
         self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
+        bodies = {}
         for wid, est in ests.items():
             person_m = np.asarray(people[wid], float)
             centres, radii = _frozen(body_spheres(person_m))
+            bodies[wid] = (person_m, centres, radii, np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]))
+        # everyone now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
+        seps = separations_per_shift_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps) if bodies else []
+        for (wid, est), sep in zip(ests.items(), seps):
+            person_m, centres, radii, _ = bodies[wid]
             v_g = ground(est.velocity_mps)
             speed = math.sqrt(v_g.dot(v_g))  # np.linalg.norm's own arithmetic for a vector (below too)
             toward = eff_g - ground(est.position_m)
             approach = float(v_g @ toward) / max(math.sqrt(toward.dot(toward)), 1e-9)
-            # now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
-            v3 = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]])
-            d = float(separation_per_shift_m(centres, radii, v3, (0.0, z.predict_s), caps).min())
+            d = float(sep.min())
             self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii))
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
@@ -931,12 +935,14 @@ def arm_points_m(q_rad) -> np.ndarray:
     t = np.eye(4)
     pts = np.zeros((10, 3))
     turn = np.eye(4)  # the joint's turn about its z axis, filled in per joint (the same matrices, built faster)
+    # ndarray.dot of two C-contiguous 4 x 4 float64 matrices is the BLAS dgemm call `@` makes, without the ufunc
+    # machinery's microseconds (tests/robot/test_frame_cost_s16.py pins the points to the `@` form's, to the bit)
     for k, origin in enumerate(_ORIGIN_TRANSFORMS):
-        t = t @ origin
+        t = t.dot(origin)
         if k < 7:  # every arm joint turns about its own z axis
             c, s_ = math.cos(q[k]), math.sin(q[k])
             turn[0, 0], turn[0, 1], turn[1, 0], turn[1, 1] = c, -s_, s_, c
-            t = t @ turn
+            t = t.dot(turn)
         pts[k + 1] = t[:3, 3]
     pts[9] = t[:3, 3] + TOOL_LENGTH_M * t[:3, 2]
     return pts @ _URDF_TO_ROBOT.T
@@ -1084,11 +1090,22 @@ def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_
                            capsules) -> np.ndarray:
     """The separation (m) of the spheres moved by ``velocity_mps`` x each of ``shifts_s`` (S,)
     from the capsules: (S,)."""
+    return separations_per_shift_m([(centres_m, radii_m, velocity_mps)], shifts_s, capsules)[0]
+
+
+def separations_per_shift_m(bodies, shifts_s, capsules) -> list[np.ndarray]:
+    """:func:`separation_per_shift_m` of each of ``bodies`` ((centres (n, 3), radii (n,), velocity (3,)) each), in
+    one clearance call for all of them (numpy's per-call overhead, not the arithmetic, is the cost of a frame's
+    few people; each point's clearance is its own, whatever else is in the call)."""
     shifts = np.asarray(shifts_s, float)
-    n = len(centres_m)
-    moved = (centres_m[None] + shifts[:, None, None] * np.asarray(velocity_mps, float)[None, None]).reshape(-1, 3)
-    d = point_clearance_m(moved, capsules).reshape(len(shifts), n) - radii_m  # each sphere's own radius, per shift
-    return d.min(axis=1)
+    moved = [(c[None] + shifts[:, None, None] * np.asarray(v, float)[None, None]).reshape(-1, 3) for c, _, v in bodies]
+    clear = point_clearance_m(np.concatenate(moved) if len(moved) > 1 else moved[0], capsules)
+    out, k = [], 0
+    for (c, r, _), m in zip(bodies, moved):
+        d = clear[k:k + len(m)].reshape(len(shifts), len(c)) - r  # each sphere's own radius, per shift
+        out.append(d.min(axis=1))
+        k += len(m)
+    return out
 
 
 def point_clearance_m(points_m: np.ndarray, capsules) -> np.ndarray:

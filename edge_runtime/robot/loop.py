@@ -309,7 +309,7 @@ def _measured(pose) -> np.ndarray:
 
 def _rounded(v) -> list[float]:
     """A robot-frame point for the log: metres to 0.1 mm."""
-    return [round(float(x), 4) for x in np.asarray(v, float).reshape(3)]
+    return [round(x, 4) for x in np.asarray(v, float).reshape(3).tolist()]  # tolist: float(x) of each, at once
 
 
 def _vec3(v) -> tuple[float, float, float]:

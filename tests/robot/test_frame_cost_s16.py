@@ -99,6 +99,12 @@ def test_separations_per_shift_are_session_15s_with_edge_velocities():
         moved = (centres[None] + np.asarray(shifts)[:, None, None] * v[None, None]).reshape(-1, 3)
         want = (session15_clearance(moved, caps) - np.tile(radii, len(shifts))).reshape(len(shifts), -1).min(axis=1)
         assert same_or_nan(hz.separation_per_shift_m(centres, radii, v, shifts, caps), want), case
+        # several people in one call: each gets what he gets alone
+        others = [(*hz.body_spheres(random_person(rng)), rng.normal(0, 1, 3)) for _ in range(int(rng.integers(0, 3)))]
+        together = hz.separations_per_shift_m([*others, (centres, radii, v)], shifts, caps)
+        assert same_or_nan(together[-1], want), case
+        for (c, r, u), got in zip(others, together):
+            assert same(got, hz.separation_per_shift_m(c, r, u, shifts, caps)), case
 
 
 def test_the_escape_plan_is_the_textbook_one_with_odd_people():
@@ -251,3 +257,13 @@ def test_the_frames_log_is_made_after_its_commands_from_what_it_was_judged_with(
             assert p["nearest_distance_m"] == round(float(gap[int(np.nanargmin(gap))]), 4)
             assert p["head_robot_m"] == [round(float(v), 4) for v in him[HEAD]]
     assert commanded >= 1 and moved >= 1
+
+
+def test_dot_of_two_4x4_matrices_is_matmuls():
+    """arm_points_m's ndarray.dot for `@`: the same BLAS product, to the bit (random, huge, tiny, signed zeros)."""
+    rng = np.random.default_rng(1609)
+    for case in range(5000):
+        a, b = (rng.normal(0, 1, (4, 4)) * rng.choice([1e-300, 1e-8, 1.0, 1e8, 1e300]) for _ in range(2))
+        if case % 5 == 0:
+            a = with_edges(rng, a, 0.2)
+        assert same_or_nan(a.dot(b), a @ b), case
