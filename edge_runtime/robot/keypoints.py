@@ -243,6 +243,11 @@ def coco_to_h36m(kp) -> np.ndarray:
         return hit.copy()
     prepared = _prepared(c)
     out = _map(c, W_EARS, _SOURCES_EARS, prepared)
+    if key is not None and out[HEAD, 2] >= EYES_FOR_EARS * c[_EYES_HEAD_SOURCES, 2].min():
+        # the ears score at least half the eyes' score (the eyes' head joint's score is the least of its sources'; a
+        # NaN compares False): the ears' head stands whatever the eyes give, so they are not mapped
+        _H36M_MEMO.put(key, out.copy())
+        return out
     # the eyes stand in for the ears when they score higher, or when the ears are not there
     from_eyes = _map(c, W_EYES[HEAD:HEAD + 1], _SOURCES_EYES_HEAD, prepared)[..., 0, :]
     ears_score = out[..., HEAD, 2]
@@ -255,6 +260,8 @@ def coco_to_h36m(kp) -> np.ndarray:
 
 _SOURCES_EARS = _sources(W_EARS)
 _SOURCES_EYES_HEAD = _sources(W_EYES[HEAD:HEAD + 1])
+_EYES_HEAD_SOURCES = np.flatnonzero(W_EYES[HEAD])
+"""The COCO keypoints the eyes' head joint is made from (the eyes and the shoulders)."""
 
 _H36M_MEMO: Recent[np.ndarray] = Recent(16)
 """:func:`coco_to_h36m` of the last few (17, 3) frames, by their float64 bytes."""
