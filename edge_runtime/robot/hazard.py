@@ -422,7 +422,9 @@ class HeadTracker:
         head = np.asarray(head_m, dtype=float)
         if self._t:
             dt = t_s - self._t[-1]
-            jumped = np.linalg.norm(head - self._x[-1]) > self.p.jump_m + self.p.max_speed_mps * dt
+            step = head - self._x[-1]
+            # np.linalg.norm of a vector is sqrt(dot(v, v)): the same dot, a correctly rounded sqrt
+            jumped = math.sqrt(step.dot(step)) > self.p.jump_m + self.p.max_speed_mps * dt
             if dt <= 0 or dt > self.p.window_s or jumped:  # a gap or a jump: a new track
                 self.reset()
                 self.resets += 1
@@ -438,11 +440,13 @@ class HeadTracker:
             pos, vel = self._x[-1], np.zeros(3)
         else:
             t = np.fromiter(self._t, float) - t_s
-            x = np.stack(self._x)
-            tc = t - t.mean()
-            vel = tc @ (x - x.mean(axis=0)) / float(tc @ tc)
-            pos = x.mean(axis=0) - t.mean() * vel  # the fitted line at t_s
-            speed = float(np.linalg.norm(vel))
+            x = np.array(self._x)  # (n, 3): the values np.stack gives, with less of its checking
+            # each mean once (the fit used both twice), as np.mean does it: a sum, then / the count
+            t_mean, x_mean = np.add.reduce(t) / len(t), np.add.reduce(x, axis=0) / len(x)
+            tc = t - t_mean
+            vel = tc @ (x - x_mean) / float(tc @ tc)
+            pos = x_mean - t_mean * vel  # the fitted line at t_s
+            speed = math.sqrt(vel.dot(vel))  # np.linalg.norm's own arithmetic for a vector
             if speed > self.p.max_speed_mps:
                 vel = vel * (self.p.max_speed_mps / speed)
         return HeadEstimate(t_s, pos, vel, pos + self.predict_s * vel)
@@ -627,16 +631,20 @@ class HazardMonitor:
         entry, nearest = State.NORMAL, (math.inf, None, None)
         self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
+        bodies = {}
         for wid, est in ests.items():
             person_m = np.asarray(people[wid], float)
             centres, radii = _frozen(body_spheres(person_m))
+            bodies[wid] = (person_m, centres, radii, np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]))
+        # everyone now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
+        seps = separations_per_shift_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps) if bodies else []
+        for (wid, est), sep in zip(ests.items(), seps):
+            person_m, centres, radii, _ = bodies[wid]
             v_g = ground(est.velocity_mps)
-            speed = float(np.linalg.norm(v_g))
+            speed = math.sqrt(v_g.dot(v_g))  # np.linalg.norm's own arithmetic for a vector (below too)
             toward = eff_g - ground(est.position_m)
-            approach = float(v_g @ toward) / max(float(np.linalg.norm(toward)), 1e-9)
-            # now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
-            v3 = np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]])
-            d = float(separation_per_shift_m(centres, radii, v3, (0.0, z.predict_s), caps).min())
+            approach = float(v_g @ toward) / max(math.sqrt(toward.dot(toward)), 1e-9)
+            d = float(sep.min())
             self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii))
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
@@ -925,15 +933,19 @@ def arm_points_m(q_rad) -> np.ndarray:
     joints j0..j6, the hand and the tool tip."""
     q = np.asarray(q_rad, float).reshape(7)
     t = np.eye(4)
-    pts = [np.zeros(3)]
+    pts = np.zeros((10, 3))
+    turn = np.eye(4)  # the joint's turn about its z axis, filled in per joint (the same matrices, built faster)
+    # ndarray.dot of two C-contiguous 4 x 4 float64 matrices is the BLAS dgemm call `@` makes, without the ufunc
+    # machinery's microseconds (tests/robot/test_frame_cost_s16.py pins the points to the `@` form's, to the bit)
     for k, origin in enumerate(_ORIGIN_TRANSFORMS):
-        t = t @ origin
+        t = t.dot(origin)
         if k < 7:  # every arm joint turns about its own z axis
             c, s_ = math.cos(q[k]), math.sin(q[k])
-            t = t @ np.array([[c, -s_, 0, 0], [s_, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
-        pts.append(t[:3, 3].copy())
-    pts.append(t[:3, 3] + TOOL_LENGTH_M * t[:3, 2])
-    return np.asarray(pts) @ _URDF_TO_ROBOT.T
+            turn[0, 0], turn[0, 1], turn[1, 0], turn[1, 1] = c, -s_, s_, c
+            t = t.dot(turn)
+        pts[k + 1] = t[:3, 3]
+    pts[9] = t[:3, 3] + TOOL_LENGTH_M * t[:3, 2]
+    return pts @ _URDF_TO_ROBOT.T
 
 
 def arm_capsules(q_rad) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -1078,11 +1090,22 @@ def separation_per_shift_m(centres_m: np.ndarray, radii_m: np.ndarray, velocity_
                            capsules) -> np.ndarray:
     """The separation (m) of the spheres moved by ``velocity_mps`` x each of ``shifts_s`` (S,)
     from the capsules: (S,)."""
+    return separations_per_shift_m([(centres_m, radii_m, velocity_mps)], shifts_s, capsules)[0]
+
+
+def separations_per_shift_m(bodies, shifts_s, capsules) -> list[np.ndarray]:
+    """:func:`separation_per_shift_m` of each of ``bodies`` ((centres (n, 3), radii (n,), velocity (3,)) each), in
+    one clearance call for all of them (numpy's per-call overhead, not the arithmetic, is the cost of a frame's
+    few people; each point's clearance is its own, whatever else is in the call)."""
     shifts = np.asarray(shifts_s, float)
-    n = len(centres_m)
-    moved = (centres_m[None] + shifts[:, None, None] * np.asarray(velocity_mps, float)[None, None]).reshape(-1, 3)
-    d = point_clearance_m(moved, capsules) - np.tile(radii_m, len(shifts))
-    return d.reshape(len(shifts), n).min(axis=1)
+    moved = [(c[None] + shifts[:, None, None] * np.asarray(v, float)[None, None]).reshape(-1, 3) for c, _, v in bodies]
+    clear = point_clearance_m(np.concatenate(moved) if len(moved) > 1 else moved[0], capsules)
+    out, k = [], 0
+    for (c, r, _), m in zip(bodies, moved):
+        d = clear[k:k + len(m)].reshape(len(shifts), len(c)) - r  # each sphere's own radius, per shift
+        out.append(d.min(axis=1))
+        k += len(m)
+    return out
 
 
 def point_clearance_m(points_m: np.ndarray, capsules) -> np.ndarray:
@@ -1100,18 +1123,23 @@ def _clearance_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, capsules) -> np.
         ab = b - a; ap = p[:, None] - a[None]; den = max((ab * ab).sum(-1), 1e-12)
         t = clip((ap * ab).sum(-1) / den, 0, 1); (norm(ap - t[..., None] * ab, axis=-1) - r).min(axis=1)
 
-    on one (N, K) array per coordinate, every sum of three in numpy's order ((x + y) + z): numpy's reductions
-    over an axis of 3 cost ten times the arithmetic (the escape plan's 1,800 points x 9 capsules)."""
-    a, b, r = capsules
-    ab = b - a
-    den = np.maximum((ab * ab).sum(-1), 1e-12)
-    ax, ay, az = a[:, 0], a[:, 1], a[:, 2]
-    bx, by, bz = ab[:, 0], ab[:, 1], ab[:, 2]
-    apx = x[:, None] - ax
-    apy = y[:, None] - ay
-    apz = z[:, None] - az
+    on one (K, N) array per coordinate, every sum of three in numpy's order ((x + y) + z): numpy's reductions
+    over an axis of 3 cost ten times the arithmetic (the escape plan's 1,800 points x 9 capsules), and so do
+    its loops over a short inner axis (the capsules'), hence the capsules first and the points along the rows."""
+    ax, ay, az, bx, by, bz, den, r = _capsule_terms(capsules, 1)
+    apx = x - ax
+    apy = y - ay
+    apz = z - az
     t = apx * bx
     t += apy * by
+    return _clearance_rest(apx, apy, apz, t, (bx, by, bz, den, r))
+
+
+def _clearance_rest(apx: np.ndarray, apy: np.ndarray, apz: np.ndarray, t: np.ndarray, terms) -> np.ndarray:
+    """:func:`_clearance_xyz` on from ``t`` = ap_x b_x + ap_y b_y: (K, ...) arrays, the capsules' ``terms`` shaped
+    to broadcast with them -> (...) (``t`` is overwritten). ``apy`` may be broadcast (the escape plan's: the same
+    for every turn)."""
+    bx, by, bz, den, r = terms
     t += apz * bz
     t /= den
     np.clip(t, 0.0, 1.0, out=t)
@@ -1125,7 +1153,32 @@ def _clearance_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, capsules) -> np.
     dx += dz
     np.sqrt(dx, out=dx)
     dx -= r
-    return dx.min(axis=1)
+    return dx.min(axis=0)
+
+
+def _capsule_terms(capsules, dims: int) -> tuple:
+    """(a_x, a_y, a_z, ab_x, ab_y, ab_z, max(|ab|^2, 1e-12), r) of ``capsules`` (ab = b - a), as
+    :func:`_clearance_xyz` uses them: each (K,) followed by ``dims`` axes of 1, to broadcast against (K, ...)
+    arrays of points. Remembered for read-only capsules (:func:`arm_capsules`', the same tuple for the same
+    joint angles, asked about by every person's separation now and predicted, the lost people, the backfire
+    check and the escape plan of a frame)."""
+    a, b, r = capsules
+    frozen = isinstance(a, np.ndarray) and not (a.flags.writeable or b.flags.writeable or r.flags.writeable)
+    key = (id(capsules), dims)
+    if frozen and (hit := _TERMS.get(key)) is not None and hit[0] is capsules:
+        return hit[1]
+    ab = b - a
+    den = np.maximum((ab * ab).sum(-1), 1e-12)
+    shape = (-1,) + (1,) * dims
+    terms = tuple(v.reshape(shape) for v in (a[:, 0], a[:, 1], a[:, 2], ab[:, 0], ab[:, 1], ab[:, 2], den,
+                                             np.asarray(r, float)))
+    if frozen:  # holding the capsules keeps their id unique while remembered
+        _TERMS.put(key, (capsules, terms))
+    return terms
+
+
+_TERMS: Recent[tuple] = Recent(8)
+""":func:`_capsule_terms` of read-only capsules, by the tuple's identity."""
 
 
 def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
@@ -1437,6 +1490,10 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
 
     here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
     x, y, z = centres[:, 0], centres[:, 1], centres[:, 2]
+    ax, ay, az, bx, by, bz, den, r = _capsule_terms(capsules, 2)
+    # a turn about y leaves every height as it is: ap_y and ap_y b_y are the same for every candidate
+    apy = y - ay                                                                      # (K, 1, spheres)
+    apy_by = apy * by
     floor = np.minimum(here, reach_m) - dip_m
     best = None  # (end separation, closest pass, turn)
     for sign in (1.0, -1.0):
@@ -1457,8 +1514,10 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
             # each coordinate as _base_rotations(-turns) applied to the centres gives it (tests pin them to the bit)
             c, s_ = cos[lo:hi, None], sin[lo:hi, None]
             moved_x, moved_z = c * x + s_ * z, -s_ * x + c * z                                 # (chunk, spheres)
-            moved_y = np.broadcast_to(y, moved_x.shape)
-            clear = _clearance_xyz(moved_x.ravel(), moved_y.ravel(), moved_z.ravel(), capsules).reshape(hi - lo, -1)
+            apx = moved_x - ax                                                                 # (K, chunk, spheres)
+            t = apx * bx
+            t += apy_by
+            clear = _clearance_rest(apx, apy, moved_z - az, t, (bx, by, bz, den, r))           # (chunk, spheres)
             d = per_person(clear - radii[None])                                                  # (chunk, P)
             passed = np.minimum.accumulate(d, axis=0)
             if prev is not None:

@@ -243,6 +243,11 @@ def coco_to_h36m(kp) -> np.ndarray:
         return hit.copy()
     prepared = _prepared(c)
     out = _map(c, W_EARS, _SOURCES_EARS, prepared)
+    if key is not None and out[HEAD, 2] >= EYES_FOR_EARS * c[_EYES_HEAD_SOURCES, 2].min():
+        # the ears score at least half the eyes' score (the eyes' head joint's score is the least of its sources'; a
+        # NaN compares False): the ears' head stands whatever the eyes give, so they are not mapped
+        _H36M_MEMO.put(key, out.copy())
+        return out
     # the eyes stand in for the ears when they score higher, or when the ears are not there
     from_eyes = _map(c, W_EYES[HEAD:HEAD + 1], _SOURCES_EYES_HEAD, prepared)[..., 0, :]
     ears_score = out[..., HEAD, 2]
@@ -255,6 +260,8 @@ def coco_to_h36m(kp) -> np.ndarray:
 
 _SOURCES_EARS = _sources(W_EARS)
 _SOURCES_EYES_HEAD = _sources(W_EYES[HEAD:HEAD + 1])
+_EYES_HEAD_SOURCES = np.flatnonzero(W_EYES[HEAD])
+"""The COCO keypoints the eyes' head joint is made from (the eyes and the shoulders)."""
 
 _H36M_MEMO: Recent[np.ndarray] = Recent(16)
 """:func:`coco_to_h36m` of the last few (17, 3) frames, by their float64 bytes."""
@@ -541,8 +548,12 @@ class PersonTracker:
                 self.rejected += 1
                 continue
             dets.append((person, kp, seen))
-        assigned = _assign({(tid, i): self._cost(tr, kp, t_s, seen) for tid, tr in self.tracks.items()
-                            for i, (_, kp, seen) in enumerate(dets)})
+        costs = {}
+        for tid, tr in self.tracks.items():
+            ahead = self._ahead(tr, t_s) if dets else None  # once per track, not per detection
+            for i, (_, kp, seen) in enumerate(dets):
+                costs[tid, i] = self._cost(tr, kp, t_s, seen, ahead)
+        assigned = _assign(costs)
         out = []
         for i, (person, kp, seen) in enumerate(dets):
             tid = assigned.get(i)
@@ -553,10 +564,19 @@ class PersonTracker:
                                           _size_px(kp, p.min_score, seen), t_s)
             else:
                 self._follow(self.tracks[tid], kp, t_s, seen)
-            out.append(replace(person, id=tid, source_id=person.id))
+            # dataclasses.replace's result, built directly for a plain Person (replace costs ten times as much)
+            out.append(Person(person.keypoints, tid, person.id) if type(person) is Person
+                       else replace(person, id=tid, source_id=person.id))
         return out
 
-    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None) -> float:
+    def _ahead(self, tr: _Track, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """(the track's keypoints predicted at ``t_s``, which of them are finite): :meth:`_cost`'s for every
+        detection."""
+        pred = tr.predicted(t_s, self.params.max_predict_s)
+        return pred, np.isfinite(pred).all(axis=1)
+
+    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None,
+              ahead: tuple | None = None) -> float:
         """Median distance of the detection's keypoints from the track's prediction, in track
         sizes, as a fraction of the track's gate (which grows while it is unseen); inf beyond
         the gate or without common joints.
@@ -573,8 +593,8 @@ class PersonTracker:
         p = self.params
         if len(tr.xy) != len(kp):
             return math.inf
-        pred = tr.predicted(t_s, p.max_predict_s)
-        both = (_seen(kp, p.min_score) if seen is None else seen) & np.isfinite(pred).all(axis=1)
+        pred, finite = self._ahead(tr, t_s) if ahead is None else ahead  # ahead: _ahead(tr, t_s), given
+        both = (_seen(kp, p.min_score) if seen is None else seen) & finite
         if both.sum() < 2:
             return math.inf
         # the median: a swinging limb or one gross keypoint error must not decide who is who

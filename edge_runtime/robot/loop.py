@@ -309,7 +309,7 @@ def _measured(pose) -> np.ndarray:
 
 def _rounded(v) -> list[float]:
     """A robot-frame point for the log: metres to 0.1 mm."""
-    return [round(float(x), 4) for x in np.asarray(v, float).reshape(3)]
+    return [round(x, 4) for x in np.asarray(v, float).reshape(3).tolist()]  # tolist: float(x) of each, at once
 
 
 def _vec3(v) -> tuple[float, float, float]:
@@ -407,7 +407,7 @@ class RobotLoop:
             persons = (self.calibration.to_robot(persons) if observed is None and ids is None
                        else self.calibration.to_robot(persons, observed, ids))
         keys = list(range(len(persons))) if ids is None else list(ids)
-        people = []
+        people = None
         # the head zones need the head; whole-body separation every joint, or enough of them that the rest is
         # bounded by its bones from those (lifter.enough_joints; hazard.body_spheres)
         if self.zones.separation == "whole_body":
@@ -420,9 +420,12 @@ class RobotLoop:
             decision = self.monitor.invalid(t_in, why)
         else:
             self.counters.unseen += len(unseen or ())
-            decision = self.monitor.observe(t_in, dict(zip(keys, persons)), self.effector_m(), self._last_q,
+            effector = self.effector_m()
+            decision = self.monitor.observe(t_in, dict(zip(keys, persons)), effector, self._last_q,
                                             unseen, self._robot_rays(rays))
-            people = self._people(keys, persons)
+            # the log's per-person beliefs, made once the commands are out (they decide nothing), against the
+            # effector the frame was judged with (before the command: its fallback is the last position sent)
+            people = (keys, persons, effector)
         return self._act(t_in, decision, record=True, people=people)
 
     def feed_people(self, lifter: PeopleLifter, t_frame_s: float, people) -> FrameRecord:
@@ -467,9 +470,9 @@ class RobotLoop:
             out[pid] = PersonRays(origin, d / np.where(n > 1e-12, n, np.nan), float(floor))
         return out
 
-    def _people(self, keys, persons: np.ndarray) -> list[dict]:
-        """What the runtime believes about each person (robot frame): FrameRecord.people."""
-        eff = self.effector_m()
+    def _people(self, keys, persons: np.ndarray, eff: np.ndarray) -> list[dict]:
+        """What the runtime believes about each person (robot frame), the end effector at ``eff``:
+        FrameRecord.people."""
         out = []
         for key, joints in zip(keys, persons):
             gap = np.linalg.norm(joints - eff, axis=1)
@@ -833,7 +836,10 @@ class RobotLoop:
             self._retract_fallback = True
             self._retract = self._radial_retract()
 
-    def _act(self, t_s: float, decision: Decision, record: bool, people=()) -> FrameRecord | None:
+    def _act(self, t_s: float, decision: Decision, record: bool, people: tuple | None = None) -> FrameRecord | None:
+        """What ``decision`` asks of the arm, sent (beacon, speed, motion); then, with ``record``, the frame's
+        FrameRecord, its ``people`` made from ``people`` ((keys, persons, effector) for :meth:`_people`, or None)
+        after the commands are on the link: the log is not on the way from keypoints to command."""
         state = decision.state
         motion = self._desired_motion(state, decision)
         alarm = self.monitor.alarm(state)
@@ -853,7 +859,8 @@ class RobotLoop:
         self._report_runtime_state(state)
         if not record:
             return None
-        rec = FrameRecord(t_s, t_cmd, state.name, self.status()["reason"], decision.distance_m, sent, list(people))
+        rec = FrameRecord(t_s, t_cmd, state.name, self.status()["reason"], decision.distance_m, sent,
+                          [] if people is None else self._people(*people))
         self.records.append(rec)
         if self.on_record:
             self.on_record(rec)

@@ -157,7 +157,7 @@ def test_tracker_ids_as_before():
     rng = np.random.default_rng(1504)
 
     class Old(PersonTracker):
-        def _cost(self, tr, kp, t_s, seen=None):
+        def _cost(self, tr, kp, t_s, seen=None, ahead=None):
             return old_cost(self.params, tr, kp, t_s)
 
         def _follow(self, tr, kp, t_s, seen=None):
