@@ -7,33 +7,17 @@ true body from the same arm capsules, the true head ground velocity and approach
 reason and the unlifted / lost / ray-bound lists.
 --fix NAME replaces the coming clause with a candidate (see CANDIDATES); default: the shipped rule, unchanged.
 usage: wtrace.py SEED NAME OUT.json [--fix NAME]    (development seeds only)"""
-import argparse
-import json
 import math
-import time
 
 import numpy as np
+from tracebase import run, setup
 
 from edge_runtime.core.skeleton import HEAD
 from edge_runtime.robot import hazard
 from edge_runtime.robot.hazard import arm_capsules, body_spheres, ground, separation_per_shift_m
-from firmware_sim.scenarios import hrc
-from firmware_sim.scenarios.hrc_world import WorldParams, scene_joints
 
-ap = argparse.ArgumentParser()
-ap.add_argument("seed", type=int)
-ap.add_argument("name")
-ap.add_argument("out")
-ap.add_argument("--fix", default="")
-a = ap.parse_args()
-assert a.seed in (1, 3, 5, 7, 9, 11, 13, 15, 17, 19), "development seeds only"
-
-box = hrc.load_box(None)
-sc = next(s for s in hrc.scenarios_for("hard:200", a.seed, 2.0) if s.name == a.name)
-world = WorldParams(camera_hz=30.0, latency_s=None, labelled_calibration=True)
-dt = world.dt_s
-n_pre = int(round(world.pre_roll_s / dt))
-J = scene_joints(sc, round(1.0 / dt))  # (W, T, 17, 3) truth
+su = setup("--fix", "a candidates.py name")
+a, dt, n_pre, J = su.args, su.dt, su.n_pre, su.truth
 FR = []
 HM = hazard.HazardMonitor
 
@@ -107,12 +91,4 @@ if a.fix:
     import candidates
     candidates.apply(a.fix)
 
-t0 = time.time()
-r = hrc._run_one((sc, "can", True, hrc.resolve_perception("lifter"), world, box))
-s = r.summary
-print(json.dumps({k: s[k] for k in ("name", "collision", "collision_steps", "first_collision_s", "arm_moved_in_contact",
-                                    "min_separation_m", "stops", "retracts", "halts", "halt_reasons",
-                                    "came_within_protective", "productive_time_share")}), f"wall {time.time() - t0:.1f}s",
-      flush=True)
-with open(a.out, "w") as f:
-    json.dump({"summary": s, "fix": a.fix, "frames": FR}, f, default=float)
+run(su, {"fix": a.fix}, FR)
