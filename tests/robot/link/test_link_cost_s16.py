@@ -105,6 +105,8 @@ def _frames(rng, n_cycles: int):
         if rng.random() < 0.6:  # a real state, some of its values repeated from the last
             st = replace(blank_state(), ee_position_m=rng.uniform(-1, 1, 3).round(int(rng.integers(1, 4))),
                          joint_positions_rad=rng.uniform(-3, 3, N_JOINTS).round(1), pitch_rad=float(rng.uniform(-1, 1)),
+                         yaw_rad=float(rng.uniform(-3, 3)), ee_speed_mps=float(rng.uniform(0, 2)),
+                         tone_db=float(rng.uniform(0, 100)),
                          mode=str(rng.choice(["stopped", "run", "retract"])), light=str(rng.choice(["off", "red"])),
                          tone_hz=float(rng.integers(0, 3000)), last_seq=int(rng.integers(0, 65536)),
                          robot_time_s=float(rng.uniform(0, 60)))
