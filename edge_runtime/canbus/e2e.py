@@ -11,7 +11,6 @@ behind a valid check never meets a frame it cannot decode.
 """
 from __future__ import annotations
 
-import math
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -40,53 +39,6 @@ WEARABLE_STATUS frames a day, 10 per distinct Uptime_s), and cantools' checked e
 largest single cost of a replay."""
 
 
-_UNSET = object()
-
-
-def strict_checks(message) -> tuple | None:
-    """What cantools' strict encoding holds each signal of a DBC ``message`` to: (the signal names,
-    per signal (name, conversion, choices, lowest, highest)), the limits with cantools' own tolerance
-    (``minimum - |scale|·1e-6``). None for a multiplexed or container message (no quick check)."""
-    if message.is_container or message.is_multiplexed():
-        return None
-    per_signal = tuple(
-        (s.name, s.conversion, s.conversion.choices,
-         None if s.minimum is None else s.minimum - abs(s.conversion.scale) * 1e-6,
-         None if s.maximum is None else s.maximum + abs(s.conversion.scale) * 1e-6)
-        for s in message.signals)
-    return frozenset(s.name for s in message.signals), per_signal
-
-
-def strict_values_ok(checks: tuple, signals: dict) -> bool:
-    """True when cantools' strict encoding (``Message.encode(strict=True)``) accepts ``signals``: exactly
-    the message's signals, each a choice name the DBC knows or a finite number within [minimum, maximum]
-    (a number that is one of the signal's choices is not range-checked, as in cantools). False means:
-    let cantools decide, so a value this check does not know is never let through."""
-    names, per_signal = checks
-    if signals.keys() != names:
-        return False
-    for name, conversion, choices, lo, hi in per_signal:
-        value = signals[name]
-        kind = type(value)
-        if kind is str:
-            if not choices:
-                return False
-            try:
-                conversion.choice_to_number(value)
-            except KeyError:
-                return False
-            continue
-        if kind is not int and kind is not float:  # bool, numpy scalars, NamedSignalValue: cantools decides
-            return False
-        if not math.isfinite(value):
-            return False
-        if choices and conversion.numeric_scaled_to_raw(value) in choices:
-            continue
-        if (lo is not None and value < lo) or (hi is not None and value > hi):
-            return False
-    return True
-
-
 class E2EProtector:
     """Send side of E2E Profile 1 for any DBC message: cantools encodes the signals, then
     the alive counter (one per frame ID, wrapping at COUNTER_MAX) and the CRC go in.
@@ -101,7 +53,6 @@ class E2EProtector:
         self._lock = threading.Lock()
         self._payloads: OrderedDict[tuple, bytes] = OrderedDict()
         self._data_ids: dict[int, int] = {}  # per frame ID: its DBC attribute, looked up once
-        self._checks: dict[int, tuple | None] = {}  # per frame ID: strict_checks(message), made once
 
     def _payload(self, message, signals: dict) -> bytes:
         # the signals in the caller's order: the encoders build them in a fixed order, and the same
@@ -112,24 +63,12 @@ class E2EProtector:
             if data is not None:
                 self._payloads.move_to_end(key)
                 return data
-        data = self._encode_checked(message, dict(signals, E2E_CRC=0, AliveCounter=0))
+        data = message.encode(dict(signals, E2E_CRC=0, AliveCounter=0), strict=True)
         with self._lock:
             self._payloads[key] = data
             if len(self._payloads) > PAYLOAD_CACHE:
                 self._payloads.popitem(last=False)
         return data
-
-    def _encode_checked(self, message, signals: dict) -> bytes:
-        """``message.encode(signals, strict=True)``'s bytes. Values that pass :func:`strict_values_ok` (the
-        same checks as cantools' strict mode, against limits taken from the DBC once per message) are
-        encoded without cantools repeating them; anything else goes through cantools' strict encoding,
-        which raises its own error (or encodes, where the quick check was only more cautious)."""
-        checks = self._checks.get(message.frame_id, _UNSET)
-        if checks is _UNSET:
-            checks = self._checks[message.frame_id] = strict_checks(message)
-        if checks is not None and strict_values_ok(checks, signals):
-            return message.encode(signals, strict=False)
-        return message.encode(signals, strict=True)
 
     def skip(self, frame_id: int, n: int) -> None:
         """``n`` frames of the message ``frame_id`` that were not sent: its alive counter moves on as if they had been."""
