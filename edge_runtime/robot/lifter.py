@@ -124,7 +124,7 @@ from edge_runtime.core.numeric import median_columns, norms2
 from edge_runtime.core.onnx import session_from_manifest
 from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS, PARENTS
 from edge_runtime.robot.hazard import enough_joints
-from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, to_h36m
+from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, image_to_canonical, to_h36m
 
 LIFTER_ARCH = "lifter"
 INPUT_NAME = "keypoints_2d"
@@ -677,14 +677,13 @@ def _rays_of(maps: "_PixelMaps", last_seen: np.ndarray, model_joints: np.ndarray
 
 
 class _PixelMaps:
-    """A lifter's pixel conversions' constants, made once instead of in every frame: VideoPose3D's
-    normalisation (:func:`edge_runtime.robot.keypoints.normalize_screen`: ``p / w * 2 - (1, h / w)``, the
-    same operations on the same numbers) and its inverse, the canonical camera's focal lengths and
-    centre, and the ray tolerance in canonical pixels."""
+    """A lifter's pixel conversions: the keypoints' normalisation (:func:`edge_runtime.robot.keypoints.
+    image_to_canonical`) and the constants of its inverse, made once instead of in every frame (the offset
+    of :func:`edge_runtime.robot.keypoints.normalize_screen`, the canonical camera's focal lengths and centre,
+    and the ray tolerance in canonical pixels)."""
 
     def __init__(self, camera: CameraModel | None, canonical: CameraModel, params: LifterParams):
         self.cameras, self.params = (camera, canonical), params
-        self.width_px = canonical.width_px
         self.screen_offset = np.array([1.0, canonical.height_px / canonical.width_px])
         self.half_width_px = canonical.width_px / 2
         self.focal_px = np.array([canonical.fx_px, canonical.fy_px], np.float64)
@@ -696,10 +695,8 @@ class _PixelMaps:
         return self.cameras[0] is camera and self.cameras[1] is canonical and self.params is params
 
     def normalised(self, kp: np.ndarray) -> np.ndarray:
-        """:func:`edge_runtime.robot.keypoints.image_to_canonical` of (n, 3) float64 keypoints, to the bit."""
-        camera, canonical = self.cameras
-        px = kp[:, :2] if camera is None else camera.to_camera(kp[:, :2], canonical)
-        return px / self.width_px * 2 - self.screen_offset
+        """(n, 3) keypoints in the input camera's pixels -> normalised canonical coordinates (n, 2)."""
+        return image_to_canonical(kp, *self.cameras)
 
 
 def _symbolic_batch(session) -> bool:
