@@ -1,4 +1,4 @@
-"""tests/support/escape_plans_s17.npz from captured plan_escape_turn calls (capture_plans.py): every --every-th
+"""The fixture of branch perf6 (its tests/support folder, escape_plans_s17.npz) from captured plan_escape_turn calls (capture_plans.py): every --every-th
 call of each capture, its inputs and the answer the code of the capture gave (session 16's plan).
 
     /work/main/.venv/bin/python reports/bench/s17_perf6/make_fixture.py OUT.npz CAPTURE.pkl ... [--every 2]
