@@ -1,0 +1,38 @@
+"""prof_cycle.py with the garbage collector's passes recorded per frame (CPU per generation, and how many).
+
+Run like prof_cycle.py (same arguments): each frame/tick item gets gc0/gc1/gc2 (thread CPU of the
+collector's passes in that frame, s), n_gc0.. counts, and gc@STAGE (the collector's CPU inside each stage
+that was running, which that stage's own figure includes), so a stage's spike can be told from a collection
+that happened to run inside it. The callback itself allocates a little, so collections fall a few
+allocations away from where they fall in prof_cycle.py's runs.
+"""
+from __future__ import annotations
+
+import gc
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path.cwd()))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "s15_perf"))
+
+import prof_cycle as pc  # noqa: E402
+
+_start: list = []
+
+
+def _cb(phase, info):
+    if phase == "start":
+        _start.append(time.thread_time())
+    else:
+        g = info["generation"]
+        t0 = _start.pop()
+        pc.CUR[f"gc{g}"] += time.thread_time() - t0
+        pc.CUR[f"n_gc{g}"] += 1
+        for stage in pc.ACTIVE:
+            pc.CUR[f"gc@{stage}"] += time.thread_time() - t0
+
+
+if __name__ == "__main__":
+    gc.callbacks.append(_cb)
+    pc.main()
