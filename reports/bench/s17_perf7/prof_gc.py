@@ -5,6 +5,11 @@ collector's passes in that frame, s), n_gc0.. counts, and gc@STAGE (the collecto
 that was running, which that stage's own figure includes), so a stage's spike can be told from a collection
 that happened to run inside it. The callback itself allocates a little, so collections fall a few
 allocations away from where they fall in prof_cycle.py's runs.
+
+``--freeze`` (a candidate, not in the product): ``gc.collect()`` then ``gc.freeze()`` once the RobotLoop is built,
+so the start-up's objects (modules, the DBC, the models' wrappers: about 90,000) leave the collector's
+generations and a full collection walks only what the run made since. ``--no-callbacks``: the same run
+without the collector callbacks (prof_cycle.py's own figures, for the candidate's A/B).
 """
 from __future__ import annotations
 
@@ -33,6 +38,26 @@ def _cb(phase, info):
             pc.CUR[f"gc@{stage}"] += time.thread_time() - t0
 
 
+def _freeze_after_init():
+    """RobotLoop.__init__ followed by a full collection and gc.freeze() (the --freeze candidate)."""
+    import edge_runtime.robot.loop as loopmod
+
+    init = loopmod.RobotLoop.__init__
+
+    def frozen(self, *a, **k):
+        init(self, *a, **k)
+        gc.collect()
+        gc.freeze()
+
+    loopmod.RobotLoop.__init__ = frozen
+
+
 if __name__ == "__main__":
-    gc.callbacks.append(_cb)
+    if "--freeze" in sys.argv:
+        sys.argv.remove("--freeze")
+        _freeze_after_init()
+    if "--no-callbacks" in sys.argv:
+        sys.argv.remove("--no-callbacks")
+    else:
+        gc.callbacks.append(_cb)
     pc.main()
