@@ -24,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "s15_perf"))
 import prof_cycle as pc  # noqa: E402
 
 _start: list = []
+FULL: list = []  # (frames so far, CPU s) of every full (generation 2) collection, wherever it ran
 
 
 def _cb(phase, info):
@@ -34,8 +35,24 @@ def _cb(phase, info):
         t0 = _start.pop()
         pc.CUR[f"gc{g}"] += time.thread_time() - t0
         pc.CUR[f"n_gc{g}"] += 1
+        if g == 2:
+            FULL.append((pc.N_FRAMES[0], time.thread_time() - t0))
         for stage in pc.ACTIVE:
             pc.CUR[f"gc@{stage}"] += time.thread_time() - t0
+
+
+def _count_frames():
+    """Counts the frames fed (pc.N_FRAMES), so a full collection outside any frame can be placed."""
+    import bench.robot_cycle as rc
+
+    pc.N_FRAMES = [0]
+    feed = rc._Frames.__call__
+
+    def counted(self, *a, **k):
+        pc.N_FRAMES[0] += 1
+        return feed(self, *a, **k)
+
+    rc._Frames.__call__ = counted
 
 
 def _freeze_after_init():
@@ -60,4 +77,6 @@ if __name__ == "__main__":
         sys.argv.remove("--no-callbacks")
     else:
         gc.callbacks.append(_cb)
+        _count_frames()
     pc.main()
+    print("full collections (frames fed before it, CPU ms):", [(n, round(c * 1e3, 2)) for n, c in FULL])
