@@ -647,22 +647,28 @@ def _assign(costs: dict[tuple[int, int], float]) -> dict[int, int]:
                 assigned[i] = tid
         return assigned
     options = {d: [t for t, dd in pairs if dd == d] for d in dets}
+    return _best_assignment(0, frozenset(), dets, options, pairs)[2]
 
-    def best(k: int, taken: frozenset) -> tuple[int, float, dict]:
-        if k == len(dets):
-            return 0, 0.0, {}
-        d = dets[k]
-        n, c, m = best(k + 1, taken)                     # detection d starts a new track
-        result = (n, c, m)
-        for t in options[d]:
-            if t not in taken:
-                n, c, m = best(k + 1, taken | {t})
-                n, c = n + 1, c + pairs[(t, d)]
-                if (n, -c) > (result[0], -result[1]):
-                    result = (n, c, {**m, d: t})
-        return result
 
-    return best(0, frozenset())[2]
+def _best_assignment(k: int, taken: frozenset, dets: list[int], options: dict[int, list[int]],
+                     pairs: dict[tuple[int, int], float]) -> tuple[int, float, dict[int, int]]:
+    """:func:`_assign`'s exhaustive search from detection ``dets[k]`` on, tracks ``taken`` already used:
+    (pairs made, their total cost, detection -> track). A module function, not a closure that calls
+    itself: such a closure is a reference cycle (function -> cell -> function) that only the garbage
+    collector frees, so one per frame made the collector run every few dozen frames, for milliseconds,
+    inside whichever stage came next (reports/bench/s17_perf7/report.md)."""
+    if k == len(dets):
+        return 0, 0.0, {}
+    d = dets[k]
+    n, c, m = _best_assignment(k + 1, taken, dets, options, pairs)  # detection d starts a new track
+    result = (n, c, m)
+    for t in options[d]:
+        if t not in taken:
+            n, c, m = _best_assignment(k + 1, taken | {t}, dets, options, pairs)
+            n, c = n + 1, c + pairs[(t, d)]
+            if (n, -c) > (result[0], -result[1]):
+                result = (n, c, {**m, d: t})
+    return result
 
 
 def _size_px(kp: np.ndarray, min_score: float, seen: np.ndarray | None = None) -> float:

@@ -159,9 +159,12 @@ def wrap_angle(a: float) -> float:
 def check_target(position_m, pitch_rad: float, yaw_rad: float) -> tuple[np.ndarray, float, float]:
     """Validated (position (3,), pitch in [-pi/2, pi/2], yaw in (-pi, pi]); ValueError names the field."""
     p = np.asarray(position_m, dtype=float).reshape(-1)
-    if p.shape != (3,) or not np.all(np.isfinite(p)):
+    # the checks on the three values as Python floats (the same IEEE comparisons as numpy's, without its
+    # per-call cost: every move and retraction passes here; tests/robot/link/test_link_cost_s17.py)
+    xyz = p.tolist()
+    if p.shape != (3,) or not all(math.isfinite(v) for v in xyz):
         raise ValueError(f"position_m must be 3 finite numbers (m), got {position_m!r}")
-    if np.any(np.abs(p) > POSITION_LIMIT_M):
+    if not _finite_within(xyz, POSITION_LIMIT_M):
         raise ValueError(f"position_m {tuple(np.round(p, 3))} is outside +-{POSITION_LIMIT_M} m of the robot base")
     if not math.isfinite(pitch_rad) or abs(pitch_rad) > math.pi / 2 + 1e-9:
         raise ValueError(f"pitch_rad must lie in [-pi/2, pi/2], got {pitch_rad!r}")
