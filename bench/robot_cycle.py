@@ -354,6 +354,7 @@ def run_cycle(cfg: RobotConfig) -> _Run:
 def _cycle(cfg: RobotConfig, clock, wait, box, feed, bus, echo, link) -> _Run:
     """:func:`run_cycle` with its bus, arm stand-in and link open."""
     from bench.arm_echo import HEARTBEAT_FRAME, command_sent_s
+    from edge_runtime.core import heap
     from edge_runtime.robot.loop import RobotLoop
 
     ids = {m.name: m.frame_id for m in link.codec.db.messages}
@@ -362,6 +363,7 @@ def _cycle(cfg: RobotConfig, clock, wait, box, feed, bus, echo, link) -> _Run:
     loop = RobotLoop(link, calibration=calibration, zones=box.zones, tracker=box.tracker, params=box.robot_loop,
                      clock=clock)
     run = _Run(loop, echo, feed.what)
+    heap.settle()  # as `python -m edge_runtime robot` does once its loop is built
     with CpuShare() as cpu:
         t_start = clock()
         echo.serve(t_start)  # the arm's first state, so the link is up from the first frame

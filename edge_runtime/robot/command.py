@@ -417,6 +417,7 @@ def _frames(args, cfg, calibration):
 
 
 def run_loop(args, cfg) -> int:
+    from edge_runtime.core import heap
     from edge_runtime.core.service import keepalive
     from edge_runtime.robot.loop import RobotLoop
     from edge_runtime.robot.replay import NO_ARM_VERDICT, NoArm, ReplayClock, fast_frames
@@ -436,6 +437,7 @@ def run_loop(args, cfg) -> int:
     loop = RobotLoop(link, calibration if camera_frame else None, cfg.zones, cfg.tracker, cfg.robot_loop,
                      clock=clock, on_record=(lambda r: log.write(json.dumps(asdict(r)) + "\n")) if log else None)
     progress = _Progress(loop, args.quiet)
+    heap.settle()  # no collection of start-up objects inside a frame
     start = time.monotonic()
     recording_s = 0.0
     try:

@@ -272,3 +272,12 @@ def test_link_none_fast_logs_each_persons_head_as_given_and_says_no_arm(tmp_path
 def test_fast_needs_link_none(tmp_path):
     src = approach(tmp_path / "j.jsonl")
     assert main(["robot", "--link", "can", "--fast", "--joints", str(src)]) == 2
+
+
+def test_the_heap_is_settled_once_before_the_loop_runs(tmp_path, monkeypatch):
+    from edge_runtime.core import heap
+    calls = []
+    monkeypatch.setattr(heap, "settle", lambda: calls.append(1) or 0)
+    assert main(["robot", "--link", "none", "--fast", "--joints", str(approach(tmp_path / "j.jsonl")),
+                 "--quiet"]) == 0
+    assert calls == [1]
