@@ -581,7 +581,7 @@ def _safe_stop(link: RobotLink) -> None:
 
 
 def _summary(loop: RobotLoop, link: RobotLink, states: dict, wall_s: float) -> dict:
-    react = [1e3 * (r.t_command_s - r.t_in_s) for r in loop.records if r.t_command_s is not None]
+    react = [1e3 * r_s for r_s in loop.reactions_s]
     rt = {"median": round(float(np.median(react)), 3) if react else None,
           "p99": round(float(np.percentile(react, 99)), 3) if react else None, "n": len(react)}
     return {**loop.status(), "states": states, "wall_s": round(wall_s, 3), "reaction_ms": rt,

@@ -176,7 +176,11 @@ class LoopParams:
     """Retraction targets further than this from the base's axis (ground distance, m) are
     pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
     records: int = config.setting(100_000, config.AT_LEAST_1)
-    """Frame records kept in memory (the oldest are dropped)."""
+    """Frames whose reaction time (keypoints in -> command sent) the run's summary keeps (the oldest
+    are dropped). A frame's whole record goes to ``on_record`` (the ``--log``) and is not kept: a
+    shift's worth of records, each with its people's dicts and lists, made every full pass of the
+    garbage collector walk them, inside a frame (76 ms after 300 s in the bench, growing with the
+    run; reports/bench/s17_final.md)."""
     ack_timeout_s: float = config.setting(0.1, ("a number in (0, 0.2) (the arm's watchdog is 200 ms)",
                                                  lambda v: 0 < v < 0.2))
     """A motion command (stop, retract, move) the arm has not acknowledged within this long
@@ -338,7 +342,8 @@ class RobotLoop:
         self.on_record = on_record
         self.monitor = HazardMonitor(zones, tracker)
         self.counters = LoopCounters()
-        self.records: deque[FrameRecord] = deque(maxlen=params.records)
+        self.reactions_s: deque[float] = deque(maxlen=params.records)
+        """Each recorded frame that sent a command: keypoints in -> its last command sent (s)."""
         self.link_state = "connecting"
         self.link_error = ""
         self._raised = False  # the last link call raised: retry at link_retry_s
@@ -861,7 +866,8 @@ class RobotLoop:
             return None
         rec = FrameRecord(t_s, t_cmd, state.name, self.status()["reason"], decision.distance_m, sent,
                           [] if people is None else self._people(*people))
-        self.records.append(rec)
+        if t_cmd is not None:
+            self.reactions_s.append(t_cmd - t_s)
         if self.on_record:
             self.on_record(rec)
         return rec
