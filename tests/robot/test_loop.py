@@ -763,3 +763,17 @@ def test_a_refused_escape_turn_is_a_stop_and_the_turn_is_planned_again():
     again = drive(3.0)
     assert [c[0] for c in again] == ["retract"] and loop.status()["escapes"] == 2
     assert loop.status()["reason"] != "retract_unreachable"
+
+
+def test_the_loop_keeps_reaction_times_not_frame_records():
+    import weakref
+    logged, refs = [], []
+    loop, link, clock = make_whole_body()
+    loop.on_record = lambda rec: (refs.append(weakref.ref(rec)),
+                                  logged.append((rec.t_in_s, rec.t_command_s, rec.command)))
+    # a worker walks in from 5 m to 0.5 m: speed changes, a stop or retraction on the way
+    drive_poses(loop, link, clock, lambda t: [(0, lifted(at_tool_height(max(0.5, 5.0 - 1.5 * t))))], 3.5)
+    commanding = [(t_cmd - t_in) for t_in, t_cmd, _ in logged if t_cmd is not None]
+    assert len(logged) > 90 and len(commanding) >= 2
+    assert list(loop.reactions_s) == commanding
+    assert all(r() is None for r in refs)  # the loop holds none of the records it made
