@@ -57,11 +57,35 @@ def open_session(model: bytes | str | os.PathLike, threads: int = 1, source: str
         raise ModelIntegrityError(f"{source}: onnxruntime cannot load the model ({msg})") from None
 
 
+def same_arrays(got: Sequence[np.ndarray], want: Sequence[np.ndarray]) -> bool:
+    """Whether two lists of results are the same arrays, bit for bit (the check of the private paths here)."""
+    return len(got) == len(want) and all(np.array_equal(a, b) for a, b in zip(got, want))
+
+
+def fast_run(session: ort.InferenceSession, outputs: Sequence[str], feed: dict[str, np.ndarray],
+             run_options: ort.RunOptions):
+    """``session.run`` or, when this onnxruntime has it, the compiled session's own run under it (``_sess.run``,
+    private): why: it skips the Python wrapper's check of the feed's names on every call, about 2 of a step's
+    23 us at batch 1 on one thread, 3-6 % of the int8 lifter's bench call at any batch size
+    (reports/bench/s18_ortperf/report.md). It is taken only if it accepts ``(outputs, feed, run_options)`` and
+    gives exactly what ``session.run`` gives on ``feed``; any other onnxruntime (no ``_sess``, another signature,
+    other results) gets the public call, the same results at the wrapper's cost."""
+    inner = getattr(getattr(session, "_sess", None), "run", None)
+    if callable(inner):
+        try:
+            if same_arrays(inner(list(outputs), feed, run_options), session.run(list(outputs), feed, run_options)):
+                return inner
+        except Exception:  # noqa: BLE001 - a private API that changed: the public call below is the contract
+            pass
+    return session.run
+
+
 def bound_call(session: ort.InferenceSession, feed: dict[str, np.ndarray], outputs: Sequence[str],
-               run_options: ort.RunOptions | None = None) -> Callable[..., tuple[np.ndarray, ...]] | None:
+               run_options: ort.RunOptions | None = None) -> Callable[..., list[np.ndarray]] | None:
     """A call of ``session`` at ``feed``'s shapes through one IOBinding: ``call(*arrays)`` takes one array per
-    input of ``feed`` (in its order; another shape or dtype raises) and returns fresh copies of ``outputs``; None when
-    this onnxruntime cannot, or when the call does not give exactly what ``session.run`` gives on ``feed``.
+    input of ``feed`` (in its order; another shape or dtype raises) and returns fresh copies of ``outputs`` (a
+    list, as ``session.run``); None when this onnxruntime cannot, or when the call does not give exactly what
+    ``session.run`` gives on ``feed``.
 
     Why: at batch 1 a large part of a small model's run is turning the feed into onnxruntime's values and its
     results into new arrays; here inputs and outputs are bound once to buffers, and a call copies in, runs and
@@ -69,7 +93,8 @@ def bound_call(session: ort.InferenceSession, feed: dict[str, np.ndarray], outpu
     is 5-7 % faster this way (reports/bench/s18_ortperf/report.md), with the same outputs bit for bit. The run
     is the binding's private one (``_sess.run_with_iobinding``): 1.32's public wrapper costs 30 us more, so
     it is used only after the check against ``session.run``. The buffers are the call's: one caller at a time.
-    (``edge_runtime.wearable.classifier.bound_step`` is the step model's form, its three copies written out.)"""
+    (``edge_runtime.wearable.classifier.bound_step`` is the step model's form, its six copies written out;
+    :func:`fast_run` gains about as much on the lifter under load, at any batch size and without buffers.)"""
     try:
         want = session.run(list(outputs), feed, run_options)
         ins = [np.zeros_like(a) for a in feed.values()]
@@ -79,19 +104,21 @@ def bound_call(session: ort.InferenceSession, feed: dict[str, np.ndarray], outpu
             binding.bind_input(name, "cpu", 0, a.dtype, list(a.shape), a.ctypes.data)
         for name, a in zip(outputs, outs):
             binding.bind_output(name, "cpu", 0, a.dtype, list(a.shape), a.ctypes.data)
-        run, bound, copyto = session._sess.run_with_iobinding, binding._iobinding, np.copyto
+        run, bound, copyto, copy, n_in = session._sess.run_with_iobinding, binding._iobinding, np.copyto, \
+            np.ndarray.copy, len(ins)
 
-        def call(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-            for buf, a in zip(ins, arrays, strict=True):
+        def call(*arrays: np.ndarray) -> list[np.ndarray]:
+            if len(arrays) != n_in:
+                raise ValueError(f"bound call: {len(arrays)} inputs, bound to {n_in}")
+            for buf, a in zip(ins, arrays):
                 if a.shape != buf.shape:  # copyto would broadcast what session.run refuses
                     raise ValueError(f"bound call: input shape {a.shape}, bound to {buf.shape}")
                 copyto(buf, a, casting="no")  # nor cast: session.run refuses another dtype too
             run(bound, run_options)
-            return tuple(a.copy() for a in outs)
+            return list(map(copy, outs))  # map, not a generator: ~1 us of a ~100 us call
 
         call.keep = binding  # with ins and outs in the closure: the buffers onnxruntime writes live as long
-        got = call(*feed.values())
-        if len(got) == len(want) and all(np.array_equal(a, b) for a, b in zip(got, want)):
+        if same_arrays(call(*feed.values()), want):
             return call
     except Exception:  # noqa: BLE001 - a private API that changed: the caller's session.run is the contract
         pass

@@ -58,7 +58,8 @@ from edge_runtime.core.manifest import (
     manifest_path,
     read_verified,
 )
-from edge_runtime.core.onnx import open_session
+from edge_runtime.core.onnx import fast_run, open_session
+from edge_runtime.core.onnx import same_arrays as _same
 
 CAPTURE_FRAMES = 700
 RESAMPLED_FRAMES = 200
@@ -422,27 +423,6 @@ def run_steps(step: Callable[[np.ndarray, np.ndarray, np.ndarray], Sequence[np.n
         p, h, c = step(np.ascontiguousarray(x, dtype=np.float32), h, c)
         out.append(p)
     return out
-
-
-def _same(got: Sequence[np.ndarray], want: Sequence[np.ndarray]) -> bool:
-    return len(got) == len(want) and all(np.array_equal(a, b) for a, b in zip(got, want))
-
-
-def fast_run(session: ort.InferenceSession, outputs: Sequence[str], feed: dict[str, np.ndarray],
-             run_options: ort.RunOptions):
-    """``session.run`` or, when this onnxruntime has it, the compiled session's own run under it (``_sess.run``,
-    private): why: it skips the Python wrapper's check of the feed's names on every call, about 2 of a step's
-    23 us at batch 1 on one thread. It is taken only if it accepts ``(outputs, feed, run_options)`` and gives
-    exactly what ``session.run`` gives on ``feed``; any other onnxruntime (no ``_sess``, another signature,
-    other results) gets the public call, the same results at the wrapper's cost."""
-    inner = getattr(getattr(session, "_sess", None), "run", None)
-    if callable(inner):
-        try:
-            if _same(inner(list(outputs), feed, run_options), session.run(list(outputs), feed, run_options)):
-                return inner
-        except Exception:  # noqa: BLE001 - a private API that changed: the public call below is the contract
-            pass
-    return session.run
 
 
 def _binding(session: ort.InferenceSession, buffers: dict[str, np.ndarray]):

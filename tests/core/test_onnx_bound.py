@@ -1,11 +1,11 @@
-"""edge_runtime.core.onnx.bound_call: a fixed-shape IOBinding call that gives exactly what session.run gives."""
+"""edge_runtime.core.onnx's private fast paths (bound_call, fast_run): taken only where they give exactly what session.run gives."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from edge_runtime.core.manifest import ASSETS_DIR
-from edge_runtime.core.onnx import bound_call, session_from_manifest
+from edge_runtime.core.onnx import bound_call, fast_run, same_arrays, session_from_manifest
 
 
 @pytest.fixture(scope="module")
@@ -84,3 +84,20 @@ def test_no_bound_call_without_the_private_run_or_when_it_differs(lifter):
             pass
 
     assert bound_call(_PublicOnly(session, Zeroing()), {"keypoints_2d": x}, outputs) is None
+
+
+def test_fast_run_takes_the_private_run_only_where_it_gives_what_session_run_gives(lifter):
+    """fast_run at any batch size: the compiled session's run when it agrees with session.run, else session.run."""
+    session, outputs = lifter
+    rng = np.random.default_rng(2)
+    feed = {"keypoints_2d": rng.normal(0.0, 0.3, (3, 27, 17, 2)).astype(np.float32)}
+    run = fast_run(session, outputs, feed, None)
+    assert run == session._sess.run
+    assert same_arrays(run(outputs, feed, None), session.run(outputs, feed))
+    assert fast_run(_PublicOnly(session), outputs, feed, None) == session.run
+
+    class Zeros:
+        def run(self, outputs, feed, options):
+            return [np.zeros_like(a) for a in session.run(outputs, feed, options)]
+
+    assert fast_run(_PublicOnly(session, Zeros()), outputs, feed, None) == session.run
