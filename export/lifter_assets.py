@@ -79,6 +79,9 @@ def add_arguments(p) -> None:
     p.add_argument("--holdout-motions", default="carry,reach",
                    help="varied: motion types never trained on (comma-separated)")
     p.add_argument("--eval-frames", type=positive_int, default=20000, help="held-out frames scored per split")
+    p.add_argument("--int8-fold-centering", action="store_true",
+                   help="quantise the int8 candidates from the fp32 graph with its input centering folded into the "
+                        "expand convolutions (export.lifter_fold: faster, less accurate; off: the shipped recipe)")
     p.add_argument("--latency-runs", type=positive_int, default=500, help="timed batch-1 calls per model")
     p.add_argument("--threads", type=positive_int, default=1, help="torch threads for training")
     p.add_argument("--out", default=None, help="assets directory (default: edge_runtime/assets)")
@@ -368,8 +371,16 @@ def _quantise(model, fp32_path: Path, splits: dict, a, d: Path, say) -> tuple[Pa
     quick = max(1000, a.eval_frames // 4)
     fp32_mm = evaluate(model, test, quick, runner=onnx_runner(fp32_path))["mpjpe_mm"]
     frame = np.random.default_rng(0).normal(0, 0.3, (1, model.config.receptive_field, 17, 2)).astype(np.float32)
+    source = fp32_path
+    if getattr(a, "int8_fold_centering", False):  # the fp32 asset stays as exported; only int8 is built from this
+        import onnx
+
+        from export.lifter_fold import fold_input_centering
+
+        source = d / "lifter.fp32.folded.onnx"
+        onnx.save(fold_input_centering(onnx.load(str(fp32_path))), str(source))
     comp = compare_variants(
-        fp32_path, CANDIDATES, calib, d, stem="lifter.int8.", describe=False,
+        source, CANDIDATES, calib, d, stem="lifter.int8.", describe=False,
         score=lambda s: {"mpjpe_mm": evaluate(model, test, quick, runner=session_runner(s))["mpjpe_mm"]},
         feed={INPUT_NAME: frame}, n_timing=a.latency_runs, warmup=max(20, a.latency_runs // 10), log=say)
     if not comp.paths:
@@ -386,6 +397,8 @@ def _quantise(model, fp32_path: Path, splits: dict, a, d: Path, say) -> tuple[Pa
         "reduce_range": comp.results[best]["reduce_range"],
         "integer_kernel_drift": comp.results[best]["integer_kernel_drift"],
         "calibration": f"{len(calib)} windows of training subjects and cameras (MinMax)",
+        **({"input_centering": "folded into the expand convolutions (export.lifter_fold)"} if source != fp32_path
+           else {}),
         "rule": f"fastest candidate within max({MAX_INT8_LOSS_MM} mm, {MAX_INT8_LOSS_REL:.0%}) MPJPE of fp32, "
                 "else the most accurate",
         "candidates": {k: {"mpjpe_mm": round(mm[k], 2), "bytes": comp.results[k]["size_bytes"],

@@ -37,6 +37,7 @@ CANDIDATES = {  # name -> quantize_static keyword changes from today's recipe
     "qdq_pt_rr_fp32in": {"reduce_range": True, "nodes_to_exclude": INPUT_CENTERING},
     "qop_pt": {"quant_format": QuantFormat.QOperator},
     "qdq_pt_u8u8": {"weight_type": QuantType.QUInt8},
+    "qdq_pt_fp32expand": {"nodes_to_exclude": ["/pose/expand_conv/Conv", "/trajectory/expand_conv/Conv"]},
 }
 TODAY = dict(quant_format=QuantFormat.QDQ, op_types_to_quantize=None, per_channel=False,
              activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, reduce_range=False,
@@ -54,6 +55,8 @@ def main(argv=None) -> int:
     p.add_argument("--seconds", type=float, default=30.0)
     p.add_argument("--eval-frames", type=int, default=5000)
     p.add_argument("--only", default="")
+    p.add_argument("--fp32", default="", help="the fp32 graph to quantise (default: the shipped one), e.g. "
+                                              "fold_centering.py's")
     p.add_argument("--out", required=True)
     a = p.parse_args(argv)
     out = Path(a.out)
@@ -64,8 +67,8 @@ def main(argv=None) -> int:
     train, val = splits["train"], splits["val"]
     calib = train.windows(eval_frames(train, N_CALIB)).astype(np.float32)
     print(f"data {time.time() - t0:.0f} s: calib {calib.shape}, val frames {int(val.valid.sum())}", file=sys.stderr)
-    fp32 = ASSETS_DIR / "lifter.fp32.onnx"
-    scores = {"utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "data": cfg.to_dict(),
+    fp32 = Path(a.fp32) if a.fp32 else ASSETS_DIR / "lifter.fp32.onnx"
+    scores = {"utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "data": cfg.to_dict(), "fp32_graph": str(fp32),
               "eval_frames": a.eval_frames, "candidates": {}}
 
     def score(path: Path) -> dict:
