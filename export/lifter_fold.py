@@ -6,10 +6,10 @@ joint's x/y, then 4 x (joint - root) for the 16 other joints (``/Slice``, ``/Sli
 ``/Concat``), read by the pose and the trajectory branches' expand convolutions. Folding that map into those two
 convolutions' weights gives the same function up to float rounding (about 2e-6 m on the shipped fp32 graph)
 with 5 graph nodes fewer. Why: at batch 1 each onnxruntime node costs about a microsecond, and in the int8 graph
-the centering is 9 nodes of quantise / slice / dequantise glue; the folded int8 lifter's bench call is about 12 %
+the centering is 9 nodes of quantise / slice / dequantise glue; the folded int8 lifter's bench call is 12-16 %
 faster on an AVX2-only x86 (reports/bench/s18_ortperf/report.md). The price: its first int8 convolutions then
 read the raw keypoints, quantised on their whole image range instead of the centred ones, which costs some
-accuracy (the same report: MPJPE +0.6 mm, root error up to +19 mm on a development seed), so it is a candidate
+accuracy (the same report: MPJPE +0.6-0.7 mm, root error up to +19 mm on development seeds), so it is a candidate
 for the lead to weigh, not a default.
 """
 from __future__ import annotations

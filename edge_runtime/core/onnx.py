@@ -66,7 +66,7 @@ def fast_run(session: ort.InferenceSession, outputs: Sequence[str], feed: dict[s
              run_options: ort.RunOptions):
     """``session.run`` or, when this onnxruntime has it, the compiled session's own run under it (``_sess.run``,
     private): why: it skips the Python wrapper's check of the feed's names on every call, about 2 of a step's
-    23 us at batch 1 on one thread, 3-6 % of the int8 lifter's bench call at any batch size
+    23 us at batch 1 on one thread, 2.6-6 % of the int8 lifter's bench call at any batch size
     (reports/bench/s18_ortperf/report.md). It is taken only if it accepts ``(outputs, feed, run_options)`` and
     gives exactly what ``session.run`` gives on ``feed``; any other onnxruntime (no ``_sess``, another signature,
     other results) gets the public call, the same results at the wrapper's cost."""
@@ -89,8 +89,9 @@ def bound_call(session: ort.InferenceSession, feed: dict[str, np.ndarray], outpu
 
     Why: at batch 1 a large part of a small model's run is turning the feed into onnxruntime's values and its
     results into new arrays; here inputs and outputs are bound once to buffers, and a call copies in, runs and
-    copies out. The int8 lifter's bench call (``session.run`` with a pre-built feed, 1 thread, other core busy)
-    is 5-7 % faster this way (reports/bench/s18_ortperf/report.md), with the same outputs bit for bit. The run
+    copies out. Against the int8 lifter's bench call (``session.run`` with a pre-built feed, 1 thread, other core
+    busy) the paired medians of 4 loaded runs ranged from 6 % faster to 2.5 % slower
+    (reports/bench/s18_ortperf/report.md), with the same outputs bit for bit. The run
     is the binding's private one (``_sess.run_with_iobinding``): 1.32's public wrapper costs 30 us more, so
     it is used only after the check against ``session.run``. The buffers are the call's: one caller at a time.
     (``edge_runtime.wearable.classifier.bound_step`` is the step model's form, its six copies written out;
