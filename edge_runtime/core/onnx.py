@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 import onnxruntime as ort
@@ -78,52 +78,6 @@ def fast_run(session: ort.InferenceSession, outputs: Sequence[str], feed: dict[s
         except Exception:  # noqa: BLE001 - a private API that changed: the public call below is the contract
             pass
     return session.run
-
-
-def bound_call(session: ort.InferenceSession, feed: dict[str, np.ndarray], outputs: Sequence[str],
-               run_options: ort.RunOptions | None = None) -> Callable[..., list[np.ndarray]] | None:
-    """A call of ``session`` at ``feed``'s shapes through one IOBinding: ``call(*arrays)`` takes one array per
-    input of ``feed`` (in its order; another shape or dtype raises) and returns fresh copies of ``outputs`` (a
-    list, as ``session.run``); None when this onnxruntime cannot, or when the call does not give exactly what
-    ``session.run`` gives on ``feed``.
-
-    Why: at batch 1 a large part of a small model's run is turning the feed into onnxruntime's values and its
-    results into new arrays; here inputs and outputs are bound once to buffers, and a call copies in, runs and
-    copies out. Against the int8 lifter's bench call (``session.run`` with a pre-built feed, 1 thread, other core
-    busy) the paired medians of 4 loaded runs ranged from 6 % faster to 2.5 % slower
-    (reports/bench/s18_ortperf/report.md), with the same outputs bit for bit. The run
-    is the binding's private one (``_sess.run_with_iobinding``): 1.32's public wrapper costs 30 us more, so
-    it is used only after the check against ``session.run``. The buffers are the call's: one caller at a time.
-    (``edge_runtime.wearable.classifier.bound_step`` is the step model's form, its six copies written out;
-    :func:`fast_run` gains about as much on the lifter under load, at any batch size and without buffers.)"""
-    try:
-        want = session.run(list(outputs), feed, run_options)
-        ins = [np.zeros_like(a) for a in feed.values()]
-        outs = [np.zeros_like(a) for a in want]
-        binding = session.io_binding()
-        for name, a in zip(feed, ins):
-            binding.bind_input(name, "cpu", 0, a.dtype, list(a.shape), a.ctypes.data)
-        for name, a in zip(outputs, outs):
-            binding.bind_output(name, "cpu", 0, a.dtype, list(a.shape), a.ctypes.data)
-        run, bound, copyto, copy, n_in = session._sess.run_with_iobinding, binding._iobinding, np.copyto, \
-            np.ndarray.copy, len(ins)
-
-        def call(*arrays: np.ndarray) -> list[np.ndarray]:
-            if len(arrays) != n_in:
-                raise ValueError(f"bound call: {len(arrays)} inputs, bound to {n_in}")
-            for buf, a in zip(ins, arrays):
-                if a.shape != buf.shape:  # copyto would broadcast what session.run refuses
-                    raise ValueError(f"bound call: input shape {a.shape}, bound to {buf.shape}")
-                copyto(buf, a, casting="no")  # nor cast: session.run refuses another dtype too
-            run(bound, run_options)
-            return list(map(copy, outs))  # map, not a generator: ~1 us of a ~100 us call
-
-        call.keep = binding  # with ins and outs in the closure: the buffers onnxruntime writes live as long
-        if same_arrays(call(*feed.values()), want):
-            return call
-    except Exception:  # noqa: BLE001 - a private API that changed: the caller's session.run is the contract
-        pass
-    return None
 
 
 def session_from_manifest(assets_dir: str | os.PathLike = ASSETS_DIR, name_or_precision: str = "int8",
