@@ -14,11 +14,6 @@ def lifter():
     return session, [o.name for o in session.get_outputs()]
 
 
-def _windows(n: int, seed: int = 0) -> list[np.ndarray]:
-    rng = np.random.default_rng(seed)
-    return [rng.normal(0.0, 0.3, (1, 27, 17, 2)).astype(np.float32) for _ in range(n)]
-
-
 class _PublicOnly:
     """A session of an onnxruntime without the private calls (or whose private calls changed)."""
 
