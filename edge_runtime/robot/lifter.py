@@ -456,8 +456,7 @@ class StreamingLifter:
             self.stats.wrong_joint_count += 1
             return np.zeros(N_JOINTS, bool), f"{JOINT_COUNT}: keypoints of shape {kp.shape}, expected (17, 3)"
         kp = to_h36m(kp, self.keypoint_format)
-        finite = np.isfinite(kp)
-        ok = finite[:, 0] & finite[:, 1] & (kp[:, 2] >= self.params.min_score)  # NaN score: False
+        ok = np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= self.params.min_score)  # NaN score: False
         if ok.all():  # the usual frame: no row to leave out
             norm = self._pixel_maps().normalised(kp)
         else:
@@ -469,8 +468,7 @@ class StreamingLifter:
             norm[ok] = self._pixel_maps().normalised(kp[ok])
         # undistortion may fail far outside the image; a point beyond MAX_NORMALISED is no joint
         # this camera saw, and float32 would make a huge one inf in the model's input
-        fine = np.abs(norm) <= MAX_NORMALISED  # NaN: False
-        ok &= fine[:, 0] & fine[:, 1]
+        ok &= (np.abs(norm) <= MAX_NORMALISED).all(axis=1)  # NaN: False
         if ok.all():
             self._moved[:] = 0.0
             self._last_seen[:] = norm
@@ -685,6 +683,9 @@ class _PixelMaps:
     def __init__(self, camera: CameraModel | None, canonical: CameraModel, params: LifterParams):
         self.cameras, self.params = (camera, canonical), params
         self.screen_offset = np.array([1.0, canonical.height_px / canonical.width_px])
+        self.width_px = canonical.width_px
+        self.canonical_pixels = camera is None or camera.same_pixels_as(canonical)
+        """The keypoints are canonical-camera pixels already (:meth:`CameraModel.to_camera` would copy them)."""
         self.half_width_px = canonical.width_px / 2
         self.focal_px = np.array([canonical.fx_px, canonical.fy_px], np.float64)
         self.centre_px = np.array([canonical.cx_px, canonical.cy_px], np.float64)
@@ -696,6 +697,8 @@ class _PixelMaps:
 
     def normalised(self, kp: np.ndarray) -> np.ndarray:
         """(n, 3) keypoints in the input camera's pixels -> normalised canonical coordinates (n, 2)."""
+        if self.canonical_pixels:  # normalize_screen's arithmetic, its constants made once
+            return kp[..., :2] / self.width_px * 2 - self.screen_offset
         return image_to_canonical(kp, *self.cameras)
 
 
