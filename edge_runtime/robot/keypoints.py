@@ -285,7 +285,8 @@ def to_h36m_each(kps: Sequence[np.ndarray], fmt: str) -> np.ndarray:
     conversion is remembered as :func:`coco_to_h36m` remembers it (his lifter asks for it next). The same
     numbers as one call per person (numpy's per-call cost, not its arithmetic, is most of a person's conversion;
     tests/robot/test_perception_batch_s18.py pins the two together)."""
-    c = np.stack([as_keypoints(kp) for kp in kps]) if len(kps) else np.empty((0, N_JOINTS, 3))
+    # np.array of equal-shape arrays stacks them, without np.stack's per-call checks (a third of its cost)
+    c = np.array([as_keypoints(kp) for kp in kps]) if len(kps) else np.empty((0, N_JOINTS, 3))
     if fmt == "h36m":
         return c
     if fmt != "coco":
@@ -634,8 +635,8 @@ class PersonTracker:
         before, the joints not seen now moved with it. Every track in one pass (the same numbers as one by one:
         tests/robot/test_perception_batch_s18.py)."""
         a = self.params.velocity_smoothing
-        xy = np.stack([tr.xy for tr in tracks])
-        velocity = np.stack([tr.velocity_pxps for tr in tracks])
+        xy = np.array([tr.xy for tr in tracks])  # stacked (as np.stack, cheaper)
+        velocity = np.array([tr.velocity_pxps for tr in tracks])
         dt = [t_s - tr.t_s for tr in tracks]
         both = seen & np.isfinite(xy).all(axis=2)
         n_both = both.sum(axis=1)
@@ -662,8 +663,8 @@ def _pair_costs(tracks: list[tuple[int, _Track]], kps: np.ndarray, seen: np.ndar
     floats (the same IEEE operations; tests/robot/test_perception_batch_s18.py)."""
     ahead_s = np.array([min(t_s - tr.t_s, p.max_predict_s) for _, tr in tracks])
     # _Track.predicted of each: xy + velocity * ahead, element by element
-    pred = (np.stack([tr.xy for _, tr in tracks])
-            + np.stack([tr.velocity_pxps for _, tr in tracks])[:, None, :] * ahead_s[:, None, None])
+    pred = (np.array([tr.xy for _, tr in tracks])  # stacked (as np.stack, cheaper)
+            + np.array([tr.velocity_pxps for _, tr in tracks])[:, None, :] * ahead_s[:, None, None])
     both = seen[None] & np.isfinite(pred).all(axis=2)[:, None]  # (T, D, 17)
     n_both = both.sum(axis=2)
     with np.errstate(over="ignore", invalid="ignore"):  # joints not in common may be anything: unused

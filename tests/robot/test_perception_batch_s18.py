@@ -305,3 +305,43 @@ def test_stacked_products_are_each_ones():
         for i in range(n):
             assert same(stacked[i], (float(k[i]) * j[i]) @ A.T)
             assert same(rays[i], j[i][cal._ANKLES] @ A.T)
+
+
+def test_usable_all_is_each_ones():
+    """The lifter's usable joints and normalised keypoints of everyone in a frame, made in one pass, are each
+    person's own (StreamingLifter._usable), and people whose keypoints are not (17, 2|3) are left to their own
+    lifter."""
+    from types import SimpleNamespace
+
+    from edge_runtime.robot.lifter import LifterParams, StreamingLifter, _PixelMaps, _usable_all
+
+    rng = np.random.default_rng(1810)
+    nobody = 0
+    canonical = CameraModel.from_fov(1280, 720, 100.0)
+    for camera in (None, canonical, CameraModel.from_fov(1920, 1080, 90.0)):
+        for fmt in ("coco", "h36m"):
+            params = LifterParams(min_score=float(rng.choice([0.0, 0.3])))
+            maps = _PixelMaps(camera, canonical, params)
+            stub = SimpleNamespace(keypoint_format=fmt, params=params, _pixel_maps=lambda maps=maps: maps)
+            for case in range(200):
+                people = list(random_coco(rng, int(rng.integers(1, 5)), two_columns=case % 9 == 0))
+                if case % 4 == 0:
+                    people[0][:, :2] *= rng.choice([10.0, 1e4])  # beyond MAX_NORMALISED
+                if case % 5 == 0 and people[-1].shape[1] == 3:
+                    people[-1][:, 2] = -1.0  # nobody's joint usable
+                if case % 6 == 0:
+                    people.insert(int(rng.integers(0, len(people))), None if case % 12 else np.ones((12, 3)))
+                got = _usable_all(stub, people)
+                assert len(got) == len(people)
+                batched = maps.canonical_pixels and sum(k is not None and np.shape(k)[0] == 17 for k in people) > 1
+                for kp, g in zip(people, got):
+                    if kp is None or np.shape(kp)[0] != 17 or not batched:
+                        assert g is None
+                        continue
+                    ok, norm = StreamingLifter._usable(stub, np.asarray(kp, float))
+                    assert np.array_equal(g[0], ok) and g[0].dtype == bool
+                    assert (g[1] is None) == (norm is None)
+                    if norm is not None:
+                        assert same(g[1], norm), case
+                    nobody += norm is None
+    assert nobody > 50
