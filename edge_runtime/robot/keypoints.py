@@ -285,7 +285,7 @@ def to_h36m_each(kps: Sequence[np.ndarray], fmt: str) -> np.ndarray:
     conversion is remembered as :func:`coco_to_h36m` remembers it (his lifter asks for it next). The same
     numbers as one call per person (numpy's per-call cost, not its arithmetic, is most of a person's conversion;
     tests/robot/test_perception_batch_s18.py pins the two together)."""
-    # np.array of equal-shape arrays stacks them, without np.stack's per-call checks (a third of its cost)
+    # np.array of equal-shape arrays stacks them, in a third of np.stack's time (no per-call checks)
     c = np.array([as_keypoints(kp) for kp in kps]) if len(kps) else np.empty((0, N_JOINTS, 3))
     if fmt == "h36m":
         return c

@@ -1,8 +1,8 @@
 """Capture the perception stages' inputs in the bench scenario (simulated clock, prof_cycle's frames) -> pickle.
 
 Records every PersonTracker.update (t_s, people), PeopleLifter.push (t_s, people), lifter_rays keypoints and
-Calibration.to_robot (joints, observed, ids) call, with the answers, so replay.py can time each stage alone
-and check a tree's answers against these (the base tree's).
+Calibration.to_robot (joints, observed, ids) call, with the answers: the inputs paired.py times each stage on
+(a base tree's and this one's, side by side).
 
     cd TREE && OMP_NUM_THREADS=1 nice -n 10 env PYTHONPATH=. /work/main/.venv/bin/python \
         reports/bench/s18_perfB/capture.py --seconds 60 --out /tmp/perfB/cap.pkl

@@ -40,7 +40,9 @@ def main():
     for s in STAGES:
         b = rows["base"]
         n = rows["perfB"]
-        med = lambda runs, k: float(np.median([r[s][k] for r in runs]))  # noqa: E731
+        def med(runs, k, s=s):
+            return float(np.median([r[s][k] for r in runs]))
+
         line = f"{s:12s} {med(b, 0):9.3f} {med(n, 0):9.3f} {med(b, 1):9.3f} {med(n, 1):10.3f}"
         if s in STAGES[:3]:
             line += (f" {np.median([r['rel'][s] for r in b]):8.3f} {np.median([r['rel'][s] for r in n]):9.3f}")
