@@ -199,9 +199,16 @@ def anchor_factor(joints_cam_m, A, b, params: CalibrationParams = CalibrationPar
     """
     j = np.asarray(joints_cam_m, float).reshape(-1, 3)
     A, b = np.asarray(A, float), np.asarray(b, float)
+    return _anchor_factor((j[_ANKLES] @ A.T).tolist(), j, A, b, params, observed)
+
+
+def _anchor_factor(rays: list, j: np.ndarray, A: np.ndarray, b: np.ndarray, params: CalibrationParams,
+                   observed) -> tuple[float, str | None]:
+    """:func:`anchor_factor` of skeleton ``j`` (17, 3), given its ankles' rays ``(j[_ANKLES] @ A.T).tolist()``
+    (:class:`FloorAnchor` makes everyone's in one product: numpy's matmul of a stack multiplies each
+    skeleton as it multiplies one alone, tests/robot/test_perception_batch_s18.py)."""
     # camera centre -> ankle, robot frame; the two rays' arithmetic goes on in Python floats (the same IEEE
     # operations as numpy's on these few numbers, without its per-call cost; tests/robot/test_calibration_fast.py)
-    rays = (j[_ANKLES] @ A.T).tolist()
     ok = [math.isfinite(x) and math.isfinite(y) and math.isfinite(z) for x, y, z in rays]
     if observed is not None:
         obs = np.asarray(observed, bool)
@@ -347,6 +354,40 @@ class FloorAnchor:
         window = max(1, int(cal.anchor_window_frames))
         flat = np.asarray(joints_cam_m, float).reshape(-1, 17, 3)
         seen = [None] * len(flat) if observed is None else np.asarray(observed, bool).reshape(-1, 17)
+        out, todo, matched = self._match(flat, ids, window)
+        if not todo:
+            return out
+        # everyone's ankle rays, and below everyone's anchored joints, in one matrix product each (a stack's
+        # product is each skeleton's own, to the bit: tests/robot/test_perception_batch_s18.py)
+        A, b = np.asarray(cal.A, float), np.asarray(cal.b, float)
+        mine = flat[todo]
+        ankle_rays = (mine[:, _ANKLES] @ A.T).tolist()
+        anchored = []
+        for i, rays in zip(todo, ankle_rays):
+            k, reason = _anchor_factor(rays, flat[i], A, b, p, seen[i])
+            t = matched.get(i)
+            if t is None:
+                t = _AnchorTrack(deque(maxlen=window), k, np.full(3, np.nan), None if ids is None else ids[i])
+                self.tracks.append(t)
+            if reason is None and p.anchor_min_scale < k < p.anchor_max_scale:
+                t.factors.append(k)
+            t.k = median_floats(t.factors) if t.factors else k
+            anchored.append(t)
+        # cal.apply(k * joints) of each
+        robot = (np.array([t.k for t in anchored])[:, None, None] * mine) @ cal.A.T + cal.b
+        roots_finite = np.isfinite(robot[:, HIP]).all(axis=1).tolist()
+        for i, t, joints, mine_i, root_finite in zip(todo, anchored, robot, mine, roots_finite):
+            out[i] = joints
+            if root_finite:
+                t.root_m = joints[HIP]
+            t.last_in, t.last_out = mine_i, joints  # views of this call's own arrays (no caller holds them)
+        return out
+
+    def _match(self, flat: np.ndarray, ids, window: int) -> tuple[np.ndarray, list[int], dict[int, _AnchorTrack]]:
+        """The people's tracks for skeletons ``flat`` (P, 17, 3): (the output with the skeletons given again
+        filled, the indices of the others, index -> its matched track); the tracks unseen for longer than
+        ``window`` frames are forgotten."""
+        cal = self.calibration
         out = np.empty_like(flat)
         todo, taken = [], set()
         for i, again in enumerate(self._given_before(flat)):
@@ -368,20 +409,7 @@ class FloorAnchor:
         for n, t in enumerate(self.tracks):
             t.missed = 0 if n in taken else t.missed + 1
         self.tracks = [t for t in self.tracks if t.missed <= window]
-        for i in todo:
-            k, reason = anchor_factor(flat[i], cal.A, cal.b, p, seen[i])
-            t = matched.get(i)
-            if t is None:
-                t = _AnchorTrack(deque(maxlen=window), k, np.full(3, np.nan), None if ids is None else ids[i])
-                self.tracks.append(t)
-            if reason is None and p.anchor_min_scale < k < p.anchor_max_scale:
-                t.factors.append(k)
-            t.k = median_floats(t.factors) if t.factors else k
-            out[i] = cal.apply(t.k * flat[i])
-            if np.isfinite(out[i][HIP]).all():
-                t.root_m = out[i][HIP]
-            t.last_in, t.last_out = flat[i].copy(), out[i].copy()
-        return out
+        return out, todo, matched
 
     def _given_before(self, flat: np.ndarray) -> list[int | None]:
         """For each skeleton of ``flat`` (P, 17, 3), the first track (index) whose last skeleton it equals,

@@ -110,7 +110,6 @@ from edge_runtime import config
 from edge_runtime.core import skeleton as sk
 from edge_runtime.core import strict_json
 from edge_runtime.core.memo import Recent
-from edge_runtime.core.numeric import median, norms2
 from edge_runtime.core.skeleton import HEAD, HIP, L_SHOULDER, N_JOINTS, NECK, R_SHOULDER, SPINE, THORAX
 from edge_runtime.errors import InputError
 
@@ -241,20 +240,25 @@ def coco_to_h36m(kp) -> np.ndarray:
     key = c.tobytes() if c.shape == (N_JOINTS, 3) else None
     if key is not None and (hit := _H36M_MEMO.get(key)) is not None:
         return hit.copy()
+    out = _coco_to_h36m(c)
+    if key is not None:
+        _H36M_MEMO.put(key, out.copy())
+    return out
+
+
+def _coco_to_h36m(c: np.ndarray) -> np.ndarray:
+    """:func:`coco_to_h36m` of float64 (..., 17, 3) ``c``, nothing remembered."""
     prepared = _prepared(c)
     out = _map(c, W_EARS, _SOURCES_EARS, prepared)
-    if key is not None and out[HEAD, 2] >= EYES_FOR_EARS * c[_EYES_HEAD_SOURCES, 2].min():
-        # the ears score at least half the eyes' score (the eyes' head joint's score is the least of its sources'; a
-        # NaN compares False): the ears' head stands whatever the eyes give, so they are not mapped
-        _H36M_MEMO.put(key, out.copy())
+    if (out[..., HEAD, 2] >= EYES_FOR_EARS * c[..., _EYES_HEAD_SOURCES, 2].min(axis=-1)).all():
+        # everyone's ears score at least half his eyes' score (the eyes' head joint's score is the least of its
+        # sources'; a NaN compares False): the ears' heads stand whatever the eyes give, so they are not mapped
         return out
     # the eyes stand in for the ears when they score higher, or when the ears are not there
     from_eyes = _map(c, W_EYES[HEAD:HEAD + 1], _SOURCES_EYES_HEAD, prepared)[..., 0, :]
     ears_score = out[..., HEAD, 2]
     use_eyes = np.isfinite(from_eyes[..., 0]) & ~(ears_score >= EYES_FOR_EARS * from_eyes[..., 2])  # NaN: eyes
     out[..., HEAD, :] = np.where(use_eyes[..., None], from_eyes, out[..., HEAD, :])
-    if key is not None:
-        _H36M_MEMO.put(key, out.copy())
     return out
 
 
@@ -274,6 +278,23 @@ def to_h36m(kp, fmt: str) -> np.ndarray:
     if fmt == "h36m":
         return as_keypoints(kp)
     raise ValueError(f"unknown keypoint format {fmt!r} (one of {', '.join(FORMATS)})")
+
+
+def to_h36m_each(kps: Sequence[np.ndarray], fmt: str) -> np.ndarray:
+    """:func:`to_h36m` of several people's keypoints ((17, 2|3) each) in one pass: (D, 17, 3). Each person's
+    conversion is remembered as :func:`coco_to_h36m` remembers it (his lifter asks for it next). The same
+    numbers as one call per person (numpy's per-call cost, not its arithmetic, is most of a person's conversion;
+    tests/robot/test_perception_batch_s18.py pins the two together)."""
+    # np.array of equal-shape arrays stacks them, in a third of np.stack's time (no per-call checks)
+    c = np.array([as_keypoints(kp) for kp in kps]) if len(kps) else np.empty((0, N_JOINTS, 3))
+    if fmt == "h36m":
+        return c
+    if fmt != "coco":
+        raise ValueError(f"unknown keypoint format {fmt!r} (one of {', '.join(FORMATS)})")
+    out = _coco_to_h36m(c)
+    for person_c, person_out in zip(c, out):
+        _H36M_MEMO.put(person_c.tobytes(), person_out.copy())
+    return out
 
 
 def h36m_to_coco_3d(joints) -> np.ndarray:
@@ -508,7 +529,8 @@ class _Track:
 
 
 def _seen(kp: np.ndarray, min_score: float) -> np.ndarray:
-    return np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= min_score)
+    """(..., 17) bool: the joints of keypoints (..., 17, 3) seen (finite, scored at least ``min_score``)."""
+    return np.isfinite(kp[..., :2]).all(axis=-1) & (kp[..., 2] >= min_score)
 
 
 class PersonTracker:
@@ -536,47 +558,51 @@ class PersonTracker:
         p = self.params
         for tid in [k for k, tr in self.tracks.items() if t_s - tr.t_s > p.max_lost_s or t_s < tr.t_s]:
             del self.tracks[tid]  # gone too long, or the clock went back: a new stream
-        dets = []
+        shaped, kps = [], []
         for person in people:
             kp = np.asarray(person.keypoints, float)
             if kp.shape not in ((N_JOINTS, 2), (N_JOINTS, 3)):
                 self.rejected += 1
                 continue
-            kp = to_h36m(kp, self.keypoint_format)  # tracked on the lifter's joints: one set of bones
-            seen = _seen(kp, p.min_score)  # once per detection: the cost, the follow and the size use it
-            if seen.sum() < p.min_joints:
-                self.rejected += 1
-                continue
-            dets.append((person, kp, seen))
-        costs = {}
-        for tid, tr in self.tracks.items():
-            ahead = self._ahead(tr, t_s) if dets else None  # once per track, not per detection
-            for i, (_, kp, seen) in enumerate(dets):
-                costs[tid, i] = self._cost(tr, kp, t_s, seen, ahead)
-        assigned = _assign(costs)
-        out = []
-        for i, (person, kp, seen) in enumerate(dets):
+            shaped.append(person)
+            kps.append(kp)
+        # everyone's keypoints, seen joints and size in one pass (numpy's per-call cost, not its arithmetic, was
+        # most of a frame's tracking when each detection had its own); tracked on the lifter's joints: one set
+        # of bones
+        kps = to_h36m_each(kps, self.keypoint_format)
+        seen = _seen(kps, p.min_score)
+        enough = seen.sum(axis=1) >= p.min_joints
+        if not enough.all():
+            self.rejected += len(enough) - int(enough.sum())
+            shaped = [person for person, ok in zip(shaped, enough.tolist()) if ok]
+            kps, seen = kps[enough], seen[enough]
+        sizes = _sizes_px(kps, seen, p.min_score)
+        assigned = _assign(self._costs(kps, seen, t_s))
+        out, followed = [], []
+        for i, person in enumerate(shaped):
             tid = assigned.get(i)
             if tid is None:
                 tid = next(self._ids)
                 self.created += 1
-                self.tracks[tid] = _Track(tid, np.where(seen[:, None], kp[:, :2], np.nan),
-                                          _size_px(kp, p.min_score, seen), t_s)
+                self.tracks[tid] = _Track(tid, np.where(seen[i][:, None], kps[i][:, :2], np.nan), sizes[i], t_s)
             else:
-                self._follow(self.tracks[tid], kp, t_s, seen)
+                followed.append((self.tracks[tid], i))
             # dataclasses.replace's result, built directly for a plain Person (replace costs ten times as much)
             out.append(Person(person.keypoints, tid, person.id) if type(person) is Person
                        else replace(person, id=tid, source_id=person.id))
+        if followed:
+            which = [i for _, i in followed]
+            self._follow_all([tr for tr, _ in followed], kps[which], seen[which], [sizes[i] for i in which], t_s)
         return out
 
-    def _ahead(self, tr: _Track, t_s: float) -> tuple[np.ndarray, np.ndarray]:
-        """(the track's keypoints predicted at ``t_s``, which of them are finite): :meth:`_cost`'s for every
-        detection."""
-        pred = tr.predicted(t_s, self.params.max_predict_s)
-        return pred, np.isfinite(pred).all(axis=1)
+    def _costs(self, kps: np.ndarray, seen: np.ndarray, t_s: float) -> dict[tuple[int, int], float]:
+        """:meth:`_cost` of every (track id, detection index) pair, tracks in their order, of detections ``kps``
+        (D, 17, 3) whose joints ``seen`` (D, 17) are seen (:func:`_pair_costs`)."""
+        if not self.tracks or not len(kps):
+            return {}
+        return _pair_costs(list(self.tracks.items()), kps, seen, t_s, self.params)
 
-    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None,
-              ahead: tuple | None = None) -> float:
+    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None) -> float:
         """Median distance of the detection's keypoints from the track's prediction, in track
         sizes, as a fraction of the track's gate (which grows while it is unseen); inf beyond
         the gate or without common joints.
@@ -590,34 +616,74 @@ class PersonTracker:
         from frame to frame, as much as between two people crossing; a smoothed size weighed in
         mixed more people up. Matching recently seen tracks first, DeepSORT's cascade, lost
         22 points there: a half-hidden walker's sliver then takes the visible one's id.)"""
-        p = self.params
         if len(tr.xy) != len(kp):
             return math.inf
-        pred, finite = self._ahead(tr, t_s) if ahead is None else ahead  # ahead: _ahead(tr, t_s), given
-        both = (_seen(kp, p.min_score) if seen is None else seen) & finite
-        if both.sum() < 2:
-            return math.inf
-        # the median: a swinging limb or one gross keypoint error must not decide who is who
-        d = float(median(norms2(kp[both, :2] - pred[both]))) / tr.size_px
-        gate = p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0)
-        return d / gate if d <= gate else math.inf
+        seen = _seen(kp, self.params.min_score) if seen is None else seen
+        return _pair_costs([(0, tr)], kp[None], seen[None], t_s, self.params)[0, 0]
 
-    def _follow(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None) -> None:
-        p = self.params
-        if seen is None:
-            seen = _seen(kp, p.min_score)
-        dt = t_s - tr.t_s
-        both = seen & np.isfinite(tr.xy).all(axis=1)
-        if dt > 0 and both.any():
-            step = kp[both, :2] - tr.xy[both]
-            v = step.sum(axis=0) / len(step) / dt  # np.mean's own arithmetic (a sum, then / the count)
-            a = p.velocity_smoothing
-            tr.velocity_pxps = a * v + (1 - a) * tr.velocity_pxps
+    def _follow(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None,
+                size_px: float | None = None) -> None:
+        """Move the track to detection ``kp`` at ``t_s`` (``size_px``: his :func:`_size_px`, when known)."""
+        seen = _seen(kp, self.params.min_score) if seen is None else seen
+        size_px = _size_px(kp, self.params.min_score, seen) if size_px is None else size_px
+        self._follow_all([tr], kp[None], seen[None], [size_px], t_s)
+
+    def _follow_all(self, tracks: list[_Track], kps: np.ndarray, seen: np.ndarray, sizes_px: list[float],
+                    t_s: float) -> None:
+        """Move each of ``tracks`` to its detection at ``t_s`` (``kps`` (M, 17, 3), ``seen`` (M, 17), ``sizes_px``
+        their :func:`_size_px`): its smoothed image velocity from the mean step of the joints seen now and
+        before, the joints not seen now moved with it. Every track in one pass (the same numbers as one by one:
+        tests/robot/test_perception_batch_s18.py)."""
+        a = self.params.velocity_smoothing
+        xy = np.array([tr.xy for tr in tracks])  # stacked (as np.stack, cheaper)
+        velocity = np.array([tr.velocity_pxps for tr in tracks])
+        dt = [t_s - tr.t_s for tr in tracks]
+        both = seen & np.isfinite(xy).all(axis=2)
+        n_both = both.sum(axis=1)
+        moving = np.array([d > 0 and n > 0 for d, n in zip(dt, n_both.tolist())])
+        with np.errstate(all="ignore"):  # a track not moving (dt <= 0, no joint in common) gets no velocity
+            # np.mean's own arithmetic: the steps summed joint after joint (numpy adds the rows of a (n, 2) array
+            # in order), then / the count, then / dt; the joints left out add -0.0, the sum's exact identity
+            step = np.where(both[..., None], kps[..., :2] - xy, -0.0).sum(axis=1)
+            v = step / n_both[:, None] / np.array(dt)[:, None]
+        velocity = np.where(moving[:, None], a * v + (1 - a) * velocity, velocity)
         # joints not seen now keep their last position, moved with the person
-        moved = tr.xy + tr.velocity_pxps * max(dt, 0.0)
-        tr.xy = np.where(seen[:, None], kp[:, :2], moved)
-        tr.size_px = _size_px(kp, p.min_score, seen)
-        tr.t_s = t_s
+        moved = xy + velocity[:, None, :] * np.array([max(d, 0.0) for d in dt])[:, None, None]
+        new_xy = np.where(seen[..., None], kps[..., :2], moved)
+        for tr, xy_k, velocity_k, size_px in zip(tracks, new_xy, velocity, sizes_px):
+            tr.xy, tr.velocity_pxps, tr.size_px, tr.t_s = xy_k, velocity_k, size_px, t_s
+
+
+def _pair_costs(tracks: list[tuple[int, _Track]], kps: np.ndarray, seen: np.ndarray, t_s: float,
+                p: PeopleTrackParams) -> dict[tuple[int, int], float]:
+    """:meth:`PersonTracker._cost` of every (track id, detection index) pair of ``tracks`` ((id, track), in
+    their order) and detections ``kps`` (D, 17, 3) whose joints ``seen`` (D, 17) are seen: every pair's
+    distances in one (T, D, 17) pass, and each pair's median the middle of its sorted distances (the joints
+    not in common sorted last, as inf) with :func:`edge_runtime.core.numeric.median`'s arithmetic on Python
+    floats (the same IEEE operations; tests/robot/test_perception_batch_s18.py)."""
+    ahead_s = np.array([min(t_s - tr.t_s, p.max_predict_s) for _, tr in tracks])
+    # _Track.predicted of each: xy + velocity * ahead, element by element
+    pred = (np.array([tr.xy for _, tr in tracks])  # stacked (as np.stack, cheaper)
+            + np.array([tr.velocity_pxps for _, tr in tracks])[:, None, :] * ahead_s[:, None, None])
+    both = seen[None] & np.isfinite(pred).all(axis=2)[:, None]  # (T, D, 17)
+    n_both = both.sum(axis=2)
+    with np.errstate(over="ignore", invalid="ignore"):  # joints not in common may be anything: unused
+        d = kps[None, :, :, :2] - pred[:, None]
+        dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])  # norms2's arithmetic
+    rows = np.sort(np.where(both, dist, np.inf), axis=2).tolist()
+    costs = {}
+    for (tid, tr), track_rows, counts in zip(tracks, rows, n_both.tolist()):
+        gate = p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0)
+        for i, (row, count) in enumerate(zip(track_rows, counts)):
+            if count < 2:
+                costs[tid, i] = math.inf
+                continue
+            # the median: a swinging limb or one gross keypoint error must not decide who is who
+            h = count // 2
+            mid = row[h] if count % 2 else (row[h - 1] + row[h]) / 2.0
+            dist_sizes = mid / tr.size_px
+            costs[tid, i] = dist_sizes / gate if dist_sizes <= gate else math.inf
+    return costs
 
 
 _BONES = ((L_SHOULDER, sk.L_HIP, 0.288), (R_SHOULDER, sk.R_HIP, 0.288), (sk.L_HIP, sk.L_KNEE, 0.245),
@@ -628,6 +694,7 @@ _BONES = ((L_SHOULDER, sk.L_HIP, 0.288), (R_SHOULDER, sk.R_HIP, 0.288), (sk.L_HI
 _BONE_A = np.array([a for a, _, _ in _BONES])
 _BONE_B = np.array([b for _, b, _ in _BONES])
 _BONE_FRAC = [frac for _, _, frac in _BONES]
+_BONE_FRACTIONS = np.array(_BONE_FRAC)
 
 
 MAX_EXACT_ASSIGNMENT = 4
@@ -686,6 +753,18 @@ def _size_px(kp: np.ndarray, min_score: float, seen: np.ndarray | None = None) -
         return max(heights[-2], 1.0)  # the second largest: one bad keypoint cannot inflate it
     xy = kp[seen, :2]
     return max(float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0))), 1.0)
+
+
+def _sizes_px(kps: np.ndarray, seen: np.ndarray, min_score: float) -> list[float]:
+    """:func:`_size_px` of each detection of ``kps`` (D, 17, 3), ``seen`` (D, 17) its seen joints: every bone of
+    every detection in one pass (``np.vecdot`` of float64 calls the dot ``ndarray.dot`` calls, vector by vector),
+    the same numbers; a detection with fewer than two bones seen gets :func:`_size_px` itself (its box)."""
+    bone_seen = seen[:, _BONE_A] & seen[:, _BONE_B]
+    bones = kps[:, _BONE_A, :2] - kps[:, _BONE_B, :2]
+    heights = np.where(bone_seen, np.sqrt(np.vecdot(bones, bones)) / _BONE_FRACTIONS, -np.inf)
+    second = np.sort(heights, axis=1)[:, -2]  # the second largest seen (the bones not seen sort first, -inf)
+    return [max(h, 1.0) if n >= 2 else _size_px(kps[i], min_score, seen[i])
+            for i, (n, h) in enumerate(zip(bone_seen.sum(axis=1).tolist(), second.tolist()))]
 
 
 # ---------------------------------------------------------------------------- cameras

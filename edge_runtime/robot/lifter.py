@@ -385,9 +385,10 @@ class StreamingLifter:
             return ready
         return _finish([self], [ready], *_lift(self, [self]))[0]
 
-    def _prepare(self, t_s: float, keypoints) -> LiftedPose | tuple:
+    def _prepare(self, t_s: float, keypoints, usable: tuple | None = None) -> LiftedPose | tuple:
         """Everything of :meth:`push` before the model: the frame's verdict when it is invalid, else what
-        :func:`_finish` needs once the model has run on :meth:`window` (``(t_s, observed, held, missing)``)."""
+        :func:`_finish` needs once the model has run on :meth:`window` (``(t_s, observed, held, missing)``).
+        ``usable``: :meth:`_usable` of the keypoints, made beforehand (:func:`_usable_all`)."""
         st = self.stats
         st.frames += 1
         t_s = float(t_s)
@@ -400,7 +401,7 @@ class StreamingLifter:
         steps = self._steps_since_last(t_s)
         self._last_t = t_s
         self._frames_since_buffered += steps
-        observed, why = self._observe(keypoints)
+        observed, why = self._observe(keypoints, usable)
         if self._buffered_t is not None and t_s - self._buffered_t > self.params.lost_timeout_s + 1e-9:
             st.resets += 1  # lost for too long: the buffer no longer describes this person's recent motion
             self.reset()
@@ -446,8 +447,9 @@ class StreamingLifter:
         self.stats.frames_dropped += steps - 1
         return steps
 
-    def _observe(self, keypoints) -> tuple[np.ndarray, str | None]:
-        """Update the joint memory from this frame; (observed mask, invalid reason or None)."""
+    def _observe(self, keypoints, usable: tuple | None = None) -> tuple[np.ndarray, str | None]:
+        """Update the joint memory from this frame; (observed mask, invalid reason or None). ``usable``:
+        :meth:`_usable` of the keypoints, when :func:`_usable_all` made it for everyone at once."""
         if keypoints is None:
             self.stats.no_person += 1
             return np.zeros(N_JOINTS, bool), f"{NO_PERSON}: nobody in this frame"
@@ -455,22 +457,9 @@ class StreamingLifter:
         if kp.ndim != 2 or kp.shape[0] != N_JOINTS or kp.shape[1] not in (2, 3):
             self.stats.wrong_joint_count += 1
             return np.zeros(N_JOINTS, bool), f"{JOINT_COUNT}: keypoints of shape {kp.shape}, expected (17, 3)"
-        kp = to_h36m(kp, self.keypoint_format)
-        finite = np.isfinite(kp)
-        ok = finite[:, 0] & finite[:, 1] & (kp[:, 2] >= self.params.min_score)  # NaN score: False
-        if ok.all():  # the usual frame: no row to leave out
-            norm = self._pixel_maps().normalised(kp)
-        else:
-            if not ok.any():
-                return ok, None
-            # the rows left out stay NaN: each keypoint is mapped on its own, so mapping only the
-            # rows kept gives them the same values
-            norm = np.full((N_JOINTS, 2), np.nan)
-            norm[ok] = self._pixel_maps().normalised(kp[ok])
-        # undistortion may fail far outside the image; a point beyond MAX_NORMALISED is no joint
-        # this camera saw, and float32 would make a huge one inf in the model's input
-        fine = np.abs(norm) <= MAX_NORMALISED  # NaN: False
-        ok &= fine[:, 0] & fine[:, 1]
+        ok, norm = self._usable(kp) if usable is None else usable
+        if norm is None:
+            return ok, None
         if ok.all():
             self._moved[:] = 0.0
             self._last_seen[:] = norm
@@ -485,6 +474,25 @@ class StreamingLifter:
         self._last_seen[ok] = norm[ok]
         self._age[ok] = 0
         return ok, None
+
+    def _usable(self, kp: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """(which joints of keypoints ``kp`` (17, 2|3) are usable, their normalised coordinates (17, 2), NaN where
+        left out; None when no joint passed the score and finiteness checks)."""
+        kp = to_h36m(kp, self.keypoint_format)
+        ok = np.isfinite(kp[:, :2]).all(axis=1) & (kp[:, 2] >= self.params.min_score)  # NaN score: False
+        if ok.all():  # the usual frame: no row to leave out
+            norm = self._pixel_maps().normalised(kp)
+        else:
+            if not ok.any():
+                return ok, None
+            # the rows left out stay NaN: each keypoint is mapped on its own, so mapping only the
+            # rows kept gives them the same values
+            norm = np.full((N_JOINTS, 2), np.nan)
+            norm[ok] = self._pixel_maps().normalised(kp[ok])
+        # undistortion may fail far outside the image; a point beyond MAX_NORMALISED is no joint
+        # this camera saw, and float32 would make a huge one inf in the model's input
+        ok &= (np.abs(norm) <= MAX_NORMALISED).all(axis=1)  # NaN: False
+        return ok, norm
 
     def _buffer(self, frame: np.ndarray) -> None:
         """Append a usable frame; bridge a hole since the last one by interpolation, or
@@ -581,11 +589,12 @@ class PeopleLifter:
         person absent for longer than ``lost_timeout_s`` loses his lifter (his window would
         be reset anyway); a shorter absence is bridged like any hole."""
         out, ready = [], []
-        for person in people:
+        usable = _usable_all(self.template, [person.keypoints for person in people])
+        for person, usable_i in zip(people, usable):
             lifter = self.lifters.get(person.id)
             if lifter is None:
                 lifter = self.lifters[person.id] = self.template.sibling()
-            r = lifter._prepare(t_s, person.keypoints)
+            r = lifter._prepare(t_s, person.keypoints, usable_i)
             out.append((person.id, r))
             if not isinstance(r, LiftedPose):
                 ready.append((len(out) - 1, lifter, r))
@@ -604,11 +613,38 @@ class PeopleLifter:
         return out
 
 
+def _usable_all(lifter: StreamingLifter, keypoints: list) -> list[tuple | None]:
+    """:meth:`StreamingLifter._usable` of several people's keypoints for ``lifter``'s siblings, everyone's in one
+    pass when there are several and their normalisation goes element by element (canonical-camera pixels:
+    undistortion maps each person apart); None for a person left to his own lifter (keypoints that are not
+    (17, 2|3): his lifter says why). Each person's numbers are his own (tests/robot/test_perception_batch_s18.py)."""
+    out: list = [None] * len(keypoints)
+    maps = lifter._pixel_maps()
+    if len(keypoints) < 2 or not maps.canonical_pixels:
+        return out
+    arrays = [None if k is None else np.asarray(k, dtype=np.float64) for k in keypoints]
+    which = [i for i, a in enumerate(arrays) if a is not None and a.ndim == 2 and a.shape[0] == N_JOINTS
+             and a.shape[1] in (2, 3)]
+    if len(which) < 2:
+        return out
+    # stacked (as np.stack, cheaper); each person's H36M keypoints come from the tracker's conversion (memo)
+    kp = np.array([to_h36m(arrays[i], lifter.keypoint_format) for i in which])
+    ok = np.isfinite(kp[..., :2]).all(axis=-1) & (kp[..., 2] >= lifter.params.min_score)  # NaN score: False
+    any_ok = ok.any(axis=1).tolist()
+    norm = maps.normalised(kp)
+    norm[~ok] = np.nan  # the rows left out stay NaN, as _usable leaves them
+    ok &= (np.abs(norm) <= MAX_NORMALISED).all(axis=-1)
+    for i, ok_i, norm_i, kept in zip(which, ok, norm, any_ok):
+        out[i] = (ok_i, norm_i if kept else None)
+    return out
+
+
 def _lift(lifter: StreamingLifter, lifters: list[StreamingLifter]) -> tuple[np.ndarray, np.ndarray, float]:
     """One onnxruntime call of ``lifter``'s session on the windows of ``lifters`` (each prepared for this
     frame), in order: (pose_3d (N, 1, 17, 3), root_3d (N, 1, 3), the call's time in s), counted in the
     shared :class:`LifterStats` (``inferences`` per window, ``infer_s`` per call)."""
-    x = lifters[0].window()[None] if len(lifters) == 1 else np.stack([lf.window() for lf in lifters])
+    # np.array of the equal-shape windows stacks them, in a third of np.stack's time (no per-call checks)
+    x = lifters[0].window()[None] if len(lifters) == 1 else np.array([lf.window() for lf in lifters])
     t0 = time.perf_counter()
     pose, root = lifter.session.run(lifter._outputs, {INPUT_NAME: x})
     dt = time.perf_counter() - t0
@@ -645,7 +681,7 @@ def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray
     if not good:
         return out
     model_joints = model_joints if len(good) == n else model_joints[good]
-    seen = np.stack([lifters[i]._last_seen for i in good])
+    seen = np.array([lifters[i]._last_seen for i in good])  # stacked (as np.stack, cheaper)
     joints = _rays_of(maps, seen, model_joints) * model_joints[..., 2:3]
     for k, i in enumerate(good):
         lf, (t_s, observed, held, missing) = lifters[i], ready[i]
@@ -685,6 +721,9 @@ class _PixelMaps:
     def __init__(self, camera: CameraModel | None, canonical: CameraModel, params: LifterParams):
         self.cameras, self.params = (camera, canonical), params
         self.screen_offset = np.array([1.0, canonical.height_px / canonical.width_px])
+        self.width_px = canonical.width_px
+        self.canonical_pixels = camera is None or camera.same_pixels_as(canonical)
+        """The keypoints are canonical-camera pixels already (:meth:`CameraModel.to_camera` would copy them)."""
         self.half_width_px = canonical.width_px / 2
         self.focal_px = np.array([canonical.fx_px, canonical.fy_px], np.float64)
         self.centre_px = np.array([canonical.cx_px, canonical.cy_px], np.float64)
@@ -696,6 +735,8 @@ class _PixelMaps:
 
     def normalised(self, kp: np.ndarray) -> np.ndarray:
         """(n, 3) keypoints in the input camera's pixels -> normalised canonical coordinates (n, 2)."""
+        if self.canonical_pixels:  # normalize_screen's arithmetic, its constants made once
+            return kp[..., :2] / self.width_px * 2 - self.screen_offset
         return image_to_canonical(kp, *self.cameras)
 
 

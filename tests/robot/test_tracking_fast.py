@@ -157,11 +157,13 @@ def test_tracker_ids_as_before():
     rng = np.random.default_rng(1504)
 
     class Old(PersonTracker):
-        def _cost(self, tr, kp, t_s, seen=None, ahead=None):
-            return old_cost(self.params, tr, kp, t_s)
+        def _costs(self, kps, seen, t_s):  # every pair's old cost, one by one (session 18 made them in one pass)
+            return {(tid, i): old_cost(self.params, tr, kp, t_s) for tid, tr in self.tracks.items()
+                    for i, kp in enumerate(kps)}
 
-        def _follow(self, tr, kp, t_s, seen=None):
-            old_follow(self.params, tr, kp, t_s)
+        def _follow_all(self, tracks, kps, seen, sizes_px, t_s):  # one by one, the old way
+            for tr, kp in zip(tracks, kps):
+                old_follow(self.params, tr, kp, t_s)
 
     new, old = PersonTracker(), Old()
     for k, _ in enumerate(range(300)):
