@@ -191,17 +191,21 @@ def check_state(st: RobotState) -> str | None:
         return "ee_position_m"
     if q.shape != (N_JOINTS,) or not _finite_within(q.tolist(), MAX_JOINT_RAD):
         return "joint_positions_rad"
-    for name, lo, hi in (("pitch_rad", -math.pi / 2 - 1e-3, math.pi / 2 + 1e-3), ("yaw_rad", -math.pi, math.pi),
-                         ("ee_speed_mps", 0.0, MAX_EE_SPEED_MPS), ("tone_hz", 0.0, MAX_TONE_HZ),
-                         ("tone_db", 0.0, MAX_TONE_DB), ("robot_time_s", 0.0, math.inf)):
+    for name, lo, hi in _STATE_RANGES:
         v = getattr(st, name)
         if not (math.isfinite(v) and lo <= v <= hi):
             return name
-    for name, allowed in (("mode", MODES), ("light", LIGHTS), ("last_command", COMMANDS),
-                          ("last_result", RESULTS)):
+    for name, allowed in _STATE_NAMES:
         if getattr(st, name) not in allowed:
             return name
     return None
+
+
+_STATE_RANGES = (("pitch_rad", -math.pi / 2 - 1e-3, math.pi / 2 + 1e-3), ("yaw_rad", -math.pi, math.pi),
+                 ("ee_speed_mps", 0.0, MAX_EE_SPEED_MPS), ("tone_hz", 0.0, MAX_TONE_HZ),
+                 ("tone_db", 0.0, MAX_TONE_DB), ("robot_time_s", 0.0, math.inf))
+"""check_state's numeric fields and their [lo, hi], made once (not per state)."""
+_STATE_NAMES = (("mode", MODES), ("light", LIGHTS), ("last_command", COMMANDS), ("last_result", RESULTS))
 
 
 def _finite_within(values: list[float], limit: float) -> bool:
@@ -320,7 +324,7 @@ class RobotCanCodec:
         self._by_name = {m.name: m for m in self.db.messages}
         self._by_id = {m.frame_id: m for m in self.db.messages}
         self._ranges = {m.frame_id: _signal_ranges(m) for m in self.db.messages}
-        self._decoded: dict[tuple[int, bytes], dict | None] = {}
+        self._decoded: dict[tuple[int, bytes], tuple[str, dict | None]] = {}
         self._e2e = E2EProtector()
 
     def encode(self, name: str, **signals) -> can.Message:
@@ -339,21 +343,22 @@ class RobotCanCodec:
         if not res.valid:
             return res.status, "", None
         frame_id = msg.arbitration_id
-        message = self._by_id[frame_id]
         # the same bytes decode to the same signals: the arm repeats its state (the counter and CRC
-        # cycle through 15 values per signal set), so a decoded, range-checked frame is looked up
+        # cycle through 15 values per signal set), so a decoded, range-checked frame is looked up,
+        # with its message's name (a cantools property: read once per decoding, not per frame)
         key = (frame_id, bytes(msg.data))
-        sig = self._decoded.get(key, _UNSEEN)
-        if sig is _UNSEEN:
+        decoded = self._decoded.get(key)
+        if decoded is None:
+            message = self._by_id[frame_id]
             sig = message.decode(key[1], decode_choices=True)
-            if not _in_ranges(self._ranges[frame_id], sig):
-                sig = None
+            decoded = message.name, (sig if _in_ranges(self._ranges[frame_id], sig) else None)
             if len(self._decoded) >= DECODED_CACHE:
                 del self._decoded[next(iter(self._decoded))]
-            self._decoded[key] = sig
+            self._decoded[key] = decoded
+        name, sig = decoded
         if sig is None:
-            return "out_of_range", message.name, None
-        return res.status, message.name, dict(sig)
+            return "out_of_range", name, None
+        return res.status, name, dict(sig)
 
     # -- runtime -> robot ------------------------------------------------------------------
     def target_frames(self, seq: int, position_m, pitch_rad: float, yaw_rad: float, retract: bool) -> list[can.Message]:
@@ -405,7 +410,6 @@ class RobotCanCodec:
                            IntegrityErrors=sat("integrity_errors", 65535), Refused=sat("refused", 65535))
 
 
-_UNSEEN = object()
 DECODED_CACHE = 1024
 """Decoded frames remembered per codec, by identifier and bytes (the oldest dropped first)."""
 
@@ -459,6 +463,7 @@ class CanStateAssembler:
     def __init__(self):
         self._fields = vars(blank_state()).copy()
         self._joints = np.zeros(N_JOINTS)
+        self._joint_slots: dict[str, tuple[tuple[str, int], ...]] = {}
 
     def feed(self, name: str, sig: dict, t_s: float) -> RobotState | None:
         f = self._fields
@@ -467,9 +472,13 @@ class CanStateAssembler:
         elif name == "ROBOT_EE_ORIENT":
             f["pitch_rad"], f["yaw_rad"], f["ee_speed_mps"] = sig["Pitch"], sig["Yaw"], sig["Speed"] / 1000.0
         elif name.startswith("ROBOT_JOINTS_"):
-            for k, v in sig.items():
-                if k.startswith("J") and k[1:].isdigit():
-                    self._joints[int(k[1:])] = v
+            slots = self._joint_slots.get(name)
+            if slots is None:  # its joint signals (J<index>) and their indices, found in its first decoding
+                slots = self._joint_slots[name] = tuple((k, int(k[1:])) for k in sig
+                                                        if k.startswith("J") and k[1:].isdigit())
+            joints = self._joints
+            for k, i in slots:
+                joints[i] = sig[k]
         elif name == "ROBOT_ALARM_STATE":
             f["light"], f["tone_hz"], f["tone_db"] = str(sig["Light"]), float(sig["ToneFreq"]), float(sig["ToneLevel"])
         elif name == "ROBOT_COUNTERS":
