@@ -77,18 +77,19 @@ class E2EProtector:
             self._counters[frame_id] = (counter + n) % (COUNTER_MAX + 1)
 
     def protect(self, message, signals: dict) -> can.Message:
+        frame_id = message.frame_id  # a cantools property: read once
         with self._lock:
-            counter = self._counters.get(message.frame_id, 0)
-            self._counters[message.frame_id] = (counter + 1) % (COUNTER_MAX + 1)
+            counter = self._counters.get(frame_id, 0)
+            self._counters[frame_id] = (counter + 1) % (COUNTER_MAX + 1)
         data = bytearray(self._payload(message, signals))
         data[COUNTER_BYTE] |= counter
-        data_id = self._data_ids.get(message.frame_id)
+        data_id = self._data_ids.get(frame_id)
         if data_id is None:
-            data_id = self._data_ids[message.frame_id] = e2e_data_id(message)
+            data_id = self._data_ids[frame_id] = e2e_data_id(message)
         p01.e2e_p01_protect(data, data_id, length=len(data), increment_counter=False)
         import can  # here: a replay that sends nothing never loads python-can (canbus.bus.DeferredBus)
 
-        return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
+        return can.Message(arbitration_id=frame_id, data=data, is_extended_id=message.is_extended_frame)
 
 
 def frame_fault(msg: can.Message, message) -> str | None:
@@ -151,7 +152,9 @@ class E2EChecker:
         fault = frame_fault(msg, message)
         if fault is not None:
             return E2EResult("bad_frame", reason=fault)
-        data = msg.data  # read in place: the check only reads its buffer (no copy per frame)
+        data = msg.data  # python-can's bytearray, checked in place (autosar-e2e only reads it): no copy per frame
+        if not isinstance(data, bytearray):  # autosar-e2e refuses a read-only buffer: a frame given bytes is copied
+            data = bytearray(data)
         if not p01.e2e_p01_check(data, self._ids[frame_id], length=len(data)):
             return _PLAIN["wrong_crc"]
         counter = data[COUNTER_BYTE] & 0x0F

@@ -63,19 +63,19 @@ class CanRobotLink(RobotLink):
         self._put(self.codec.heartbeat_frame(state, uptime_s))
 
     def _receive(self, now: float) -> list[RobotState]:
-        # the bound methods once per poll, not per frame (the arm's state is seven frames every 10 ms)
-        states, recv, decode, feed, stats = [], self.bus.recv, self.codec.decode, self._assembler.feed, self.stats
+        states = []
         for _ in range(self.config.max_frames_per_poll):
-            msg = recv(timeout=0)
+            msg = self.bus.recv(timeout=0)
             if msg is None:
                 break
-            status, name, sig = decode(msg)
+            # the remembered decoding itself, not a copy: the assembler only reads it (7 frames every 10 ms)
+            status, name, sig = self.codec.decode_shared(msg)
             if sig is None:
                 if status != "unknown_id":
-                    stats.integrity_errors += 1
+                    self.stats.integrity_errors += 1
                 continue
-            stats.frames_received += 1
-            st = feed(name, sig, now)
+            self.stats.frames_received += 1
+            st = self._assembler.feed(name, sig, now)
             if st is not None:
                 states.append(st)
         return states

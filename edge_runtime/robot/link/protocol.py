@@ -338,7 +338,13 @@ class RobotCanCodec:
         (``bad_frame``: an error or remote frame, the wrong identifier kind or length; a
         short frame would make cantools raise). The decoded values are then held to the
         DBC: every enumerated signal one of its named values and every signal within its
-        [min|max] (``out_of_range``)."""
+        [min|max] (``out_of_range``). The signals are the caller's own copy."""
+        status, name, sig = self.decode_shared(msg)
+        return status, name, None if sig is None else dict(sig)
+
+    def decode_shared(self, msg: can.Message) -> tuple[str, str, dict | None]:
+        """:meth:`decode` without the copy: the signals are the codec's remembered decoding, which the
+        caller only reads (the link's state assembler, seven frames every 10 ms)."""
         res = self.checker.check(msg)
         if not res.valid:
             return res.status, "", None
@@ -358,7 +364,7 @@ class RobotCanCodec:
         name, sig = decoded
         if sig is None:
             return "out_of_range", name, None
-        return res.status, name, dict(sig)
+        return res.status, name, sig
 
     # -- runtime -> robot ------------------------------------------------------------------
     def target_frames(self, seq: int, position_m, pitch_rad: float, yaw_rad: float, retract: bool) -> list[can.Message]:

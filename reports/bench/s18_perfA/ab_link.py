@@ -60,10 +60,10 @@ def main():
     sides = {"other": other, "this": {name: sys.modules[name] for name in MODULES}}
     reps = int(sys.argv[3]) if len(sys.argv) > 3 else 3
     poll_t = {s: [] for s in sides}
-    full_t = {s: [] for s in sides}
     enc_t = {s: defaultdict(list) for s in sides}
-    for rep in range(reps):
-        now = [0.0]
+    now = [0.0]  # the replayed poll's time: both links' clock
+    for _rep in range(reps):
+        now[0] = 0.0
         links = {}
         for s, mods in sides.items():
             bus = ListBus()
