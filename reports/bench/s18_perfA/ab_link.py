@@ -6,7 +6,10 @@ under their own names, each bound to the others of its tree. Every captured poll
 through both links, in alternating order, each on a list-backed bus (no python-can transport); every captured
 encode likewise through both codecs. Prints the per-poll and per-encode CPU of each and checks that both give the
 same states, counters and bytes.
-    cd TREE && OMP_NUM_THREADS=1 nice -n 10 env PYTHONPATH=. python reports/bench/s18_perfA/ab_link.py CAP.pkl OTHER_TREE
+    cd TREE && OMP_NUM_THREADS=1 nice -n 10 env PYTHONPATH=. python reports/bench/s18_perfA/ab_link.py CAP.pkl OTHER_TREE \
+        [RUNS] [EVICT_MB]
+EVICT_MB > 0: before each timed poll and encode, untimed, a pass over that many MB of memory, so that each runs
+with cold caches, as in a frame after the tracker and the lifter (warm by default).
 """
 from __future__ import annotations
 
@@ -59,6 +62,12 @@ def main():
     other = load_tree(Path(sys.argv[2]))
     sides = {"other": other, "this": {name: sys.modules[name] for name in MODULES}}
     reps = int(sys.argv[3]) if len(sys.argv) > 3 else 3
+    evict_mb = float(sys.argv[4]) if len(sys.argv) > 4 else 0.0
+    junk = np.ones(int(evict_mb * (1 << 20) / 8))
+
+    def evict():
+        if junk.size:
+            junk.sum()  # reads every cache line of it: the caches hold junk, not the link's code and data
     poll_t = {s: [] for s in sides}
     enc_t = {s: defaultdict(list) for s in sides}
     now = [0.0]  # the replayed poll's time: both links' clock
@@ -76,6 +85,7 @@ def main():
             for s in (("other", "this") if i % 2 else ("this", "other")):
                 bus, link = links[s]
                 bus.rx.extend(can.Message(arbitration_id=a, data=d, is_extended_id=x) for a, d, x in frames)
+                evict()
                 c0 = time.thread_time()
                 st = link.poll()
                 pt[s][i] = time.thread_time() - c0
@@ -90,13 +100,14 @@ def main():
         for i, (name, signals) in enumerate(cap["encodes"]):
             out = {}
             for s in (("other", "this") if i % 2 else ("this", "other")):
+                evict()
                 c0 = time.thread_time()
                 msg = codecs[s].encode(name, **signals)
                 enc_t[s][name].append(time.thread_time() - c0)
                 out[s] = (msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
             assert out["this"] == out["other"], (name, out)
     n_frames = np.array([len(f) for _, f in cap["polls"]])
-    print(f"{len(cap['polls'])} polls, {n_frames.sum()} frames, {reps} runs; states, stats, counters, sent and "
+    print(f"{len(cap['polls'])} polls, {n_frames.sum()} frames, {reps} runs, {evict_mb:g} MB evicted before each; states, stats, counters, sent and "
           f"encoded bytes identical")
     for s in sides:
         best = np.min(poll_t[s], axis=0)  # each poll's best over the runs

@@ -25,7 +25,9 @@ LINK_STAGES = ["recv", "decode", "feed", "check_state", "receive", "check_target
 def instrument_link():
     pc._wrap(ae.StampedBus, "recv", "recv")               # python-can's recv on the bench's virtual bus
     pc._wrap(ae.StampedBus, "send", "bus_send")           # python-can's send (the virtual bus's deepcopy)
-    pc._wrap(proto.RobotCanCodec, "decode", "decode")     # E2E check + cantools decode + range check
+    # E2E check + cantools decode + range check (a tree whose link reads the shared decoding: decode_shared)
+    pc._wrap(proto.RobotCanCodec, "decode_shared" if hasattr(proto.RobotCanCodec, "decode_shared") else "decode",
+             "decode")
     pc._wrap(proto.CanStateAssembler, "feed", "feed")
     pc._wrap(base, "check_state", "check_state")
     pc._wrap(canlink.CanRobotLink, "_receive", "receive")

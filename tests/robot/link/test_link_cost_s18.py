@@ -1,8 +1,9 @@
 """Session 18 (perfA): the CAN link's receive path without a changed result. The E2E check reads the frame's
 buffer in place and returns one shared, frozen result per plain status: pinned to session 17's copying form
 (status, lost frames, reason and counts, frame for frame) on valid, repeated, lost, corrupted, mis-shaped and
-unknown frames. The robot loop takes a state report once: it follows every new one and keeps what it had
-while the report is unchanged or unusable."""
+unknown frames. The link's assembler reads the codec's remembered decodings without changing them, and makes
+its state with RobotState.from_fields, the constructor's object. The robot loop takes a state report once: it
+follows every new one and keeps what it had while the report is unchanged or unusable."""
 from __future__ import annotations
 
 import dataclasses
@@ -15,7 +16,7 @@ import pytest
 from support.robot import FakeLink
 
 from edge_runtime.canbus.e2e import COUNTER_MAX, E2EChecker, E2EResult, frame_fault
-from edge_runtime.robot.link.protocol import RobotCanCodec, blank_state
+from edge_runtime.robot.link.protocol import RobotCanCodec, RobotState, blank_state
 from edge_runtime.robot.loop import RobotLoop
 
 
@@ -157,3 +158,16 @@ def test_the_link_reads_the_shared_decodings_without_changing_them():
         status, got_name, got = codec.decode(can.Message(arbitration_id=frame_id, data=bytearray(data),
                                                          is_extended_id=False))
         assert got_name == name and got == sig and got is not sig  # decode() hands out a copy
+
+
+def test_from_fields_makes_the_state_the_constructor_makes():
+    rng = np.random.default_rng(13)
+    for _ in range(50):
+        f = vars(replace(blank_state(float(rng.uniform(0, 9))), ee_position_m=rng.uniform(-1, 1, 3),
+                         joint_positions_rad=rng.uniform(-3, 3, 7), mode=str(rng.choice(["run", "stopped"])),
+                         last_seq=int(rng.integers(65536)), counters={"rx_valid": int(rng.integers(9))})).copy()
+        made, want = RobotState.from_fields(f), RobotState(**f)
+        assert type(made) is RobotState and list(vars(made).items()) == list(vars(want).items())
+        assert repr(made) == repr(want)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            made.mode = "run"
