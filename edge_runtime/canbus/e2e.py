@@ -39,6 +39,12 @@ WEARABLE_STATUS frames a day, 10 per distinct Uptime_s), and cantools' checked e
 largest single cost of a replay."""
 
 
+def _checked_payload(message, signals: dict) -> bytes:
+    """``signals`` encoded by cantools and checked by it against the DBC (strict: every signal, in range),
+    with the alive counter and the CRC zero."""
+    return message.encode(dict(signals, E2E_CRC=0, AliveCounter=0), strict=True)
+
+
 class E2EProtector:
     """Send side of E2E Profile 1 for any DBC message: cantools encodes the signals, then
     the alive counter (one per frame ID, wrapping at COUNTER_MAX) and the CRC go in.
@@ -54,7 +60,9 @@ class E2EProtector:
         self._payloads: OrderedDict[tuple, bytes] = OrderedDict()
         self._data_ids: dict[int, int] = {}  # per frame ID: its DBC attribute, looked up once
 
-    def _payload(self, message, signals: dict) -> bytes:
+    def _payload(self, message, signals: dict, remember: bool) -> bytes:
+        if not remember:  # signals that will not come again: a lookup and an entry would be work for nothing
+            return _checked_payload(message, signals)
         # the signals in the caller's order: the encoders build them in a fixed order, and the same
         # signals in another order only make a second entry with the same bytes (no sort per frame)
         key = (message.frame_id, *signals.items())
@@ -63,7 +71,7 @@ class E2EProtector:
             if data is not None:
                 self._payloads.move_to_end(key)
                 return data
-        data = message.encode(dict(signals, E2E_CRC=0, AliveCounter=0), strict=True)
+        data = _checked_payload(message, signals)
         with self._lock:
             self._payloads[key] = data
             if len(self._payloads) > PAYLOAD_CACHE:
@@ -76,12 +84,14 @@ class E2EProtector:
             counter = self._counters.get(frame_id, 0)
             self._counters[frame_id] = (counter + n) % (COUNTER_MAX + 1)
 
-    def protect(self, message, signals: dict) -> can.Message:
+    def protect(self, message, signals: dict, remember: bool = True) -> can.Message:
+        """The protected frame of ``message`` with ``signals``. ``remember=False``: signals that will not come
+        again (a command's new sequence number) are encoded without the payload cache."""
         frame_id = message.frame_id  # a cantools property: read once
         with self._lock:
             counter = self._counters.get(frame_id, 0)
             self._counters[frame_id] = (counter + 1) % (COUNTER_MAX + 1)
-        data = bytearray(self._payload(message, signals))
+        data = bytearray(self._payload(message, signals, remember))
         data[COUNTER_BYTE] |= counter
         data_id = self._data_ids.get(frame_id)
         if data_id is None:

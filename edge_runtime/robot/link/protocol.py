@@ -340,6 +340,11 @@ class RobotCanCodec:
         """A protected frame: signals by cantools, then alive counter and CRC (Profile 1)."""
         return self._e2e.protect(self._by_name[name], signals)
 
+    def _command(self, name: str, **signals) -> can.Message:
+        """:meth:`encode` for a command frame: its sequence number is new, so its signals never come again and
+        the payload cache is neither searched nor filled (3-4 us of a 15-18 us frame, with the same bytes)."""
+        return self._e2e.protect(self._by_name[name], signals, remember=False)
+
     def decode(self, msg: can.Message) -> tuple[str, str, dict | None]:
         """(status, message name, signals). Signals is None unless the frame is valid.
 
@@ -378,19 +383,19 @@ class RobotCanCodec:
     # -- runtime -> robot ------------------------------------------------------------------
     def target_frames(self, seq: int, position_m, pitch_rad: float, yaw_rad: float, retract: bool) -> list[can.Message]:
         x, y, z = (float(v) * 1000.0 for v in position_m)
-        return [self.encode("ROBOT_TARGET_ORIENT", Kind="retract" if retract else "move", Seq=seq,
-                            Pitch=pitch_rad, Yaw=yaw_rad),
-                self.encode("ROBOT_TARGET_POS", SeqCheck=seq % 16, X=x, Y=y, Z=z)]
+        return [self._command("ROBOT_TARGET_ORIENT", Kind="retract" if retract else "move", Seq=seq,
+                              Pitch=pitch_rad, Yaw=yaw_rad),
+                self._command("ROBOT_TARGET_POS", SeqCheck=seq % 16, X=x, Y=y, Z=z)]
 
     def mode_frame(self, seq: int, command: str) -> can.Message:
-        return self.encode("ROBOT_MODE_CMD", Command=command, Seq=seq)
+        return self._command("ROBOT_MODE_CMD", Command=command, Seq=seq)
 
     def alarm_frame(self, seq: int, light: str, tone_hz: float, tone_db: float) -> can.Message:
-        return self.encode("ROBOT_ALARM_CMD", Light=light, Seq=seq, ToneFreq=round(tone_hz),
-                           ToneLevel=round(tone_db * 2) / 2)
+        return self._command("ROBOT_ALARM_CMD", Light=light, Seq=seq, ToneFreq=round(tone_hz),
+                             ToneLevel=round(tone_db * 2) / 2)
 
     def speed_frame(self, seq: int, limit_mps: float) -> can.Message:
-        return self.encode("ROBOT_SPEED_CMD", Seq=seq, SpeedLimit=round(limit_mps * 10000.0) / 10.0)
+        return self._command("ROBOT_SPEED_CMD", Seq=seq, SpeedLimit=round(limit_mps * 10000.0) / 10.0)
 
     def heartbeat_frame(self, state: str, uptime_s: float) -> can.Message:
         return self.encode("RUNTIME_HEARTBEAT", State=state, Uptime_s=int(min(max(uptime_s, 0), 65535)))

@@ -31,6 +31,7 @@ import edge_runtime.robot.link.base  # noqa: E402,F401
 import edge_runtime.robot.link.can  # noqa: E402,F401
 import edge_runtime.robot.link.protocol  # noqa: E402,F401
 
+COMMANDS = {"ROBOT_TARGET_ORIENT", "ROBOT_TARGET_POS", "ROBOT_MODE_CMD", "ROBOT_ALARM_CMD", "ROBOT_SPEED_CMD"}
 MODULES = ("edge_runtime.canbus.e2e", "edge_runtime.robot.link.protocol", "edge_runtime.robot.link.base",
            "edge_runtime.robot.link.can")
 
@@ -101,8 +102,10 @@ def main():
             out = {}
             for s in (("other", "this") if i % 2 else ("this", "other")):
                 evict()
+                # a command frame as the tree's codec makes one (_command where it has it: no payload cache)
+                encode = getattr(codecs[s], "_command", codecs[s].encode) if name in COMMANDS else codecs[s].encode
                 c0 = time.thread_time()
-                msg = codecs[s].encode(name, **signals)
+                msg = encode(name, **signals)
                 enc_t[s][name].append(time.thread_time() - c0)
                 out[s] = (msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
             assert out["this"] == out["other"], (name, out)

@@ -48,6 +48,15 @@ def init_w(self, *a, **k):
 
 
 canlink.CanRobotLink._receive, ae.StampedBus.recv, proto.RobotCanCodec.encode = receive_w, recv_w, encode_w
+if hasattr(proto.RobotCanCodec, "_command"):  # a tree whose command frames skip the payload cache
+    command = proto.RobotCanCodec._command
+
+    def command_w(self, name, **signals):
+        if self is LINK_CODEC[0]:
+            CAP["encodes"].append((name, signals))
+        return command(self, name, **signals)
+
+    proto.RobotCanCodec._command = command_w
 canlink.CanRobotLink.__init__ = init_w
 from edge_runtime.core.manifest import ASSETS_DIR, load_manifest  # noqa: E402
 

@@ -7,7 +7,8 @@ import sys
 
 import numpy as np
 
-STAGES = ["cpu", "link_poll", "receive", "recv", "decode", "feed", "check_state", "link_send", "check_target",
+STAGES = ["cpu", "tracker", "lifter", "calibration", "monitor", "separation", "people_log", "act", "backfires",
+          "link_poll", "receive", "recv", "decode", "feed", "check_state", "link_send", "check_target",
           "enc_target", "enc_mode", "enc_speed", "enc_alarm", "enc_heartbeat", "bus_send"]
 
 

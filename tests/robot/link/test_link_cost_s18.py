@@ -171,3 +171,26 @@ def test_from_fields_makes_the_state_the_constructor_makes():
         assert repr(made) == repr(want)
         with pytest.raises(dataclasses.FrozenInstanceError):
             made.mode = "run"
+
+
+def test_command_frames_skip_the_payload_cache_with_the_same_bytes():
+    rng = np.random.default_rng(19)
+    new, old = RobotCanCodec(), RobotCanCodec()
+    old._command = old.encode  # session 17: every frame through the payload cache
+    hb = new.heartbeat_frame("running", 1.0)
+    for seq in range(1, 400):
+        p = rng.uniform(-1, 1, 3).round(int(rng.integers(1, 4)))  # positions that repeat, as waypoints do
+        cases = [("target_frames", seq, p, float(rng.uniform(-1.5, 1.5)), float(rng.uniform(-3, 3)),
+                  bool(rng.random() < 0.5)),
+                 ("mode_frame", seq, str(rng.choice(["stop", "resume"]))),
+                 ("alarm_frame", seq, str(rng.choice(["off", "red"])), float(rng.integers(0, 3000)),
+                  float(rng.uniform(0, 100))),
+                 ("speed_frame", seq % 20, float(rng.uniform(0, 1.5)))]
+        for name, *args in cases:
+            got, want = getattr(new, name)(*args), getattr(old, name)(*args)
+            for g, w in zip(got if isinstance(got, list) else [got], want if isinstance(want, list) else [want]):
+                assert (g.arbitration_id, bytes(g.data), g.is_extended_id) == \
+                       (w.arbitration_id, bytes(w.data), w.is_extended_id), (name, args)
+    assert list(new._e2e._payloads) == [(hb.arbitration_id, ("State", "running"), ("Uptime_s", 1))]
+    with pytest.raises(Exception, match="SpeedLimit"):  # cantools' strict check still refuses what it refused
+        new._command("ROBOT_SPEED_CMD", Seq=1, SpeedLimit=1e9)
