@@ -130,7 +130,7 @@ class E2EResult:
 
 _PLAIN = {status: E2EResult(status) for status in ("ok", "initial", "repeated", "wrong_crc", "unknown_id")}
 """One shared (frozen) result per status that carries nothing else: the robot's state arrives as seven
-frames every 10 ms, and a result made per frame was a tenth of the frame's receive cost."""
+frames every 10 ms, and a result made per frame was about 5 % of the frame's receive cost (0.75 of ~14 us)."""
 
 
 @dataclass
