@@ -39,6 +39,12 @@ WEARABLE_STATUS frames a day, 10 per distinct Uptime_s), and cantools' checked e
 largest single cost of a replay."""
 
 
+def _checked_payload(message, signals: dict) -> bytes:
+    """``signals`` encoded by cantools and checked by it against the DBC (strict: every signal, in range),
+    with the alive counter and the CRC zero."""
+    return message.encode(dict(signals, E2E_CRC=0, AliveCounter=0), strict=True)
+
+
 class E2EProtector:
     """Send side of E2E Profile 1 for any DBC message: cantools encodes the signals, then
     the alive counter (one per frame ID, wrapping at COUNTER_MAX) and the CRC go in.
@@ -54,7 +60,9 @@ class E2EProtector:
         self._payloads: OrderedDict[tuple, bytes] = OrderedDict()
         self._data_ids: dict[int, int] = {}  # per frame ID: its DBC attribute, looked up once
 
-    def _payload(self, message, signals: dict) -> bytes:
+    def _payload(self, message, signals: dict, remember: bool) -> bytes:
+        if not remember:  # signals that will not come again: a lookup and an entry would be work for nothing
+            return _checked_payload(message, signals)
         # the signals in the caller's order: the encoders build them in a fixed order, and the same
         # signals in another order only make a second entry with the same bytes (no sort per frame)
         key = (message.frame_id, *signals.items())
@@ -63,7 +71,7 @@ class E2EProtector:
             if data is not None:
                 self._payloads.move_to_end(key)
                 return data
-        data = message.encode(dict(signals, E2E_CRC=0, AliveCounter=0), strict=True)
+        data = _checked_payload(message, signals)
         with self._lock:
             self._payloads[key] = data
             if len(self._payloads) > PAYLOAD_CACHE:
@@ -76,19 +84,22 @@ class E2EProtector:
             counter = self._counters.get(frame_id, 0)
             self._counters[frame_id] = (counter + n) % (COUNTER_MAX + 1)
 
-    def protect(self, message, signals: dict) -> can.Message:
+    def protect(self, message, signals: dict, remember: bool = True) -> can.Message:
+        """The protected frame of ``message`` with ``signals``. ``remember=False``: signals that will not come
+        again (a command's new sequence number) are encoded without the payload cache."""
+        frame_id = message.frame_id  # a cantools property: read once
         with self._lock:
-            counter = self._counters.get(message.frame_id, 0)
-            self._counters[message.frame_id] = (counter + 1) % (COUNTER_MAX + 1)
-        data = bytearray(self._payload(message, signals))
+            counter = self._counters.get(frame_id, 0)
+            self._counters[frame_id] = (counter + 1) % (COUNTER_MAX + 1)
+        data = bytearray(self._payload(message, signals, remember))
         data[COUNTER_BYTE] |= counter
-        data_id = self._data_ids.get(message.frame_id)
+        data_id = self._data_ids.get(frame_id)
         if data_id is None:
-            data_id = self._data_ids[message.frame_id] = e2e_data_id(message)
+            data_id = self._data_ids[frame_id] = e2e_data_id(message)
         p01.e2e_p01_protect(data, data_id, length=len(data), increment_counter=False)
         import can  # here: a replay that sends nothing never loads python-can (canbus.bus.DeferredBus)
 
-        return can.Message(arbitration_id=message.frame_id, data=data, is_extended_id=message.is_extended_frame)
+        return can.Message(arbitration_id=frame_id, data=data, is_extended_id=message.is_extended_frame)
 
 
 def frame_fault(msg: can.Message, message) -> str | None:
@@ -104,7 +115,7 @@ def frame_fault(msg: can.Message, message) -> str | None:
     return None
 
 
-@dataclass
+@dataclass(frozen=True)
 class E2EResult:
     status: str
     """'ok', 'initial' (first frame seen), 'wrong_crc', 'repeated', 'lost' (lost > 0 frames in between),
@@ -115,6 +126,11 @@ class E2EResult:
     @property
     def valid(self) -> bool:
         return self.status in ("ok", "initial", "lost")
+
+
+_PLAIN = {status: E2EResult(status) for status in ("ok", "initial", "repeated", "wrong_crc", "unknown_id")}
+"""One shared (frozen) result per status that carries nothing else: the robot's state arrives as seven
+frames every 10 ms, and a result made per frame was about 5 % of the frame's receive cost (0.75 of ~14 us)."""
 
 
 @dataclass
@@ -139,27 +155,30 @@ class E2EChecker:
         return res
 
     def _check(self, msg: can.Message) -> E2EResult:
-        message = self._messages.get(msg.arbitration_id)
+        frame_id = msg.arbitration_id
+        message = self._messages.get(frame_id)
         if message is None:
-            return E2EResult("unknown_id")
+            return _PLAIN["unknown_id"]
         fault = frame_fault(msg, message)
         if fault is not None:
             return E2EResult("bad_frame", reason=fault)
-        data = bytearray(msg.data)
-        if not p01.e2e_p01_check(data, self._ids[msg.arbitration_id], length=len(data)):
-            return E2EResult("wrong_crc")
-        counter = data[1] & 0x0F
+        data = msg.data  # python-can's bytearray, checked in place (autosar-e2e only reads it): no copy per frame
+        if not isinstance(data, bytearray):  # autosar-e2e refuses a read-only buffer: a frame given bytes is copied
+            data = bytearray(data)
+        if not p01.e2e_p01_check(data, self._ids[frame_id], length=len(data)):
+            return _PLAIN["wrong_crc"]
+        counter = data[COUNTER_BYTE] & 0x0F
         if counter > COUNTER_MAX:
-            return E2EResult("wrong_crc")
-        last = self._last.get(msg.arbitration_id)
-        self._last[msg.arbitration_id] = counter
+            return _PLAIN["wrong_crc"]
+        last = self._last.get(frame_id)
+        self._last[frame_id] = counter
         if last is None:
-            return E2EResult("initial")
+            return _PLAIN["initial"]
         delta = (counter - last) % (COUNTER_MAX + 1)
         if delta == 0:
-            return E2EResult("repeated")
+            return _PLAIN["repeated"]
         if delta == 1:
-            return E2EResult("ok")
+            return _PLAIN["ok"]
         return E2EResult("lost", lost=delta - 1)
 
     @property

@@ -370,6 +370,7 @@ class RobotLoop:
         self._sent_speed: float | None = None  # the speed override the arm acknowledged or was last sent (m/s)
         self._speed_pending: PendingCommand | None = None
         self._last_yaw: float | None = None
+        self._seen_state = None  # the link's state report _last_effector, _last_q and _last_yaw were taken from
         self._pending: PendingCommand | None = None
         self._unconfirmed = 0  # motion commands in a row the arm did not acknowledge
         self._retry_of: PendingCommand | None = None  # the unacknowledged command being sent again
@@ -552,12 +553,14 @@ class RobotLoop:
         state = self.link.state
         if state is None:
             return
-        pos = np.asarray(state.ee_position_m, float)
-        if np.isfinite(pos).all():
-            self._last_effector = pos.reshape(3)
-        q = np.asarray(state.joint_positions_rad, float)
-        self._last_q = q.reshape(7) if q.size == 7 and np.isfinite(q).all() else None
-        self._last_yaw = float(state.yaw_rad) if math.isfinite(state.yaw_rad) else None
+        if state is not self._seen_state:  # a new report (the same one, as in most frames and ticks, gives the same)
+            self._seen_state = state
+            pos = np.asarray(state.ee_position_m, float)
+            if np.isfinite(pos).all():
+                self._last_effector = pos.reshape(3)
+            q = np.asarray(state.joint_positions_rad, float)
+            self._last_q = q.reshape(7) if q.size == 7 and np.isfinite(q).all() else None
+            self._last_yaw = float(state.yaw_rad) if math.isfinite(state.yaw_rad) else None
         now = self.clock()
         if state.watchdog and self._sent_motion is not None and self._sent_motion.kind is MotionKind.MOVE \
                 and now - self._last_watchdog_fix_s >= self.params.link_retry_s:
