@@ -121,7 +121,12 @@ GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
 def ground(v) -> np.ndarray:
     """The ground projection (x, z) of a robot-frame point or vector."""
     v = np.asarray(v, dtype=float)
-    return v[..., GROUND_AXES]
+    # the same copy of the same elements as v[..., GROUND_AXES], a tenth of the cost (no tuple to convert, no
+    # ellipsis for the common single vector): a frame asks for a few dozen
+    return v[_GROUND_INDEX] if v.ndim == 1 else v[..., _GROUND_INDEX]
+
+
+_GROUND_INDEX = np.array(GROUND_AXES)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -631,11 +636,9 @@ class HazardMonitor:
         entry, nearest = State.NORMAL, (math.inf, None, None)
         self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
-        bodies = {}
-        for wid, est in ests.items():
-            person_m = np.asarray(people[wid], float)
-            centres, radii = _frozen(body_spheres(person_m))
-            bodies[wid] = (person_m, centres, radii, np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]))
+        persons = [np.asarray(people[wid], float) for wid in ests]
+        bodies = {wid: (person_m, centres, radii, np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]))
+                  for (wid, est), person_m, (centres, radii) in zip(ests.items(), persons, body_spheres_of(persons))}
         # everyone now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
         seps = separations_per_shift_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps) if bodies else []
         for (wid, est), sep in zip(ests.items(), seps):
@@ -997,9 +1000,25 @@ def body_spheres(person_m) -> tuple[np.ndarray, np.ndarray]:
     return centres, _BODY_SPHERE_RADII_M.copy()
 
 
+def body_spheres_of(persons_m) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`body_spheres` of each of ``persons_m``, read-only (they are kept and shared: nobody may change them
+    in place). Whole skeletons all at once (numpy's per-call overhead, not the arithmetic, is the cost of a
+    frame's few people; each centre is the per-person call's to the bit), their radii one shared array."""
+    if persons_m and all(p.shape == (17, 3) for p in persons_m):
+        p = np.array(persons_m, float)  # np.stack's values, without its per-array reshaping
+        if np.isfinite(p).all():
+            a, b = _LIMB_ENDS
+            centres = np.concatenate([p, 0.5 * (p[:, a] + p[:, b])], axis=1)   # (P, 25, 3), as body_spheres
+            centres.setflags(write=False)  # and so every person's view of it
+            return [(c, _BODY_SPHERE_RADII_M) for c in centres]
+    return [_frozen(body_spheres(p)) for p in persons_m]
+
+
 _LIMB_ENDS = (np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS]))
 _BODY_SPHERE_RADII_M = np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[_LIMB_ENDS[0]] + BODY_RADII_M[_LIMB_ENDS[1]])])
-""":func:`body_spheres`' radii of a whole skeleton: the joints', then the limb midpoints'."""
+""":func:`body_spheres`' radii of a whole skeleton: the joints', then the limb midpoints' (read-only: shared by
+:func:`body_spheres_of`)."""
+_BODY_SPHERE_RADII_M.setflags(write=False)
 
 
 MAX_MISSING_JOINTS = 0
@@ -1098,6 +1117,14 @@ def separations_per_shift_m(bodies, shifts_s, capsules) -> list[np.ndarray]:
     one clearance call for all of them (numpy's per-call overhead, not the arithmetic, is the cost of a frame's
     few people; each point's clearance is its own, whatever else is in the call)."""
     shifts = np.asarray(shifts_s, float)
+    if len(bodies) > 1 and len({len(c) for c, _, _ in bodies}) == 1:  # whole skeletons: one (S, P, n) array
+        # np.array of equal shapes: np.stack's values, without its per-array reshaping
+        centres, radii = np.array([c for c, _, _ in bodies], float), np.array([r for _, r, _ in bodies], float)
+        velocities = np.array([np.asarray(v, float) for _, _, v in bodies], float)
+        # each moved centre is c + s v as below, elementwise the same arithmetic
+        moved = centres[None] + shifts[:, None, None, None] * velocities[None, :, None, :]     # (S, P, n, 3)
+        clear = point_clearance_m(moved.reshape(-1, 3), capsules).reshape(moved.shape[:3])
+        return list((clear - radii[None]).min(axis=2).T)
     moved = [(c[None] + shifts[:, None, None] * np.asarray(v, float)[None, None]).reshape(-1, 3) for c, _, v in bodies]
     clear = point_clearance_m(np.concatenate(moved) if len(moved) > 1 else moved[0], capsules)
     out, k = [], 0
@@ -1179,6 +1206,21 @@ def _capsule_terms(capsules, dims: int) -> tuple:
 
 _TERMS: Recent[tuple] = Recent(8)
 """:func:`_capsule_terms` of read-only capsules, by the tuple's identity."""
+
+
+def _gathered(people) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Everyone's spheres (``people``: (centres (n, 3), radii (n,)) each) as one list: centres, radii and where
+    each person's begin (each person's spheres are contiguous)."""
+    centres = np.concatenate([c for c, _ in people])
+    radii = np.concatenate([r for _, r in people])
+    return centres, radii, np.cumsum([0] + [len(r) for _, r in people[:-1]])
+
+
+def people_separations_m(people, capsules) -> np.ndarray:
+    """:func:`separation_m` of each of ``people`` ((centres (n, 3), radii (n,)) each, at least one) from the
+    ``capsules``: (P,), in one clearance call (each point's clearance is its own, and a minimum is exact)."""
+    centres, radii, starts = _gathered(people)
+    return np.minimum.reduceat(point_clearance_m(centres, capsules) - radii, starts)
 
 
 def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
@@ -1479,9 +1521,7 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
     closest pass is clearer."""
     if not people:
         return None
-    centres = np.concatenate([c for c, _ in people])
-    radii = np.concatenate([r for _, r in people])
-    starts = np.cumsum([0] + [len(r) for _, r in people[:-1]])  # each person's spheres are contiguous
+    centres, radii, starts = _gathered(people)
     step = math.radians(step_deg)
 
     def per_person(clear: np.ndarray) -> np.ndarray:
