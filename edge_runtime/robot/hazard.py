@@ -1164,15 +1164,20 @@ def _clearance_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, capsules) -> np.
 
 def _clearance_rest(apx: np.ndarray, apy: np.ndarray, apz: np.ndarray, t: np.ndarray, terms) -> np.ndarray:
     """:func:`_clearance_xyz` on from ``t`` = ap_x b_x + ap_y b_y: (K, ...) arrays, the capsules' ``terms`` shaped
-    to broadcast with them -> (...) (``t`` is overwritten). ``apy`` may be broadcast (the escape plan's: the same
-    for every turn)."""
+    to broadcast with them -> (...) (``apx``, ``apz`` and ``t`` are overwritten). ``apy`` may be broadcast (the
+    escape plan's: the same for every turn), and is not written.
+
+    The operations of ``dx = apx - t bx; dy = apy - t by; dz = apz - t bz; dx * dx + dy * dy + dz * dz`` in that
+    order, each into an array already there (one scratch array, not six new ones: for the escape plan's (9, 28,
+    50) arrays the allocations cost as much as the arithmetic)."""
     bx, by, bz, den, r = terms
-    t += apz * bz
+    tmp = apz * bz
+    t += tmp
     t /= den
-    np.clip(t, 0.0, 1.0, out=t)
-    dx = apx - t * bx
-    dy = apy - t * by
-    dz = apz - t * bz
+    t.clip(0.0, 1.0, out=t)  # np.clip's own ufunc, without its dispatch
+    dx = np.subtract(apx, np.multiply(t, bx, out=tmp), out=apx)
+    dy = np.subtract(apy, np.multiply(t, by, out=tmp), out=tmp)
+    dz = np.subtract(apz, np.multiply(t, bz, out=t), out=apz)
     dx *= dx
     dy *= dy
     dz *= dz
@@ -1535,30 +1540,44 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
     apy = y - ay                                                                      # (K, 1, spheres)
     apy_by = apy * by
     floor = np.minimum(here, reach_m) - dip_m
-    best = None  # (end separation, closest pass, turn)
+    gain = here.min() + min_gain_m
+
+    def separations(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
+        """(chunk,) cosines and sines of -turn -> (chunk, P): everyone's separation after each turn. Turning the
+        arm by a is turning everyone by -a about the same axis (y), each coordinate as _base_rotations(-turns)
+        applied to the centres gives it (tests pin them to the bit)."""
+        c, s_ = cos[:, None], sin[:, None]
+        moved_x, moved_z = c * x + s_ * z, -s_ * x + c * z                                     # (chunk, spheres)
+        apx = moved_x - ax                                                                     # (K, chunk, spheres)
+        t = apx * bx
+        t += apy_by
+        clear = _clearance_rest(apx, apy, moved_z - az, t, (bx, by, bz, den, r))               # (chunk, spheres)
+        return per_person(clear - radii[None])
+
+    sweeps = []  # each direction's candidate turns, with the cosines and sines of their negatives
     for sign in (1.0, -1.0):
         room = math.radians(max_turn_deg)
         if j0_rad is not None:
             room = min(room, SAWYER_J0_RANGE_RAD - sign * j0_rad)
         n = int(math.floor(room / step + 1e-9))
-        if n < 1:
-            continue
-        turns = sign * step * np.arange(1, n + 1)
-        cos, sin = np.cos(-turns), np.sin(-turns)
-        gain = here.min() + min_gain_m
+        if n >= 1:
+            turns = sign * step * np.arange(1, n + 1)
+            sweeps.append((turns, np.cos(-turns), np.sin(-turns)))
+    if not sweeps:
+        return None
+    # both directions' first candidates in one pass (a pass's overhead is a few candidates' arithmetic); each
+    # candidate's separations are its own whatever else is in the pass
+    first = ESCAPE_FIRST_CANDIDATES
+    firsts = np.split(separations(np.concatenate([cos[:first] for _, cos, _ in sweeps]),
+                                  np.concatenate([sin[:first] for _, _, sin in sweeps])), [len(sweeps[0][0][:first])])
+    best = None  # (end separation, closest pass, turn)
+    for (turns, cos, sin), d_first in zip(sweeps, firsts):
+        n = len(turns)
         prev = None  # the closest pass so far of each person, up to the chunk before
-        for lo, hi in ((0, min(n, ESCAPE_FIRST_CANDIDATES)), (min(n, ESCAPE_FIRST_CANDIDATES), n)):
+        for lo, hi in ((0, min(n, first)), (min(n, first), n)):
             if lo >= hi:
                 break
-            # turning the arm by a is turning everyone by -a about the same axis (y): a chunk of candidates at once,
-            # each coordinate as _base_rotations(-turns) applied to the centres gives it (tests pin them to the bit)
-            c, s_ = cos[lo:hi, None], sin[lo:hi, None]
-            moved_x, moved_z = c * x + s_ * z, -s_ * x + c * z                                 # (chunk, spheres)
-            apx = moved_x - ax                                                                 # (K, chunk, spheres)
-            t = apx * bx
-            t += apy_by
-            clear = _clearance_rest(apx, apy, moved_z - az, t, (bx, by, bz, den, r))           # (chunk, spheres)
-            d = per_person(clear - radii[None])                                                  # (chunk, P)
+            d = d_first if lo == 0 else separations(cos[lo:hi], sin[lo:hi])                  # (chunk, P)
             passed = np.minimum.accumulate(d, axis=0)
             if prev is not None:
                 passed = np.minimum(passed, prev[None])
