@@ -525,6 +525,9 @@ class _Seen:
     spheres: tuple
     """:func:`body_spheres` of ``person_m`` (centres, radii; read-only), made once per frame: the lost-person
     check, the escape plan and the loop's backfire check use them at every frame and tick."""
+    clear_of: tuple | None = None
+    """(capsules, separation m): his separation now from the arm's capsules his frame was judged with (read-only
+    ones, :func:`arm_capsules`'s, by identity), as :func:`separation_m` gives it; None when not known so."""
 
 
 @dataclass
@@ -642,13 +645,16 @@ class HazardMonitor:
         # everyone now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
         seps = separations_per_shift_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps) if bodies else []
         for (wid, est), sep in zip(ests.items(), seps):
-            person_m, centres, radii, _ = bodies[wid]
+            person_m, centres, radii, velocity = bodies[wid]
             v_g = ground(est.velocity_mps)
             speed = math.sqrt(v_g.dot(v_g))  # np.linalg.norm's own arithmetic for a vector (below too)
             toward = eff_g - ground(est.position_m)
             approach = float(v_g @ toward) / max(math.sqrt(toward.dot(toward)), 1e-9)
             d = float(sep.min())
-            self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii))
+            # moved by 0 s his spheres are where they are (c + 0 v is c, but for the sign of a zero, which no
+            # clearance keeps): sep[0] is separation_m's, to the bit, while his velocity is finite
+            now = (caps, sep[0]) if np.isfinite(velocity).all() else None
+            self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii), now)
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
             # approach speed covers over the retraction's lead. (His path over the lead instead, so that a
@@ -776,6 +782,15 @@ class HazardMonitor:
     def people_spheres(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """whole_body: :func:`body_spheres` of each of :meth:`bodies` (read-only arrays, made once per frame)."""
         return [seen.spheres for seen in self._seen.values()]
+
+    def people_separations_m(self, capsules) -> np.ndarray:
+        """whole_body: :func:`people_separations_m` of :meth:`people_spheres` (at least one) from ``capsules``;
+        without a clearance when they are the capsules everyone's last frame judged him against (the loop's
+        backfire check asks for the arm where it is, which it was at the frame: that frame's separations)."""
+        seen = list(self._seen.values())
+        if all(s.clear_of is not None and s.clear_of[0] is capsules for s in seen):
+            return np.array([s.clear_of[1] for s in seen], float)
+        return people_separations_m([s.spheres for s in seen], capsules)
 
     def escape_people(self, sweep_m: float) -> list[tuple[np.ndarray, np.ndarray]] | None:
         """whole_body: everyone accounted for at the last pose frame, as body spheres (centres, radii;

@@ -92,7 +92,6 @@ from edge_runtime.robot.hazard import (
     enough_joints,
     eq6_retraction,
     ground,
-    people_separations_m,
     plan_escape_turn,
     radial_retraction,
     turned_retraction,
@@ -832,7 +831,8 @@ class RobotLoop:
         return bool((near & (now < self._separations_of(people, arm_capsules(q0)) - self.params.retract_backfire_m)).any())
 
     def _separations_of(self, people: list, caps) -> np.ndarray:
-        """:func:`edge_runtime.robot.hazard.people_separations_m` of everyone's body spheres (the monitor's, made
+        """:meth:`edge_runtime.robot.hazard.HazardMonitor.people_separations_m`: the separations of everyone's body
+        spheres (``people``, the monitor's :meth:`~edge_runtime.robot.hazard.HazardMonitor.people_spheres`, made
         once per frame) from the arm's capsules (:func:`edge_runtime.robot.hazard.arm_capsules`'s, the same for
         the same joint angles), all read-only: remembered, since the backfire check asks at every tick (100 Hz)
         for the same bodies (30 Hz) against the same few arm states (where the retraction began, where the arm
@@ -841,7 +841,7 @@ class RobotLoop:
         hit = self._separations.get(key)
         if hit is None or hit[1] is not caps or any(a is not b for a, b in zip(hit[0], people)):
             # holding them keeps their ids unique while remembered
-            hit = self._separations.put(key, (people, caps, people_separations_m(people, caps)))
+            hit = self._separations.put(key, (people, caps, self.monitor.people_separations_m(caps)))
         return hit[2]
 
     def _retract_motion(self, decision: Decision) -> Motion:

@@ -140,12 +140,33 @@ def test_the_backfire_check_of_everyone_at_once_is_each_persons_own():
     fired = 0
     for case in range(400):
         persons = np.array([random_person(rng) for _ in range(int(rng.integers(1, 4)))])
-        loop.monitor.observe(case / 30, dict(enumerate(persons)), rng.normal(0, 0.5, 3), rng.uniform(-2, 2, 7))
+        q_frame = rng.uniform(-2, 2, 7)
+        loop.monitor.observe(case / 30, dict(enumerate(persons)), rng.normal(0, 0.5, 3), q_frame)
         loop._retract = loop._radial_retract()
-        loop._last_q = rng.uniform(-2.5, 2.5, 7)
+        loop._last_q = q_frame if case % 2 else rng.uniform(-2.5, 2.5, 7)  # the frame's arm: its separations
         loop._retract_q0 = loop._last_q + rng.normal(0, rng.choice([0.01, 0.3, 1.0]), 7)
         want = old_backfires(loop)
         assert loop._retract_backfires() == want, case
         assert loop._retract_backfires() == want, case  # remembered
         fired += want
     assert 20 < fired < 380  # both answers were tried
+
+
+def test_the_frames_separations_are_the_backfire_checks_own():
+    """The monitor's separation of each person at his frame (his spheres moved by 0 s) is what people_separations_m
+    gives for the same capsules, to the bit, on random walks (people coming and going, lost ones too), and for
+    any other capsules it is computed."""
+    rng = np.random.default_rng(1806)
+    mon = hz.HazardMonitor()
+    seeded = 0
+    for k in range(300):
+        q = rng.uniform(-2, 2, 7)
+        people = {w: random_person(rng) for w in range(4) if rng.random() < 0.7}
+        mon.observe(k / 30, people, rng.normal(0, 0.5, 3), q)
+        spheres = mon.people_spheres()
+        if not spheres:
+            continue
+        for caps in (hz.arm_capsules(q), hz.arm_capsules(rng.uniform(-2, 2, 7))):
+            assert same(mon.people_separations_m(caps), hz.people_separations_m(spheres, caps)), k
+        seeded += all(s.clear_of is not None and s.clear_of[0] is hz.arm_capsules(q) for s in mon._seen.values())
+    assert 30 < seeded < 300
