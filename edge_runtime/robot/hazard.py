@@ -591,8 +591,10 @@ class HazardMonitor:
         for wid, person in people.items():
             person = np.asarray(person, float)
             head = person if person.shape == (3,) else person[HEAD_JOINT]
-            ests[wid] = self._trackers.setdefault(wid, HeadTracker(self.tracker, self.zones.predict_s)).update(
-                t_s, head)
+            tracker = self._trackers.get(wid)
+            if tracker is None:  # (not setdefault: that made a tracker for every person at every frame)
+                tracker = self._trackers[wid] = HeadTracker(self.tracker, self.zones.predict_s)
+            ests[wid] = tracker.update(t_s, head)
         self.estimates = ests  # each person's head estimate, for the per-person log
         if self.zones.separation == "head":
             entry, exit_r, nearest = self._head_zones(ests, effector_m)
