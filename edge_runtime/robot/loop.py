@@ -824,13 +824,14 @@ class RobotLoop:
         people = self.monitor.people_spheres()
         if not people:
             return False
+        # Python floats (the same doubles): a tick's check is a few comparisons, which numpy's calls would outweigh
         now = self._separations_of(people, arm_capsules(q))
-        near = now < reach
-        if not near.any():
+        if not any(d < reach for d in now):
             return False
-        return bool((near & (now < self._separations_of(people, arm_capsules(q0)) - self.params.retract_backfire_m)).any())
+        start = self._separations_of(people, arm_capsules(q0))
+        return any(d < reach and d < d0 - self.params.retract_backfire_m for d, d0 in zip(now, start))
 
-    def _separations_of(self, people: list, caps) -> np.ndarray:
+    def _separations_of(self, people: list, caps) -> list[float]:
         """:meth:`edge_runtime.robot.hazard.HazardMonitor.people_separations_m`: the separations of everyone's body
         spheres (``people``, the monitor's :meth:`~edge_runtime.robot.hazard.HazardMonitor.people_spheres`, made
         once per frame) from the arm's capsules (:func:`edge_runtime.robot.hazard.arm_capsules`'s, the same for
@@ -841,7 +842,7 @@ class RobotLoop:
         hit = self._separations.get(key)
         if hit is None or hit[1] is not caps or any(a is not b for a, b in zip(hit[0], people)):
             # holding them keeps their ids unique while remembered
-            hit = self._separations.put(key, (people, caps, self.monitor.people_separations_m(caps)))
+            hit = self._separations.put(key, (people, caps, self.monitor.people_separations_m(caps).tolist()))
         return hit[2]
 
     def _retract_motion(self, decision: Decision) -> Motion:
