@@ -824,12 +824,17 @@ class RobotLoop:
         people = self.monitor.people_spheres()
         if not people:
             return False
-        # Python floats (the same doubles): a tick's check is a few comparisons, which numpy's calls would outweigh
+        # Python floats (the same doubles) and plain loops: a tick's check is a few comparisons, which numpy's calls
+        # (or generators) would outweigh
         now = self._separations_of(people, arm_capsules(q))
-        if not any(d < reach for d in now):
-            return False
-        start = self._separations_of(people, arm_capsules(q0))
-        return any(d < reach and d < d0 - self.params.retract_backfire_m for d, d0 in zip(now, start))
+        start = None
+        for k, d in enumerate(now):
+            if d < reach:
+                if start is None:
+                    start = self._separations_of(people, arm_capsules(q0))
+                if d < start[k] - self.params.retract_backfire_m:
+                    return True
+        return False
 
     def _separations_of(self, people: list, caps) -> list[float]:
         """:meth:`edge_runtime.robot.hazard.HazardMonitor.people_separations_m`: the separations of everyone's body
@@ -840,8 +845,8 @@ class RobotLoop:
         is); everyone in one call (numpy's per-call overhead, not the arithmetic, is the cost)."""
         key = (*map(id, people), id(caps))
         hit = self._separations.get(key)
-        if hit is None or hit[1] is not caps or any(a is not b for a, b in zip(hit[0], people)):
-            # holding them keeps their ids unique while remembered
+        if hit is None:
+            # holding them keeps their ids unique while remembered: the same ids are the same objects
             hit = self._separations.put(key, (people, caps, self.monitor.people_separations_m(caps).tolist()))
         return hit[2]
 
