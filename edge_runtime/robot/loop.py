@@ -269,6 +269,10 @@ class FrameRecord:
         self.people = make()
         return self.people
 
+    def __getstate__(self):
+        self.people  # noqa: B018 - made before a copy or pickle: what makes it (a closure) cannot be pickled
+        return self.__dict__
+
 
 @dataclass
 class LoopCounters:

@@ -1,7 +1,9 @@
 """Session 18's per-frame CPU cuts in the decision half of a frame (edge_runtime.robot.hazard, loop) pinned to the
 forms they replaced: the same floating-point results to the bit on random and edge inputs, so no decision and no
 logged figure changes; and a frame's log, made when first read, says what that frame believed."""
+import copy
 import math
+import pickle
 from dataclasses import asdict
 
 import numpy as np
@@ -113,6 +115,9 @@ def test_a_frames_log_read_later_says_what_that_frame_believed():
     for k, rec in enumerate(later):
         assert rec.people == at_once[k] and len(at_once[k]) == 1, k
         assert asdict(rec)["people"] == at_once[k]
+    unread = loop.feed_joints(anchored_worker((0.5, 1.2), heading=math.pi))
+    copied = pickle.loads(pickle.dumps(unread))  # made before pickling (a closure cannot be pickled)
+    assert copied.people == unread.people and len(copied.people) == 1 and copy.deepcopy(unread) == unread
     empty = loop.feed_joints(None)
     assert empty.people == [] and asdict(empty)["people"] == []
     assert FrameRecord(0.0, None, "NORMAL", "clear", math.inf, None) == FrameRecord(0.0, None, "NORMAL", "clear",
