@@ -121,7 +121,12 @@ GROUND_AXES = (0, 2)  # x and z: the robot frame's ground plane (y is up)
 def ground(v) -> np.ndarray:
     """The ground projection (x, z) of a robot-frame point or vector."""
     v = np.asarray(v, dtype=float)
-    return v[..., GROUND_AXES]
+    # the same copy of the same elements as v[..., GROUND_AXES], a tenth of the cost (no tuple to convert, no
+    # ellipsis for the common single vector): a frame asks for a few dozen
+    return v[_GROUND_INDEX] if v.ndim == 1 else v[..., _GROUND_INDEX]
+
+
+_GROUND_INDEX = np.array(GROUND_AXES)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -520,6 +525,9 @@ class _Seen:
     spheres: tuple
     """:func:`body_spheres` of ``person_m`` (centres, radii; read-only), made once per frame: the lost-person
     check, the escape plan and the loop's backfire check use them at every frame and tick."""
+    clear_of: tuple | None = None
+    """(capsules, separation m): his separation now from the arm's capsules his frame was judged with (read-only
+    ones, :func:`arm_capsules`'s, by identity), as :func:`separation_m` gives it; None when not known so."""
 
 
 @dataclass
@@ -583,8 +591,10 @@ class HazardMonitor:
         for wid, person in people.items():
             person = np.asarray(person, float)
             head = person if person.shape == (3,) else person[HEAD_JOINT]
-            ests[wid] = self._trackers.setdefault(wid, HeadTracker(self.tracker, self.zones.predict_s)).update(
-                t_s, head)
+            tracker = self._trackers.get(wid)
+            if tracker is None:  # (not setdefault: that made a tracker for every person at every frame)
+                tracker = self._trackers[wid] = HeadTracker(self.tracker, self.zones.predict_s)
+            ests[wid] = tracker.update(t_s, head)
         self.estimates = ests  # each person's head estimate, for the per-person log
         if self.zones.separation == "head":
             entry, exit_r, nearest = self._head_zones(ests, effector_m)
@@ -631,21 +641,22 @@ class HazardMonitor:
         entry, nearest = State.NORMAL, (math.inf, None, None)
         self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
-        bodies = {}
-        for wid, est in ests.items():
-            person_m = np.asarray(people[wid], float)
-            centres, radii = _frozen(body_spheres(person_m))
-            bodies[wid] = (person_m, centres, radii, np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]))
+        persons = [np.asarray(people[wid], float) for wid in ests]
+        bodies = {wid: (person_m, centres, radii, np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]))
+                  for (wid, est), person_m, (centres, radii) in zip(ests.items(), persons, body_spheres_of(persons))}
         # everyone now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
         seps = separations_per_shift_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps) if bodies else []
         for (wid, est), sep in zip(ests.items(), seps):
-            person_m, centres, radii, _ = bodies[wid]
+            person_m, centres, radii, velocity = bodies[wid]
             v_g = ground(est.velocity_mps)
             speed = math.sqrt(v_g.dot(v_g))  # np.linalg.norm's own arithmetic for a vector (below too)
             toward = eff_g - ground(est.position_m)
             approach = float(v_g @ toward) / max(math.sqrt(toward.dot(toward)), 1e-9)
             d = float(sep.min())
-            self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii))
+            # moved by 0 s his spheres are where they are (c + 0 v is c, but for the sign of a zero, which no
+            # clearance keeps): sep[0] is separation_m's, to the bit, while his velocity is finite
+            now = (caps, sep[0]) if np.isfinite(velocity).all() else None
+            self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii), now)
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
             # approach speed covers over the retraction's lead. (His path over the lead instead, so that a
@@ -773,6 +784,15 @@ class HazardMonitor:
     def people_spheres(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """whole_body: :func:`body_spheres` of each of :meth:`bodies` (read-only arrays, made once per frame)."""
         return [seen.spheres for seen in self._seen.values()]
+
+    def people_separations_m(self, capsules) -> np.ndarray:
+        """whole_body: :func:`people_separations_m` of :meth:`people_spheres` (at least one) from ``capsules``;
+        without a clearance when they are the capsules everyone's last frame judged him against (the loop's
+        backfire check asks for the arm where it is, which it was at the frame: that frame's separations)."""
+        seen = list(self._seen.values())
+        if all(s.clear_of is not None and s.clear_of[0] is capsules for s in seen):
+            return np.array([s.clear_of[1] for s in seen], float)
+        return people_separations_m([s.spheres for s in seen], capsules)
 
     def escape_people(self, sweep_m: float) -> list[tuple[np.ndarray, np.ndarray]] | None:
         """whole_body: everyone accounted for at the last pose frame, as body spheres (centres, radii;
@@ -997,9 +1017,25 @@ def body_spheres(person_m) -> tuple[np.ndarray, np.ndarray]:
     return centres, _BODY_SPHERE_RADII_M.copy()
 
 
+def body_spheres_of(persons_m) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`body_spheres` of each of ``persons_m``, read-only (they are kept and shared: nobody may change them
+    in place). Whole skeletons all at once (numpy's per-call overhead, not the arithmetic, is the cost of a
+    frame's few people; each centre is the per-person call's to the bit), their radii one shared array."""
+    if persons_m and all(p.shape == (17, 3) for p in persons_m):
+        p = np.array(persons_m, float)  # np.stack's values, without its per-array reshaping
+        if np.isfinite(p).all():
+            a, b = _LIMB_ENDS
+            centres = np.concatenate([p, 0.5 * (p[:, a] + p[:, b])], axis=1)   # (P, 25, 3), as body_spheres
+            centres.setflags(write=False)  # and so every person's view of it
+            return [(c, _BODY_SPHERE_RADII_M) for c in centres]
+    return [_frozen(body_spheres(p)) for p in persons_m]
+
+
 _LIMB_ENDS = (np.array([i for i, _ in LIMBS]), np.array([j for _, j in LIMBS]))
 _BODY_SPHERE_RADII_M = np.concatenate([BODY_RADII_M, 0.5 * (BODY_RADII_M[_LIMB_ENDS[0]] + BODY_RADII_M[_LIMB_ENDS[1]])])
-""":func:`body_spheres`' radii of a whole skeleton: the joints', then the limb midpoints'."""
+""":func:`body_spheres`' radii of a whole skeleton: the joints', then the limb midpoints' (read-only: shared by
+:func:`body_spheres_of`)."""
+_BODY_SPHERE_RADII_M.setflags(write=False)
 
 
 MAX_MISSING_JOINTS = 0
@@ -1098,6 +1134,14 @@ def separations_per_shift_m(bodies, shifts_s, capsules) -> list[np.ndarray]:
     one clearance call for all of them (numpy's per-call overhead, not the arithmetic, is the cost of a frame's
     few people; each point's clearance is its own, whatever else is in the call)."""
     shifts = np.asarray(shifts_s, float)
+    if len(bodies) > 1 and len({len(c) for c, _, _ in bodies}) == 1:  # whole skeletons: one (S, P, n) array
+        # np.array of equal shapes: np.stack's values, without its per-array reshaping
+        centres, radii = np.array([c for c, _, _ in bodies], float), np.array([r for _, r, _ in bodies], float)
+        velocities = np.array([np.asarray(v, float) for _, _, v in bodies], float)
+        # each moved centre is c + s v as below, elementwise the same arithmetic
+        moved = centres[None] + shifts[:, None, None, None] * velocities[None, :, None, :]     # (S, P, n, 3)
+        clear = point_clearance_m(moved.reshape(-1, 3), capsules).reshape(moved.shape[:3])
+        return list((clear - radii[None]).min(axis=2).T)
     moved = [(c[None] + shifts[:, None, None] * np.asarray(v, float)[None, None]).reshape(-1, 3) for c, _, v in bodies]
     clear = point_clearance_m(np.concatenate(moved) if len(moved) > 1 else moved[0], capsules)
     out, k = [], 0
@@ -1137,15 +1181,20 @@ def _clearance_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, capsules) -> np.
 
 def _clearance_rest(apx: np.ndarray, apy: np.ndarray, apz: np.ndarray, t: np.ndarray, terms) -> np.ndarray:
     """:func:`_clearance_xyz` on from ``t`` = ap_x b_x + ap_y b_y: (K, ...) arrays, the capsules' ``terms`` shaped
-    to broadcast with them -> (...) (``t`` is overwritten). ``apy`` may be broadcast (the escape plan's: the same
-    for every turn)."""
+    to broadcast with them -> (...) (``apx``, ``apz`` and ``t`` are overwritten). ``apy`` may be broadcast (the
+    escape plan's: the same for every turn), and is not written.
+
+    The operations of ``dx = apx - t bx; dy = apy - t by; dz = apz - t bz; dx * dx + dy * dy + dz * dz`` in that
+    order, each into an array already there (one scratch array, not six new ones: for the escape plan's (9, 28,
+    50) arrays the allocations cost as much as the arithmetic)."""
     bx, by, bz, den, r = terms
-    t += apz * bz
+    tmp = apz * bz
+    t += tmp
     t /= den
-    np.clip(t, 0.0, 1.0, out=t)
-    dx = apx - t * bx
-    dy = apy - t * by
-    dz = apz - t * bz
+    t.clip(0.0, 1.0, out=t)  # np.clip's own ufunc, without its dispatch
+    dx = np.subtract(apx, np.multiply(t, bx, out=tmp), out=apx)
+    dy = np.subtract(apy, np.multiply(t, by, out=tmp), out=tmp)
+    dz = np.subtract(apz, np.multiply(t, bz, out=t), out=apz)
     dx *= dx
     dy *= dy
     dz *= dz
@@ -1179,6 +1228,21 @@ def _capsule_terms(capsules, dims: int) -> tuple:
 
 _TERMS: Recent[tuple] = Recent(8)
 """:func:`_capsule_terms` of read-only capsules, by the tuple's identity."""
+
+
+def _gathered(people) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Everyone's spheres (``people``: (centres (n, 3), radii (n,)) each) as one list: centres, radii and where
+    each person's begin (each person's spheres are contiguous)."""
+    centres = np.concatenate([c for c, _ in people])
+    radii = np.concatenate([r for _, r in people])
+    return centres, radii, np.cumsum([0] + [len(r) for _, r in people[:-1]])
+
+
+def people_separations_m(people, capsules) -> np.ndarray:
+    """:func:`separation_m` of each of ``people`` ((centres (n, 3), radii (n,)) each, at least one) from the
+    ``capsules``: (P,), in one clearance call (each point's clearance is its own, and a minimum is exact)."""
+    centres, radii, starts = _gathered(people)
+    return np.minimum.reduceat(point_clearance_m(centres, capsules) - radii, starts)
 
 
 def separation_m(centres_m: np.ndarray, radii_m: np.ndarray, capsules) -> float:
@@ -1479,9 +1543,7 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
     closest pass is clearer."""
     if not people:
         return None
-    centres = np.concatenate([c for c, _ in people])
-    radii = np.concatenate([r for _, r in people])
-    starts = np.cumsum([0] + [len(r) for _, r in people[:-1]])  # each person's spheres are contiguous
+    centres, radii, starts = _gathered(people)
     step = math.radians(step_deg)
 
     def per_person(clear: np.ndarray) -> np.ndarray:
@@ -1495,30 +1557,44 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
     apy = y - ay                                                                      # (K, 1, spheres)
     apy_by = apy * by
     floor = np.minimum(here, reach_m) - dip_m
-    best = None  # (end separation, closest pass, turn)
+    gain = here.min() + min_gain_m
+
+    def separations(cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
+        """(chunk,) cosines and sines of -turn -> (chunk, P): everyone's separation after each turn. Turning the
+        arm by a is turning everyone by -a about the same axis (y), each coordinate as _base_rotations(-turns)
+        applied to the centres gives it (tests pin them to the bit)."""
+        c, s_ = cos[:, None], sin[:, None]
+        moved_x, moved_z = c * x + s_ * z, -s_ * x + c * z                                     # (chunk, spheres)
+        apx = moved_x - ax                                                                     # (K, chunk, spheres)
+        t = apx * bx
+        t += apy_by
+        clear = _clearance_rest(apx, apy, moved_z - az, t, (bx, by, bz, den, r))               # (chunk, spheres)
+        return per_person(clear - radii[None])
+
+    sweeps = []  # each direction's candidate turns, with the cosines and sines of their negatives
     for sign in (1.0, -1.0):
         room = math.radians(max_turn_deg)
         if j0_rad is not None:
             room = min(room, SAWYER_J0_RANGE_RAD - sign * j0_rad)
         n = int(math.floor(room / step + 1e-9))
-        if n < 1:
-            continue
-        turns = sign * step * np.arange(1, n + 1)
-        cos, sin = np.cos(-turns), np.sin(-turns)
-        gain = here.min() + min_gain_m
+        if n >= 1:
+            turns = sign * step * np.arange(1, n + 1)
+            sweeps.append((turns, np.cos(-turns), np.sin(-turns)))
+    if not sweeps:
+        return None
+    # both directions' first candidates in one pass (a pass's overhead is a few candidates' arithmetic); each
+    # candidate's separations are its own whatever else is in the pass
+    first = ESCAPE_FIRST_CANDIDATES
+    firsts = np.split(separations(np.concatenate([cos[:first] for _, cos, _ in sweeps]),
+                                  np.concatenate([sin[:first] for _, _, sin in sweeps])), [len(sweeps[0][0][:first])])
+    best = None  # (end separation, closest pass, turn)
+    for (turns, cos, sin), d_first in zip(sweeps, firsts):
+        n = len(turns)
         prev = None  # the closest pass so far of each person, up to the chunk before
-        for lo, hi in ((0, min(n, ESCAPE_FIRST_CANDIDATES)), (min(n, ESCAPE_FIRST_CANDIDATES), n)):
+        for lo, hi in ((0, min(n, first)), (min(n, first), n)):
             if lo >= hi:
                 break
-            # turning the arm by a is turning everyone by -a about the same axis (y): a chunk of candidates at once,
-            # each coordinate as _base_rotations(-turns) applied to the centres gives it (tests pin them to the bit)
-            c, s_ = cos[lo:hi, None], sin[lo:hi, None]
-            moved_x, moved_z = c * x + s_ * z, -s_ * x + c * z                                 # (chunk, spheres)
-            apx = moved_x - ax                                                                 # (K, chunk, spheres)
-            t = apx * bx
-            t += apy_by
-            clear = _clearance_rest(apx, apy, moved_z - az, t, (bx, by, bz, den, r))           # (chunk, spheres)
-            d = per_person(clear - radii[None])                                                  # (chunk, P)
+            d = d_first if lo == 0 else separations(cos[lo:hi], sin[lo:hi])                  # (chunk, P)
             passed = np.minimum.accumulate(d, axis=0)
             if prev is not None:
                 passed = np.minimum(passed, prev[None])

@@ -70,7 +70,7 @@ import enum
 import math
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 from typing import TYPE_CHECKING, Callable, Protocol
 
 import numpy as np
@@ -94,7 +94,6 @@ from edge_runtime.robot.hazard import (
     ground,
     plan_escape_turn,
     radial_retraction,
-    separation_m,
     turned_retraction,
 )
 from edge_runtime.robot.rays import lifter_rays
@@ -247,10 +246,32 @@ class FrameRecord:
     reason: str
     distance_m: float
     command: str | None
-    people: list = field(default_factory=list)
+    people_of: InitVar[Callable[[], list] | None] = None
+    """What makes ``people`` when it is first read (None: nobody seen). The loop's per-person beliefs decide
+    nothing and the robot command reads them only with ``--log``: a frame makes none of them unless asked
+    (0.2-0.3 ms of a frame's CPU, on every frame of a run without a log)."""
+    people: list = field(init=False)
     """Per person seen (valid frames): ``id``, ``head_robot_m``, ``predicted_head_m`` (Eq. 3),
     ``nearest_joint``, ``nearest_point_m`` (his joint nearest the end effector) and
-    ``nearest_distance_m`` (3D, m); robot frame."""
+    ``nearest_distance_m`` (3D, m); robot frame. Made on first reading (``asdict``, ``==`` and ``repr`` read it)."""
+
+    def __post_init__(self, people_of):
+        if people_of is None:
+            self.people = []
+        else:
+            self._people_of = people_of
+
+    def __getattr__(self, name: str):
+        # only reached for an attribute not set: ``people`` before its first reading
+        make = self.__dict__.pop("_people_of", None) if name == "people" else None
+        if make is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        self.people = make()
+        return self.people
+
+    def __getstate__(self):
+        self.people  # noqa: B018 - made before a copy or pickle: what makes it (a closure) cannot be pickled
+        return self.__dict__
 
 
 @dataclass
@@ -359,7 +380,7 @@ class RobotLoop:
         self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
         self._escape_s = -math.inf  # when this level 2 last planned an escape turn (clock, s)
         self._escaping = False  # the retraction under way is an escape turn
-        self._separations: Recent[tuple] = Recent(32)  # _separation's memory
+        self._separations: Recent[tuple] = Recent(32)  # _separations_of's memory
         self._move_seq: int | None = None
         self._unreachable = False
         self._last_hb_s = -math.inf
@@ -476,19 +497,34 @@ class RobotLoop:
             out[pid] = PersonRays(origin, d / np.where(n > 1e-12, n, np.nan), float(floor))
         return out
 
-    def _people(self, keys, persons: np.ndarray, eff: np.ndarray) -> list[dict]:
+    def _people_of(self, keys, persons: np.ndarray, eff: np.ndarray) -> Callable[[], list[dict]]:
+        """:meth:`_people` of this frame, for when the record's ``people`` is read: of copies of the frame's
+        joints and effector and of its head estimates (the monitor replaces its dict at each frame), so a
+        record read later still says what this frame believed."""
+        persons, eff, estimates = np.array(persons, float), np.array(eff, float), self.monitor.estimates
+        return lambda: self._people(keys, persons, eff, estimates)
+
+    def _people(self, keys, persons: np.ndarray, eff: np.ndarray, estimates: dict | None = None) -> list[dict]:
         """What the runtime believes about each person (robot frame), the end effector at ``eff``:
-        FrameRecord.people."""
+        FrameRecord.people. ``estimates``: the monitor's head estimates of the frame (default: its last)."""
+        estimates = self.monitor.estimates if estimates is None else estimates
+        persons = np.asarray(persons, float)
+        # everyone at once (numpy's per-call overhead is the cost of a frame's few people; each row's norm is
+        # the per-person call's), the nearest joint as np.nanargmin finds it (NaN taken as +inf, then the
+        # first smallest; a person with no finite gap gets joint 0 as before)
+        gaps = np.linalg.norm(persons - eff, axis=-1)                                    # (P, 17)
+        nearest = np.argmin(np.where(np.isnan(gaps), np.inf, gaps), axis=1)
+        rows = np.arange(len(persons))
+        # tolist: float(x) of each, at once; rounded as _rounded rounds
+        heads, points = persons[:, HEAD].tolist(), persons[rows, nearest].tolist()
         out = []
-        for key, joints in zip(keys, persons):
-            gap = np.linalg.norm(joints - eff, axis=1)
-            j = int(np.nanargmin(gap)) if np.isfinite(gap).any() else 0
-            est = self.monitor.estimates.get(key)
+        for key, head, j, point, gap in zip(keys, heads, nearest.tolist(), points, gaps[rows, nearest].tolist()):
+            est = estimates.get(key)
             out.append({"id": key.item() if isinstance(key, np.generic) else key,
-                        "head_robot_m": _rounded(joints[HEAD]),
+                        "head_robot_m": [round(x, 4) for x in head],
                         "predicted_head_m": None if est is None else _rounded(est.predicted_m),
-                        "nearest_joint": JOINTS[j], "nearest_point_m": _rounded(joints[j]),
-                        "nearest_distance_m": round(float(gap[j]), 4)})
+                        "nearest_joint": JOINTS[j], "nearest_point_m": [round(x, 4) for x in point],
+                        "nearest_distance_m": round(gap, 4)})
         return out
 
     def feed_lifted(self, out: LiftedPose, t_in_s: float | None = None) -> FrameRecord:
@@ -524,12 +560,16 @@ class RobotLoop:
             return np.array(self._sent_motion.position_m)
         return np.array(self.params.task_waypoints_m[0], float)
 
+    def _reason(self) -> str:
+        """Why the arm does what it does (``status()["reason"]``)."""
+        m = self.monitor
+        return "retract_unreachable" if self._unreachable and m.state == State.LEVEL2 else m.reason
+
     def status(self) -> dict:
         m = self.monitor
-        reason = "retract_unreachable" if self._unreachable and m.state == State.LEVEL2 else m.reason
         self.counters.stale = m.stale_events
         self.counters.bounds_refused = m.bounds_refused
-        return {"state": m.state.name, "reason": reason, "link": self.link_state,
+        return {"state": m.state.name, "reason": self._reason(), "link": self.link_state,
                 "link_error": self.link_error, "command_alarm": self.command_alarm, "fault": self.fault,
                 "waypoint": self._waypoint, **vars(self.counters)}
 
@@ -788,23 +828,33 @@ class RobotLoop:
         if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None or z.separation != "whole_body":
             return False
         reach = z.body_retract_distance_m + z.retract_lead_s * z.lost_person_speed_mps
-        now_caps, start_caps = arm_capsules(q), arm_capsules(q0)
-        for spheres in self.monitor.people_spheres():
-            now = self._separation(spheres, now_caps)
-            if now < reach and now < self._separation(spheres, start_caps) - self.params.retract_backfire_m:
-                return True
+        people = self.monitor.people_spheres()
+        if not people:
+            return False
+        # Python floats (the same doubles) and plain loops: a tick's check is a few comparisons, which numpy's calls
+        # (or generators) would outweigh
+        now = self._separations_of(people, arm_capsules(q))
+        start = None
+        for k, d in enumerate(now):
+            if d < reach:
+                if start is None:
+                    start = self._separations_of(people, arm_capsules(q0))
+                if d < start[k] - self.params.retract_backfire_m:
+                    return True
         return False
 
-    def _separation(self, spheres, caps) -> float:
-        """:func:`edge_runtime.robot.hazard.separation_m` of a person's body spheres (the monitor's, made once per
-        frame) from the arm's capsules (:func:`edge_runtime.robot.hazard.arm_capsules`'s, the same for the same
-        joint angles), both read-only: remembered, since the backfire check asks at every tick (100 Hz) for the
-        same bodies (30 Hz) against the same few arm states (where the retraction began, where the arm is)."""
-        key = (id(spheres), id(caps))
+    def _separations_of(self, people: list, caps) -> list[float]:
+        """:meth:`edge_runtime.robot.hazard.HazardMonitor.people_separations_m`: the separations of everyone's body
+        spheres (``people``, the monitor's :meth:`~edge_runtime.robot.hazard.HazardMonitor.people_spheres`, made
+        once per frame) from the arm's capsules (:func:`edge_runtime.robot.hazard.arm_capsules`'s, the same for
+        the same joint angles), all read-only: remembered, since the backfire check asks at every tick (100 Hz)
+        for the same bodies (30 Hz) against the same few arm states (where the retraction began, where the arm
+        is); everyone in one call (numpy's per-call overhead, not the arithmetic, is the cost)."""
+        key = (*map(id, people), id(caps))
         hit = self._separations.get(key)
-        if hit is None or hit[0] is not spheres or hit[1] is not caps:
-            # holding both keeps their ids unique while remembered
-            hit = self._separations.put(key, (spheres, caps, separation_m(*spheres, caps)))
+        if hit is None:
+            # holding them keeps their ids unique while remembered: the same ids are the same objects
+            hit = self._separations.put(key, (people, caps, self.monitor.people_separations_m(caps).tolist()))
         return hit[2]
 
     def _retract_motion(self, decision: Decision) -> Motion:
@@ -847,7 +897,7 @@ class RobotLoop:
     def _act(self, t_s: float, decision: Decision, record: bool, people: tuple | None = None) -> FrameRecord | None:
         """What ``decision`` asks of the arm, sent (beacon, speed, motion); then, with ``record``, the frame's
         FrameRecord, its ``people`` made from ``people`` ((keys, persons, effector) for :meth:`_people`, or None)
-        after the commands are on the link: the log is not on the way from keypoints to command."""
+        when first read, after the commands are on the link: the log is not on the way from keypoints to command."""
         state = decision.state
         motion = self._desired_motion(state, decision)
         alarm = self.monitor.alarm(state)
@@ -867,8 +917,8 @@ class RobotLoop:
         self._report_runtime_state(state)
         if not record:
             return None
-        rec = FrameRecord(t_s, t_cmd, state.name, self.status()["reason"], decision.distance_m, sent,
-                          [] if people is None else self._people(*people))
+        rec = FrameRecord(t_s, t_cmd, state.name, self._reason(), decision.distance_m, sent,
+                          None if people is None else self._people_of(*people))
         if t_cmd is not None:
             self.reactions_s.append(t_cmd - t_s)
         if self.on_record:
