@@ -64,7 +64,7 @@ class ModelProbe:
     def get_outputs(self):
         return [SimpleNamespace(name=POSE_OUTPUT), SimpleNamespace(name=ROOT_OUTPUT)]
 
-    def run(self, outputs, feeds):
+    def run(self, outputs, feeds, run_options=None):  # onnxruntime's signature: the lifter passes run_options
         x = feeds[INPUT_NAME]
         if not np.isfinite(x).all() or np.abs(x).max() > MAX_NORMALISED:
             raise SilentAcceptance(f"the lifter's model got a window with max |x| = {np.abs(x).max()}")
