@@ -596,37 +596,11 @@ class PersonTracker:
         return out
 
     def _costs(self, kps: np.ndarray, seen: np.ndarray, t_s: float) -> dict[tuple[int, int], float]:
-        """:meth:`_cost` of every (track id, detection index) pair, tracks in their order, of detections ``kps``
+        """The match cost of every (track id, detection index) pair, tracks in their order, of detections ``kps``
         (D, 17, 3) whose joints ``seen`` (D, 17) are seen (:func:`_pair_costs`)."""
         if not self.tracks or not len(kps):
             return {}
         return _pair_costs(list(self.tracks.items()), kps, seen, t_s, self.params)
-
-    def _cost(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None) -> float:
-        """Median distance of the detection's keypoints from the track's prediction, in track
-        sizes, as a fraction of the track's gate (which grows while it is unseen); inf beyond
-        the gate or without common joints.
-
-        Dividing by the gate weighs a miss by how sure the prediction is: a person seen a frame
-        ago is predicted to a few pixels, one hidden for a second anywhere in a wide gate. So
-        when a hidden walker reappears beside the one who hid him, the detection nearest the
-        visible walker's sharp prediction keeps his id and the vague track takes the other
-        (in ``firmware_sim crossings`` on development seed 5, 300 crossings: right id kept
-        91.0 % -> 93.2 %). (Apparent size is no cue: at a real detector's noise it varies 13 %
-        from frame to frame, as much as between two people crossing; a smoothed size weighed in
-        mixed more people up. Matching recently seen tracks first, DeepSORT's cascade, lost
-        22 points there: a half-hidden walker's sliver then takes the visible one's id.)"""
-        if len(tr.xy) != len(kp):
-            return math.inf
-        seen = _seen(kp, self.params.min_score) if seen is None else seen
-        return _pair_costs([(0, tr)], kp[None], seen[None], t_s, self.params)[0, 0]
-
-    def _follow(self, tr: _Track, kp: np.ndarray, t_s: float, seen: np.ndarray | None = None,
-                size_px: float | None = None) -> None:
-        """Move the track to detection ``kp`` at ``t_s`` (``size_px``: his :func:`_size_px`, when known)."""
-        seen = _seen(kp, self.params.min_score) if seen is None else seen
-        size_px = _size_px(kp, self.params.min_score, seen) if size_px is None else size_px
-        self._follow_all([tr], kp[None], seen[None], [size_px], t_s)
 
     def _follow_all(self, tracks: list[_Track], kps: np.ndarray, seen: np.ndarray, sizes_px: list[float],
                     t_s: float) -> None:
@@ -656,8 +630,21 @@ class PersonTracker:
 
 def _pair_costs(tracks: list[tuple[int, _Track]], kps: np.ndarray, seen: np.ndarray, t_s: float,
                 p: PeopleTrackParams) -> dict[tuple[int, int], float]:
-    """:meth:`PersonTracker._cost` of every (track id, detection index) pair of ``tracks`` ((id, track), in
-    their order) and detections ``kps`` (D, 17, 3) whose joints ``seen`` (D, 17) are seen: every pair's
+    """The match cost of every (track id, detection index) pair of ``tracks`` ((id, track), in their order) and
+    detections ``kps`` (D, 17, 3) whose joints ``seen`` (D, 17) are seen.
+
+    A pair's cost is the median distance of the detection's keypoints from the track's prediction, in track
+    sizes, as a fraction of the track's gate (which grows while it is unseen); inf beyond the gate or without
+    common joints. Dividing by the gate weighs a miss by how sure the prediction is: a person seen a frame
+    ago is predicted to a few pixels, one hidden for a second anywhere in a wide gate. So when a hidden walker
+    reappears beside the one who hid him, the detection nearest the visible walker's sharp prediction keeps
+    his id and the vague track takes the other (in ``firmware_sim crossings`` on development seed 5, 300
+    crossings: right id kept 91.0 % -> 93.2 %). (Apparent size is no cue: at a real detector's noise it varies
+    13 % from frame to frame, as much as between two people crossing; a smoothed size weighed in mixed more
+    people up. Matching recently seen tracks first, DeepSORT's cascade, lost 22 points there: a half-hidden
+    walker's sliver then takes the visible one's id.)
+
+    Every pair's
     distances in one (T, D, 17) pass, and each pair's median the middle of its sorted distances (the joints
     not in common sorted last, as inf) with :func:`edge_runtime.core.numeric.median`'s arithmetic on Python
     floats (the same IEEE operations; tests/robot/test_perception_batch_s18.py)."""

@@ -58,8 +58,7 @@ from edge_runtime.core.manifest import (
     manifest_path,
     read_verified,
 )
-from edge_runtime.core.onnx import fast_run, open_session
-from edge_runtime.core.onnx import same_arrays as _same
+from edge_runtime.core.onnx import fast_run, open_session, same_arrays
 
 CAPTURE_FRAMES = 700
 RESAMPLED_FRAMES = 200
@@ -461,7 +460,7 @@ def bound_step(session: ort.InferenceSession, feed: dict[str, np.ndarray], out_s
             return p_out.copy(), h_out.copy(), c_out.copy()
 
         call.keep = binding  # with ins and outs in the closure: the buffers onnxruntime writes live as long
-        if _same(call(*(feed[k] for k in STEP_INPUTS)), session.run(list(STEP_OUTPUTS), feed, run_options)):
+        if same_arrays(call(*(feed[k] for k in STEP_INPUTS)), session.run(list(STEP_OUTPUTS), feed, run_options)):
             return call
     except Exception:  # noqa: BLE001 - a private API that changed: the caller's usual run is the contract
         pass
@@ -579,7 +578,7 @@ class StepModel:
                                                                                  "c": want[k][1]}, self._run_options)
                 if not np.array_equal(got, p):
                     return False
-            return all(_same((st.h, st.c), ref) for st, ref in zip(streams, want))
+            return all(same_arrays((st.h, st.c), ref) for st, ref in zip(streams, want))
         except Exception:  # noqa: BLE001 - a private API that changed: the public run is the contract
             return False
 

@@ -17,6 +17,7 @@ from edge_runtime.robot.keypoints import (
     CameraModel,
     PeopleTrackParams,
     PersonTracker,
+    _pair_costs,
     _seen,
     _size_px,
     _Track,
@@ -59,6 +60,18 @@ def old_size_px(kp, min_score):
         return max(float(np.sort(heights)[-2]), 1.0)
     xy = kp[seen, :2]
     return max(float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0))), 1.0)
+
+
+def _cost(tracker, tr, kp, t_s, seen=None):
+    """One pair's match cost as the tracker weighs it (:func:`_pair_costs` of one track and one detection)."""
+    seen = _seen(kp, tracker.params.min_score) if seen is None else seen
+    return _pair_costs([(0, tr)], kp[None], seen[None], t_s, tracker.params)[0, 0]
+
+
+def _follow(tracker, tr, kp, t_s, seen=None):
+    """The tracker's move of one track to detection ``kp`` (its ``_follow_all`` of one)."""
+    seen = _seen(kp, tracker.params.min_score) if seen is None else seen
+    tracker._follow_all([tr], kp[None], seen[None], [_size_px(kp, tracker.params.min_score, seen)], t_s)
 
 
 def old_cost(p, tr, kp, t_s):
@@ -140,12 +153,12 @@ def test_cost_and_follow_are_the_old_ones():
         tracks = [_Track(7, xy.copy(), size, t0, velocity.copy()) for _ in range(4)]
         want = old_cost(p, tracks[0], kp, t1)
         n_finite += math.isfinite(want)
-        assert same(tracker._cost(tracks[1], kp, t1), want), case
-        assert same(tracker._cost(tracks[1], kp, t1, _seen(kp, p.min_score)), want), case
+        assert same(_cost(tracker, tracks[1], kp, t1), want), case
+        assert same(_cost(tracker, tracks[1], kp, t1, _seen(kp, p.min_score)), want), case
         if _seen(kp, p.min_score).any():
             a, b = tracks[2], tracks[3]
             old_follow(p, a, kp, t1)
-            tracker._follow(b, kp, t1, _seen(kp, p.min_score) if case % 2 else None)
+            _follow(tracker, b, kp, t1, _seen(kp, p.min_score) if case % 2 else None)
             for f in ("xy", "velocity_pxps", "size_px", "t_s"):
                 assert same(getattr(b, f), getattr(a, f)), (case, f)
     assert n_finite > 300
