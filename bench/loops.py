@@ -114,6 +114,7 @@ class _Wearable:
     def feed(self, i: int, n: int, acc: np.ndarray) -> None:
         """Samples i .. i + n - 1 as one block, as the live source hands them over."""
         self.t_fed = time.monotonic()  # the block "arrives" now
+        self.pub.beat_if_due()  # as the command's _drive does on each of its wake-ups
         self.loop.feed(ImuBlock(i / SAMPLE_RATE_HZ, acc[i : i + n], i > 0, self.t_fed))
 
 

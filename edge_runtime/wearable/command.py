@@ -294,6 +294,7 @@ def _drive(source: _Source, loop: WearableLoop, outputs: list[Callable[[Decision
     for event in source.events:
         if loop.publisher is not None:  # a dead heartbeat thread ends the run: no keep-alive for a silent box
             loop.publisher.check_running()
+            loop.publisher.beat_if_due()  # on this thread's wake-up, when live: see AlertPublisher.beat_if_due
         keepalive()  # READY, then the watchdog's keep-alives, only while this loop turns
         status.set_source_counts(*source.health())
         if not isinstance(event, ImuBlock):  # a live source's SourceStatus

@@ -78,6 +78,12 @@ BATCH_CAPTURES = 20
 capture stops falling at about 16, and onnxruntime's buffers grow with the batch (the day's replay:
 the same CPU time with 20, 32 or 64, peak memory 89, 92 and 98 MB); a recording handed over whole
 (``command.replay``) must not make it hold every capture's tensors at once (about 50 KB each at S = 6)."""
+SAMPLEWISE_ROWS = 16
+"""Blocks of at most this many samples go to the detector sample by sample as Python floats
+(``StreamingDetector.push_sample``): a live source hands over 5 every 50 ms (``[imu] read_period_s``),
+and on the caches a 50 ms sleep leaves cold each numpy call of the block path costs microseconds, more
+than the five samples' Python arithmetic (reports/bench/s19_wearable). Larger blocks (a recording) take
+the numpy path."""
 MIN_CLASS_WEIGHT, MAX_CLASS_WEIGHT = 1e-3, 1e3
 """``AlertPolicy.class_weights``' range: a prior shift of up to 10^6 between two classes; beyond it a
 weighted sum can underflow to 0 or overflow (a decision divides by it)."""
@@ -412,16 +418,18 @@ class WearableLoop:
         if not block.continuous or self.detector.n_seen == 0:  # nothing fed yet, or a gap
             self._restart(block.t0_s)
         self._rx = block.rx_monotonic_s
-        if len(acc) == 1:  # the live 100 Hz loop: one sample as three floats, one numpy call per sample
-            x, y, z = acc.tolist()[0]
+        if len(acc) <= SAMPLEWISE_ROWS:  # a live source's block: its samples as floats, one numpy call in all
+            rows = acc.tolist()
             # finite: v - v is 0 for a finite v, NaN for NaN or an infinity (arithmetic: no call per sample,
-            # and every call costs microseconds on the caches a 10 ms sleep leaves cold)
-            if x - x == 0.0 and y - y == 0.0 and z - z == 0.0:
-                self.status.count_samples(1)
-                cap = self.detector.push_sample(x, y, z)
-                if cap is None:
-                    return self._early_due() if self._fills else []
-                return self._steps_of(cap.trigger_index, cap.data) + self._early_due()
+            # and every call costs microseconds on the caches a 50 ms sleep leaves cold)
+            if all(x - x == 0.0 and y - y == 0.0 and z - z == 0.0 for x, y, z in rows):
+                self.status.count_samples(len(rows))
+                out: list[Decision] = []
+                for x, y, z in rows:  # the detector's push_sample gives push's triggers and captures
+                    cap = self.detector.push_sample(x, y, z)
+                    if cap is not None:
+                        out += self._steps_of(cap.trigger_index, cap.data)
+                return out + self._early_due() if self._fills else out
         elif np.isfinite(acc).all():  # the common case
             self.status.count_samples(len(acc))
             return self._push(acc)

@@ -119,6 +119,77 @@ def test_heartbeat_rate_and_log(tmp_path):
     assert len(logged) == pub.frames_sent
 
 
+class FakeClock:
+    """``time.monotonic`` for the publisher: moved by the test only (its thread's waits stay real)."""
+
+    def __init__(self, now_s: float = 1000.0):
+        self.now_s = now_s
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+def _heartbeats(rx: can.BusABC, n: int | None = None, timeout_s: float = 2.0) -> int:
+    """Heartbeats received: ``n`` of them (or fewer when ``timeout_s`` passes first), or, with ``n`` None,
+    those already waiting."""
+    got, end = 0, time.monotonic() + timeout_s
+    while n is None or got < n:
+        m = rx.recv(0.0 if n is None else max(end - time.monotonic(), 0.0))
+        if m is None:
+            break
+        got += m.arbitration_id == 0x3A1
+    return got
+
+
+def test_the_loops_thread_sends_the_heartbeats_it_is_awake_for_and_the_thread_backs_it_up(monkeypatch):
+    """beat_if_due: the loop's wake-ups carry the heartbeat, a period apart at least, and the heartbeat thread
+    sends only one the loop left RIDE_LATE_S overdue, so a listener still hears one every period + RIDE_LATE_S.
+    Wake-ups a hair early (the 50 ms grid's float sums) still carry it: every other one does."""
+    clock = FakeClock()
+    monkeypatch.setattr(alerts_module.time, "monotonic", clock)
+    rx = can.Bus(interface="virtual", channel="ride")
+    pub = AlertPublisher(can.Bus(interface="virtual", channel="ride"), heartbeat_period_s=0.1).start()
+    try:
+        assert _heartbeats(rx, 1) == 1  # the thread's first, at start
+        sent = pub.heartbeats_sent
+        for k in range(1, 30):  # the loop wakes every 50 ms (its read period), 3 ms after the heartbeat's grid
+            clock.now_s = 1000.0 + 0.05 * k + 0.003
+            pub.beat_if_due()
+            assert pub.heartbeats_sent == sent + k // 2, k  # every other wake-up, never two in a row
+        time.sleep(0.3)  # the thread's real waits pass; on the fake clock nothing is overdue
+        assert pub.heartbeats_sent == sent + 14 and _heartbeats(rx) == 14
+        # the loop stalls: the thread sends it once it is RIDE_LATE_S overdue, not before
+        due_s = clock.now_s + 0.05  # the last went out at k = 28, 0.05 s before the last wake-up, a period ago
+        clock.now_s = due_s + alerts_module.RIDE_LATE_S - 0.01
+        time.sleep(0.3)
+        assert _heartbeats(rx) == 0
+        clock.now_s = due_s + alerts_module.RIDE_LATE_S
+        assert _heartbeats(rx, 1) == 1
+    finally:
+        pub.close()
+        rx.shutdown()
+
+
+def test_without_a_loop_to_ride_on_the_heartbeat_is_the_threads_and_a_replays_beats_go_by_data_time(monkeypatch):
+    clock = FakeClock()
+    monkeypatch.setattr(alerts_module.time, "monotonic", clock)
+    rx = can.Bus(interface="virtual", channel="noride")
+    pub = AlertPublisher(can.Bus(interface="virtual", channel="noride"), heartbeat_period_s=0.1)
+    pub.beat_if_due()  # not started: nothing to ride on, nothing sent
+    assert pub.heartbeats_sent == 0
+    pub.start()
+    try:
+        assert _heartbeats(rx, 1) == 1
+        clock.now_s += 0.1  # due, nobody riding: the thread sends it without waiting RIDE_LATE_S
+        assert _heartbeats(rx, 1) == 1
+    finally:
+        pub.close()
+        rx.shutdown()
+    replay = AlertPublisher(None, clock=Clock.DATA)
+    replay.beat_if_due()
+    assert replay.heartbeats_sent == 0 and replay.send_errors == 0
+
+
 def test_publisher_survives_raising_bus():
     bus = RaisingBus()
     pub = AlertPublisher(bus, heartbeat_period_s=0.02).start()

@@ -116,10 +116,14 @@ class Classifier:
 
 
 class Publisher:
-    """Stands in for AlertPublisher: the status, and how many heartbeats went out at once."""
+    """Stands in for AlertPublisher: the status, how many heartbeats went out at once, and the loop's turns
+    at the periodic heartbeat."""
 
     def __init__(self):
-        self.status, self.heartbeats = WearableStatus(), 0
+        self.status, self.heartbeats, self.turns = WearableStatus(), 0, 0
+
+    def beat_if_due(self):
+        self.turns += 1
 
     def send_heartbeat(self):
         self.heartbeats += 1
@@ -153,6 +157,7 @@ def test_drive_reports_each_change_of_the_sensor_once_and_stops_when_it_is_gone(
                      ("INFO", "sensor_state", "sensor ok"),
                      ("WARNING", "sensor_state", "sensor disconnected (1.00 s since the last sample)")]
     assert pub.heartbeats == 3  # one at each change, at once
+    assert pub.turns == 5  # and the periodic one offered at every event up to the disconnection
     counts = pub.status.counts()
     assert (counts.sensor, counts.samples, counts.saturated, counts.source_dropped) == ("disconnected", 20, 2, 7)
 
