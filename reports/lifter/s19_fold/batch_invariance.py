@@ -5,6 +5,7 @@ This script captures the windows the product really builds, by wrapping ``_lift`
 lift --person all`` runs in-process on a ``firmware_sim record`` recording:
 
 * ``steady``: the recording's own clock (30 Hz);
+* ``random_normal``: 3000 windows of N(0, 0.3) noise (off the data, as ort_ab.py's output check);
 * ``jumpy``: the same keypoints with a clock that now and then skips frames (2/30, 5/30 s: the lifter bridges the
   hole by interpolation), jumps 0.7 s ahead (a reset) or goes back (-1 s: a restart), as perf8's jumpy-clock test.
 
@@ -123,6 +124,9 @@ def main(argv=None) -> int:
         jumpy = jumpy_copy(rec / "keypoints.jsonl", Path("/tmp") / f"{rec.name}_jumpy.jsonl", a.seed)
         for clock, kp in (("steady", rec / "keypoints.jsonl"), ("jumpy", jumpy)):
             captured[f"{rec.name}/{clock}"] = capture(kp, rec / "camera.json")
+    # off the data: N(0, 0.3) windows, where ort_ab.py's check found 8-bit u8 x s8 kernels saturating (ortperf)
+    noise = np.random.default_rng(a.seed).normal(0, 0.3, (3000, 27, 17, 2)).astype(np.float32)
+    captured["random_normal"] = [w[None] for w in noise]
     result = {"utc_start": t0, "argv": sys.argv[1:], "captures": {
         k: {"calls": len(b), "windows": int(sum(len(x) for x in b)), "multi_person_calls": sum(len(x) > 1 for x in b)}
         for k, b in captured.items()}, "models": {}}
