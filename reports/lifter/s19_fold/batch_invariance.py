@@ -16,7 +16,7 @@ root_3d in metres.
 
     PYTHONPATH=. python reports/lifter/s19_fold/batch_invariance.py --recording /tmp/fold/rec4 \
         --model shipped_int8=edge_runtime/assets:int8 --model fp32=edge_runtime/assets:fp32 \
-        --model folded_int8=/tmp/fold/folded:int8 --out reports/lifter/s19_fold/data/batch_invariance.json
+        --model folded_int8=/tmp/fold/folded:int8 --out reports/lifter/s19_fold/results/batch_invariance.json
 """
 from __future__ import annotations
 

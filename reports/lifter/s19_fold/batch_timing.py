@@ -6,7 +6,7 @@ bench's feed; this adds batches 2 and 3.
 
     PYTHONPATH=. python reports/lifter/s19_fold/batch_timing.py --a edge_runtime/assets/lifter.int8.onnx \
         --b /tmp/fold/folded/lifter.int8.onnx --split /tmp/fold/work/val.npz --repeats 9 \
-        --out reports/lifter/s19_fold/data/batch_timing.json
+        --out reports/lifter/s19_fold/results/batch_timing.json
 
 Each repeat times A and B interleaved (bench.timing.interleaved_calls, 5 rounds), the order swapped every other
 repeat; reported per batch size: each model's median p50 over repeats and the median of the per-repeat ratio B/A.

@@ -8,7 +8,7 @@ metrics of both models on the windows only the folded model clips.
 
     PYTHONPATH=. python reports/lifter/s19_fold/input_range.py --split /tmp/fold/work/val.npz \
         --shipped edge_runtime/assets/lifter.int8.onnx --folded /tmp/fold/folded/lifter.int8.onnx \
-        --out reports/lifter/s19_fold/data/input_range.json
+        --out reports/lifter/s19_fold/results/input_range.json
 """
 from __future__ import annotations
 
