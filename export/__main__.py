@@ -97,6 +97,8 @@ def _parser() -> argparse.ArgumentParser:
 # Commands that live in their own module: each module defines ``add_arguments(parser)`` and ``cmd(args)``.
 _MODULE_COMMANDS = (
     ("lifter", "lifter_assets", "train, export and quantise the pose lifter into edge_runtime/assets"),
+    ("lifter-int8", "lifter_int8", "quantise the shipped fp32 pose lifter again (no training), optionally with "
+                                   "its input centering folded, into a scratch directory"),
     ("bundle", "bundle", "build what goes onto a box: runtime wheel, assets, default config, checksums"),
     ("sign", "sign", "sign the manifest with Ed25519 (or make a key pair): a box then refuses other models"),
 )

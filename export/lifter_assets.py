@@ -359,26 +359,51 @@ def _export_checked(model, channels: int, mcfg, seed: int, test, d: Path) -> tup
     return fp32_path, parity
 
 
+def calibration_windows(train) -> np.ndarray:
+    """The int8 calibration inputs: :data:`N_CALIB` evenly spread valid windows of the training split."""
+    from models.lifter_train import eval_frames
+
+    return train.windows(eval_frames(train, N_CALIB)).astype(np.float32)
+
+
+def int8_source(fp32_path: Path, fold_centering: bool, d: Path) -> Path:
+    """The fp32 graph the int8 lifter is quantised from: ``fp32_path`` itself, or with ``fold_centering`` a copy
+    with its input centering folded into the expand convolutions (``d/lifter.fp32.folded.onnx``; the fp32
+    asset itself always stays as exported)."""
+    if not fold_centering:
+        return fp32_path
+    import onnx
+
+    from export.lifter_fold import fold_input_centering
+
+    source = d / "lifter.fp32.folded.onnx"
+    onnx.save(fold_input_centering(onnx.load(str(fp32_path))), str(source))
+    return source
+
+
+def recipe_fields(n_calib: int, fold_centering: bool) -> dict:
+    """The int8 entry's "quantization" fields that say what it was calibrated on and from which graph."""
+    return {"calibration": f"{n_calib} windows of training subjects and cameras (MinMax)",
+            **({"input_centering": FOLDED_CENTERING} if fold_centering else {})}
+
+
+FOLDED_CENTERING = "folded into the expand convolutions (export.lifter_fold)"
+
+
 def _quantise(model, fp32_path: Path, splits: dict, a, d: Path, say) -> tuple[Path, dict, dict]:
     """Every :data:`CANDIDATES` built (calibrated on training windows), scored on held-out frames
     and timed per frame against fp32; the :func:`choose_int8` one copied to ``d/lifter.int8.onnx``.
     Returns (that path, the row's "quantization", the row's "latency")."""
     from export.quantize import compare_variants, int8_report
-    from models.lifter_train import eval_frames, evaluate
+    from models.lifter_train import evaluate
 
     train, test = splits["train"], splits[choice_split(splits)]
-    calib = train.windows(eval_frames(train, N_CALIB)).astype(np.float32)
+    calib = calibration_windows(train)
     quick = max(1000, a.eval_frames // 4)
     fp32_mm = evaluate(model, test, quick, runner=onnx_runner(fp32_path))["mpjpe_mm"]
     frame = np.random.default_rng(0).normal(0, 0.3, (1, model.config.receptive_field, 17, 2)).astype(np.float32)
-    source = fp32_path
-    if getattr(a, "int8_fold_centering", False):  # the fp32 asset stays as exported; only int8 is built from this
-        import onnx
-
-        from export.lifter_fold import fold_input_centering
-
-        source = d / "lifter.fp32.folded.onnx"
-        onnx.save(fold_input_centering(onnx.load(str(fp32_path))), str(source))
+    folded = getattr(a, "int8_fold_centering", False)
+    source = int8_source(fp32_path, folded, d)
     comp = compare_variants(
         source, CANDIDATES, calib, d, stem="lifter.int8.", describe=False,
         score=lambda s: {"mpjpe_mm": evaluate(model, test, quick, runner=session_runner(s))["mpjpe_mm"]},
@@ -396,9 +421,7 @@ def _quantise(model, fp32_path: Path, splits: dict, a, d: Path, say) -> tuple[Pa
         "method": best, "description": comp.results[best]["description"],
         "reduce_range": comp.results[best]["reduce_range"],
         "integer_kernel_drift": comp.results[best]["integer_kernel_drift"],
-        "calibration": f"{len(calib)} windows of training subjects and cameras (MinMax)",
-        **({"input_centering": "folded into the expand convolutions (export.lifter_fold)"} if source != fp32_path
-           else {}),
+        **recipe_fields(len(calib), folded),
         "rule": f"fastest candidate within max({MAX_INT8_LOSS_MM} mm, {MAX_INT8_LOSS_REL:.0%}) MPJPE of fp32, "
                 "else the most accurate",
         "candidates": {k: {"mpjpe_mm": round(mm[k], 2), "bytes": comp.results[k]["size_bytes"],
@@ -535,6 +558,22 @@ def _figure(path: Path, row: dict, test, model) -> None:
 
 
 # --------------------------------------------------------------------------- command
+def data_config(d: dict):
+    """The :class:`models.pose_data.VariedConfig` or ``DataConfig`` a manifest's ``provenance.data`` records
+    (``to_dict``'s inverse: JSON lists back to tuples, the recipe's name dropped)."""
+    from models.pose_data import DataConfig, VariedConfig
+
+    cls = VariedConfig if d.get("recipe") == "varied" else DataConfig
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items() if k != "recipe"})
+
+
+def simulate(dcfg, progress: bool = False) -> dict:
+    """The splits of a data recipe's config (deterministic in its seed)."""
+    from models.pose_data import VariedConfig, build_splits, build_varied_splits
+
+    return build_varied_splits(dcfg, progress) if isinstance(dcfg, VariedConfig) else build_splits(dcfg, progress)
+
+
 def _rel(p: Path) -> str:
     """``p`` relative to the repository when it lies inside it (portable provenance), else absolute."""
     p = p.resolve()
@@ -546,7 +585,7 @@ def cmd(a) -> int:
 
     from export.assets import versions
     from export.onnx_export import git_commit, package_version
-    from models.pose_data import DataConfig, VariedConfig, build_splits, build_varied_splits, summary
+    from models.pose_data import DataConfig, VariedConfig, summary
 
     if not np.isfinite(a.seconds) or a.seconds < 2.0:
         raise CliError(f"--seconds: expected at least 2 s of activity per subject, got {a.seconds}")
@@ -564,13 +603,13 @@ def cmd(a) -> int:
         holdout = tuple(m.strip() for m in a.holdout_motions.split(",") if m.strip())
         dcfg = VariedConfig(train_scenes=a.scenes, seconds_per_scene=a.seconds, holdout_motions=holdout, seed=a.seed)
         try:
-            splits = build_varied_splits(dcfg, progress=not a.no_progress)
+            splits = simulate(dcfg, progress=not a.no_progress)
         except ValueError as e:
             raise CliError(f"--holdout-motions: {e}") from None
     else:
         dcfg = DataConfig(train_subjects=a.subjects, test_subjects=a.test_subjects, seconds_per_subject=a.seconds,
                           train_cameras=a.cameras, test_cameras=a.test_cameras, views=a.views, seed=a.seed)
-        splits = build_splits(dcfg, progress=not a.no_progress)
+        splits = simulate(dcfg, progress=not a.no_progress)
     info = {"command": command, "data": dcfg.to_dict(), "splits": {k: summary(v) for k, v in splits.items()}}
     log(f"simulated in {time.time() - t0:.0f} s: " + ", ".join(
         f"{k} {v['valid_frames']} valid frames" for k, v in info["splits"].items()))

@@ -76,9 +76,11 @@ def fold_input_centering(model: onnx.ModelProto) -> onnx.ModelProto:
             if i == concat.output[0]:
                 n.input[k] = INPUT_NAME
     keep = [n for n in g.node if n.name not in CENTERING]
+    used = {i for n in keep for i in n.input}
+    # the slices' starts/ends/axes were Constant nodes: left unread they make onnxruntime warn on every load
+    keep = [n for n in keep if n.op_type != "Constant" or n.output[0] in used]
     del g.node[:]
     g.node.extend(keep)
-    used = {i for n in g.node for i in n.input}
     unused = [i for i in g.initializer if i.name not in used]
     for i in unused:
         g.initializer.remove(i)
