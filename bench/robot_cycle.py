@@ -6,7 +6,9 @@ with the shipped box configuration (``config.load(None)``: ``[zones]``, ``[track
 (the frame's keypoints of everyone in view -> ``PersonTracker.update`` -> ``RobotLoop.feed_people``,
 which lifts each person with his own window of the shipped int8 lifter on 1 thread,
 ``PeopleLifter``) and a control ``tick()`` every 10 ms, each on an absolute deadline with sleeps
-in between. The people are two simulated workers made by the parent (:mod:`bench.robot_scenario`):
+in between (``RobotConfig.schedule`` "grid", a tick before a frame due at the same instant, so one
+frame in three waits for one; "live": the ticks paced by the frames as the robot command's camera
+driver paces them, a frame first and its tick right after, :class:`_LiveSchedule`). The people are two simulated workers made by the parent (:mod:`bench.robot_scenario`):
 one walks up to the arm, stands working within its reach and walks away, again and again, the
 other walks across the cell and back, so that the runtime sends every kind of command the shipped
 configuration sends: speed overrides (speed-and-separation monitoring), alarms, stops,
@@ -107,6 +109,10 @@ class RobotConfig:
     scenario and commands in a fraction of the time; its timings mean nothing)."""
     zones: dict = field(default_factory=dict)
     """``[zones]`` settings to use instead of the shipped ones (tests: e.g. ``stop_time_scales``)."""
+    schedule: str = "grid"
+    """How frames and ticks interleave (:data:`SCHEDULES`): "grid", the frames and ticks on fixed grids, a tick
+    before a frame due at the same instant (:func:`_schedule`); "live", as the robot command's camera driver
+    runs them (:class:`_LiveSchedule`)."""
 
 
 def lifter_entry(entries: list[dict], precision: str = "int8") -> dict | None:
@@ -166,6 +172,8 @@ class _TimedLink(LinkInterface):
 
 TICK, ARM = -1, -2
 """Schedule slots that are not frames: a control tick, the arm stand-in's state."""
+SCHEDULES = ("grid", "live")
+"""``RobotConfig.schedule``'s values."""
 
 
 def _schedule(seconds: float) -> list[tuple[float, int]]:
@@ -175,6 +183,44 @@ def _schedule(seconds: float) -> list[tuple[float, int]]:
     ticks = [(j / TICK_RATE_HZ, TICK) for j in range(int(seconds * TICK_RATE_HZ))]
     arm = [(j / TICK_RATE_HZ + ARM_OFFSET_S, ARM) for j in range(int(seconds * TICK_RATE_HZ))]
     return sorted(frames + ticks + arm)
+
+
+class _LiveSchedule:
+    """Frames and ticks as ``edge_runtime/robot/command.py``'s ``_live_frames`` runs them on a box with a
+    camera: a frame is taken the moment it is due (the camera's reader thread queues it; the driver waits in
+    ``q.get(timeout=TICK_S)``), a tick follows every frame at once, and another comes ``TICK_S`` after a tick
+    ended when no frame came first. So ticks are paced by the frames, not by a clock of their own, and a
+    frame waits for a tick only when it falls due while one runs (as on the box). The camera (1/30 s) and the
+    arm (100 Hz, :data:`ARM_OFFSET_S` after each 10 ms) keep their own clocks. Iterate for (due time from the
+    start in s, frame index, or :data:`TICK` / :data:`ARM`) and call :meth:`done` after each frame and tick
+    with when it ended (s from the start); a slot due at once is a frame first, as a queued frame is in
+    ``q.get``. Not the product's code (a stand-in would not time its queue's hand-over from the reader
+    thread), its order."""
+
+    def __init__(self, seconds: float):
+        from edge_runtime.robot.command import TICK_S  # the robot command's own (a box imports it too)
+
+        self.tick_s = TICK_S
+        self.frames = int(seconds * FRAME_RATE_HZ)
+        self.arm_slots = int(seconds * TICK_RATE_HZ)
+        self.next_tick_s = TICK_S  # the driver first waits TICK_S for a frame
+
+    def done(self, end_s: float, k: int) -> None:
+        self.next_tick_s = end_s if k >= 0 else end_s + self.tick_s
+
+    def __iter__(self):
+        k = j = 0
+        while k < self.frames:
+            frame_s = k / FRAME_RATE_HZ
+            arm_s = j / TICK_RATE_HZ + ARM_OFFSET_S if j < self.arm_slots else math.inf
+            if arm_s <= min(frame_s, self.next_tick_s):  # the arm's frames are on the bus before (as in _schedule)
+                j += 1
+                yield arm_s, ARM
+            elif frame_s <= self.next_tick_s:
+                k += 1
+                yield frame_s, k - 1
+            else:
+                yield self.next_tick_s, TICK
 
 
 BOX_IMAGE_PX = (1280, 720)
@@ -342,6 +388,8 @@ def run_cycle(cfg: RobotConfig) -> _Run:
     machine keeps up; no timing)."""
     from bench.arm_echo import arm_on_bus
 
+    if cfg.schedule not in SCHEDULES:
+        raise ValueError(f"schedule must be one of {', '.join(SCHEDULES)}, got {cfg.schedule!r}")
     sim = _SimClock() if cfg.simulated else None
     clock, wait = (sim, sim.wait_until) if sim else (time.perf_counter, sleep_until)
     box = _box(cfg.zones)
@@ -363,11 +411,12 @@ def _cycle(cfg: RobotConfig, clock, wait, box, feed, bus, echo, link) -> _Run:
     loop = RobotLoop(link, calibration=calibration, zones=box.zones, tracker=box.tracker, params=box.robot_loop,
                      clock=clock)
     run = _Run(loop, echo, feed.what)
+    live = _LiveSchedule(cfg.seconds) if cfg.schedule == "live" else None  # made (its import done) before the clock runs
     heap.settle()  # as `python -m edge_runtime robot` does once its loop is built
     with CpuShare() as cpu:
         t_start = clock()
         echo.serve(t_start)  # the arm's first state, so the link is up from the first frame
-        for due, k in _schedule(cfg.seconds):
+        for due, k in live or _schedule(cfg.seconds):
             wait(t_start + due)
             if k == ARM:  # the arm's own slot: outside every timed frame and tick
                 echo.serve(clock())
@@ -376,6 +425,8 @@ def _cycle(cfg: RobotConfig, clock, wait, box, feed, bus, echo, link) -> _Run:
             cpu_in, t_in = time.thread_time(), clock()
             rec = loop.tick() if k == TICK else feed(loop, k)
             t_out, cpu_out = clock(), time.thread_time()
+            if live:
+                live.done(t_out - t_start, k)
             t_sent = command_sent_s(bus.sent, heartbeat_id)
             if k >= 0:
                 run.cycle_s.append(t_out - t_in)
@@ -413,7 +464,9 @@ def measure_robot(cfg: RobotConfig) -> list[dict]:
     late = np.asarray(r.late_s, float)
     from edge_runtime import config
 
-    tag = {"scenario": SCENARIO, "zones_changed": dict(cfg.zones)} if cfg.zones else {"scenario": SCENARIO}
+    # another interleaving of frames and ticks is another measurement: --compare must not set one against the other
+    scenario = SCENARIO if cfg.schedule == "grid" else f"{SCENARIO}_{cfg.schedule}"
+    tag = {"scenario": scenario, "zones_changed": dict(cfg.zones)} if cfg.zones else {"scenario": scenario}
     # config.load(None) reads an installed box's own file when there is one: say which configuration ran
     source = str(config.SYSTEM_PATH) if config.SYSTEM_PATH.is_file() else "the shipped defaults"
     return [{"name": "robot_30hz", **tag, "configuration": source, "rate_hz": FRAME_RATE_HZ, "seconds": round(r.wall_s, 2), "frames": len(r.cycle_s),

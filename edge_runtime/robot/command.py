@@ -87,6 +87,8 @@ from edge_runtime.robot.keypoints import timestamp_s
 from edge_runtime.robot.link.options import add_bus_arguments
 
 if TYPE_CHECKING:  # imported when the loop runs, not for every command's options
+    from collections.abc import Callable
+
     from edge_runtime.robot.link.base import RobotLink
     from edge_runtime.robot.loop import FrameRecord, RobotLoop
 
@@ -506,18 +508,22 @@ class _Progress:
             self._last = now
 
 
-def _replayed_frames(loop: RobotLoop, frames, start: float, duration: float | None):
+def _replayed_frames(loop: RobotLoop, frames, start: float, duration: float | None,
+                     clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep):
     """A recording at its own pace: yields (t from the first frame s, feed) at each frame's
-    timestamp, ticking the loop every TICK_S in between."""
+    timestamp (on ``clock``, from ``start``), ticking the loop right after each frame and every
+    TICK_S in between (:func:`_tick_until`)."""
     t0 = None
     for t_s, feed in frames:
         t0 = t_s if t0 is None else t0
         due = start + (t_s - t0)
         if duration and due - start > duration:
             return
-        _tick_until(loop, due)
+        _tick_until(loop, due, clock, sleep)
         yield t_s - t0, feed
-    _tick_until(loop, time.monotonic() + TICK_S)
+    loop.tick()  # the last frame's tick, and one more TICK_S later for the arm's answers to it
+    sleep(TICK_S)
+    loop.tick()
 
 
 def _live_frames(loop: RobotLoop, frames, start: float, duration: float | None):
@@ -562,14 +568,23 @@ def _read_frames(frames, q: queue.Queue, stop: threading.Event) -> None:
         q.put(_END)
 
 
-def _tick_until(loop: RobotLoop, due: float) -> None:
-    """Tick the loop every TICK_S until the monotonic clock reaches ``due``."""
+def _tick_until(loop: RobotLoop, due: float, clock: Callable[[], float] = time.monotonic,
+                sleep: Callable[[float], None] = time.sleep) -> None:
+    """Tick the loop now and every TICK_S after until ``clock`` reaches ``due``, and return at ``due``
+    without ticking there: the frame due then goes first (a tick in front of it would count in its
+    reaction), as the live driver takes a frame the moment it is queued. The frame is that instant's
+    control cycle (its own link poll and decision, and a fresh pose for the staleness check), and its
+    tick follows it: this function's first, called after the frame. So a tick or a frame still comes
+    at least every TICK_S, and a tick right after every frame, as before; two ticks may be up to TICK_S
+    and a frame's time apart, as in the live driver."""
     while True:
         loop.tick()
-        left = due - time.monotonic()
+        left = due - clock()
         if left <= 0:
             return
-        time.sleep(min(TICK_S, left))
+        sleep(min(TICK_S, left))
+        if left <= TICK_S:
+            return
 
 
 def _safe_stop(link: RobotLink) -> None:

@@ -22,6 +22,7 @@ from bench.robot_cycle import (
     TICK,
     RobotConfig,
     _box,
+    _LiveSchedule,
     _schedule,
     box_camera,
     command_row,
@@ -59,11 +60,11 @@ def _lifter():
     return lifter_entry(load_manifest(ASSETS_DIR)["models"])
 
 
-def _config(tmp_path, seconds: float, zones: dict | None = None) -> RobotConfig:
+def _config(tmp_path, seconds: float, zones: dict | None = None, schedule: str = "grid") -> RobotConfig:
     lifter = _lifter()
     npz = prepare_workers(tmp_path / "workers.npz", seconds, lifter, 1, *box_camera(_box()))
     return RobotConfig(str(npz), seconds, lifter=lifter["precision"] if lifter else "", simulated=True,
-                       zones=zones or {})
+                       zones=zones or {}, schedule=schedule)
 
 
 @pytest.fixture(scope="module")
@@ -150,6 +151,42 @@ def test_the_arm_reports_its_state_between_the_ticks():
     assert after_arm  # frames due right after an arm slot, before the next tick drains it
 
 
+def _live_slots(seconds: float, frame_s: float, tick_s: float) -> list:
+    """_LiveSchedule's slots when each frame takes ``frame_s`` and each tick ``tick_s`` (the arm none)."""
+    live, slots = _LiveSchedule(seconds), []
+    for due, k in live:
+        slots.append((due, k))
+        if k != ARM:
+            live.done(due + (frame_s if k >= 0 else tick_s), k)
+    return slots
+
+
+def test_the_live_schedule_takes_a_frame_first_and_ticks_after_it():
+    """As the robot command's camera driver: a frame when due, a tick at once after it, then one TICK_S after
+    each tick's end until the next frame; the camera and the arm keep their own clocks."""
+    from edge_runtime.robot.command import TICK_S
+
+    slots = _live_slots(1.0, frame_s=0.004, tick_s=0.0005)
+    frames = [(t, k) for t, k in slots if k >= 0]
+    assert frames == [(pytest.approx(k / 30), k) for k in range(30)]  # never behind a tick
+    arm = [t for t, k in slots if k == ARM]
+    assert arm == pytest.approx([j / 100 + 0.005 for j in range(len(arm))])
+    ticks = [(i, t) for i, (t, k) in enumerate(slots) if k == TICK]
+    for i, t in ticks:
+        prev = next((t0, k0) for t0, k0 in reversed(slots[:i]) if k0 != ARM)
+        assert t == pytest.approx(prev[0] + 0.004 if prev[1] >= 0 else prev[0] + 0.0005 + TICK_S)
+    # a tick right after every frame but the last
+    assert all(next(k for _, k in slots[i + 1:] if k != ARM) == TICK for i, (_, k) in enumerate(slots[:-1]) if k >= 0)
+
+
+def test_a_frame_due_while_a_tick_runs_comes_after_it_in_the_live_schedule():
+    """A tick under way when a frame falls due keeps it waiting, as on the box (here ticks of 12 ms: the tick
+    that starts 10 ms after the previous one ended, at 26 ms, still runs at 33 ms)."""
+    slots = [(t, k) for t, k in _live_slots(0.1, frame_s=0.004, tick_s=0.012) if k != ARM]
+    assert [k for _, k in slots[:4]] == [0, TICK, TICK, 1]
+    assert slots[2][0] == pytest.approx(0.026) and slots[2][0] < 1 / 30 < slots[2][0] + 0.012
+
+
 def test_compare_does_not_call_another_scenario_a_regression():
     old = {"results": [], "loops": [{"name": "robot_reaction", "p50_us": 1.0, "p99_us": 1.0, "mean_us": 1.0}]}
     new = {"results": [], "loops": [{"name": "robot_reaction", "scenario": SCENARIO, "p50_us": 9.0, "p99_us": 9.0,
@@ -221,3 +258,12 @@ def test_measure_robot_rows(tmp_path):
     assert reaction["frame_cpu"]["n"] == reaction["from_due"]["n"] == reaction["n"]
     assert reaction["judged_on"] == "from_due" and reaction["scenario"] == SCENARIO == r["scenario"]
     assert r["cpu_share_with_arm_pct"] >= r["cpu_share_pct"]
+
+
+def test_the_live_schedule_is_another_scenario_with_the_same_rows(tmp_path):
+    rows = {r["name"]: r for r in measure_robot(_config(tmp_path, 4.0, schedule="live"))}
+    r = rows["robot_30hz"]
+    assert r["frames"] == 120 and r["unacked"] == 0 and r["arm_rejected"] == 0
+    assert rows["robot_reaction"]["scenario"] == r["scenario"] == SCENARIO + "_live" != SCENARIO
+    with pytest.raises(ValueError, match="schedule"):
+        measure_robot(_config(tmp_path, 1.0, schedule="tick_first"))

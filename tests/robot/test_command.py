@@ -238,6 +238,56 @@ def test_a_stalled_live_camera_is_caught_by_the_staleness_check():
     assert [c for c in link.calls if c[0] != "heartbeat"][-1] == ("stop",)
 
 
+class _Timeline:
+    """A fake monotonic clock whose sleep() moves it on, and a loop stand-in whose tick() writes
+    ("tick", now) on the same timeline as the frames ("frame", now)."""
+
+    def __init__(self):
+        self.now_s, self.events = 0.0, []
+
+    def clock(self) -> float:
+        return self.now_s
+
+    def sleep(self, s: float) -> None:
+        self.now_s += s
+
+    def tick(self) -> None:
+        self.events.append(("tick", self.now_s))
+
+    def replay(self, times_s, frame_cpu_s: float):
+        """Replays frames at ``times_s`` as ``run_loop`` does, each taking ``frame_cpu_s``."""
+        frames = ((t, None) for t in times_s)
+        for _ in robot_cli._replayed_frames(self, frames, 0.0, None, self.clock, self.sleep):
+            self.events.append(("frame", self.now_s))
+            self.now_s += frame_cpu_s
+
+
+def test_a_replayed_frame_goes_first_and_its_tick_right_after():
+    """The real-time replay ticks the loop after each frame and every TICK_S in between, but not at a
+    frame's due time in front of it (a tick there would count in the frame's reaction)."""
+    times = [k / 30 for k in range(10)]
+    tl = _Timeline()
+    tl.replay(times, frame_cpu_s=0.004)
+    frames = [i for i, (what, _) in enumerate(tl.events) if what == "frame"]
+    assert [tl.events[i][1] for i in frames] == pytest.approx(times)  # each frame at its due time, not later
+    for i in frames[1:]:
+        assert tl.events[i - 1][0] == "tick" and tl.events[i - 1][1] < tl.events[i][1] - 1e-9
+    for i in frames:  # its tick right after it
+        assert tl.events[i + 1] == ("tick", pytest.approx(tl.events[i][1] + 0.004))
+
+
+def test_a_replay_still_has_a_control_cycle_every_tick_period():
+    """Between frames (here up to 0.25 s apart) the loop is ticked every TICK_S; with the frames, a
+    tick or a frame comes at least every TICK_S, and the replay ends with ticks after the last frame."""
+    tl = _Timeline()
+    tl.replay([0.0, 1 / 30, 0.1, 0.35, 0.36], frame_cpu_s=0.003)
+    starts = [t for _, t in tl.events]
+    assert max(b - a for a, b in zip(starts, starts[1:])) <= robot_cli.TICK_S + 1e-9
+    last_frame = max(t for what, t in tl.events if what == "frame")
+    assert [w for w, t in tl.events if t > last_frame] == ["tick", "tick"]
+    assert tl.events[-1][1] >= last_frame + robot_cli.TICK_S
+
+
 # ------------------------------------------------------------------ --link none: an offline replay
 
 
