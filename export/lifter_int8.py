@@ -1,6 +1,7 @@
 """``python -m export lifter-int8``: the shipped fp32 pose lifter quantised again, without training.
 
-    python -m export lifter-int8 --out DIR [--fold-centering] [--assets edge_runtime/assets]
+    python -m export lifter-int8 --out DIR [--fold-centering] [--keep-fp32 none|pose-shrink]
+                                 [--assets edge_runtime/assets]
                                  [--work runs/lifter-int8-seed<S>] [--splits val] [--eval-frames N]
 
 What ``python -m export int8`` is for the ConvLSTM, for the lifter: the checkpoint a shipped lifter came from
@@ -16,8 +17,9 @@ need not exist any more, its fp32 file and manifest entries do. The recipe is th
 
 So without ``--fold-centering`` it rebuilds the shipped ``lifter.int8.onnx`` byte for byte (same sha256; the
 test suite checks it on a tiny model). With ``--fold-centering`` the int8 file is quantised from the fp32 graph
-with its input centering folded into the expand convolutions (:mod:`export.lifter_fold`): a candidate, faster
-and a little less accurate.
+with its input centering folded into the expand convolutions (:mod:`export.lifter_fold`) and, by default, the
+pose branch's output convolution left fp32 (``--keep-fp32 pose-shrink``, :data:`KEEP_FP32`): a candidate,
+faster and a little less accurate.
 
 Into ``--out`` (never the ``--assets`` it reads): ``lifter.fp32.onnx`` (a copy), ``lifter.int8.onnx``, and
 ``manifest.json`` with the two lifter entries (other models already listed there are kept): the fp32 entry as
@@ -30,6 +32,7 @@ simulation did not reproduce the data the lifter was exported on, and the comman
 """
 from __future__ import annotations
 
+import dataclasses
 import shlex
 import shutil
 import sys
@@ -63,6 +66,12 @@ from export.lifter_assets import (
 )
 
 SPLITS = ("val", "test", "test_subjects")
+KEEP_FP32 = {"none": (), "pose-shrink": ("/pose/shrink/Conv",)}
+"""Nodes left fp32 in the int8 file (``--keep-fp32``). ``pose-shrink``, the pose branch's last convolution
+(256 -> 51 channels, 1x1), is the folded graph's default: with the centering folded, the expand convolutions read
+the raw keypoints on one coarse range and the int8 pose misses the export's rule (fp32 + 3 %) on the validation
+split by 0.006 mm, and by -0.4 to +0.5 mm depending on the calibration windows drawn; with that one node fp32 it
+passes by 1.2-1.5 mm on every draw tried, for one more runtime node (reports/lifter/s19_fold2/report.md)."""
 REPRODUCED_MM = 0.01
 """How close (mm) the fp32 metrics scored here must be to the fp32 entry's (which are rounded to 0.01 mm)."""
 
@@ -73,6 +82,9 @@ def add_arguments(p) -> None:
     p.add_argument("--fold-centering", action="store_true",
                    help="quantise from the fp32 graph with its input centering folded into the expand convolutions "
                         "(export.lifter_fold: faster, less accurate); default: the shipped recipe as it is")
+    p.add_argument("--keep-fp32", choices=sorted(KEEP_FP32), default=None,
+                   help="nodes left fp32: none, or pose-shrink (the pose branch's output convolution); default: "
+                        "none, and pose-shrink with --fold-centering")
     p.add_argument("--assets", default=None, help="where the shipped lifter is read (default: edge_runtime/assets)")
     p.add_argument("--work", default=None, help="scratch directory for the simulated splits "
                                                 "(default: runs/lifter-int8-seed<S>)")
@@ -155,6 +167,8 @@ def _latency(new: Path, replaced: Path, runs: int) -> tuple[dict, dict]:
 
 
 def cmd(a) -> int:
+    import onnx
+
     from export.quantize import build_variant, int8_report, integer_kernel_drift
     from models.lifter_train import evaluate
 
@@ -165,6 +179,12 @@ def cmd(a) -> int:
     manifest, fp32_entry, int8_entry = _shipped(assets)
     where = str(assets / "manifest.json")
     variant = _variant(int8_entry, where)
+    keep = KEEP_FP32[a.keep_fp32 or ("pose-shrink" if a.fold_centering else "none")]
+    if keep:  # the entry's method, with these nodes left out of the quantisation
+        variant = dataclasses.replace(variant, keep_fp32=lambda model: list(keep))
+        absent = sorted(set(keep) - {n.name for n in onnx.load(str(assets / fp32_entry["file"])).graph.node})
+        if absent:
+            raise LifterExportError(f"--keep-fp32: {assets / fp32_entry['file']} has no node {absent[0]!r}")
     splits_wanted = _splits(a.splits, fp32_entry, where)
     # entries made before 7-bit weights lack the key: they were built with 8-bit weights
     reduce_range = bool(int8_entry["quantization"].get("reduce_range", False))
@@ -192,7 +212,8 @@ def cmd(a) -> int:
         source = int8_source(fp32_path, a.fold_centering, Path(td))
         build_variant(source, int8_path, variant, calib, describe=False, reduce_range=reduce_range)
     sha = sha256_file(int8_path)
-    log(f"{int8_path}: {variant.name}, {'7' if reduce_range else '8'}-bit weights, centering "
+    log(f"{int8_path}: {variant.name}{' with ' + ', '.join(keep) + ' fp32' if keep else ''}, "
+        f"{'7' if reduce_range else '8'}-bit weights, centering "
         f"{'folded' if a.fold_centering else 'as exported'}, calibrated on {len(calib)} windows; sha256 {sha} "
         f"({'the same as' if sha == int8_entry['sha256'] else 'differs from'} {assets / int8_entry['file']})")
 
@@ -214,6 +235,7 @@ def cmd(a) -> int:
         "method": variant.name, "description": variant.description, "reduce_range": reduce_range,
         **recipe_fields(len(calib), a.fold_centering),
         **({} if a.fold_centering else {"input_centering": "in the graph, as exported"}),
+        **({"kept_fp32": list(keep)} if keep else {}),
         "rebuilt_from": {"fp32_sha256": fp32_entry["sha256"], "replaces_sha256": int8_entry["sha256"],
                          "same_bytes": sha == int8_entry["sha256"], "command": command},
         "integer_kernel_drift": integer_kernel_drift(int8_path, {INPUT_NAME: calib[:64]}),

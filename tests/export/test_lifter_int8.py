@@ -97,6 +97,8 @@ def test_fold_centering_builds_the_folded_candidate_the_runtime_loads(shipped, t
     assert new["sha256"] == sha256_file(tmp_path / "lifter.int8.onnx") != old["sha256"]
     q = new["quantization"]
     assert q["input_centering"] == FOLDED_CENTERING and not q["rebuilt_from"]["same_bytes"]
+    # the folded graph's default recipe leaves the pose branch's output convolution fp32
+    assert q["kept_fp32"] == ["/pose/shrink/Conv"] and q["fp32_operators"].get("Conv") == 1
     before = load_manifest(assets)  # the assets it read are untouched
     assert [e["sha256"] for e in before["models"]] == [sha256_file(assets / e["file"]) for e in before["models"]]
     # the centering's quantise / slice / subtract glue is gone from what onnxruntime runs
@@ -108,9 +110,16 @@ def test_fold_centering_builds_the_folded_candidate_the_runtime_loads(shipped, t
     assert lifter.push(0.0, kp).valid
 
 
+def test_keep_fp32_none_quantises_every_node_of_the_folded_graph(shipped, tmp_path):
+    assets, work = shipped
+    assert _run("--assets", assets, "--out", tmp_path, "--work", work, "--fold-centering", "--keep-fp32", "none") == 0
+    q = _entry(tmp_path)["quantization"]
+    assert "kept_fp32" not in q and "Conv" not in q["fp32_operators"] and q["input_centering"] == FOLDED_CENTERING
+
+
 def test_the_default_is_the_unfolded_recipe():
     args = _parser().parse_args(["lifter-int8", "--out", "x"])
-    assert args.fold_centering is False
+    assert args.fold_centering is False and args.keep_fp32 is None
     assert _parser().parse_args(["lifter-int8", "--out", "x", "--fold-centering"]).fold_centering is True
 
 
