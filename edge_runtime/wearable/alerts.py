@@ -609,10 +609,9 @@ class AlertPublisher:
         about as much CPU as the heartbeat's own work (a bare 10 Hz wake-up 0.11-0.17 % of a core, the
         heartbeat thread with its work about 0.4-0.5 %, against a 1 % budget for the whole 100 Hz loop).
         From the first call on the heartbeat thread only backs it up (a heartbeat overdue by
-        :data:`RIDE_LATE_S`), and a heartbeat is never sent less than a period after the one before (the
-        loop's wake-ups do not fall on the heartbeat's grid; one up to a fifth of a period early counts as
-        due). Nothing before :meth:`start` (wall clock
-        only: a replay's heartbeats go out at data times, :meth:`advance_to`)."""
+        :data:`RIDE_LATE_S`), and a heartbeat is due a period after the one before, not on a fixed grid
+        (the loop's wake-ups do not fall on one), up to a fifth of a period early counting as due. Nothing
+        before :meth:`start` (wall clock only: a replay's heartbeats go out at data times, :meth:`advance_to`)."""
         if self._thread is None:
             return
         self._ridden = True
