@@ -120,6 +120,9 @@ class NoBus:
     def send_heartbeat(self):
         return True
 
+    def beat_if_due(self):
+        pass
+
     def publish_alert(self, alert):
         return 0
 
