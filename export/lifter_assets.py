@@ -196,11 +196,17 @@ CANDIDATES: tuple[Variant, ...] = (
 )
 
 
+def allowed_int8_mpjpe_mm(fp32_mm: float) -> float:
+    """The export's int8 rule: the largest MPJPE an int8 lifter may have, max(MAX_INT8_LOSS_MM, MAX_INT8_LOSS_REL)
+    above its fp32 graph's."""
+    return fp32_mm + max(MAX_INT8_LOSS_MM, MAX_INT8_LOSS_REL * fp32_mm)
+
+
 def choose_int8(fp32_mm: float, mpjpe_mm: dict[str, float], p50_us: dict[str, float]) -> str:
     """The fastest candidate within the allowed MPJPE loss; else the most accurate."""
     from export.quantize import fastest
 
-    allowed = fp32_mm + max(MAX_INT8_LOSS_MM, MAX_INT8_LOSS_REL * fp32_mm)
+    allowed = allowed_int8_mpjpe_mm(fp32_mm)
     ok = [k for k, mm in mpjpe_mm.items() if mm <= allowed]
     return fastest(p50_us, ok) if ok else min(mpjpe_mm, key=mpjpe_mm.get)
 

@@ -49,13 +49,12 @@ from export.lifter_assets import (
     CANDIDATES,
     DEFAULT_ASSETS,
     INPUT_NAME,
-    MAX_INT8_LOSS_MM,
-    MAX_INT8_LOSS_REL,
     POSE_OUTPUT,
     REPO_ROOT,
     ROOT_OUTPUT,
     LifterExportError,
     _slim,
+    allowed_int8_mpjpe_mm,
     calibration_windows,
     data_config,
     int8_source,
@@ -220,7 +219,7 @@ def cmd(a) -> int:
     held_out, rule = {}, {}
     for s, (n, m32) in fp32_scores.items():
         m8 = evaluate(None, splits[s], n, runner=onnx_runner(int8_path))
-        allowed = m32["mpjpe_mm"] + max(MAX_INT8_LOSS_MM, MAX_INT8_LOSS_REL * m32["mpjpe_mm"])
+        allowed = allowed_int8_mpjpe_mm(m32["mpjpe_mm"])
         rule[s] = {"fp32_mpjpe_mm": round(m32["mpjpe_mm"], 3), "int8_mpjpe_mm": round(m8["mpjpe_mm"], 3),
                    "allowed_mpjpe_mm": round(allowed, 3), "holds": bool(m8["mpjpe_mm"] <= allowed)}
         m32, held_out[s] = _slim(m32), _slim(m8)
