@@ -1426,7 +1426,7 @@ class RetractLimits:
 
     min_radius_m: float = 0.3
     """Targets stop short of this ground distance from the base's axis (m)."""
-    max_radius_m: float = 0.7
+    max_radius_m: float = 0.45
     """Targets further out from the base's axis are pulled in to it (m)."""
     min_height_m: float = -0.3
     """Targets are kept at or above this robot-frame height (m)."""

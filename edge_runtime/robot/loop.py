@@ -171,9 +171,14 @@ class LoopParams:
     at most this often (s), whether or not the last plan found a turn: an arm stopped half folded on a
     worker's side stood there while he reached into it (hard:40 seed 5, hard_012), where turned about
     its base it cleared him."""
-    retract_max_radius_m: float = config.setting(0.7, config.POSITIVE)
+    retract_max_radius_m: float = config.setting(0.45, config.POSITIVE)
     """Retraction targets further than this from the base's axis (ground distance, m) are
-    pulled in to it: with its tool pointed at the base the Sawyer reaches 0.7-0.8 m."""
+    pulled in to it, so that a retracted arm is tucked in: with the hand at 0.45 m and the tool
+    toward the base the simulated Sawyer's links and tool stay within about 0.65 m of the axis, at 0.7 m
+    (the value until session 20) within 0.89 m, where workers passing 1.1-1.3 m from the base swung a hand
+    into the tool or walked into it (hard:200 seed 23, hard_107 0.086 m, hard_112 0.055 m; random:200 seed
+    23, random_101 0.076 m; hard:200 seed 15, hard_094, hard_110: all clear at 0.45, 0.25-0.60 m:
+    reports/hrc/s20_contact/)."""
     records: int = config.setting(100_000, config.AT_LEAST_1)
     """Frames whose reaction time (keypoints in -> command sent) the run's summary keeps (the oldest
     are dropped). A frame's whole record goes to ``on_record`` (the ``--log``) and is not kept: a

@@ -290,7 +290,7 @@ def test_the_fallback_goes_straight_toward_the_base_but_not_inside_the_min_radiu
     np.testing.assert_allclose(r.position_m, [0.18, 0.2, 0.24], atol=1e-9)       # 0.3 m out, same bearing
     far = radial_retraction([1.2, 0.2, 0.0], ZoneParams(), limits, None)           # beyond the max radius:
     np.testing.assert_allclose(far.position_m, [0.3, 0.2, 0.0], atol=1e-9)          # 0.7 - 0.5 m step -> 0.3 m
-    mid = radial_retraction([0.0, 0.2, 0.9], ZoneParams(), RetractLimits(min_radius_m=0.1), None)
+    mid = radial_retraction([0.0, 0.2, 0.9], ZoneParams(), RetractLimits(min_radius_m=0.1, max_radius_m=0.7), None)
     np.testing.assert_allclose(mid.position_m, [0.0, 0.2, 0.2], atol=1e-9)          # 0.7 - 0.5 = 0.2 m out
     on_axis = radial_retraction([0.0, 0.2, 0.0], ZoneParams(), limits, None)
     np.testing.assert_allclose(on_axis.position_m, [0.0, 0.2, 0.0])

@@ -237,3 +237,29 @@ def test_the_runtimes_stopping_model_covers_the_arm_at_every_speed(share):
         after, _ = arm.collision_spheres()
         assert steps * 0.001 <= t_s + 0.001
         assert float(np.max(np.linalg.norm(after - before, axis=1))) <= 0.5 * v_r * t_s + 1e-4
+
+
+def test_a_retraction_tucks_the_arm_in_from_anywhere_in_the_task():
+    """The runtime's Eq. 6 retraction (hazard.eq6_retraction within the shipped ``[robot_loop]
+    retract_*_radius_m``), from the hard suite's task postures, away from a worker 1.3 m from the base at any
+    bearing, walking toward the hand: the simulated Sawyer reaches it, and there no link or tool is further than
+    0.7 m from the base's axis. With the hand pulled in only to 0.7 m (until session 20) the tool stood up to
+    0.89 m out, where workers passing 1.1-1.3 m from the base swung a hand into it (reports/hrc/s20_contact/)."""
+    from edge_runtime.robot.hazard import HeadEstimate, eq6_retraction
+    from firmware_sim.scenarios.hrc_world import box_config, hard_scenarios, task_start_posture
+
+    zones, loop = box_config().zones, box_config().robot_loop
+    task = hard_scenarios(1, 0)[0].task_m
+    for k, start in enumerate(task):
+        for bearing_deg in range(-180, 180, 60):
+            b = math.radians(bearing_deg)
+            head = np.array([1.3 * math.sin(b), 0.8, 1.3 * math.cos(b)])
+            arm = SawyerArm(q_rad=task_start_posture(start, loop.task_pitch_rad, loop.task_yaw_rad))
+            hand = arm.pose().position_m
+            est = HeadEstimate(0.0, head, 1.4 * (hand - head) * [1, 0, 1] / np.linalg.norm((hand - head)[[0, 2]]), head)
+            r = eq6_retraction(hand, est, zones, loop.retract_limits, loop.task_yaw_rad)
+            arm.set_target(r.position_m, loop.task_pitch_rad, r.yaw_rad)       # raises Unreachable if it is not
+            run_to_rest(arm)
+            centres, radii = arm.collision_spheres()
+            assert arm.at_goal, (k, bearing_deg)
+            assert float((np.hypot(centres[:, 0], centres[:, 2]) + radii).max()) <= 0.7, (k, bearing_deg)

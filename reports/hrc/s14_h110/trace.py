@@ -1,6 +1,7 @@
 """Frame-by-frame trace of one hard:200 scenario through hrc's own per-scenario path (hrc._run_one),
 with hooks (monkeypatches, no product edits) on the runtime loop, the hazard monitor and the simulated arm.
-usage: trace.py SEED NAME OUT.json [--config BOX.toml] [--fix NAME]"""
+usage: trace.py SEED NAME OUT.json [--suite hard:200|random:200] [--link can|mavlink] [--config BOX.toml] [--fix NAME|PATH.py]
+(--fix NAME loads fix_NAME.py beside this file; a path loads that file: session 20's are in ../s20_contact/)"""
 import argparse
 import json
 import math
@@ -21,10 +22,12 @@ ap.add_argument("name")
 ap.add_argument("out")
 ap.add_argument("--config", default=None)
 ap.add_argument("--fix", default="")
+ap.add_argument("--suite", default="hard:200")
+ap.add_argument("--link", default="can")
 a = ap.parse_args()
 
 box = hrc.load_box(a.config)
-sc = next(s for s in hrc.scenarios_for("hard:200", a.seed, 2.0) if s.name == a.name)
+sc = next(s for s in hrc.scenarios_for(a.suite, a.seed, 2.0) if s.name == a.name)
 world = WorldParams(camera_hz=30.0, latency_s=None, labelled_calibration=True)
 dt = world.dt_s
 n_pre = int(round(world.pre_roll_s / dt))
@@ -157,13 +160,13 @@ hrc_world.SimulatedRobot = TracedRobot
 
 if a.fix:
     import importlib.util
-    spec = importlib.util.spec_from_file_location("fix", str(Path(__file__).with_name(f"fix_{a.fix}.py")))
+    spec = importlib.util.spec_from_file_location("fix", a.fix if a.fix.endswith(".py") else str(Path(__file__).with_name(f"fix_{a.fix}.py")))
     fix = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(fix)
     fix.apply(EV, J=J, t_of=t_of)
 
 t0 = time.time()
-r = hrc._run_one((sc, "can", True, hrc.resolve_perception("lifter"), world, box))
+r = hrc._run_one((sc, a.link, True, hrc.resolve_perception("lifter"), world, box))
 s = r.summary
 print(json.dumps({k: s[k] for k in ("collision", "collision_steps", "first_collision_s", "arm_still_at_contact_s",
                                     "arm_moved_in_contact", "min_separation_m", "stops", "retracts",
