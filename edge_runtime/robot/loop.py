@@ -149,6 +149,12 @@ class LoopParams:
     worker, 0.081 m). An escape turn that does so is stopped and planned again from where it stopped
     (holding it to ``escape_dip_m`` instead stopped turns as they began, over and over, and left the
     arm half folded by a worker: hard:200 seed 13, hard_064)."""
+    radial_retract_stops: bool = True
+    """whole_body: the retraction straight toward the base that replaces a backfiring one (``retract_backfire_m``)
+    is itself stopped when it backfires too. False: it runs to its end, since it only folds the arm in along
+    its bearing; stopped, it left the arm half retracted 0.8-0.9 m from the base's axis between two passing
+    workers, where a third reached into it (hard:200 seed 29, hard_143: 0.059 m, and hard_044 with another
+    lifter)."""
     escape_step_deg: float = config.setting(5.0, config.within(0.5, 30, "deg"))
     """whole_body: the escape turn (``[zones] escape_deg``) weighs turns of the base every this many
     degrees both ways (deg): at 1 m from the axis 5 deg is 0.09 m of sweep between two candidates."""
@@ -832,6 +838,8 @@ class RobotLoop:
         z = self.zones
         if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None or z.separation != "whole_body":
             return False
+        if self._retract_fallback and not self._escaping and not self.params.radial_retract_stops:
+            return False  # the straight retraction toward the base runs to its end
         reach = z.body_retract_distance_m + z.retract_lead_s * z.lost_person_speed_mps
         people = self.monitor.people_spheres()
         if not people:
