@@ -149,10 +149,10 @@ class LoopParams:
     worker, 0.081 m). An escape turn that does so is stopped and planned again from where it stopped
     (holding it to ``escape_dip_m`` instead stopped turns as they began, over and over, and left the
     arm half folded by a worker: hard:200 seed 13, hard_064)."""
-    radial_retract_stops: bool = True
+    radial_retract_stops: bool = False
     """whole_body: the retraction straight toward the base that replaces a backfiring one (``retract_backfire_m``)
-    is itself stopped when it backfires too. False: it runs to its end, since it only folds the arm in along
-    its bearing; stopped, it left the arm half retracted 0.8-0.9 m from the base's axis between two passing
+    is itself stopped when it backfires too (true, shipped until session 21). False: it runs to its end, since it
+    only folds the arm in along its bearing; stopped, it left the arm half retracted 0.8-0.9 m from the base's axis between two passing
     workers, where a third reached into it (hard:200 seed 29, hard_143: 0.059 m, and hard_044 with another
     lifter)."""
     escape_step_deg: float = config.setting(5.0, config.within(0.5, 30, "deg"))
