@@ -459,12 +459,13 @@ def test_an_arm_refusing_every_move_is_a_fault_too():
 
 # ------------------------------------------------------------------ whole-body speed and separation
 
-def make_whole_body(**zones):
-    """A loop with the shipped whole-body separation; the fake arm reports no joint angles, so its
-    end effector stands for it (a tool-sized sphere)."""
+def make_whole_body(loop_params: dict | None = None, **zones):
+    """A loop with the shipped whole-body separation (``loop_params``: LoopParams fields other than the
+    shipped ones); the fake arm reports no joint angles, so its end effector stands for it (a tool-sized sphere)."""
     from dataclasses import replace
 
-    loop, link, clock = make(zones=ZoneParams(**zones), params=LoopParams(task_waypoints_m=((0.0, 0.14, 0.8),)))
+    loop, link, clock = make(zones=ZoneParams(**zones),
+                             params=LoopParams(task_waypoints_m=((0.0, 0.14, 0.8),), **(loop_params or {})))
     link._state = replace(link._state, joint_positions_rad=np.full(7, np.nan))
     return loop, link, clock
 
@@ -622,8 +623,7 @@ def test_the_straight_retraction_toward_the_base_is_stopped_when_it_backfires_on
     q_mid = min(qs, key=lambda q: abs(sep(q, z) - (sep(q_far, z) - 0.2)))
     q_near = min(qs, key=lambda q: sep(q, z))
     assert sep(q_mid, z) < sep(q_far, z) - 0.15 and sep(q_near, z) < sep(q_mid, z) - 0.15
-    loop, link, clock = make(zones=ZoneParams(), params=LoopParams(task_waypoints_m=((0.0, 0.14, 0.8),),
-                                                                   radial_retract_stops=radial_retract_stops))
+    loop, link, clock = make_whole_body({"radial_retract_stops": radial_retract_stops})
     link._state = replace(link._state, joint_positions_rad=q_far)
     drive_poses(loop, link, clock, lambda t: [(0, lifted(at_tool_height(8.0)))], 2.0)
     drive_poses(loop, link, clock, lambda t: [(0, lifted(at_tool_height(z)))], 2.3)
@@ -704,12 +704,13 @@ def _backfiring_at(him):
     """A whole-body loop whose Eq. 6 retraction from ``him`` the controller swings toward him: the arm's
     postures turned away from him, to his side and at him (each well nearer him than the last), a step
     that puts the fake arm in one (``to(q, yaw=None)``) and one that drives the loop on and gives the stops
-    and retractions it sent (``drive(t_end)``)."""
+    and retractions it sent (``drive(t_end)``). The straight retraction that replaces a backfiring one is
+    stopped when it backfires too (``radial_retract_stops``), so that the stopped arm's escape turn is reached."""
     from dataclasses import replace
 
     posture = lambda j0: np.array([j0, -0.5, 0.0, 1.2, 0.0, 0.4, 0.0])  # noqa: E731
     q_away, q_side, q_at = (posture(math.radians(a)) for a in (180.0, 45.0, 0.0))
-    loop, link, clock = make_whole_body()
+    loop, link, clock = make_whole_body({"radial_retract_stops": True})
 
     def to(q, yaw=None):
         link._state = replace(link._state, joint_positions_rad=q, **({} if yaw is None else {"yaw_rad": yaw}))
