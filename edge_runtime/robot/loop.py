@@ -152,9 +152,9 @@ class LoopParams:
     radial_retract_stops: bool = False
     """whole_body: the retraction straight toward the base that replaces a backfiring one (``retract_backfire_m``)
     is itself stopped when it backfires too (true, shipped until session 21). False: it runs to its end, since it
-    only folds the arm in along its bearing; stopped, it left the arm half retracted 0.8-0.9 m from the base's axis between two passing
-    workers, where a third reached into it (hard:200 seed 29, hard_143: 0.059 m, and hard_044 with another
-    lifter)."""
+    only folds the arm in along its bearing; stopped, it left the arm half retracted 0.8-0.9 m from the base's
+    axis between two passing workers, where a third reached into it (hard:200 seed 29, hard_143: 0.059 m, and
+    hard_044 with another lifter)."""
     escape_step_deg: float = config.setting(5.0, config.within(0.5, 30, "deg"))
     """whole_body: the escape turn (``[zones] escape_deg``) weighs turns of the base every this many
     degrees both ways (deg): at 1 m from the axis 5 deg is 0.09 m of sweep between two candidates."""

@@ -609,40 +609,6 @@ def test_a_retraction_that_carries_the_arm_toward_someone_is_replaced_by_one_str
             assert abs(target[0] * hand[2] - target[2] * hand[0]) < 1e-6        # along the same bearing
 
 
-@pytest.mark.parametrize("radial_retract_stops", [True, False])
-def test_the_straight_retraction_toward_the_base_is_stopped_when_it_backfires_only_if_configured(radial_retract_stops):
-    from dataclasses import replace
-
-    from edge_runtime.robot.hazard import arm_capsules, body_spheres, separation_m
-
-    qs = [np.array([a, -0.5, 0.0, 1.2, 0.0, 0.4, 0.0]) for a in np.linspace(-2.0, 2.0, 33)]
-    sep = lambda q, z: separation_m(*body_spheres(at_tool_height(z)), arm_capsules(q))  # noqa: E731
-    q_far = max(qs, key=lambda q: sep(q, 2.0))
-    z = next(z for z in np.arange(3.0, 0.5, -0.02) if sep(q_far, z) < 0.8)
-    # two swings toward him, each well over retract_backfire_m: the first retraction's, then the straight one's
-    q_mid = min(qs, key=lambda q: abs(sep(q, z) - (sep(q_far, z) - 0.2)))
-    q_near = min(qs, key=lambda q: sep(q, z))
-    assert sep(q_mid, z) < sep(q_far, z) - 0.15 and sep(q_near, z) < sep(q_mid, z) - 0.15
-    loop, link, clock = make_whole_body({"radial_retract_stops": radial_retract_stops})
-    link._state = replace(link._state, joint_positions_rad=q_far)
-    drive_poses(loop, link, clock, lambda t: [(0, lifted(at_tool_height(8.0)))], 2.0)
-    drive_poses(loop, link, clock, lambda t: [(0, lifted(at_tool_height(z)))], 2.3)
-    assert "retract" in link.names()
-    link._state = replace(link._state, joint_positions_rad=q_mid)
-    drive_poses(loop, link, clock, lambda t: [(0, lifted(at_tool_height(z)))], 2.5)
-    motions = lambda calls: [c[0] for c in calls if c[0] in ("stop", "retract", "move_to")]  # noqa: E731
-    assert loop.status()["backfired"] == 1 and motions(link.calls)[-1] == "retract"  # the straight one
-    n = len(link.calls)
-    link._state = replace(link._state, joint_positions_rad=q_near)
-    frames = drive_poses(loop, link, clock, lambda t: [(0, lifted(at_tool_height(z)))], 2.7)
-    assert frames[-1].state == "LEVEL2"
-    sent = motions(link.calls[n:])
-    if radial_retract_stops:
-        assert loop.status()["backfired"] == 2 and sent[:1] == ["stop"]
-    else:  # it runs to its end: nothing replaces it
-        assert loop.status()["backfired"] == 1 and "stop" not in sent
-
-
 def test_someone_within_reach_of_a_finished_retraction_turns_the_arm_about_its_base_away_from_him():
     import math
 
@@ -700,17 +666,18 @@ def test_the_escape_is_planned_again_while_level_2_lasts_as_he_walks_round_the_b
     assert abs(math.remainder(math.radians(bearing(turns[-1][0]) - bearing(him)), 2 * math.pi)) > math.radians(90.0)
 
 
-def _backfiring_at(him):
+def _backfiring_at(him, radial_retract_stops=True):
     """A whole-body loop whose Eq. 6 retraction from ``him`` the controller swings toward him: the arm's
     postures turned away from him, to his side and at him (each well nearer him than the last), a step
     that puts the fake arm in one (``to(q, yaw=None)``) and one that drives the loop on and gives the stops
-    and retractions it sent (``drive(t_end)``). The straight retraction that replaces a backfiring one is
-    stopped when it backfires too (``radial_retract_stops``), so that the stopped arm's escape turn is reached."""
+    and retractions it sent (``drive(t_end)``). By default the straight retraction that replaces a backfiring
+    one is stopped when it backfires too (``radial_retract_stops``), so that the stopped arm's escape turn is
+    reached."""
     from dataclasses import replace
 
     posture = lambda j0: np.array([j0, -0.5, 0.0, 1.2, 0.0, 0.4, 0.0])  # noqa: E731
     q_away, q_side, q_at = (posture(math.radians(a)) for a in (180.0, 45.0, 0.0))
-    loop, link, clock = make_whole_body({"radial_retract_stops": True})
+    loop, link, clock = make_whole_body({"radial_retract_stops": radial_retract_stops})
 
     def to(q, yaw=None):
         link._state = replace(link._state, joint_positions_rad=q, **({} if yaw is None else {"yaw_rad": yaw}))
@@ -757,6 +724,21 @@ def test_a_backfired_retraction_falls_back_straight_and_a_stopped_arm_turns_clea
     assert abs(turn) <= math.radians(30.0) + 1e-9                       # escape_turn_max_deg a command
     assert separation_m(*body_spheres(him), turned_capsules(arm_capsules(q_at), turn)) > sep(q_at) + 0.3
     assert loop.status()["escapes"] == 1
+
+
+@pytest.mark.parametrize("radial_retract_stops", [True, False])
+def test_the_straight_retraction_toward_the_base_is_stopped_when_it_backfires_only_if_configured(radial_retract_stops):
+    him = at_point(0.0, 1.0)
+    loop, link, (_, q_side, q_at), to, drive = _backfiring_at(him, radial_retract_stops)
+    eq6 = drive(2.2)[0]
+    to(q_side, eq6[3])  # the first retraction swings the arm toward him: the straight one instead
+    assert loop.status()["backfired"] == 0 and drive(2.3)[0][0] == "retract" and loop.status()["backfired"] == 1
+    to(q_at)  # and the straight one swings it nearer still
+    sent = [c[0] for c in drive(2.5)]
+    if radial_retract_stops:
+        assert loop.status()["backfired"] == 2 and sent[:1] == ["stop"]
+    else:  # it runs to its end: nothing replaces it
+        assert loop.status()["backfired"] == 1 and "stop" not in sent
 
 
 def _turning_from(him):
