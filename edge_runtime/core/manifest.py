@@ -66,6 +66,9 @@ STEP_ARCH = "convlstm_step"
 """The ConvLSTM's streaming step model (one sub-window and the LSTM state per run): the arch of the entry a
 classifier entry's ``step_model`` names (``export.step_model`` writes it, the wearable runtime and the bench
 read it; defined here, where all three may import it)."""
+STREAM_ARCH = "stream"
+"""The trigger-free streaming classifier (issue 12): the last W s of the wrist stream at 25 Hz in, the class out,
+every hop (``export.stream_model`` writes its entries, ``edge_runtime.wearable.stream_decider`` reads them)."""
 _REQUIRED_MODEL_KEYS = ("name", "file", "sha256", "precision", "arch", "parameters", "inputs",
                         "outputs", "classes")
 _OBJECT_KEYS = ("parameters", "metrics", "quantization", "provenance", "camera")
