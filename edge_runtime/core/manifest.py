@@ -151,10 +151,13 @@ def _short(value: Any) -> str:
 def example_shape(spec: dict, batch: int = 1) -> tuple[int, ...]:
     """A concrete shape for a manifest input ``spec``: the batch axis ``batch``, an axis named in
     ``spec["steps"]`` (the ConvLSTM's dynamic sub-window count ``S``) its ``full_capture`` value, so
-    a timing or comparison runs the full-window decision, and any other symbolic axis 1."""
+    a timing or comparison runs the full-window decision, an axis ``spec["dims"]`` names its value there (the
+    streaming classifier's window length ``T``: the runtime's), and any other symbolic axis 1."""
     full = spec.get("steps", {}).get("full_capture", 1) if isinstance(spec.get("steps"), dict) else 1
+    named = spec.get("dims") if isinstance(spec.get("dims"), dict) else {}
     dims = spec.get("shape", [])
-    return tuple([batch] + [d if isinstance(d, int) else full if d == "S" else 1 for d in dims[1:]]) if dims else ()
+    return tuple([batch] + [d if isinstance(d, int) else full if d == "S" else int(named.get(d, 1))
+                            for d in dims[1:]]) if dims else ()
 
 
 def signature_path(manifest_file: str | os.PathLike) -> Path:

@@ -109,7 +109,7 @@ class StreamParams:
 
 
 class StreamModel:
-    """The streaming classifier on onnxruntime: a window (3, T) of 25 Hz steps in m/s^2 -> (K,) probabilities."""
+    """The streaming classifier on onnxruntime: a window (T, 3) of 25 Hz steps in m/s^2 -> (K,) probabilities."""
 
     def __init__(self, model: bytes | str | os.PathLike, *, classes: Sequence[str], name: str = "", precision: str = "",
                  threads: int = 1, entry: dict | None = None, source: str = "", window_steps: int = 100):
@@ -118,14 +118,14 @@ class StreamModel:
         inputs = {i.name: i.shape for i in self.session.get_inputs()}
         outputs = [o.name for o in self.session.get_outputs()]
         if INPUT_NAME not in inputs or OUTPUT_NAME not in outputs or len(inputs[INPUT_NAME]) != 3 \
-                or inputs[INPUT_NAME][1] != 3:
-            raise ModelIntegrityError(f"{self.source}: not a streaming classifier (want input {INPUT_NAME} (N, 3, T) "
+                or inputs[INPUT_NAME][2] != 3:
+            raise ModelIntegrityError(f"{self.source}: not a streaming classifier (want input {INPUT_NAME} (N, T, 3) "
                                       f"and output {OUTPUT_NAME}; got inputs {inputs}, outputs {outputs})")
         self.classes = [str(c) for c in classes]
         self.name, self.precision, self.entry = name or Path(self.source).stem, precision, entry or {}
         self.threads = threads
         self.step_model = None  # what the summary asks of a capture classifier
-        self._x = np.zeros((1, 3, window_steps), FLOAT32)
+        self._x = np.zeros((1, window_steps, 3), FLOAT32)
         """The model's input: filled by a copy of the window, never reallocated."""
         self._outputs = [OUTPUT_NAME]
         self._feed = {INPUT_NAME: self._x}
@@ -156,7 +156,7 @@ class StreamModel:
     def classify_window(self, window: np.ndarray) -> np.ndarray:
         """``window`` (T, 3) float32 25 Hz steps, oldest first (T = the window this model was opened for) ->
         (K,) probabilities. The input buffer is reused: the returned array is the model's own output."""
-        np.copyto(self._x[0], window.T)
+        np.copyto(self._x[0], window)
         return self._run(self._outputs, self._feed, self._options)[0][0]
 
     def decision_path(self) -> dict:

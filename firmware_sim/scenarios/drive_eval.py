@@ -392,7 +392,7 @@ def hop_agreement(drives, model, other, params) -> dict:
     for drive in drives:
         StreamLoop(both, params).feed(ImuBlock(0.0, drive.acc_mps2))
     return {"models": [model.name, other.name], "agreement": round(both.same / both.hops, 5) if both.hops else None,
-            "decisions": both.hops, "by_steps": "every hop"}
+            "decisions": both.hops, "agreeing": both.same, "by_steps": "every hop"}
 
 
 # ---------------------------------------------------------------------------- running
@@ -532,7 +532,8 @@ def to_markdown(report: dict) -> str:
                   for name, key in rows]
     if "class_agreement" in report:
         c = report["class_agreement"]
-        lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} on every capture and sub-window count: "
+        where = "at every hop of the drives" if c["by_steps"] == "every hop" else "on every capture and sub-window count"
+        lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} {where}: "
                       f"**{c['agreement']}** over {c['decisions']} decisions (by S: {c['by_steps']})"]
     if "step_accuracy" in report:
         lines += ["", "Top class after S sub-windows on every detector capture (class weights applied; truth: the "

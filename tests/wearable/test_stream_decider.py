@@ -220,3 +220,14 @@ def test_a_stream_replay_writes_the_alerts_log_with_the_capture_paths_fields(tmp
     command.replay(cfg, Windows(), _moves(4000, [(1000, 2500)]), outputs=[lambda d: lines.append(json.dumps(d.to_json()))])
     (d,) = [json.loads(line) for line in lines]
     assert list(d) == DECISION_KEYS and d["status"] == "alert" and d["alert_seq"] == 0 and d["steps"] == 0
+
+
+def test_the_wearable_command_replays_with_the_shipped_stream_model(tmp_path, capsys):
+    acc = _moves(3000, [(1000, 2000)])
+    csv, log = tmp_path / "r.csv", tmp_path / "alerts.jsonl"
+    csv.write_text("t,ax,ay,az\n" + "".join(f"{i / 100:.2f},{a:.4f},{b:.4f},{c:.4f}\n" for i, (a, b, c) in enumerate(acc)))
+    assert table.main(["wearable", "--replay", str(csv), "--decision", "stream", "--alerts", str(log), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    # 750 steps of 25 Hz: a decision at the 100th and every 12th after it
+    assert "model stream-int8 (int8)" in out and "hops 55 (stream decisions every 0.48 s on the last 4 s" in out
+    assert all(list(json.loads(line)) == DECISION_KEYS for line in log.read_text().splitlines())
