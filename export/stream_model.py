@@ -206,7 +206,8 @@ def _checkpoint_file(checkpoint: str | Path) -> Path:
 
 def add_figures(out: str | Path, reports: list[str | Path], log: Callable[[str], None] = print) -> dict:
     """The stream decisions' drive figures of ``drive_eval.json`` reports, added to the manifest entry of the
-    model that made them (matched by sha256: a figure belongs to one file), under ``metrics.drives``."""
+    model that made them (matched by sha256: a figure belongs to one file), under ``metrics.drives`` (with the
+    report's top-class agreement with another model at every hop, when it has one)."""
     out = Path(out)
     manifest = verify_all(out)
     by_sha = {e["sha256"]: e for e in manifest["models"] if e["arch"] == STREAM_ARCH}
@@ -223,7 +224,8 @@ def add_figures(out: str | Path, reports: list[str | Path], log: Callable[[str],
                 "false_alerts", "repeat_alerts", "distractions", "driving_hours")
         entry.setdefault("metrics", {}).setdefault("drives", {})[f"seed {r['seed']}"] = {
             "command": r["command"], "git_commit": r.get("git_commit"), "stream": r["stream_path"]["settings"],
-            **{k: score[k] for k in keep}}
+            **{k: score[k] for k in keep},
+            **({"hop_agreement": r["class_agreement"]} if "class_agreement" in r else {})}
         log(f"{entry['name']}: drive seed {r['seed']} figures from {path}")
     write_manifest(out, manifest)
     return manifest
