@@ -219,16 +219,19 @@ def forged(commands: int, seed: int) -> dict:
 # tampered models
 
 def tampered() -> dict:
-    from edge_runtime.core.manifest import ASSETS_DIR, load_manifest
+    from edge_runtime.core.manifest import ASSETS_DIR, STREAM_ARCH, load_manifest
     from edge_runtime.errors import ModelIntegrityError
     from edge_runtime.robot.lifter import LifterParams, StreamingLifter
     from edge_runtime.wearable.classifier import Engine
+    from edge_runtime.wearable.stream_decider import StreamModel
 
     entries = load_manifest(ASSETS_DIR)["models"]
 
     def load(assets: Path, entry: dict) -> None:
         if entry["arch"] == "lifter":
             StreamingLifter.from_manifest(assets, LifterParams(precision=entry["precision"]))
+        elif entry["arch"] == STREAM_ARCH:  # the streaming decider's classifier (issue 12)
+            StreamModel.from_manifest(assets, entry["name"])
         else:  # a step model is loaded by the classifier entry that names it
             Engine.from_manifest(assets, next((e["name"] for e in entries if e.get("step_model") == entry["name"]),
                                               entry["name"]))

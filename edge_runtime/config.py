@@ -31,7 +31,7 @@ from typing import Any, Callable
 from edge_runtime.errors import ConfigError
 
 BOX_SECTIONS: tuple[str, ...] = (
-    "imu", "detector", "model", "alerts", "can",                        # the wearable
+    "imu", "detector", "model", "alerts", "stream", "can",              # the wearable
     "robot_link", "camera", "camera_source", "people", "calibration", "tracker",  # the robot side
     "zones", "robot_loop", "lifter",
     "cap", "gola",                                                      # posture

@@ -12,6 +12,10 @@
   step          --checkpoint DIR/model.pt [--assets DIR] [--train TRAIN.npz --test TEST.npz] [--work DIR]
                 the shipped ConvLSTM's streaming step model (one sub-window + LSTM state per run), fp32 + int8,
                 added to the assets (what `assets` does as its step 7; the one-shot files untouched)
+  stream        --checkpoint DIR/model.pt [--assets DIR] [--work DIR] | --figures A/drive_eval.json,B/... [--assets DIR]
+                the streaming classifier (python -m models stream-train) -> stream.fp32.onnx, stream.int8.onnx and
+                their manifest entries (other entries untouched); --figures: add drive-eval's stream figures to
+                the entry of the model that made them
   opsets        [--assets DIR]
                 every shipped model declares only the opset domains its nodes use; manifest sha256 updated
   sign          --keygen DIR | --key PRIVATE.pem [--assets DIR]
@@ -76,6 +80,13 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--selection", default=None, help="the selection cohort whose captures gate the int8 step "
                                                      "recipe (default: reports/wearable/selection/selection.json)")
     _shipped_model_args(t)
+
+    st = sub.add_parser("stream", help="the streaming classifier's fp32 and int8 models into the assets")
+    what = st.add_mutually_exclusive_group(required=True)
+    what.add_argument("--checkpoint", help="DIR/model.pt written by python -m models stream-train")
+    what.add_argument("--figures", help="comma-separated drive_eval.json of firmware_sim drive-eval --decision stream")
+    st.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
+    st.add_argument("--work", default=None, help="scratch directory (default: the system's temporary one)")
 
     f = sub.add_parser("schedule", help="write the vehicle DBC's frame schedule beside it (after a change of the DBC)")
     f.add_argument("--assets", default=None, help="assets directory (default: edge_runtime/assets)")
@@ -204,6 +215,17 @@ def cmd_step(a) -> int:
     return 0
 
 
+def cmd_stream(a) -> int:
+    from edge_runtime.core.manifest import ASSETS_DIR
+    from export.stream_model import add_figures, build_stream_assets
+
+    if a.figures:
+        add_figures(a.assets or ASSETS_DIR, [p.strip() for p in a.figures.split(",") if p.strip()])
+    else:
+        build_stream_assets(a.checkpoint, a.assets or ASSETS_DIR, work=a.work)
+    return 0
+
+
 def cmd_opsets(a) -> int:
     from edge_runtime.core.manifest import ASSETS_DIR
     from export.opsets import apply_to_assets
@@ -230,7 +252,7 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from edge_runtime.core.manifest import ModelIntegrityError
 
-    cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "int8": cmd_int8, "step": cmd_step, "opsets": cmd_opsets,
+    cmds = {"onnx": cmd_onnx, "quantize": cmd_quantize, "assets": cmd_assets, "int8": cmd_int8, "step": cmd_step, "stream": cmd_stream, "opsets": cmd_opsets,
             "schedule": cmd_schedule,
             "compare-int8": cmd_compare}
     func = getattr(args, "func", None) or cmds[args.command]

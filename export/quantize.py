@@ -401,11 +401,13 @@ def probs_of(model: str | Path | ort.InferenceSession, x: np.ndarray, batch: int
 def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, eval_x: np.ndarray,
            eval_y: np.ndarray | None = None, variants: Sequence[str] | None = None, threads: int = 1,
            n_timing: int = 3000, log: Callable[[str], None] = lambda s: None,
-           early_min_agreement: float | None = None, early_steps: Sequence[int] = (1, 2, 3, 4, 5)) -> dict:
+           early_min_agreement: float | None = None, early_steps: Sequence[int] = (1, 2, 3, 4, 5),
+           min_agreement: float = MIN_AGREEMENT) -> dict:
     """Build every candidate, time and check each, keep the fastest faithful one at ``out_path``.
     With ``early_min_agreement``, a candidate must also agree with fp32 on that share of the
     early decisions, the first S (``early_steps``) of the 6 sub-windows of ``eval_x`` (the
     ConvLSTM's dynamic-S input): after few steps many decisions are near ties that int8 can flip.
+    ``min_agreement``: the argmax agreement with fp32 a candidate needs on ``eval_x``.
 
     Returns the quantisation report (JSON-ready)."""
     fp32_path, out_path = Path(fp32_path), Path(out_path)
@@ -421,15 +423,16 @@ def choose(fp32_path: str | Path, out_path: str | Path, calib: np.ndarray, *, ev
                                 score=_drift_from(probs_of(fp32_path, eval_x), eval_x, eval_y, early_refs),
                                 feed={INPUT_NAME: np.ascontiguousarray(eval_x[:1])}, outputs=[PROBS],
                                 threads=threads, n_timing=n_timing, warmup=200, log=log)
-        ok = _faithful(comp, eval_y, log, early_min_agreement)
+        ok = _faithful(comp, eval_y, log, early_min_agreement, min_agreement)
         if not ok:
             raise QuantizeError(f"{fp32_path}: no int8 variant keeps predictions within "
-                                f"agreement {MIN_AGREEMENT} / macro-F1 {MAX_F1_DELTA} of fp32")
+                                f"agreement {min_agreement} / macro-F1 {MAX_F1_DELTA} of fp32")
         chosen = fastest({k: comp.latency[k]["p50_us"] for k in ok}, ok, TIE)
         out_path.parent.mkdir(parents=True, exist_ok=True)
         out_path.write_bytes(comp.paths[chosen].read_bytes())
     return _choice_report(chosen, comp, n_calib=len(calib), n_eval=len(eval_x), labelled=eval_y is not None,
-                          threads=threads, early_min_agreement=early_min_agreement, early_steps=early_steps)
+                          threads=threads, early_min_agreement=early_min_agreement, early_steps=early_steps,
+                          min_agreement=min_agreement)
 
 
 def _drift_from(ref_probs: np.ndarray, eval_x: np.ndarray, eval_y: np.ndarray | None,
@@ -458,14 +461,14 @@ def _drift_from(ref_probs: np.ndarray, eval_x: np.ndarray, eval_y: np.ndarray | 
 
 
 def _faithful(comp: Comparison, eval_y: np.ndarray | None, log: Callable[[str], None],
-              early_min_agreement: float | None = None) -> list[str]:
+              early_min_agreement: float | None = None, min_agreement: float = MIN_AGREEMENT) -> list[str]:
     """The variants whose predictions stay with fp32's, in candidate order; each variant's
     result gains its latency and ``accepted``, and a log line."""
     ok = []
     for k in comp.paths:
         r = comp.results[k]
         r.update(comp.latency[k])
-        r["accepted"] = (r["agreement"] >= MIN_AGREEMENT
+        r["accepted"] = (r["agreement"] >= min_agreement
                          and (eval_y is None or abs(r["macro_f1_delta"]) <= MAX_F1_DELTA)
                          and (early_min_agreement is None or r["early_agreement"] >= early_min_agreement))
         if r["accepted"]:
@@ -478,7 +481,8 @@ def _faithful(comp: Comparison, eval_y: np.ndarray | None, log: Callable[[str], 
 
 
 def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, labelled: bool, threads: int,
-                   early_min_agreement: float | None = None, early_steps: Sequence[int] = ()) -> dict:
+                   early_min_agreement: float | None = None, early_steps: Sequence[int] = (),
+                   min_agreement: float = MIN_AGREEMENT) -> dict:
     """The quantisation report of :func:`choose` (the manifest's ``quantization``)."""
     c, v = comp.results[chosen], VARIANTS[chosen]
     return {
@@ -500,7 +504,7 @@ def _choice_report(chosen: str, comp: Comparison, *, n_calib: int, n_eval: int, 
         "runtime_op_types": c["runtime_op_types"],
         "agreement_with_fp32": c["agreement"],
         "selection": {"rule": f"fastest p50 at batch 1 with {threads} thread(s) among variants with argmax "
-                              f"agreement >= {MIN_AGREEMENT}" + (f" and |dF1| <= {MAX_F1_DELTA}" if labelled else "")
+                              f"agreement >= {min_agreement}" + (f" and |dF1| <= {MAX_F1_DELTA}" if labelled else "")
                               + (f" and argmax agreement >= {early_min_agreement} after every S in "
                                  f"{list(early_steps)} sub-windows" if early_min_agreement is not None else "")
                               + f"; variants within {TIE:.0%} of the fastest are tied and the first in the "

@@ -6,6 +6,9 @@
                --loso: one fold per subject (DIR/folds/s<K>/), scored on --test captures when given
                --within: within-subject folds (DIR/within/ when combined with --loso/--test)
             Data parallel: torchrun --nproc_per_node=2 -m models train ...
+  stream-train  --out DIR [--width 64] [--epochs 16] [--seed 0] [--subjects 20] [--cohort-seed 0] [--minutes 15]
+            -> DIR/model.pt: the trigger-free streaming classifier (models/stream_train.py), trained on the
+               simulated cohort's continuous streams; deterministic for a seed (one thread)
   evaluate  --checkpoint DIR/model.pt --data TEST.npz --out DIR2
   import    --csv REC.csv --events EVENTS.csv|truth.json --subject K --out OUT.npz [--split train|test]
             [--classes A,B,...] [--append]
@@ -47,6 +50,15 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("--jobs", type=int, default=1, help="fold worker processes for --loso/--within")
     t.add_argument("--threads", type=int, default=1, help="torch intra-op threads (train/test mode)")
     t.add_argument("--no-progress", action="store_true")
+
+    st = sub.add_parser("stream-train", help="train the trigger-free streaming classifier on the cohort's streams")
+    st.add_argument("--out", required=True, help="directory for model.pt")
+    st.add_argument("--width", type=int, default=64, help="channels of the first conv layer (default 64: m64)")
+    st.add_argument("--epochs", type=int, default=16)
+    st.add_argument("--seed", type=int, default=0, help="training seed (initialisation, sampling, augmentation)")
+    st.add_argument("--subjects", type=int, default=20)
+    st.add_argument("--cohort-seed", type=int, default=0, help="the simulated cohort (0: what the ConvLSTM trains on)")
+    st.add_argument("--minutes", type=float, default=15.0, help="minutes per simulated trial")
 
     e = sub.add_parser("evaluate", help="score a checkpoint on an NPZ")
     e.add_argument("--checkpoint", required=True)
@@ -155,6 +167,22 @@ def cmd_train(a) -> int:
     return 0
 
 
+def cmd_stream_train(a) -> int:
+    from models.dataset import DataError
+
+    for name, v in (("--width", a.width), ("--epochs", a.epochs), ("--subjects", a.subjects)):
+        if v < 1:
+            raise DataError(f"{name}: must be >= 1, got {v}")
+    if not a.minutes > 0:
+        raise DataError(f"--minutes: must be > 0, got {a.minutes}")
+    from models.stream_train import train_stream
+
+    path = train_stream(a.out, width=a.width, epochs=a.epochs, seed=a.seed, subjects=a.subjects,
+                        cohort_seed=a.cohort_seed, minutes=a.minutes, log=lambda line: print(line, flush=True))
+    print(f"wrote {path}")
+    return 0
+
+
 def cmd_evaluate(a) -> int:
     from models.dataset import DataError, load_npz
 
@@ -238,7 +266,7 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     from models.dataset import DataError
 
-    cmds = {"train": cmd_train, "evaluate": cmd_evaluate, "import": cmd_import, "select": cmd_select,
+    cmds = {"train": cmd_train, "stream-train": cmd_stream_train, "evaluate": cmd_evaluate, "import": cmd_import, "select": cmd_select,
             "report": cmd_report}
     # DataError names the file and field; OSError/ValueError: unreadable file, unwritable --out, ...
     return run(lambda: cmds[args.command](args), bad_input=(DataError, OSError, ValueError),

@@ -44,6 +44,14 @@ def test_example_file_is_the_defaults_and_print_config_round_trips(tmp_path):
         ("[imu]\nrange_mps2 = 1e300\n", r"\[imu\] range_mps2: must be a number in \[19.6, 1000\]"),
         ('[alerts]\nnever_alert = ["Phone", "Texting", "TouchScreen", "Drink", "Marker", "Other"]\n',
          r"\[alerts\] never_alert: .* holds every class"),
+        # the streaming decider's (issue 12)
+        ('[alerts]\ndecision = "streaming"\n', r"\[alerts\] decision: must be one of early, full_window, stream"),
+        ("[stream]\nhop_s = 0.5\n", r"\[stream\] hop_s: must be a multiple of 0.04 s in \[0.04, 10\] s, got 0.5"),
+        ("[stream]\nwindow_s = 0.4\n", r"\[stream\] window_s: must be a multiple of 0.04 s in \[0.64, 30\] s"),
+        ('[stream]\nscore = "max"\n', r"\[stream\] score: must be top or any"),
+        ("[stream]\nthreshold = 1.2\n", r"\[stream\] threshold: must be a number in \[0, 1\]"),
+        ("[stream]\nconsecutive_hops = 0\n", r"\[stream\] consecutive_hops: must be an integer in 1..100"),
+        ("[stream]\nhops = 3\n", r"box.toml: \[stream\] hops: unknown key"),
         # what a parser meets from a fuzzer: one line, never a traceback
         ("[detector]\nwindow_frames = " + "9" * 400 + "\n", r"\[detector\] window_frames: expected an integer, got 9+\.\.\.$"),
         ("[imu]\nrange_mps2 = " + "9" * 400 + "\n", r"\[imu\] range_mps2: expected a number"),
@@ -144,7 +152,7 @@ def test_the_wearable_reads_the_shared_file_without_loading_the_robot_side(tmp_p
     r = subprocess.run([sys.executable, "-c", PROBE, str(box)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
-    assert out["sections"] == ["imu", "detector", "model", "alerts", "can"]
+    assert out["sections"] == ["imu", "detector", "model", "alerts", "stream", "can"]
     assert out["robot_or_posture_loaded"] == []
     with pytest.raises(ConfigError, match=r"\[zones\] not_a_key: unknown key"):
         config.load(box)  # this process has the robot side loaded: the section is checked

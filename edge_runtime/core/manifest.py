@@ -66,6 +66,9 @@ STEP_ARCH = "convlstm_step"
 """The ConvLSTM's streaming step model (one sub-window and the LSTM state per run): the arch of the entry a
 classifier entry's ``step_model`` names (``export.step_model`` writes it, the wearable runtime and the bench
 read it; defined here, where all three may import it)."""
+STREAM_ARCH = "stream"
+"""The trigger-free streaming classifier (issue 12): the last W s of the wrist stream at 25 Hz in, the class out,
+every hop (``export.stream_model`` writes its entries, ``edge_runtime.wearable.stream_decider`` reads them)."""
 _REQUIRED_MODEL_KEYS = ("name", "file", "sha256", "precision", "arch", "parameters", "inputs",
                         "outputs", "classes")
 _OBJECT_KEYS = ("parameters", "metrics", "quantization", "provenance", "camera")
@@ -148,10 +151,13 @@ def _short(value: Any) -> str:
 def example_shape(spec: dict, batch: int = 1) -> tuple[int, ...]:
     """A concrete shape for a manifest input ``spec``: the batch axis ``batch``, an axis named in
     ``spec["steps"]`` (the ConvLSTM's dynamic sub-window count ``S``) its ``full_capture`` value, so
-    a timing or comparison runs the full-window decision, and any other symbolic axis 1."""
+    a timing or comparison runs the full-window decision, an axis ``spec["dims"]`` names its value there (the
+    streaming classifier's window length ``T``: the runtime's), and any other symbolic axis 1."""
     full = spec.get("steps", {}).get("full_capture", 1) if isinstance(spec.get("steps"), dict) else 1
+    named = spec.get("dims") if isinstance(spec.get("dims"), dict) else {}
     dims = spec.get("shape", [])
-    return tuple([batch] + [d if isinstance(d, int) else full if d == "S" else 1 for d in dims[1:]]) if dims else ()
+    return tuple([batch] + [d if isinstance(d, int) else full if d == "S" else int(named.get(d, 1))
+                            for d in dims[1:]]) if dims else ()
 
 
 def signature_path(manifest_file: str | os.PathLike) -> Path:

@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from edge_runtime.wearable.loop import Decision, WearableLoop
     from edge_runtime.wearable.mavlink_source import MavlinkImuSource
     from edge_runtime.wearable.sources import ImuBlock, ReplayStats
+    from edge_runtime.wearable.stream_decider import StreamLoop, StreamModel
 
 log = logging.getLogger(__name__)
 BAD_INPUT: tuple[type[BaseException], ...] = ()
@@ -59,9 +60,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, help="onnxruntime intra-op threads [model] threads")
     p.add_argument("--min-confidence", type=float, help="below this a full-window decision is 'uncertain' "
                    "[alerts] min_confidence (and the S = 6 entry of min_confidence_by_steps)")
-    p.add_argument("--decision", choices=("early", "full_window"),
+    p.add_argument("--decision", choices=("early", "full_window", "stream"),
                    help="decide after each sub-window the capture allows (preliminary, then confirmed, revised or "
-                        "withdrawn), or once on the full 7-s window [alerts] decision")
+                        "withdrawn), once on the full 7-s window, or without captures every hop on the last seconds "
+                        "of the stream ([stream]) [alerts] decision")
     p.add_argument("--threshold", type=float, help="detector threshold (m/s^2) [detector] threshold_mps2")
     p.add_argument("--realtime", action="store_true", help="pace a replay at its own sample rate")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
@@ -71,7 +73,7 @@ def effective_config(args: argparse.Namespace):
     """The config file, then the command-line flags on top, validated as one: the sections of
     the components imported here (the robot's sections in the same file are left to it)."""
     from edge_runtime import config
-    from edge_runtime.wearable import alerts, classifier, detector, loop, sources  # noqa: F401 - their sections
+    from edge_runtime.wearable import alerts, classifier, detector, loop, sources, stream_decider  # noqa: F401 - their sections
 
     cfg = config.load(args.config)
     cfg = config.override(cfg, "model", assets=args.assets, name=args.model, threads=args.threads)
@@ -84,8 +86,6 @@ def effective_config(args: argparse.Namespace):
 
 
 def cmd(args: argparse.Namespace) -> int:
-    from edge_runtime.wearable.loop import WearableLoop
-
     cfg = effective_config(args)
     if args.print_config:
         print(cfg.to_toml(), end="")
@@ -102,7 +102,7 @@ def cmd(args: argparse.Namespace) -> int:
         record = _recorder(stack, args.record)
         pub = _open_publisher(cfg, args.can_log, _status_of(engine), data_clock=source.live is None)
         stack.callback(pub.close)
-        loop = WearableLoop(engine, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
+        loop = make_loop(cfg, engine, pub)
         t_wall = time.perf_counter()
         with suppress(KeyboardInterrupt):
             _drive(source, loop, outputs, record)
@@ -194,10 +194,27 @@ def _paced(block: ImuBlock, rate_hz: float) -> Iterator[ImuBlock]:
                        rx_monotonic_s=time.monotonic())
 
 
-def _load_classifier(cfg) -> Engine:
+def make_loop(cfg, classifier, publisher: AlertPublisher | None) -> WearableLoop | StreamLoop:
+    """The decider ``[alerts] decision`` selects, on ``classifier`` (:func:`_load_classifier`'s): the capture loop,
+    or with "stream" the streaming decider. Every decider's alerts go out through ``publisher``."""
+    if cfg.alerts.decision == "stream":
+        from edge_runtime.wearable.stream_decider import StreamLoop
+
+        return StreamLoop(classifier, cfg.stream, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=publisher)
+    from edge_runtime.wearable.loop import WearableLoop
+
+    return WearableLoop(classifier, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz,
+                        publisher=publisher)
+
+
+def _load_classifier(cfg) -> Engine | StreamModel:
     from edge_runtime.config import ConfigError
     from edge_runtime.wearable.classifier import Engine
 
+    if cfg.alerts.decision == "stream":  # the streaming classifier; [alerts]' capture keys do not apply
+        from edge_runtime.wearable.stream_decider import StreamModel
+
+        return StreamModel.from_params(cfg.stream, cfg.model)
     engine = Engine.from_params(cfg.model)
     unknown = sorted(set(cfg.alerts.never_alert) - set(engine.classes))
     if unknown:
@@ -269,13 +286,12 @@ def replay(cfg, classifier, acc_mps2, outputs: Iterable[Callable[[Decision], Non
     to ``outputs``. For evaluations that would otherwise write and parse CSV files (``firmware_sim
     drive-eval``); the loop (its stats and status) is returned."""
     from edge_runtime.wearable.alerts import WearableStatus
-    from edge_runtime.wearable.loop import WearableLoop
     from edge_runtime.wearable.sources import ImuBlock, ReplayStats
 
     status = _status_of(classifier) if hasattr(classifier, "entry") else WearableStatus()
     pub = _open_publisher(cfg, None, status, data_clock=True)
     try:
-        loop = WearableLoop(classifier, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=pub)
+        loop = make_loop(cfg, classifier, pub)
         _drive(_Source([ImuBlock(t0_s, acc_mps2)], ReplayStats()), loop, list(outputs))
     finally:
         pub.close()
@@ -347,8 +363,11 @@ def _sensor_state(pub: AlertPublisher, state: str, detail: str = "") -> None:
 
 
 def _print_decision(d: Decision) -> None:
+    from edge_runtime.wearable.stream_decider import STREAM_STEPS
+
     mark = ("ALERT" if d.status == "alert" else d.status.upper()) if d.alerted else d.status
-    after = "" if d.steps == 6 else f"  (after {d.steps} of 6 sub-windows, t={d.t_alert_s:.2f}s)"
+    after = "" if d.steps == 6 else f"  (stream, t={d.t_alert_s:.2f}s)" if d.steps == STREAM_STEPS else \
+        f"  (after {d.steps} of 6 sub-windows, t={d.t_alert_s:.2f}s)"
     print(f"t={d.t_trigger_s:9.2f}s  {d.label:<12} p={d.confidence:.2f}  {mark}{after}")
 
 
@@ -360,7 +379,8 @@ def _print_summary(loop: WearableLoop, source: _Source, cfg, can_log: str | None
         f"({stream_s / max(wall_s, 1e-9):,.0f}x real time); model {engine.name} ({engine.precision})"
         + (f", steps by {engine.step_model.call_path}" if getattr(engine, "step_model", None) is not None else "")
         + "\n"
-        f"  captures {s.captures} ({loop.decision_mode}): alert events {s.events}; decisions "
+        + (f"  hops {loop.hops}" if hasattr(loop, "hops") else f"  captures {s.captures}")
+        + f" ({loop.decision_mode}): alert events {s.events}; decisions "
         + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(s.statuses.items())) + "\n"
         "  by class: " + (", ".join(f"{k} {v}" for k, v in sorted(s.labels.items())) or "none") + "\n"
         f"  bad samples: non-finite or out of range {h.non_finite} (out of range "

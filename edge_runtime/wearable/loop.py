@@ -94,7 +94,7 @@ OTHER_EVIDENCE_FROM_STEP = 3
 """The first sub-window count whose P(Other) counts towards ``AlertPolicy.max_mean_other``: after 1 or 2
 sub-windows (0.5-1.6 s of the motion) the model is right on fewer than two thirds of the captures."""
 FLOAT32 = np.dtype(np.float32)
-DECISIONS = ("early", "full_window")
+DECISIONS = ("early", "full_window", "stream")
 ALERTING = ("alert", "preliminary", "confirmed", "revised")
 """Statuses whose frame tells the vehicle a distraction is under way (``withdrawn`` clears it)."""
 
@@ -112,7 +112,9 @@ class AlertPolicy:
     decision: str = config.setting("early", config.one_of(*DECISIONS))
     """'early': decide after each sub-window the capture's evidence allows (preliminary, then confirmed,
     revised or withdrawn), when the model accepts partial captures; 'full_window': one decision per
-    capture at T+599, the dissertation's."""
+    capture at T+599, the dissertation's; 'stream': no detector and no capture: the streaming classifier
+    decides every hop on the last seconds of the stream ([stream], edge_runtime.wearable.stream_decider; issue
+    12, not validated on held-out drives yet). The other keys of this section are the capture path's."""
     min_confidence_by_steps: tuple[float, ...] = config.setting(
         (0.9, 0.9, 0.9, 0.9, 0.9, -1.0), ("a list of 6 numbers, each in [0, 1] or negative",
                                              lambda v: len(v) == N_SUBSEQ and all(p <= 1.0 for p in v)))
@@ -676,16 +678,22 @@ class WearableLoop:
         )
 
     def _conclude(self, verdict: Verdict) -> Decision:
-        """The decision, made once: a verdict whose frame should go out is alerted only if it went out."""
-        if verdict.status in ("uncertain", "not_alerted", "continued"):
-            return Decision.made(verdict, alerted=False)
-        if self.publisher is None:
-            return Decision.made(verdict, alerted=True)
-        seq = self.publisher.publish_alert(verdict)
-        if seq is None:
-            return Decision.made(verdict, alerted=False, status="alert_not_sent")
-        if verdict.rx_monotonic_s is None:  # a recording: no arrival time to measure from
-            return Decision.made(verdict, alerted=True, alert_seq=seq)
-        latency_ms = (time.monotonic() - verdict.rx_monotonic_s) * 1e3
-        self.status.add_alert_latency(latency_ms)
-        return Decision.made(verdict, alerted=True, latency_ms=latency_ms, alert_seq=seq)
+        return conclude(verdict, self.publisher, self.status)
+
+
+def conclude(verdict: Verdict, publisher: AlertPublisher | None, status: WearableStatus) -> Decision:
+    """The decision, made once: a verdict whose frame should go out is alerted only if it went out (through
+    ``publisher``; without one, offline, it counts as alerted). The alert path of every decider (this loop's,
+    ``stream_decider``'s)."""
+    if verdict.status in ("uncertain", "not_alerted", "continued"):
+        return Decision.made(verdict, alerted=False)
+    if publisher is None:
+        return Decision.made(verdict, alerted=True)
+    seq = publisher.publish_alert(verdict)
+    if seq is None:
+        return Decision.made(verdict, alerted=False, status="alert_not_sent")
+    if verdict.rx_monotonic_s is None:  # a recording: no arrival time to measure from
+        return Decision.made(verdict, alerted=True, alert_seq=seq)
+    latency_ms = (time.monotonic() - verdict.rx_monotonic_s) * 1e3
+    status.add_alert_latency(latency_ms)
+    return Decision.made(verdict, alerted=True, latency_ms=latency_ms, alert_seq=seq)

@@ -1,8 +1,8 @@
 """``python -m firmware_sim drive-eval``: what a driver gets, on held-out simulated driving.
 
     python -m firmware_sim drive-eval --hours 10 --seed 0 --out reports/drive_eval
-        [--decision early,full_window] [--baseline-share 0.3] [--drive-minutes 30]
-        [--config BOX.toml] [--assets DIR] [--model int8|fp32]
+        [--decision early,full_window[,stream]] [--baseline-share 0.3] [--drive-minutes 30]
+        [--config BOX.toml] [--assets DIR] [--model int8|fp32] [--agreement ENTRY]
 
 Simulates ``--hours`` of driving by drivers the models never saw: drives with distractions and
 Other motions (``firmware_sim.devices.wrist.simulate_drive``) and, for ``--baseline-share`` of the
@@ -34,6 +34,12 @@ trigger alone, and how many distractions only the frame rule credits:
   motion stayed below the detector's threshold, or the detector was still paused by an earlier
   capture), a capture that only continued an earlier event, a full window that said Other, or no
   step confident enough.
+
+``stream`` (``[alerts] decision = "stream"``, issue 12): the same replay with the streaming decider
+(:mod:`edge_runtime.wearable.stream_decider`, the model ``[stream] model`` names); its alerts have no detector
+trigger and are scored as session 21 scored its prototype (:func:`stream_scored`). ``--config BOX.toml`` with
+``decision = "stream"`` adds the mode. ``--agreement ENTRY`` then also compares the stream model with ENTRY at
+every hop.
 
 Writes ``OUT/drive_eval.json``, ``OUT/drive_eval.md`` and ``OUT/imu_trace.png`` (a distraction with
 its onset, end, the preliminary and final alert frames).
@@ -93,6 +99,9 @@ model decides per sub-window; a frame less than one into the distraction was dec
 it (an Other motion), so its coinciding with the distraction is chance, not detection."""
 ATTRIBUTIONS = ("trigger", "frame")
 MODES = ("full_window", "early")
+"""The capture path's decision modes."""
+STREAM = "stream"
+"""The streaming decider's mode (``[alerts] decision = "stream"``)."""
 HELD_OUT_SEED = 2
 """The held-out seed: never tuned on; every other seed is development (its report says so)."""
 
@@ -288,6 +297,7 @@ class ModeScore:
             "false_alerts_per_hour": round(self.false_alerts / self.hours, 3) if self.hours else None,
             "false_alerts_withdrawn": self.false_withdrawn,
             "first_alerts_after_the_distraction_ended": self.late,
+            "first_alerts_before_the_onset": int((t < 0).sum()),
             "repeat_alerts": self.repeat_alerts,
             "decisions": self.decisions,
             "statuses": dict(sorted(self.statuses.items())),
@@ -346,16 +356,57 @@ def step_accuracy(drives, engine, detector_cfg, class_weights=None) -> dict:
             for s, (a, n, ad, nd) in right.items()}
 
 
+def stream_scored(d: dict) -> dict:
+    """A stream decision as the scorer reads it: session 21's convention (reports/wearable/stream_s21), kept so
+    that the product path's figures compare with the prototype's. A stream alert has no detector trigger; it is
+    scored as if its trigger came ``MATCH_BEFORE_S`` after its frame (``t_trigger_s = t_alert_s + 1 s``), so the
+    trigger rule credits a frame that went out from 2 s before the distraction's start to 1 s before its end, and
+    the frame rule (``SUBWINDOW_S`` after the start to the end) the last second. The 2 s before the start are
+    more than the prototype's report says ("an alert before the onset is a false alert"): the figures count
+    such first alerts apart (``first_alerts_before_the_onset``)."""
+    return {**d, "t_trigger_s": round(d["t_alert_s"] + MATCH_BEFORE_S, 3)}
+
+
+class _HopAgreement:
+    """A streaming classifier that also asks a second one at every hop and counts when their top classes agree."""
+
+    def __init__(self, model, other):
+        self.model, self.other, self.classes = model, other, model.classes
+        self.same = self.hops = 0
+
+    def classify_window(self, window: np.ndarray) -> np.ndarray:
+        p = self.model.classify_window(window)
+        top = int(np.argmax(p))
+        self.same += top == int(np.argmax(self.other.classify_window(window)))
+        self.hops += 1
+        return p
+
+
+def hop_agreement(drives, model, other, params) -> dict:
+    """Top-class agreement of two streaming classifiers (int8 against fp32) at every hop of the drives, through the
+    runtime's streaming decider (its 25 Hz steps and windows)."""
+    from edge_runtime.wearable.sources import ImuBlock
+    from edge_runtime.wearable.stream_decider import StreamLoop
+
+    both = _HopAgreement(model, other)
+    for drive in drives:
+        StreamLoop(both, params).feed(ImuBlock(0.0, drive.acc_mps2))
+    return {"models": [model.name, other.name], "agreement": round(both.same / both.hops, 5) if both.hops else None,
+            "decisions": both.hops, "agreeing": both.same, "by_steps": "every hop"}
+
+
 # ---------------------------------------------------------------------------- running
 
 
-def evaluate(drives, classifier, cfg, modes=MODES, progress=print) -> dict:
-    """Replay every drive through the runtime once per mode; the scores, and an example for the trace."""
+def evaluate(drives, classifier, cfg, modes=MODES, progress=print, stream_model=None) -> dict:
+    """Replay every drive through the runtime once per mode; the scores, and an example for the trace.
+    ``stream_model``: the streaming classifier the "stream" mode decides with (``classifier`` decides the others)."""
     from edge_runtime import config
     from edge_runtime.wearable.command import replay
 
-    scores = {m: ModeScore(detector=cfg.detector, attribution="frame") for m in modes}
-    by_trigger = {m: ModeScore(detector=cfg.detector, attribution="trigger") for m in modes}
+    # a stream alert has no capture: why a distraction was missed is not the detector's to tell (no detector)
+    scores = {m: ModeScore(detector=None if m == STREAM else cfg.detector, attribution="frame") for m in modes}
+    by_trigger = {m: ModeScore(detector=None if m == STREAM else cfg.detector, attribution="trigger") for m in modes}
     example: dict | None = None
     kinds: dict[str, float] = {}
     for drive in drives:
@@ -363,7 +414,10 @@ def evaluate(drives, classifier, cfg, modes=MODES, progress=print) -> dict:
         for mode in modes:
             decisions: list[dict] = []
             mode_cfg = config.override(cfg, "alerts", decision=mode)
-            replay(mode_cfg, classifier, drive.acc_mps2, outputs=[lambda d, out=decisions: out.append(d.to_json())])
+            replay(mode_cfg, stream_model if mode == STREAM else classifier, drive.acc_mps2,
+                   outputs=[lambda d, out=decisions: out.append(d.to_json())])
+            if mode == STREAM:
+                decisions = [stream_scored(d) for d in decisions]
             matched = scores[mode].add(drive, decisions)
             by_trigger[mode].add(drive, decisions)
             example = _better_example(example, mode, drive, decisions, matched)
@@ -453,6 +507,8 @@ def to_markdown(report: dict) -> str:
         return "–" if v is None else f"{v:g}"
 
     held_out = report.get("seed", HELD_OUT_SEED) == HELD_OUT_SEED
+    if "stream_path" in report:  # every mode's score has the figure then
+        rows = rows + [("first alerts before the onset (credited, see stream_scored)", "first_alerts_before_the_onset")]
     lines = [f"# Held-out simulated driving: {report['hours']:g} h" if held_out else
              # which other seeds are development and which were run once as fresh held-out ones is the
              # reports' record (reports/drive_eval/development.md), not the tool's to say
@@ -476,7 +532,8 @@ def to_markdown(report: dict) -> str:
                   for name, key in rows]
     if "class_agreement" in report:
         c = report["class_agreement"]
-        lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} on every capture and sub-window count: "
+        where = "at every hop of the drives" if c["by_steps"] == "every hop" else "on every capture and sub-window count"
+        lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} {where}: "
                       f"**{c['agreement']}** over {c['decisions']} decisions (by S: {c['by_steps']})"]
     if "step_accuracy" in report:
         lines += ["", "Top class after S sub-windows on every detector capture (class weights applied; truth: the "
@@ -507,15 +564,20 @@ def _provenance_lines(report: dict) -> list[str]:
         return []
     by = (f"the step model {path['step_model']} (sha256 {path['step_model_sha256']})" if path["step_model"] else
           "the whole model on each prefix (no step model)")
-    return [f"Decisions by {by}; model {path['model']} (sha256 {path['sha256']}); code: git {report.get('git_commit')}", ""]
+    lines = [f"Decisions by {by}; model {path['model']} (sha256 {path['sha256']}); code: git {report.get('git_commit')}", ""]
+    sp = report.get("stream_path")
+    if sp is not None:
+        lines += [f"Stream decisions by {sp['model']} (sha256 {sp['sha256']}); [stream] {sp['settings']}", ""]
+    return lines
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hours", type=positive_float, default=10.0, help="hours of held-out driving (default 10)")
     p.add_argument("--seed", type=int, default=0, help="selects the held-out drives and drivers")
     p.add_argument("--out", required=True, help="output directory (drive_eval.json, drive_eval.md, imu_trace.png)")
-    p.add_argument("--decision", default="full_window,early",
-                   help="decision modes to compare, comma-separated (default full_window,early)")
+    p.add_argument("--decision", default=None,
+                   help="decision modes to compare, comma-separated: full_window, early, stream (default full_window,"
+                        "early, and stream when the --config file says [alerts] decision = \"stream\")")
     p.add_argument("--baseline-share", type=float, default=0.3,
                    help="share of the drives that are baseline drives: Other motions, no distraction (default 0.3)")
     p.add_argument("--drive-minutes", type=positive_float, default=30.0, help="length of each drive (default 30)")
@@ -524,7 +586,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", help="manifest entry: a name or a precision (default: [model] name, int8)")
     p.add_argument("--agreement", metavar="ENTRY",
                    help="also the top-class agreement with this manifest entry (e.g. fp32) on every capture, at "
-                        "every sub-window count the model decides at")
+                        "every sub-window count the model decides at; with the stream mode: the stream model's "
+                        "with this stream entry (e.g. stream-fp32) at every hop")
     p.add_argument("--step-accuracy", action="store_true",
                    help="also the top class's accuracy after each sub-window count S on every capture (what an "
                         "alert after S sub-windows can reach)")
@@ -532,19 +595,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def cmd(a) -> int:
     from edge_runtime import config
-    from edge_runtime.wearable import alerts, classifier, detector, loop, sources  # noqa: F401 - their sections
+    from edge_runtime.wearable import alerts, classifier, detector, loop, sources, stream_decider  # noqa: F401 - their sections
     from edge_runtime.wearable.classifier import Engine
     from firmware_sim.__main__ import _out_dir
 
-    modes = tuple(m.strip() for m in a.decision.split(",") if m.strip())
-    if not modes or set(modes) - set(MODES):
-        raise CliError(f"--decision {a.decision}: give full_window, early or both, comma-separated")
     if not 0.0 <= a.baseline_share < 1.0:
         raise CliError(f"--baseline-share {a.baseline_share}: must lie in [0, 1)")
     cfg = config.load(a.config)
     cfg = config.override(cfg, "model", assets=a.assets, name=a.model)
+    default = ",".join(MODES + ((STREAM,) if cfg.alerts.decision == STREAM else ()))
+    modes = tuple(m.strip() for m in (a.decision or default).split(",") if m.strip())
+    if not modes or set(modes) - set(MODES + (STREAM,)):
+        raise CliError(f"--decision {a.decision}: give full_window, early, stream or several, comma-separated")
     out = _out_dir(a.out)
     engine = Engine.from_params(cfg.model)
+    stream_model = stream_decider.StreamModel.from_params(cfg.stream, cfg.model) if STREAM in modes else None
     early = engine.early_steps != (6,)
     measured = modes if early else tuple(m for m in modes if m != "early") or ("full_window",)
     t_wall = time.perf_counter()
@@ -553,9 +618,11 @@ def cmd(a) -> int:
     drives = held_out_drives(a.hours, a.seed, a.baseline_share, a.drive_minutes)
     if a.agreement or a.step_accuracy:
         drives = list(drives)  # walked twice
-    res = evaluate(drives, engine, cfg, measured, progress=lambda line: print(line, flush=True))
+    res = evaluate(drives, engine, cfg, measured, progress=lambda line: print(line, flush=True), stream_model=stream_model)
     described = {m: ("one decision per capture at T+599 (the dissertation's)" if m == "full_window" else
-                     f"decisions after S = {', '.join(map(str, engine.early_steps))} sub-windows") for m in measured}
+                     f"decisions after S = {', '.join(map(str, engine.early_steps))} sub-windows" if m == "early" else
+                     f"the streaming decider: {stream_model.name} ({stream_model.precision}), "
+                     f"{_section(cfg.stream)}; scored by drive_eval.stream_scored") for m in measured}
     if "early" in modes and "early" not in measured:
         described["not measured"] = ("early: the model takes S = 6 only, so early decisions are the full "
                                      "window's (re-run with a model that accepts 1..6 sub-windows)")
@@ -574,7 +641,13 @@ def cmd(a) -> int:
         "hours_by_kind": res["hours_by_kind"],
         "config": {"alerts": _section(cfg.alerts), "detector": _section(cfg.detector)},
         "scores": res["scores"], "scores_by_trigger": res["scores_by_trigger"]}
-    if a.agreement:
+    if stream_model is not None:
+        report["stream_path"] = {**stream_model.decision_path(), "settings": _section(cfg.stream)}
+        report["config"]["stream"] = _section(cfg.stream)
+    if a.agreement and stream_model is not None:
+        other = stream_decider.StreamModel.from_params(cfg.stream, cfg.model, a.agreement)
+        report["class_agreement"] = hop_agreement(drives, stream_model, other, cfg.stream)
+    elif a.agreement:
         other = Engine.from_params(cfg.model, a.agreement)
         report["class_agreement"] = class_agreement(drives, engine, other, cfg.detector)
     if a.step_accuracy:

@@ -193,7 +193,7 @@ def test_the_shipped_int8_models_compute_on_this_cpu_what_their_graphs_say():
                                     test_cameras=1, views=1, seed=3))["test"]  # the lifter: simulated keypoints
     feed["lifter-int8/keypoints_2d"] = poses.windows(np.flatnonzero(poses.valid)[::3][:64]).astype(np.float32)
     int8 = [e for e in m["models"] if e["precision"] == "int8"]
-    assert {e["arch"] for e in int8} == {"convlstm", "convlstm_step", "lifter"}
+    assert {e["arch"] for e in int8} == {"convlstm", "convlstm_step", "lifter", "stream"}
     for e in int8:
         f = {s["name"]: feed[f"{e['name']}/{s['name']}"] for s in e["inputs"]}
         assert integer_kernel_drift(ASSETS_DIR / e["file"], f) < 1e-4, e["name"]

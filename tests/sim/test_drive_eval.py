@@ -9,7 +9,7 @@ from support.early_model import NEUTRAL_WEIGHTS, SCRIPTED_EARLY_THRESHOLDS, Scri
 from edge_runtime import config
 from edge_runtime.wearable import loop  # noqa: F401 - its [alerts] section
 from firmware_sim.__main__ import main
-from firmware_sim.scenarios.drive_eval import MODES, Drive, evaluate, held_out_drives, plot_example
+from firmware_sim.scenarios.drive_eval import MODES, Drive, ModeScore, evaluate, held_out_drives, plot_example
 
 
 def _drive():
@@ -256,3 +256,43 @@ def test_git_head_reads_a_checkout_a_worktree_and_packed_refs_without_git(tmp_pa
     (wt_git / "HEAD").write_text(a + "\n")  # detached
     assert git_head(tmp_path / "wt") == a
     assert git_head(tmp_path / "nowhere") is None
+
+
+# ---------------------------------------------------------------------------- the streaming decider (issue 12)
+
+
+class MovesOnX:
+    """A stand-in streaming classifier: Phone while the window's last second moves on x, else Other."""
+
+    classes = ("Phone", "Texting", "TouchScreen", "Drink", "Marker", "Other")
+    name, precision, entry, step_model = "stand-in", "fp32", {}, None
+
+    def classify_window(self, window):
+        p = np.full(6, 0.01, np.float32)
+        p[0 if window[-25:, 0].mean() > 3.0 else 5] = 0.95
+        return p
+
+
+def test_the_stream_mode_replays_through_the_streaming_decider_and_scores_as_session_21():
+    from edge_runtime.wearable import stream_decider  # noqa: F401 - its [stream] section
+    from firmware_sim.scenarios.drive_eval import STREAM, stream_scored
+
+    acc = np.tile(np.float32([0, 0, 9.81]), (12000, 1))
+    acc[3000:5000, 0] += 6.0  # the distraction, 30-50 s
+    acc[8000:8300, 0] += 6.0  # an Other motion the stand-in takes for a phone, 80-83 s
+    events = [{"label": "Phone", "start_s": 30.0, "end_s": 50.0}, {"label": "Other", "start_s": 80.0, "end_s": 83.0}]
+    cfg = config.box_config_type()()
+    res = evaluate([Drive("d", acc, events, "distraction")], None, cfg, modes=(STREAM,), progress=lambda _: None,
+                   stream_model=MovesOnX())
+    s = res["scores"][STREAM]
+    assert (s["event_recall"], s["first_alert_class_accuracy"], s["false_alerts"]) == (1.0, 1.0, 1)
+    assert 0.5 < s["onset_to_first_alert_s"]["median"] < 2.5 and s["statuses"] == {"alert": 2}
+    # session 21's convention: the scorer reads a stream alert's trigger 1 s after its frame, so a frame from 2 s
+    # before a distraction's start is credited to it (and counted apart), one 2.1 s before is not
+    d = {"t_trigger_s": 0.0, "t_alert_s": 28.1, "label": "Phone", "alerted": True, "status": "alert", "alert_seq": 0,
+         "event_start_s": 0.0}
+    for t_alert_s, credited in ((28.0, True), (27.9, False)):
+        score = ModeScore(attribution="frame", detector=None)
+        score.add(Drive("d", acc, events, "distraction"), [stream_scored({**d, "t_alert_s": t_alert_s})])
+        got = score.as_dict()
+        assert (got["event_recall"] == 1.0, got["first_alerts_before_the_onset"]) == (credited, int(credited))

@@ -1,0 +1,216 @@
+"""Training of the streaming classifier (:mod:`models.stream_net`) on the cohort's continuous streams.
+
+    model = fit_stream(recordings, width=64, epochs=16, seed=0)     # python -m models stream-train
+
+The capture models (:mod:`models.train`) learn from detector windows; this one learns from every 25 Hz
+step of the recordings, as the box will run it. It reproduces session 21's prototype
+(reports/wearable/stream_s21/train.py) draw for draw, so that the same seed gives the same weights:
+
+* Labels, per window end t (the class the box should report at t): a distraction's class from
+  ``ONSET_IGNORE_S`` after its start to its end; no loss from its start to ``ONSET_IGNORE_S`` (the hand has
+  only just left the wheel, as in an Other motion: either answer there teaches the wrong one) nor for
+  ``AFTER_END_IGNORE_S`` after its end (the hand on its way back, the window still mostly the
+  distraction); Other everywhere else.
+* Each epoch draws ``SAMPLES`` window ends: half inside distractions, a quarter within ``NEAR_OTHER_S`` of
+  an Other motion (the false alerts' source), a quarter anywhere else. The window length is drawn per
+  batch in ``W_RANGE_S``: one length-agnostic model, W chosen on development drives.
+* Augmentation, per window: a rotation about a random axis by up to ``ROT_DEG`` (strap position), a gain
+  in 1 +- ``GAIN``, a bias N(0, ``BIAS_MPS2``) per axis, white noise ``NOISE_MPS2``.
+* AdamW (weight decay 1e-3), one-cycle learning rate peaking at ``LR``, batch ``BATCH``, plain
+  cross-entropy (the sampling balances distraction and Other).
+* Deterministic for a seed: :func:`models.train.seed_everything` (one intra-op thread), one numpy
+  Generator for every draw, in the prototype's order.
+
+Checkpoint: :func:`models.train.save_checkpoint`'s layout with ``arch = "stream"``; the width is read
+back from the weights (:func:`load_stream_checkpoint`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from edge_runtime.wearable.labels import CLASSES, OTHER
+from models.stream_net import STEP_S, StreamNet, to25, width_of, windows
+from models.train import save_checkpoint, seed_everything
+
+ARCH = "stream"
+ONSET_IGNORE_S = 0.3
+AFTER_END_IGNORE_S = 1.0
+NEAR_OTHER_S = 3.0
+IGNORE = -1
+W_RANGE_S = (2.0, 4.0)
+SAMPLES = 120_000
+"""Window ends per epoch."""
+BATCH = 256
+LR = 3e-3
+WEIGHT_DECAY = 1e-3
+ROT_DEG = 25.0
+GAIN = 0.1
+BIAS_MPS2 = 0.3
+NOISE_MPS2 = 0.05
+DEFAULT_WIDTH, DEFAULT_EPOCHS = 64, 16
+"""Session 21's m64: width 48 for 8 epochs reached 0.870 recall at <= 1.55 false alerts / h on drive seed 1,
+width 64 for 16 epochs 0.950 (reports/wearable/stream_s21/report.md)."""
+I_OTHER = CLASSES.index(OTHER)
+
+
+def step_labels(n_steps: int, events: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """Per 25 Hz step of a recording: the class index to learn (``IGNORE``: none) and whether it lies within
+    ``NEAR_OTHER_S`` of an Other motion. ``events``: the simulator's truth (label, start_s, end_s)."""
+    t_s = (np.arange(n_steps) * 4 + 3) / 100.0  # the time of each step's last raw frame
+    y = np.full(n_steps, I_OTHER, dtype=np.int64)
+    near_other = np.zeros(n_steps, bool)
+    for e in events:
+        if e["label"] == OTHER:
+            near_other |= (t_s >= e["start_s"] - NEAR_OTHER_S) & (t_s <= e["end_s"] + NEAR_OTHER_S)
+    for e in events:  # after every Other motion: a distraction's span wins where they touch
+        if e["label"] != OTHER:
+            y[(t_s >= e["start_s"]) & (t_s <= e["end_s"] + AFTER_END_IGNORE_S)] = IGNORE
+            y[(t_s >= e["start_s"] + ONSET_IGNORE_S) & (t_s <= e["end_s"])] = CLASSES.index(e["label"])
+    return y, near_other
+
+
+@dataclass
+class StreamSet:
+    """The recordings end to end at 25 Hz, with what each step teaches and which steps may end a window."""
+
+    x25: np.ndarray
+    """(n, 3) float32 m/s^2."""
+    y: np.ndarray
+    distraction: np.ndarray
+    near_other: np.ndarray
+    far_other: np.ndarray
+    """Window-end step indices of the three draws (a window never reaches back into the previous recording)."""
+    hours: float
+
+
+def stream_set(recordings) -> StreamSet:
+    """``recordings``: (acc_mps2 (n, 3) at 100 Hz, truth events) pairs, in order."""
+    xs, ys, nears, whole = [], [], [], []
+    for acc, events in recordings:
+        x25 = to25(acc)
+        y, near = step_labels(len(x25), events)
+        xs.append(x25)
+        ys.append(y)
+        nears.append(near)
+        whole.append(np.arange(len(x25)) >= int(W_RANGE_S[1] / STEP_S))  # room for the longest window behind
+    y, near, ok = np.concatenate(ys), np.concatenate(nears), np.concatenate(whole)
+    other = ok & (y == I_OTHER)
+    x25 = np.concatenate(xs)
+    return StreamSet(x25, y, np.flatnonzero(ok & (y >= 0) & (y != I_OTHER)), np.flatnonzero(other & near),
+                     np.flatnonzero(other & ~near), len(x25) * STEP_S / 3600.0)
+
+
+def cohort_recordings(subjects: int, seed: int, minutes: float):
+    """The simulated cohort's recordings as (float32 acc, events): what ``models.dataset.build_cohort_datasets``
+    windows for the capture models, kept whole."""
+    from firmware_sim.devices.wrist import simulate_cohort  # the simulator is only needed here
+
+    for rec in simulate_cohort(n_subjects=subjects, seed=seed, minutes_per_trial=minutes):
+        yield rec.acc_mps2.astype(np.float32), [e.to_json() for e in rec.events]
+
+
+def rotations(n: int, max_deg: float, rng: np.random.Generator) -> np.ndarray:
+    """n rotation matrices (n, 3, 3) about random axes by up to ``max_deg`` (Rodrigues' formula: the
+    prototype's draws, so the same seed gives the same weights)."""
+    axis = rng.standard_normal((n, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    angle = rng.uniform(0, np.radians(max_deg), n)[:, None, None]
+    k = np.zeros((n, 3, 3))
+    k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
+    k -= k.transpose(0, 2, 1)
+    return np.eye(3)[None] + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def augment(xb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(N, 3, T) windows -> rotated, gained, biased, noisy float32 copies (module docstring)."""
+    n = len(xb)
+    x = np.einsum("nij,njt->nit", rotations(n, ROT_DEG, rng), xb)
+    gain = rng.uniform(1 - GAIN, 1 + GAIN, (n, 1, 1))
+    x = x * gain + rng.normal(0, BIAS_MPS2, (n, 3, 1))
+    return (x + rng.normal(0, NOISE_MPS2, x.shape)).astype(np.float32)
+
+
+def fit_stream(data: StreamSet, *, width: int = DEFAULT_WIDTH, epochs: int = DEFAULT_EPOCHS, seed: int = 0,
+               log=print) -> tuple[StreamNet, dict]:
+    """Train a StreamNet on ``data``; returns the model in eval mode and its last epoch's loss and accuracy."""
+    seed_everything(seed)
+    rng = np.random.default_rng(seed)
+    model = StreamNet(width=width)
+    opt = torch.optim.AdamW(model.parameters(), lr=LR, weight_decay=WEIGHT_DECAY)
+    steps_per_epoch = SAMPLES // BATCH
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=LR, total_steps=max(1, epochs * steps_per_epoch))
+    loss_fn = nn.CrossEntropyLoss()
+    lengths = (int(W_RANGE_S[0] / STEP_S), int(W_RANGE_S[1] / STEP_S) + 1)
+    last = {}
+    for epoch in range(epochs):
+        ends = np.concatenate([rng.choice(data.distraction, SAMPLES // 2), rng.choice(data.near_other, SAMPLES // 4),
+                               rng.choice(data.far_other, SAMPLES - SAMPLES // 2 - SAMPLES // 4)])
+        rng.shuffle(ends)
+        model.train()
+        total, right, seen = 0.0, 0, 0
+        for b in range(steps_per_epoch):
+            e = ends[b * BATCH:(b + 1) * BATCH]
+            xb = torch.from_numpy(augment(windows(data.x25, e, int(rng.integers(*lengths))), rng))
+            yb = torch.from_numpy(data.y[e])
+            logits = model(xb)
+            loss = loss_fn(logits, yb)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += loss.item() * len(e)
+            right += int((logits.argmax(1) == yb).sum())
+            seen += len(e)
+        last = {"loss": round(total / seen, 4), "train_accuracy_augmented": round(right / seen, 4)}
+        log(f"epoch {epoch + 1}/{epochs}: loss {last['loss']:.4f}, train accuracy {last['train_accuracy_augmented']:.3f}")
+    return model.eval(), last
+
+
+def train_stream(out_dir, *, width: int = DEFAULT_WIDTH, epochs: int = DEFAULT_EPOCHS, seed: int = 0,
+                 subjects: int = 20, cohort_seed: int = 0, minutes: float = 15.0, log=print):
+    """``python -m models stream-train``: simulate the cohort, train, write OUT/model.pt; returns its path."""
+    data = stream_set(cohort_recordings(subjects, cohort_seed, minutes))
+    log(f"cohort seed {cohort_seed}: {subjects} subjects x 6 trials x {minutes:g} min, {data.hours:.1f} h; window "
+        f"ends: distraction {len(data.distraction)}, near Other {len(data.near_other)}, elsewhere {len(data.far_other)}")
+    model, last = fit_stream(data, width=width, epochs=epochs, seed=seed, log=log)
+    return save_checkpoint(out_dir, model, arch=ARCH, classes=CLASSES, seed=seed, epochs=epochs,
+                           metrics={**last, "parameters": sum(p.numel() for p in model.parameters())},
+                           data={"cohort_seed": cohort_seed, "subjects": subjects, "minutes_per_trial": minutes,
+                                 "onset_ignore_s": ONSET_IGNORE_S, "after_end_ignore_s": AFTER_END_IGNORE_S,
+                                 "w_range_s": list(W_RANGE_S)})
+
+
+def training_command(meta: dict) -> str:
+    """The ``python -m models stream-train`` command that rebuilds a checkpoint of :func:`train_stream`."""
+    d = meta.get("data", {})
+    return (f"python -m models stream-train --out DIR --width {meta.get('width')} --epochs {meta.get('epochs')} "
+            f"--seed {meta.get('seed')} --subjects {d.get('subjects')} --cohort-seed {d.get('cohort_seed')} "
+            f"--minutes {d.get('minutes_per_trial'):g}")
+
+
+def load_stream_checkpoint(path) -> tuple[StreamNet, dict]:
+    """(model in eval mode, meta) from a ``stream-train`` DIR/model.pt (or that directory); also reads the
+    prototype's checkpoints (``{"state", "width", ...}``)."""
+    from pathlib import Path
+
+    from models.dataset import DataError
+
+    p = Path(path)
+    p = p / "model.pt" if p.is_dir() else p
+    if not p.is_file():
+        raise DataError(f"{p}: checkpoint not found")
+    ck = torch.load(p, map_location="cpu", weights_only=False)
+    state = ck.get("state_dict", ck.get("state"))
+    if state is None or "conv.0.weight" not in state:
+        raise DataError(f"{p}: field 'state_dict': not a streaming classifier's weights")
+    model = StreamNet(classes=len(ck.get("classes", CLASSES)), width=width_of(state))
+    model.load_state_dict(state)
+    meta = {k: v for k, v in ck.items() if k not in ("state_dict", "state")}
+    meta.setdefault("classes", list(CLASSES))
+    meta.setdefault("arch", ARCH)
+    meta["width"] = model.width
+    return model.eval(), meta
