@@ -89,11 +89,18 @@ class _Wearable:
         from edge_runtime.core.manifest import ASSETS_DIR
         from edge_runtime.wearable.alerts import AlertPublisher
         from edge_runtime.wearable.classifier import Engine
-        from edge_runtime.wearable.loop import WearableLoop
+        from edge_runtime.wearable.loop import AlertPolicy, WearableLoop
+        from edge_runtime.wearable.stream_decider import StreamLoop, StreamModel
 
-        self.engine = Engine.from_manifest(cfg.assets or ASSETS_DIR, cfg.model, threads=cfg.threads)
         self.pub = AlertPublisher(open_bus("virtual", f"bench-{os.getpid()}"), heartbeat_period_s=0.1)
-        self.loop = WearableLoop(self.engine, on_decision=self._handle)
+        # the decider the box ships ([alerts] decision's default): the streaming classifier, or the capture path
+        self.decider = AlertPolicy().decision
+        if self.decider == "stream":
+            self.engine = StreamModel.from_manifest(cfg.assets or ASSETS_DIR, cfg.model, threads=cfg.threads)
+            self.loop = StreamLoop(self.engine, on_decision=self._handle)
+        else:
+            self.engine = Engine.from_manifest(cfg.assets or ASSETS_DIR, cfg.model, threads=cfg.threads)
+            self.loop = WearableLoop(self.engine, on_decision=self._handle)
         self.t_fed = 0.0
         self.decision_s: list[float] = []
         self.alert_s: list[float] = []
@@ -151,8 +158,11 @@ def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float, read_pe
             "captures": w.loop.stats.captures - captures0, "cpu_share_pct": cpu.pct,
             "deadline_misses": int(misses), "start_late_p99_us": round(float(np.percentile(late, 99)) * 1e6, 1),
             **summarize(busy * 1e9), "peak_rss_mb": peak_rss_mb(),
+            "decision": w.decider,
             "what": f"block_samples-block feed of {block_samples} sample(s) every {period_s * 1e3:g} ms, as the live source hands them "
-                    "over (detector + classify on capture + CAN), real time, int8 1 thread, heartbeat thread running"}
+                    + ("over (the shipped streaming decider: 25 Hz steps, a decision every hop, CAN)" if w.decider == "stream"
+                       else "over (detector + classify on capture + CAN)")
+                    + f", real time, {w.engine.name} 1 thread, heartbeat thread running"}
 
 
 def _detector(acc: np.ndarray) -> list[dict]:
@@ -178,7 +188,7 @@ def _latency(w: _Wearable, acc: np.ndarray) -> list[dict]:
     w.loop = type(w.loop)(w.engine, on_decision=w._handle)
     for i in range(len(acc)):
         w.feed(i, 1, acc)
-    what = "from handing a capture's last sample to the loop to "
+    what = "from handing the deciding sample (a capture's last, or a hop's) to the loop to "
     return [{"name": "alert_latency", **summarize(np.asarray(w.alert_s) * 1e9),
              "what": what + "the DISTRACTION_ALERT frame handed to the CAN bus (alerted decisions)"},
             {"name": "decision_latency", **summarize(np.asarray(w.decision_s) * 1e9),
