@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from support.robot import EFF, FPS, HEAD_Y, anchored_worker, head_at
 
+from edge_runtime.core.skeleton import HEAD
 from edge_runtime.robot.hazard import (
     ARM_LINK_RADII_M,
     JOINT_REACH_M,
@@ -124,6 +125,24 @@ def test_least_squares_velocity_rejects_keypoint_noise():
     assert np.sqrt(np.mean(err_ls ** 2)) < np.sqrt(np.mean(err_fd ** 2)) / 4
     pred_err = np.linalg.norm([e.predicted_m - (p + 0.5 * truth_v) for e, p in zip(est[30:], pos[30:])], axis=1)
     assert np.median(pred_err) < 0.1
+
+
+def test_a_new_track_shorter_than_min_span_has_no_velocity():
+    # a head whose depth jumps about by 0.3 m at 30 Hz: three frames span 0.07 s and read as metres per second
+    heads = [[1.0, HEAD_Y, 4.0 + dz] for dz in (0.0, -0.15, -0.3, -0.2, -0.35, -0.25, -0.4, -0.3, -0.45, -0.35)]
+    off, on = TrackerParams(), TrackerParams(min_span_s=0.25)
+    fits = {}
+    for name, p in (("off", off), ("on", on)):
+        tr = HeadTracker(p, 0.5)
+        fits[name] = [tr.update(i / FPS, h) for i, h in enumerate(heads)]
+    assert np.linalg.norm(fits["off"][2].velocity_mps) > 2.0          # 3 frames: a fit, and a fast one
+    span_s = [i / FPS for i in range(len(heads))]
+    for est, t in zip(fits["on"], span_s):
+        if t < 0.25:                                                    # not long enough: standing, where he is
+            assert not est.velocity_mps.any() and np.array_equal(est.predicted_m, est.position_m)
+        else:                                                           # then the same fit as without it
+            ref = fits["off"][span_s.index(t)]
+            assert np.array_equal(est.velocity_mps, ref.velocity_mps)
 
 
 def test_leaving_needs_the_exit_radius_and_the_dwell_time():
@@ -923,6 +942,25 @@ def test_a_lost_person_in_view_within_reach_by_his_rays_makes_the_arm_retract_aw
     d = mon.observe(2.5, {}, EFF, unseen={0: "missing_joints: left_wrist"}, rays={0: rays_of(body_facing_arm(0.6))})
     assert d.state == State.LEVEL2 and d.worker == 0 and d.head.position_m[2] > EFF[2]
 
+
+
+def test_a_lost_person_who_would_stop_the_arm_makes_it_retract_away_from_where_he_was_last_seen():
+    body = body_facing_arm(1.42)
+    for z, expect in ((FULL_SPEED_TS, State.LEVEL1), (replace(FULL_SPEED_TS, lost_reach_retracts=True), State.LEVEL2)):
+        mon = ready_body(z, 1.42)
+        assert settle(mon, body).state == State.NORMAL
+        d = lose(mon, 1.0, 2)[-1]                                     # hidden, no rays: his reachable set stops it
+        assert d.state == expect
+        if expect == State.LEVEL2:                                    # away from his last head: it is beyond the tool
+            assert d.worker == 0 and d.head.position_m[2] > EFF[2]
+            assert np.array_equal(d.head.position_m, body[HEAD])
+        else:
+            assert d.reason.startswith("person_lost")
+    # far out, his reachable set stops nothing, and it retracts nothing either
+    z = replace(WHOLE_BODY, lost_reach_retracts=True)
+    mon = ready_body(z, 4.0)
+    settle(mon, body_facing_arm(4.0))
+    assert all(d.state == State.NORMAL for d in lose(mon, 1.0, 5))
 
 
 def test_a_lost_persons_ray_bound_beyond_what_his_track_allows_is_not_heard():
