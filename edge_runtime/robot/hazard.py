@@ -143,11 +143,14 @@ class TrackerParams:
     min_samples: int = config.setting(3, ("an integer of at least 2", lambda v: v >= 2))
     """Frames a fit needs; with fewer (a new track) the velocity is taken as zero. At
     5.8 Hz a 0.5 s window holds 3 frames."""
-    min_span_s: float = config.setting(0.0, config.NON_NEGATIVE)
+    min_span_s: float = config.setting(0.3, config.NON_NEGATIVE)
     """A fit also needs its frames to span this long (s); a new track's shorter one is taken as
-    zero velocity too. At 30 Hz three frames span 0.07 s, and a lifted head's depth error
-    (0.2-0.6 m, reports/robot/head_error.md) over 0.07 s reads as 2-5 m/s: walkers tracked
-    afresh (after a jump or on entering) were taken as coming and retracted from."""
+    zero velocity too (0: as before session 22). At 30 Hz three frames span 0.07 s, and a lifted
+    head's depth error (0.2-0.6 m, reports/robot/head_error.md) over 0.07 s reads as 2-5 m/s:
+    walk-by traffic tracked afresh (entering, or after a jump) was taken as coming and retracted
+    from (hard:200 seed 31, hard_003 and hard_153: 2.2 and 4.0 m/s from 3 frames of people walking
+    0.1 m/s toward the arm; reports/hrc/s22_walkby/). A person met by a new track is still judged
+    at ISO 13855's 1.6 m/s at least (``[zones] iso_human_speed_mps``)."""
     max_speed_mps: float = config.setting(3.0, config.POSITIVE)
     """Head speeds above this (m/s) are clipped: faster than a running worker, so noise. (2.0 m/s,
     the fastest the hard suite's workers walk, cut retractions for walkers tracked too fast from a
@@ -276,14 +279,15 @@ class ZoneParams:
     valid pose, every joint of him (his reachable set grows this fast, or at his last tracked
     speed if that was faster): ISO 13855's 2.0 m/s for a hand or arm (K = 2000 mm/s, 6.2.3),
     above its 1.6 m/s walking, and the hard suite's running bursts."""
-    lost_reach_retracts: bool = False
+    lost_reach_retracts: bool = True
     """whole_body: a lost person (:meth:`HazardMonitor._lost`) whose reachable set comes within
     ``reach_retract_m``, or would stop the arm (within the protective distance at the slowest speed:
     0.78 m at 2.0 m/s, 0.96 m at a last tracked 3.0 m/s), makes it retract (Eq. 6, away from where
     his rays say he stands or else from where he was last seen) instead of stopping it (False: it
     stopped where it stood, extended, and retracted only once he was seen again within reach; fresh
     hard:200 seed 31, hard_096: a worker lost 1.3 s while walking up, retracted from 0.33 s after
-    the stop, bent into the tool still folding in, 0.083 m)."""
+    the stop, bent into the tool still folding in, 0.083 m; with True 0.283 m; reports/hrc/s22_walkby/).
+    On since session 22."""
     ray_bound: bool = True
     """whole_body: a person the camera sees but the lifter has not (yet) lifted validly is bounded
     by his keypoints' rays (:func:`ray_separation_m`: his feet on the floor along the ankles' rays,
