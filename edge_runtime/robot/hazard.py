@@ -143,6 +143,14 @@ class TrackerParams:
     min_samples: int = config.setting(3, ("an integer of at least 2", lambda v: v >= 2))
     """Frames a fit needs; with fewer (a new track) the velocity is taken as zero. At
     5.8 Hz a 0.5 s window holds 3 frames."""
+    min_span_s: float = config.setting(0.3, config.NON_NEGATIVE)
+    """A fit also needs its frames to span this long (s); a new track's shorter one is taken as
+    zero velocity too (0: as before session 22). At 30 Hz three frames span 0.07 s, and a lifted
+    head's depth error (0.2-0.6 m, reports/robot/head_error.md) over 0.07 s reads as 2-5 m/s:
+    walk-by traffic tracked afresh (entering, or after a jump) was taken as coming and retracted
+    from (hard:200 seed 31, hard_003 and hard_153: 2.2 and 4.0 m/s from 3 frames of people walking
+    0.1 m/s toward the arm; reports/hrc/s22_walkby/). A person met by a new track is still judged
+    at ISO 13855's 1.6 m/s at least (``[zones] iso_human_speed_mps``)."""
     max_speed_mps: float = config.setting(3.0, config.POSITIVE)
     """Head speeds above this (m/s) are clipped: faster than a running worker, so noise. (2.0 m/s,
     the fastest the hard suite's workers walk, cut retractions for walkers tracked too fast from a
@@ -271,6 +279,15 @@ class ZoneParams:
     valid pose, every joint of him (his reachable set grows this fast, or at his last tracked
     speed if that was faster): ISO 13855's 2.0 m/s for a hand or arm (K = 2000 mm/s, 6.2.3),
     above its 1.6 m/s walking, and the hard suite's running bursts."""
+    lost_reach_retracts: bool = True
+    """whole_body: a lost person (:meth:`HazardMonitor._lost`) whose reachable set comes within
+    ``reach_retract_m``, or would stop the arm (within the protective distance at the slowest speed:
+    0.78 m at 2.0 m/s, 0.96 m at a last tracked 3.0 m/s), makes it retract (Eq. 6, away from where
+    his rays say he stands or else from where he was last seen) instead of stopping it (False: it
+    stopped where it stood, extended, and retracted only once he was seen again within reach; fresh
+    hard:200 seed 31, hard_096: a worker lost 1.3 s while walking up, retracted from 0.33 s after
+    the stop, bent into the tool still folding in, 0.083 m; with True 0.283 m; reports/hrc/s22_walkby/).
+    On since session 22."""
     ray_bound: bool = True
     """whole_body: a person the camera sees but the lifter has not (yet) lifted validly is bounded
     by his keypoints' rays (:func:`ray_separation_m`: his feet on the floor along the ankles' rays,
@@ -441,7 +458,7 @@ class HeadTracker:
         return self._estimate(t_s)
 
     def _estimate(self, t_s: float) -> HeadEstimate:
-        if len(self._t) < self.p.min_samples:
+        if len(self._t) < self.p.min_samples or self._t[-1] - self._t[0] < self.p.min_span_s:
             pos, vel = self._x[-1], np.zeros(3)
         else:
             t = np.fromiter(self._t, float) - t_s
@@ -530,6 +547,11 @@ class _Seen:
     ones, :func:`arm_capsules`'s, by identity), as :func:`separation_m` gives it; None when not known so."""
 
 
+def _head_of(person_m: np.ndarray) -> np.ndarray:
+    """A person's head: his body's head joint, or the head alone when that is all he is given as."""
+    return person_m if person_m.shape == (3,) else person_m[HEAD_JOINT]
+
+
 @dataclass
 class HazardMonitor:
     """The zone state machine over every tracked worker (see the module docstring).
@@ -590,7 +612,7 @@ class HazardMonitor:
         ests = {}
         for wid, person in people.items():
             person = np.asarray(person, float)
-            head = person if person.shape == (3,) else person[HEAD_JOINT]
+            head = _head_of(person)
             tracker = self._trackers.get(wid)
             if tracker is None:  # (not setdefault: that made a tracker for every person at every frame)
                 tracker = self._trackers[wid] = HeadTracker(self.tracker, self.zones.predict_s)
@@ -677,12 +699,15 @@ class HazardMonitor:
                 worst = (allowed, speed, d)
         bounds = {w: ray_separation_m(rays[w], caps, z) for w in unseen if z.ray_bound and w in rays}
         self._lost_stop, self._unlifted_stop = [], []
-        for stops, judged in ((self._lost_stop, self._lost(t_s, set(ests), caps, bounds)),
-                              (self._unlifted_stop, self._unlifted(t_s, unseen, bounds, set(ests)))):
+        # a lost person whose reachable set would stop the arm makes it retract instead (lost_reach_retracts)
+        for stops, judged, stop_retracts in (
+                (self._lost_stop, self._lost(t_s, set(ests), caps, bounds), z.lost_reach_retracts),
+                (self._unlifted_stop, self._unlifted(t_s, unseen, bounds, set(ests)), False)):
             for wid, d, speed, point in judged:
                 allowed = z.allowed_speed_mps(d, speed)
-                if point is not None and d <= z.reach_retract_m:
-                    # within reach by what is known of him, in view: retract, away from where his rays say he stands
+                if point is not None and (d <= z.reach_retract_m or (stop_retracts and allowed < v_stop - 1e-9)):
+                    # within reach by what is known of him: retract, away from where his rays say he stands (or,
+                    # lost with no rays, where he was last seen)
                     entry = State.LEVEL2
                     if d < nearest[0]:
                         nearest = (d, wid, HeadEstimate(t_s, point, np.zeros(3), point))
@@ -753,11 +778,11 @@ class HazardMonitor:
                 continue
             speed = max(z.lost_person_speed_mps, seen.speed_mps)
             last = separation_m(*seen.spheres, caps)
-            d, point = last - speed * age, None
+            d, point = last - speed * age, (_head_of(seen.person_m) if z.lost_reach_retracts else None)
             bound = bounds.get(wid)
             if bound is not None:  # in view: where his rays say he stands (retract away from it)
                 if bound[0] <= last + speed * age:
-                    d, point = max(d, bound[0]), bound[1]
+                    d, point = max(d, bound[0]), (point if bound[1] is None else bound[1])
                 else:
                     self.bounds_refused += 1
             out.append((wid, d, speed, point))

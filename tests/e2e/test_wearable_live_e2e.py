@@ -31,6 +31,12 @@ def _drive(tmp_path, minutes=3, seed=11):
     return tmp_path / "imu.csv"
 
 
+def _serial_link(summary: str) -> dict[str, int]:
+    """The runtime summary's "serial link:" counters by name."""
+    line = next(x for x in summary.splitlines() if x.strip().startswith("serial link:"))
+    return {k.strip(): int(v) for k, v in (item.rsplit(" ", 1) for item in line.split(":", 1)[1].split(", "))}
+
+
 def _decisions(path):
     return [json.loads(x) for x in path.read_text().splitlines()]
 
@@ -100,7 +106,11 @@ def test_signed_live_imu_through_a_hub_outage(hub, tmp_path):
     assert 0 <= offset < 0.5
     assert all(abs(g["t_trigger_s"] - e["t_trigger_s"] - offset) < 0.005 for g, e in zip(got, expected))
     assert "reconnects 0" not in out and "reconnects" in out
-    assert "signature failures 0" in out and "crc errors 0" in out  # every signed packet verified
+    # every signed packet verified, but for packets the firmware cut short: on a busy machine its pty fills and it
+    # drops the rest of a packet (a UART's overrun, a gap in the stream); the parser reads the cut packet on into the
+    # next one, and both fail, by CRC or (cut in its signature) by signature
+    link = _serial_link(out)
+    assert link["signature failures"] + link["crc errors"] <= 2 * link["gaps"], link
 
     # alerts that left the box carry a latency from the arrival of the capture's last sample
     sent = [d for d in got if d["alerted"]]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from support.robot import EFF, FPS, HEAD_Y, anchored_worker, head_at
 
+from edge_runtime.core.skeleton import HEAD
 from edge_runtime.robot.hazard import (
     ARM_LINK_RADII_M,
     JOINT_REACH_M,
@@ -124,6 +125,25 @@ def test_least_squares_velocity_rejects_keypoint_noise():
     assert np.sqrt(np.mean(err_ls ** 2)) < np.sqrt(np.mean(err_fd ** 2)) / 4
     pred_err = np.linalg.norm([e.predicted_m - (p + 0.5 * truth_v) for e, p in zip(est[30:], pos[30:])], axis=1)
     assert np.median(pred_err) < 0.1
+
+
+def test_a_new_track_shorter_than_min_span_has_no_velocity():
+    # a head whose depth jumps about by 0.3 m at 30 Hz: three frames span 0.07 s and read as metres per second
+    heads = [[1.0, HEAD_Y, 4.0 + dz] for dz in (0.0, -0.15, -0.3, -0.2, -0.35, -0.25, -0.4, -0.3, -0.45, -0.35)]
+    off, on = TrackerParams(min_span_s=0.0), TrackerParams()             # before session 22, and shipped (0.3 s)
+    assert on.min_span_s > 0.2
+    fits = {}
+    for name, p in (("off", off), ("on", on)):
+        tr = HeadTracker(p, 0.5)
+        fits[name] = [tr.update(i / FPS, h) for i, h in enumerate(heads)]
+    assert np.linalg.norm(fits["off"][2].velocity_mps) > 2.0          # 3 frames: a fit, and a fast one
+    span_s = [i / FPS for i in range(len(heads))]
+    for est, t in zip(fits["on"], span_s):
+        if t < on.min_span_s - 1e-9:                                    # not long enough: standing, where he is
+            assert not est.velocity_mps.any() and np.array_equal(est.predicted_m, est.position_m)
+        else:                                                           # then the same fit as without it
+            ref = fits["off"][span_s.index(t)]
+            assert np.array_equal(est.velocity_mps, ref.velocity_mps)
 
 
 def test_leaving_needs_the_exit_radius_and_the_dwell_time():
@@ -544,6 +564,14 @@ def test_a_person_lost_far_from_the_arm_does_not_stop_it():
     assert all(d.state == State.NORMAL for d in lose(mon, 5.0, 5, {0: "missing_joints: hip"}, other))
 
 
+def halted_for_lost(d, z) -> bool:
+    """The halt a lost person who could be near makes: a retraction away from where he was last seen
+    (``lost_reach_retracts``, shipped) or, without it, a stop (``person_lost``)."""
+    if z.lost_reach_retracts:
+        return d.state == State.LEVEL2 and d.reason == "level2_retract"
+    return d.state == State.LEVEL1 and d.reason.startswith("person_lost")
+
+
 def test_a_person_lost_near_the_arm_slows_it_at_once_and_stops_it_with_the_full_speed_stopping_time():
     shipped = ready_body(WHOLE_BODY, 1.42)
     seen = settle(shipped, body_facing_arm(1.42))
@@ -554,7 +582,7 @@ def test_a_person_lost_near_the_arm_slows_it_at_once_and_stops_it_with_the_full_
     mon = ready_body(z, 1.42)
     assert settle(mon, body).state == State.NORMAL
     d = lose(mon, 1.0, 2, {0: "missing_joints: left_hip"})[-1]
-    assert d.state == State.LEVEL1 and d.reason.startswith("person_lost")
+    assert halted_for_lost(d, z)
     # he is seen again a step back (beyond the exit hysteresis): the arm works again, judged on him
     assert settle(mon, body_facing_arm(1.7), t0=2.0, seconds=z.dwell_s + 0.5).state == State.NORMAL
 
@@ -566,8 +594,9 @@ def test_a_person_never_lifted_validly_stops_the_arm():
     assert d.state == State.FAULT and d.reason.startswith("person_unseen: person 1")
 
 
-def test_a_lost_person_stops_the_arm_once_his_reachable_set_gets_within_the_protective_distance():
-    z = WHOLE_BODY
+@pytest.mark.parametrize("retracts", [True, False])
+def test_a_lost_person_stops_the_arm_once_his_reachable_set_gets_within_the_protective_distance(retracts):
+    z = replace(WHOLE_BODY, lost_reach_retracts=retracts)
     body = body_facing_arm(3.0)
     mon = ready_body(z, 3.0)
     settle(mon, body)
@@ -581,7 +610,7 @@ def test_a_lost_person_stops_the_arm_once_his_reachable_set_gets_within_the_prot
     before = [d for d, ti in zip(decisions, t) if ti - (1.0 - 1 / FPS) < bound_s - 0.05]
     after = [d for d, ti in zip(decisions, t) if ti - (1.0 - 1 / FPS) > bound_s + 0.05]
     assert before and all(d.state == State.NORMAL for d in before)
-    assert after and all(d.state == State.LEVEL1 and d.reason.startswith("person_lost") for d in after)
+    assert after and all(halted_for_lost(d, z) for d in after)
     assert before[-1].speed_scale < 1.0                              # slowing down while the set grows
 
 
@@ -590,7 +619,7 @@ def test_a_lost_person_is_forgotten_after_the_hold_and_the_scene_clears():
     mon = ready_body(z, 1.42)
     settle(mon, body_facing_arm(1.42))
     held = lose(mon, 1.0, int((z.lost_hold_s - 0.2) * FPS))
-    assert held[-1].state == State.LEVEL1
+    assert halted_for_lost(held[-1], z)
     d = lose(mon, 1.0 + z.lost_hold_s, int((z.dwell_s + 0.5) * FPS))[-1]
     assert d.state == State.NORMAL and d.speed_scale == 1.0
 
@@ -925,6 +954,26 @@ def test_a_lost_person_in_view_within_reach_by_his_rays_makes_the_arm_retract_aw
 
 
 
+def test_a_lost_person_who_would_stop_the_arm_makes_it_retract_away_from_where_he_was_last_seen():
+    body = body_facing_arm(1.42)
+    for z, expect in ((replace(FULL_SPEED_TS, lost_reach_retracts=False), State.LEVEL1), (FULL_SPEED_TS, State.LEVEL2)):
+        mon = ready_body(z, 1.42)
+        assert settle(mon, body).state == State.NORMAL
+        d = lose(mon, 1.0, 2)[-1]                                     # hidden, no rays: his reachable set stops it
+        assert d.state == expect
+        if expect == State.LEVEL2:                                    # away from his last head: it is beyond the tool
+            assert d.worker == 0 and d.head.position_m[2] > EFF[2]
+            assert np.array_equal(d.head.position_m, body[HEAD])
+        else:
+            assert d.reason.startswith("person_lost")
+    # far out, his reachable set stops nothing, and it retracts nothing either
+    z = WHOLE_BODY
+    assert z.lost_reach_retracts                                       # shipped
+    mon = ready_body(z, 4.0)
+    settle(mon, body_facing_arm(4.0))
+    assert all(d.state == State.NORMAL for d in lose(mon, 1.0, 5))
+
+
 def test_a_lost_persons_ray_bound_beyond_what_his_track_allows_is_not_heard():
     z = FULL_SPEED_TS                        # where his reachable set 1.42 m out stops the arm at once
     mon = ready_body(z, 1.42)
@@ -933,7 +982,7 @@ def test_a_lost_persons_ray_bound_beyond_what_his_track_allows_is_not_heard():
     # keypoint on the wrong person, a miscalibrated ray); his reachable set, not that bound, stops the arm
     far = {0: rays_of(body_facing_arm(5.0))}
     d = mon.observe(1.0, {}, EFF, unseen={0: "missing_joints: left_hip"}, rays=far)
-    assert d.state == State.LEVEL1 and d.reason.startswith("person_lost")
+    assert halted_for_lost(d, z) and np.array_equal(d.head.position_m, body_facing_arm(1.42)[HEAD])
     assert mon.bounds_refused == 1
     # rays his track allows (he stands where he was last lifted) are heard: they keep him off the arm after his
     # reachable set alone would have stopped it (4.5 m out, that set reaches the protective distance in 1.5 s)
