@@ -114,11 +114,11 @@ class AlertPolicy:
     """How the box decides a DISTRACTION_ALERT: the decider, and the capture path's alert policy."""
 
     min_confidence: float = config.setting(0.6, config.PROBABILITY)
-    """Capture path only. Below this top-class probability a full-window decision is 'uncertain' and not
-    alerted (unless min_confidence_by_steps or the model's manifest gives S = 6 its own)."""
+    """Capture path only. Below this top-class probability a full-window decision is 'uncertain' and not alerted
+    (unless min_confidence_by_steps or the model's manifest gives S = 6 its own)."""
     never_alert: tuple[str, ...] = (OTHER,)
-    """Capture path only. Classes that are logged but never alerted (non-coupled hand motions; the stream never
-    alerts Other)."""
+    """Capture path only. Classes that are logged but never alerted (non-coupled hand motions; the stream never alerts
+    Other)."""
     decision: str = config.setting(STREAM, config.one_of(*DECISIONS))
     """How the box decides. 'stream' (shipped): no detector and no capture: the streaming classifier decides every
     hop on the last seconds of the stream and sends one final alert (Status 0) per distraction ([stream],
@@ -133,79 +133,74 @@ class AlertPolicy:
     min_confidence_by_steps: tuple[float, ...] = config.setting(
         (0.9, 0.9, 0.9, 0.9, 0.9, -1.0), ("a list of 6 numbers, each in [0, 1] or negative",
                                              lambda v: len(v) == N_SUBSEQ and all(p <= 1.0 for p in v)))
-    """Capture path only. Threshold of a decision after S = 1..6 sub-windows (a preliminary alert or a
-    revision for S < 6, the full window's for S = 6); a negative entry: the model manifest's min_confidence_by_steps for
-    that S, else 0.9 for S < 6 and min_confidence for S = 6; 1 for an S < 6: no decision after S
-    sub-windows (the step is not computed). 0.9 before the full window was chosen on
-    validation drives (``firmware_sim early-tune --seed 1``, reports/wearable/early_tuning): the
-    manifest's early thresholds tell a distraction from Other in single captures but not which
-    distraction (first-alert class 0.81 on those drives, Phone taken for Texting most), and the
-    rule there asks class accuracy >= 0.90 at the full window's recall. S = 6 keeps the manifest's.
-    Session 9's model, the same command and rule: 0.9 at every early step was no longer eligible (33
-    repeat alerts in 20 h against the full window's 32) and (0.97, 0.98, 0.99, 0.97, 0.96) shipped,
-    median onset -> first alert 5.76 s on validation. Session 12 gave the rule's repeat- and
-    false-alert limits a tolerance of one Poisson standard deviation of the full window's counts
-    (``early_tuning.RULE``: one count in 20 h no longer decides); on the same validation drives it
-    takes 0.9 again: median 3.85 s, class accuracy 0.903, recall 0.924 (full window 0.922), 33 repeat
-    and 44 false alerts in 20 h (full window 32 and 45)."""
+    """Capture path only. Threshold of a decision after S = 1..6 sub-windows (a preliminary alert or a revision for S <
+    6, the full window's for S = 6); a negative entry: the model manifest's min_confidence_by_steps for that S, else
+    0.9 for S < 6 and min_confidence for S = 6; 1 for an S < 6: no decision after S sub-windows (the step is not
+    computed). 0.9 before the full window was chosen on validation drives (``firmware_sim early-tune --seed 1``,
+    reports/wearable/early_tuning): the manifest's early thresholds tell a distraction from Other in single captures
+    but not which distraction (first-alert class 0.81 on those drives, Phone taken for Texting most), and the rule
+    there asks class accuracy >= 0.90 at the full window's recall. S = 6 keeps the manifest's. Session 9's model,
+    the same command and rule: 0.9 at every early step was no longer eligible (33 repeat alerts in 20 h against the
+    full window's 32) and (0.97, 0.98, 0.99, 0.97, 0.96) shipped, median onset -> first alert 5.76 s on validation.
+    Session 12 gave the rule's repeat- and false-alert limits a tolerance of one Poisson standard deviation of the
+    full window's counts (``early_tuning.RULE``: one count in 20 h no longer decides); on the same validation drives
+    it takes 0.9 again: median 3.85 s, class accuracy 0.903, recall 0.924 (full window 0.922), 33 repeat and 44
+    false alerts in 20 h (full window 32 and 45)."""
     event_hold_s: float = config.setting(5.0, config.within(0.0, 120.0, "s"))
     """Capture path only. An alert event stays active until this long after the end of its last capture: a capture
-    triggered meanwhile continues it and raises no new alert. 0: every capture is its own event.
-    5 s was chosen on validation drives (``firmware_sim drive-eval --seed 1``, 5 h, full window):
-    repeat alerts 23 -> 1 at unchanged event recall (0.886); 10 s cost 0.03 of recall, 15 s 0.13. The
-    early-decision sweep (``firmware_sim early-tune``) kept it: 3 s gained 0.01 of recall at 3.6 times
-    the repeat alerts, 10 s cost 0.05 of recall."""
+    triggered meanwhile continues it and raises no new alert. 0: every capture is its own event. 5 s was chosen on
+    validation drives (``firmware_sim drive-eval --seed 1``, 5 h, full window): repeat alerts 23 -> 1 at unchanged
+    event recall (0.886); 10 s cost 0.03 of recall, 15 s 0.13. The early-decision sweep (``firmware_sim
+    early-tune``) kept it: 3 s gained 0.01 of recall at 3.6 times the repeat alerts, 10 s cost 0.05 of recall."""
     event_ends_on_other: bool = True
     """Capture path only. A capture of an active event whose full window says a never-alerted class (Other: the hand
-    did something else in between) ends the event instead of extending it, so that the next
-    distraction alerts afresh rather than continuing an event opened long before (or by a false
-    alert). Chosen on development drives (``firmware_sim drive-eval --seed 5`` and ``--seed 1``,
-    10 h each): event recall +0.008 on both, in both decision modes, at unchanged repeat alerts
-    and false alerts +0.1 / 0 per hour (reports/drive_eval/development.md)."""
+    did something else in between) ends the event instead of extending it, so that the next distraction alerts
+    afresh rather than continuing an event opened long before (or by a false alert). Chosen on development drives
+    (``firmware_sim drive-eval --seed 5`` and ``--seed 1``, 10 h each): event recall +0.008 on both, in both
+    decision modes, at unchanged repeat alerts and false alerts +0.1 / 0 per hour
+    (reports/drive_eval/development.md)."""
     class_weights: tuple[float, ...] = config.setting(
         (1.0, 1.0, 1.0, 1.0, 3.0, 1.5), (f"a list of one number in [{MIN_CLASS_WEIGHT:g}, {MAX_CLASS_WEIGHT:g}] per class",
                                          lambda v: len(v) == len(CLASSES) and all(
                                              MIN_CLASS_WEIGHT <= w <= MAX_CLASS_WEIGHT for w in v)))
     """Capture path only. Weights of the classes (Phone, Texting, TouchScreen, Drink, Marker, Other) the classifier's
-    probabilities are multiplied by, and renormalised, before every decision (a decision's probs and
-    confidence are the weighted ones): a prior-shift correction of a model that under-calls a class
-    on the deployment's captures. 1 everywhere: the model's own probabilities. On development drives
-    (``firmware_sim drive-eval --seed 5`` and ``--seed 1``, 10 h each) Marker was most missed, its
-    full window calling it Other (the Marker reach to the passenger seat is Other's grab_from_seat
-    with a stop at the cup holder); other classes' misses gained less than they cost in false alerts.
-    Rule: the highest mean event recall (early decisions) over both seeds with false alerts per hour
-    on each no higher than with weights 1. Session 8's model: Marker 8, Other 1.5. Refitted by the
-    same rule for session 9's model (label smoothing, rotation up to 15 degrees; Marker 1..8 x Other
-    1..1.5): Marker 3, Other 1.5, event recall +0.012 / +0.007, false alerts -0.1 / -0.4 per hour,
-    class accuracy -0.000 / -0.002 against weights 1 (reports/drive_eval/development.md, round 3).
-    Fitted on simulated drives: refit on a deployment's own validation drives."""
+    probabilities are multiplied by, and renormalised, before every decision (a decision's probs and confidence are
+    the weighted ones): a prior-shift correction of a model that under-calls a class on the deployment's captures. 1
+    everywhere: the model's own probabilities. On development drives (``firmware_sim drive-eval --seed 5`` and
+    ``--seed 1``, 10 h each) Marker was most missed, its full window calling it Other (the Marker reach to the
+    passenger seat is Other's grab_from_seat with a stop at the cup holder); other classes' misses gained less than
+    they cost in false alerts. Rule: the highest mean event recall (early decisions) over both seeds with false
+    alerts per hour on each no higher than with weights 1. Session 8's model: Marker 8, Other 1.5. Refitted by the
+    same rule for session 9's model (label smoothing, rotation up to 15 degrees; Marker 1..8 x Other 1..1.5): Marker
+    3, Other 1.5, event recall +0.012 / +0.007, false alerts -0.1 / -0.4 per hour, class accuracy -0.000 / -0.002
+    against weights 1 (reports/drive_eval/development.md, round 3). Fitted on simulated drives: refit on a
+    deployment's own validation drives."""
     max_mean_other: float = config.setting(0.5, config.PROBABILITY)
     """Capture path only. A capture that has raised no alert yet may open one after S >= ``OTHER_EVIDENCE_FROM_STEP``
-    sub-windows only if its mean probability of Other (class weights applied) over the sub-window counts
-    decided so far from that step on is at most this (1: no such check). Several steps' evidence that
-    the hand is doing something else outweighs one confident step: a false alert's Other motion keeps
-    some P(Other) at most steps, a distraction's usually loses it. With ``decision = "full_window"``
-    (or no early step computed) the mean is of the full window alone. Alerts already open
-    (confirmed, revised) are not checked. Chosen on development drives (``firmware_sim drive-eval --seed 5``
-    and ``--seed 1``, 10 h each) by a rule fixed beforehand: the largest cut in false alerts over
-    1, 0.5, 0.4, ..., 0.05 with event recall (early) not lower on either seed: 0.5, false alerts
-    2.1 -> 1.9 and 2.0 -> 1.7 per hour, recall +0.001 / 0; 0.4 and below cost recall on seed 5
+    sub-windows only if its mean probability of Other (class weights applied) over the sub-window counts decided so
+    far from that step on is at most this (1: no such check). Several steps' evidence that the hand is doing
+    something else outweighs one confident step: a false alert's Other motion keeps some P(Other) at most steps, a
+    distraction's usually loses it. With ``decision = "full_window"`` (or no early step computed) the mean is of the
+    full window alone. Alerts already open (confirmed, revised) are not checked. Chosen on development drives
+    (``firmware_sim drive-eval --seed 5`` and ``--seed 1``, 10 h each) by a rule fixed beforehand: the largest cut
+    in false alerts over 1, 0.5, 0.4, ..., 0.05 with event recall (early) not lower on either seed: 0.5, false
+    alerts 2.1 -> 1.9 and 2.0 -> 1.7 per hour, recall +0.001 / 0; 0.4 and below cost recall on seed 5
     (reports/drive_eval/development.md, round 2)."""
 
     earliest_alert_step: int = config.setting(2, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
     """Capture path only. No preliminary alert or revision before this many sub-windows (the full window, S = 6, always
-    decides): the first sub-windows hold little of the motion, and a wrong early class is a false alarm.
-    2 was chosen with the thresholds above: at 0.9, S = 1 alerts are rare and tie with 2 on validation,
-    and the tie goes to the later step (int8 and fp32 agree least at S = 1)."""
+    decides): the first sub-windows hold little of the motion, and a wrong early class is a false alarm. 2 was
+    chosen with the thresholds above: at 0.9, S = 1 alerts are rare and tie with 2 on validation, and the tie goes
+    to the later step (int8 and fp32 agree least at S = 1)."""
     early_agreement_steps: int = config.setting(1, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
     """Capture path only. A preliminary alert or a revision needs the same top class at this many consecutive decided
-    sub-window counts, ending at its own (1: its own step alone). One confident step may be a
-    passing shape of the motion; two that agree are less often. On validation, 2 cost 0.24 s of
-    median latency on average for 0.003 of class accuracy (a higher threshold buys it cheaper): 1."""
+    sub-window counts, ending at its own (1: its own step alone). One confident step may be a passing shape of the
+    motion; two that agree are less often. On validation, 2 cost 0.24 s of median latency on average for 0.003 of
+    class accuracy (a higher threshold buys it cheaper): 1."""
     early_min_margin: float = config.setting(0.0, config.PROBABILITY)
     """Capture path only. A preliminary alert or a revision needs its top class this far (calibrated probability) above
-    the second: a confident step torn between two distractions (Phone or Texting) waits. On validation
-    the early mistakes are confident ones: 0.3 moved class accuracy by 0.003 on average: 0."""
+    the second: a confident step torn between two distractions (Phone or Texting) waits. On validation the early
+    mistakes are confident ones: 0.3 moved class accuracy by 0.003 on average: 0."""
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_confidence <= 1.0:
