@@ -7,7 +7,9 @@ its peak resident memory is the runtime's. The simulated drive is made by the
 parent (:func:`prepare_drive`, firmware_sim) and handed over as a ``.npy`` file.
 
 ``wearable_100hz``
-    ``edge_runtime.wearable.loop.WearableLoop`` with the int8 model on 1 thread and an
+    The decider the box ships (``[alerts] decision``'s default, the row's ``decision``): the streaming
+    decider (``edge_runtime.wearable.stream_decider.StreamLoop``, the int8 streaming classifier), or with a
+    capture-path default ``edge_runtime.wearable.loop.WearableLoop`` and the int8 ConvLSTM; on 1 thread, with an
     ``AlertPublisher`` (alerts + the 10 Hz WEARABLE_STATUS heartbeat thread) on an
     in-process python-can ``virtual`` bus, fed 100 Hz samples in real time on absolute
     deadlines (sleeping in between) for ``realtime_s`` seconds, in the blocks the box's
@@ -16,15 +18,16 @@ parent (:func:`prepare_drive`, firmware_sim) and handed over as a ``.npy`` file.
     hands over what arrived meanwhile, so a block of ``read_period_s`` x 100 Hz samples
     (5) every ``read_period_s`` (one sample every 10 ms with ``read_period_s`` = 0).
     The stretch starts 2.5 s before a detector trigger of the drive so
-    that a capture is classified inside it. CPU share = process CPU time (all
+    that a capture is classified inside it (the stream decides every hop wherever it starts). CPU share = process CPU time (all
     threads) / wall time, in % of one core. A deadline miss is a block whose
     processing ends after the next block is due.
 ``detector``
     ``edge_runtime.wearable.detector.StreamingDetector.push`` of one sample, timed per call
-    over the drive (captures included, classification not).
+    over the drive (captures included, classification not): the capture path's, which the
+    streaming decider does not run.
 ``alert_latency``
     The same loop fed one sample at a time as fast as it goes over the whole
-    drive: from the arrival of the capture's last sample (the block's
+    drive: from the arrival of the deciding sample (a capture's last, or a hop's; the block's
     ``rx_monotonic_s``, stamped as it is handed to ``feed``) to the return of
     ``AlertPublisher.on_decision`` (the DISTRACTION_ALERT frame handed to the
     bus), for every alerted decision, as ``python -m edge_runtime wearable``
@@ -80,7 +83,7 @@ def prepare_drive(minutes: float, seed: int, out_npy: str | Path) -> tuple[Path,
 
 
 class _Wearable:
-    """WearableLoop + AlertPublisher on a virtual bus, as ``python -m edge_runtime wearable`` wires them."""
+    """The shipped decider + AlertPublisher on a virtual bus, as ``python -m edge_runtime wearable`` wires them."""
 
     def __init__(self, cfg: WearableConfig):
         import os
@@ -89,18 +92,21 @@ class _Wearable:
         from edge_runtime.core.manifest import ASSETS_DIR
         from edge_runtime.wearable.alerts import AlertPublisher
         from edge_runtime.wearable.classifier import Engine
-        from edge_runtime.wearable.loop import AlertPolicy, WearableLoop
+        from edge_runtime.wearable.loop import STREAM, AlertPolicy, WearableLoop
         from edge_runtime.wearable.stream_decider import StreamLoop, StreamModel
 
         self.pub = AlertPublisher(open_bus("virtual", f"bench-{os.getpid()}"), heartbeat_period_s=0.1)
         # the decider the box ships ([alerts] decision's default): the streaming classifier, or the capture path
-        self.decider = AlertPolicy().decision
-        if self.decider == "stream":
+        policy = AlertPolicy()
+        self.decider = policy.decision
+        self.streaming = self.decider == STREAM
+        if self.streaming:
             self.engine = StreamModel.from_manifest(cfg.assets or ASSETS_DIR, cfg.model, threads=cfg.threads)
-            self.loop = StreamLoop(self.engine, on_decision=self._handle)
+            self.new_loop = lambda: StreamLoop(self.engine, on_decision=self._handle)
         else:
             self.engine = Engine.from_manifest(cfg.assets or ASSETS_DIR, cfg.model, threads=cfg.threads)
-            self.loop = WearableLoop(self.engine, on_decision=self._handle)
+            self.new_loop = lambda: WearableLoop(self.engine, policy=policy, on_decision=self._handle)
+        self.loop = self.new_loop()
         self.t_fed = 0.0
         self.decision_s: list[float] = []
         self.alert_s: list[float] = []
@@ -141,7 +147,8 @@ def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float, read_pe
     busy = np.empty(blocks, np.float64)
     late = np.empty(blocks, np.float64)
     misses = 0
-    captures0 = w.loop.stats.captures
+    stream = w.streaming
+    done0 = w.loop.hops if stream else w.loop.stats.captures
     w.pub.start()
     with CpuShare() as cpu:
         t_start = time.perf_counter()
@@ -155,12 +162,13 @@ def _realtime(w: _Wearable, acc: np.ndarray, start: int, seconds: float, read_pe
             misses += t1 > due_s + period_s
     return {"name": "wearable_100hz", "rate_hz": SAMPLE_RATE_HZ, "seconds": round(cpu.wall_s, 2),
             "samples": blocks * block_samples, "block_samples": block_samples,
-            "captures": w.loop.stats.captures - captures0, "cpu_share_pct": cpu.pct,
+            ("hops" if stream else "captures"): (w.loop.hops if stream else w.loop.stats.captures) - done0,
+            "cpu_share_pct": cpu.pct,
             "deadline_misses": int(misses), "start_late_p99_us": round(float(np.percentile(late, 99)) * 1e6, 1),
             **summarize(busy * 1e9), "peak_rss_mb": peak_rss_mb(),
             "decision": w.decider,
             "what": f"block_samples-block feed of {block_samples} sample(s) every {period_s * 1e3:g} ms, as the live source hands them "
-                    + ("over (the shipped streaming decider: 25 Hz steps, a decision every hop, CAN)" if w.decider == "stream"
+                    + ("over (the shipped streaming decider: 25 Hz steps, a decision every hop, CAN)" if stream
                        else "over (detector + classify on capture + CAN)")
                     + f", real time, {w.engine.name} 1 thread, heartbeat thread running"}
 
@@ -185,7 +193,7 @@ def _detector_row(name: str, call: str, push, n: int) -> dict:
 def _latency(w: _Wearable, acc: np.ndarray) -> list[dict]:
     w.decision_s.clear()
     w.alert_s.clear()
-    w.loop = type(w.loop)(w.engine, on_decision=w._handle)
+    w.loop = w.new_loop()
     for i in range(len(acc)):
         w.feed(i, 1, acc)
     what = "from handing the deciding sample (a capture's last, or a hop's) to the loop to "

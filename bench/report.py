@@ -88,6 +88,8 @@ def _loop_figure(lp: dict) -> str:
               f"{lp['deadline_misses']} deadline misses")
     if "captures" in lp:
         s += f", {lp['captures']} capture(s)"
+    if "hops" in lp:
+        s += f", {lp['hops']} stream decision(s)"
     if "peak_rss_mb" in lp:
         s += f"; peak RSS {lp['peak_rss_mb']:.1f} MiB"
     if "escapes" in lp:

@@ -17,7 +17,7 @@ installed the same way on this machine, on the same simulated drive.
 4. **Install.** Each bundle's ``install.sh`` with no package index (:data:`export.bundle.OFFLINE_ENV`):
    the aarch64 one under emulation, the x86 one here.
 5. **Replay.** The installed ``edge-wearable`` replays the same drive on both, int8 and fp32, with
-   early and full-window decisions: the decisions must be the same (trigger and alert times,
+   the shipped streaming decider and the capture path's early and full-window decisions: the decisions must be the same (trigger and alert times,
    class, status, alerted, AlertSeq; confidence within :data:`CONFIDENCE_TOL`) and so must every
    CAN frame sent, but for the measured time in an alert's TimeSinceTrigger (and the CRC over it);
    every aarch64 frame must pass x86's E2E check.
@@ -79,7 +79,8 @@ ONNXRUNTIME_ALSO = ("1.22.1", "1.28.0", "1.32.0")
 """onnxruntime versions whose aarch64 wheels also run the shipped models under emulation, beside the
 bundle's pinned one: the range the bundle's install notes state (export.bundle.ONNXRUNTIME_TESTED) comes from here."""
 MODELS = ("int8", "fp32")
-DECISIONS = ("early", "full_window")
+DECISIONS = ("stream", "early", "full_window")
+"""The shipped decider first, then the capture path's two (``--model int8|fp32`` names each one's model)."""
 EMU_ENV = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": "/tmp", "LANG": "C.UTF-8"}
 """The emulated programs' whole environment: nothing of this machine's Python or pip leaks in."""
 E2E_PROBE = ("import importlib, json, e2e.crc as c; d = bytes(range(1, 10)); "

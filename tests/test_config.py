@@ -89,10 +89,13 @@ def _cli(*args):
 def test_cli_print_config_and_one_line_error(tmp_path):
     p = tmp_path / "box.toml"
     p.write_text("[detector]\nthreshold_mps2 = 4.0\n")
-    r = _cli("--config", str(p), "--print-config", "--min-confidence", "0.75")
+    r = _cli("--config", str(p), "--print-config")
+    assert r.returncode == 0 and tomllib.loads(r.stdout)["alerts"]["decision"] == "stream"  # as shipped
+    r = _cli("--config", str(p), "--print-config", "--decision", "early", "--min-confidence", "0.75")
     assert r.returncode == 0
     eff = tomllib.loads(r.stdout)
     assert eff["detector"]["threshold_mps2"] == 4.0 and eff["alerts"]["min_confidence"] == 0.75
+    assert eff["alerts"]["decision"] == "early"
     p.write_text("[can]\nbitrat = 1\n")
     r = _cli("--config", str(p), "--print-config")
     assert r.returncode == 2 and "bitrat" in r.stderr and "Traceback" not in r.stderr
@@ -104,7 +107,7 @@ def test_never_alert_must_name_model_classes(tmp_path):
     csv = tmp_path / "r.csv"
     csv.write_text("t,ax,ay,az\n" + "".join(f"{i / 100:.2f},0,0,9.81\n" for i in range(300)))
     p = tmp_path / "box.toml"
-    p.write_text('[alerts]\nnever_alert = ["Othr"]\n')
+    p.write_text('[alerts]\ndecision = "early"\nnever_alert = ["Othr"]\n')  # the capture path's key
     r = _cli("--config", str(p), "--replay", str(csv))
     assert r.returncode == 2 and "never_alert" in r.stderr and "Othr" in r.stderr
 

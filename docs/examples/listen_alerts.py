@@ -16,8 +16,9 @@ preliminary alerts, alert copies skipped, heartbeats, E2E errors, largest heartb
 Each message comes as several DISTRACTION_ALERT frames (the DBC's GenMsgNrOfRepetition copies,
 GenMsgCycleTimeFast ms apart, all alike), so a lost frame costs nothing but the wait for the
 next copy. One AlertSeq is one alert event: its first message is the alert (Status alert, or
-preliminary when decided early), later messages with the same AlertSeq are updates (confirmed,
-revised: a new Class, withdrawn: the alert is void). A frame whose (AlertSeq, Status, Class) was
+preliminary when the capture path decides early), later messages with the same AlertSeq are updates
+(confirmed, revised: a new Class, withdrawn: the alert is void). As shipped (the DBC's decision stream)
+every alert is one message of Status alert and no update follows; the listener handles both the same way. A frame whose (AlertSeq, Status, Class) was
 accepted within the last COPY_WINDOW_S is a copy; an alert counts once, each update once.
 """
 import argparse

@@ -370,15 +370,16 @@ class ModelParams:
     """Which shipped classifier the box runs, and how."""
 
     assets: str = ""
-    """Directory with manifest.json; empty = the models shipped inside edge_runtime."""
+    """Directory with manifest.json; empty = the models shipped inside edge_runtime (both deciders' models)."""
     name: str = config.setting("int8", ("a non-empty string", bool))
-    """Manifest entry: a model name, or a precision (int8, fp32)."""
+    """Capture path only. Manifest entry of the ConvLSTM: a model name, or a precision (int8, fp32). The
+    streaming decider ([alerts] decision = "stream", the default) runs [stream] model instead."""
     threads: int = config.setting(1, config.AT_LEAST_1)
-    """onnxruntime intra-op threads."""
+    """onnxruntime intra-op threads (both deciders)."""
     stream: bool = True
-    """Decide by the ConvLSTM's step model (one run per sub-window as it arrives, the LSTM state kept per
-    capture) when the manifest entry names one (``step_model``); false: run the whole model on the
-    capture's prefix at every decision (sessions 8-9)."""
+    """Capture path only. Decide by the ConvLSTM's step model (one run per sub-window as it arrives, the LSTM
+    state kept per capture) when the manifest entry names one (``step_model``); false: run the whole model on
+    the capture's prefix at every decision (sessions 8-9)."""
     manifest_public_key: str = ""
     """PEM file of the Ed25519 key the manifest must be signed with (manifest.json.sig); empty =
     the sha256 hashes only. Needs the signed-models extra."""

@@ -1,4 +1,8 @@
-"""``python -m edge_runtime wearable``: IMU -> detector -> ConvLSTM -> alert decisions on CAN (docs/design.md section 7).
+"""``python -m edge_runtime wearable``: IMU -> the decider -> alert decisions on CAN (docs/design.md section 7).
+
+The decider is ``[alerts] decision``'s: as shipped ("stream") the streaming classifier on the last seconds of the
+stream (:mod:`edge_runtime.wearable.stream_decider`); "early" or "full_window", the capture path (detector ->
+ConvLSTM on the 7-s capture, :mod:`edge_runtime.wearable.loop`).
 
     python -m edge_runtime wearable (--replay FILE.csv | --imu serial:PATH?key=@FILE|key=env:NAME|unsigned=yes
                                      | --imu sim[?options])
@@ -56,15 +60,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="BOX.toml", help="the box configuration (see edge_runtime/box.example.toml)")
     p.add_argument("--print-config", action="store_true", help="print the effective configuration as TOML and exit")
     p.add_argument("--assets", metavar="DIR", help="model directory with manifest.json [model] assets")
-    p.add_argument("--model", help="manifest entry: a name, or a precision (int8, fp32) [model] name")
+    p.add_argument("--model", help="manifest entry of the decider's model: a name, or a precision (int8, fp32) "
+                   "[stream] model with decision stream, else [model] name")
     p.add_argument("--threads", type=int, help="onnxruntime intra-op threads [model] threads")
-    p.add_argument("--min-confidence", type=float, help="below this a full-window decision is 'uncertain' "
-                   "[alerts] min_confidence (and the S = 6 entry of min_confidence_by_steps)")
-    p.add_argument("--decision", choices=("early", "full_window", "stream"),
-                   help="decide after each sub-window the capture allows (preliminary, then confirmed, revised or "
-                        "withdrawn), once on the full 7-s window, or without captures every hop on the last seconds "
-                        "of the stream ([stream]) [alerts] decision")
-    p.add_argument("--threshold", type=float, help="detector threshold (m/s^2) [detector] threshold_mps2")
+    p.add_argument("--min-confidence", type=float, help="capture path: below this a full-window decision is "
+                   "'uncertain' [alerts] min_confidence (and the S = 6 entry of min_confidence_by_steps)")
+    p.add_argument("--decision", choices=("stream", "early", "full_window"),
+                   help="without captures every hop on the last seconds of the stream ([stream], the default), or the "
+                        "capture path: after each sub-window the capture allows (preliminary, then confirmed, revised "
+                        "or withdrawn), or once on the full 7-s window [alerts] decision")
+    p.add_argument("--threshold", type=float, help="capture path: detector threshold (m/s^2) [detector] threshold_mps2")
     p.add_argument("--realtime", action="store_true", help="pace a replay at its own sample rate")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
 
@@ -76,12 +81,20 @@ def effective_config(args: argparse.Namespace):
     from edge_runtime.wearable import alerts, classifier, detector, loop, sources, stream_decider  # noqa: F401 - their sections
 
     cfg = config.load(args.config)
-    cfg = config.override(cfg, "model", assets=args.assets, name=args.model, threads=args.threads)
+    cfg = config.override(cfg, "alerts", decision=getattr(args, "decision", None))
+    stream = cfg.alerts.decision == loop.STREAM
+    # a flag the decider would not read is refused, not ignored: the user asked for something that would not happen
+    unread = [flag for flag, v in (("--min-confidence", args.min_confidence), ("--threshold", args.threshold))
+              if v is not None]
+    if stream and unread:
+        raise CliError(f"{', '.join(unread)}: the capture path's; [alerts] decision = \"stream\" (the default) has no "
+                       "detector and no capture (add --decision early or full_window)")
+    cfg = config.override(cfg, "model", assets=args.assets, name=None if stream else args.model, threads=args.threads)
+    cfg = config.override(cfg, "stream", model=args.model if stream else None)
     by_steps = None
     if args.min_confidence is not None:  # the flag is the full window's threshold, before the manifest's
         by_steps = [*cfg.alerts.min_confidence_by_steps[:-1], args.min_confidence]
-    cfg = config.override(cfg, "alerts", min_confidence=args.min_confidence, decision=getattr(args, "decision", None),
-                          min_confidence_by_steps=by_steps)
+    cfg = config.override(cfg, "alerts", min_confidence=args.min_confidence, min_confidence_by_steps=by_steps)
     return config.override(cfg, "detector", threshold_mps2=args.threshold)
 
 
@@ -197,12 +210,12 @@ def _paced(block: ImuBlock, rate_hz: float) -> Iterator[ImuBlock]:
 def make_loop(cfg, classifier, publisher: AlertPublisher | None) -> WearableLoop | StreamLoop:
     """The decider ``[alerts] decision`` selects, on ``classifier`` (:func:`_load_classifier`'s): the capture loop,
     or with "stream" the streaming decider. Every decider's alerts go out through ``publisher``."""
-    if cfg.alerts.decision == "stream":
+    from edge_runtime.wearable.loop import STREAM, WearableLoop
+
+    if cfg.alerts.decision == STREAM:
         from edge_runtime.wearable.stream_decider import StreamLoop
 
         return StreamLoop(classifier, cfg.stream, sample_rate_hz=cfg.imu.sample_rate_hz, publisher=publisher)
-    from edge_runtime.wearable.loop import WearableLoop
-
     return WearableLoop(classifier, cfg.detector, cfg.alerts, sample_rate_hz=cfg.imu.sample_rate_hz,
                         publisher=publisher)
 
@@ -210,8 +223,9 @@ def make_loop(cfg, classifier, publisher: AlertPublisher | None) -> WearableLoop
 def _load_classifier(cfg) -> Engine | StreamModel:
     from edge_runtime.config import ConfigError
     from edge_runtime.wearable.classifier import Engine
+    from edge_runtime.wearable.loop import STREAM
 
-    if cfg.alerts.decision == "stream":  # the streaming classifier; [alerts]' capture keys do not apply
+    if cfg.alerts.decision == STREAM:  # the streaming classifier; [alerts]' capture keys do not apply
         from edge_runtime.wearable.stream_decider import StreamModel
 
         return StreamModel.from_params(cfg.stream, cfg.model)

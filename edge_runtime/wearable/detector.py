@@ -34,7 +34,10 @@ from edge_runtime import config
 @config.section("detector")
 @dataclass(frozen=True)
 class DetectorConfig:
-    """The hand-motion detector (dissertation section 2.3.1) and the capture around a trigger."""
+    """The capture path's hand-motion detector (dissertation 2.3.1) and capture; decision "stream" reads none of it.
+
+    [alerts] decision = "early" or "full_window" reads this section; "stream" (the default) has no detector (a gap or
+    bad samples restart its stream, which the status counts as detector restarts)."""
 
     threshold_mps2: float = config.setting(5.0, config.POSITIVE)
     """Trigger when |ax[T] - ax[T - window + 1]| exceeds this (m/s^2)."""

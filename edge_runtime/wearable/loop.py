@@ -1,4 +1,8 @@
-"""The wearable loop: IMU samples -> detector -> capture -> classifier -> alert policy -> publisher.
+"""The wearable capture loop: IMU samples -> detector -> capture -> classifier -> alert policy -> publisher.
+
+The capture path, ``[alerts] decision = "early"`` or ``"full_window"``. The box ships the other decider,
+``"stream"`` (:mod:`edge_runtime.wearable.stream_decider`: no detector, no capture); :class:`AlertPolicy` is
+the section of both, and :class:`WearableLoop` refuses a policy that says "stream".
 
 In the shape of TFLite Micro's magic_wand: a data provider (``sources``,
 ``mavlink_source``) hands over blocks of 100 Hz samples, the model (``classifier``)
@@ -50,6 +54,7 @@ from typing import Any, Callable, Protocol, Sequence
 import numpy as np
 
 from edge_runtime import config
+from edge_runtime.errors import ConfigError
 from edge_runtime.wearable.alerts import AlertPublisher, WearableStatus
 from edge_runtime.wearable.classifier import CAPTURE_FRAMES, N_SUBSEQ, needed_frames
 from edge_runtime.wearable.detector import Capture, DetectorConfig, StreamingDetector
@@ -94,7 +99,11 @@ OTHER_EVIDENCE_FROM_STEP = 3
 """The first sub-window count whose P(Other) counts towards ``AlertPolicy.max_mean_other``: after 1 or 2
 sub-windows (0.5-1.6 s of the motion) the model is right on fewer than two thirds of the captures."""
 FLOAT32 = np.dtype(np.float32)
-DECISIONS = ("early", "full_window", "stream")
+STREAM = "stream"
+"""``[alerts] decision`` of the streaming decider (:mod:`edge_runtime.wearable.stream_decider`)."""
+CAPTURE_DECISIONS = ("early", "full_window")
+"""``[alerts] decision`` values of the capture path (:class:`WearableLoop`)."""
+DECISIONS = (*CAPTURE_DECISIONS, STREAM)
 ALERTING = ("alert", "preliminary", "confirmed", "revised")
 """Statuses whose frame tells the vehicle a distraction is under way (``withdrawn`` clears it)."""
 
@@ -102,95 +111,96 @@ ALERTING = ("alert", "preliminary", "confirmed", "revised")
 @config.section("alerts")
 @dataclass(frozen=True)
 class AlertPolicy:
-    """Which classifier decisions become a DISTRACTION_ALERT."""
+    """How the box decides a DISTRACTION_ALERT: the decider, and the capture path's alert policy."""
 
     min_confidence: float = config.setting(0.6, config.PROBABILITY)
-    """Below this top-class probability a full-window decision is 'uncertain' and not alerted (unless
-    min_confidence_by_steps or the model's manifest gives S = 6 its own)."""
+    """Capture path only. Below this top-class probability a full-window decision is 'uncertain' and not alerted
+    (unless min_confidence_by_steps or the model's manifest gives S = 6 its own)."""
     never_alert: tuple[str, ...] = (OTHER,)
-    """Classes that are logged but never alerted (non-coupled hand motions)."""
-    decision: str = config.setting("early", config.one_of(*DECISIONS))
-    """'early': decide after each sub-window the capture's evidence allows (preliminary, then confirmed,
-    revised or withdrawn), when the model accepts partial captures; 'full_window': one decision per
-    capture at T+599, the dissertation's; 'stream': no detector and no capture: the streaming classifier
-    decides every hop on the last seconds of the stream ([stream], edge_runtime.wearable.stream_decider; issue
-    12, not validated on held-out drives yet). The other keys of this section are the capture path's."""
+    """Capture path only. Classes that are logged but never alerted (non-coupled hand motions; the stream never alerts
+    Other)."""
+    decision: str = config.setting(STREAM, config.one_of(*DECISIONS))
+    """How the box decides. 'stream' (shipped): no detector and no capture: the streaming classifier decides every
+    hop on the last seconds of the stream and sends one final alert (Status 0) per distraction ([stream],
+    edge_runtime.wearable.stream_decider). Chosen over 'early' on development drives (``firmware_sim drive-eval``
+    seeds 1 and 5, 20 h each: better on event recall, first-alert class, onset -> alert median and p95 and false
+    alerts per hour on both, reports/wearable/stream_s22); held-out drive seed 72 (20 h) measured the same order
+    afterwards (reports/drive_eval/fresh_seed72_stream). The capture path (the [detector]'s trigger, then the
+    ConvLSTM on the 7-s capture): 'early', decide after each sub-window the capture's evidence allows
+    (preliminary, then confirmed, revised or withdrawn), when the model accepts partial captures; 'full_window',
+    one decision per capture at T+599, the dissertation's. Every other key of this section is the capture path's
+    only: 'stream' does not read them."""
     min_confidence_by_steps: tuple[float, ...] = config.setting(
         (0.9, 0.9, 0.9, 0.9, 0.9, -1.0), ("a list of 6 numbers, each in [0, 1] or negative",
                                              lambda v: len(v) == N_SUBSEQ and all(p <= 1.0 for p in v)))
-    """Threshold of a decision after S = 1..6 sub-windows (a preliminary alert or a revision for S < 6,
-    the full window's for S = 6); a negative entry: the model manifest's min_confidence_by_steps for
-    that S, else 0.9 for S < 6 and min_confidence for S = 6; 1 for an S < 6: no decision after S
-    sub-windows (the step is not computed). 0.9 before the full window was chosen on
-    validation drives (``firmware_sim early-tune --seed 1``, reports/wearable/early_tuning): the
-    manifest's early thresholds tell a distraction from Other in single captures but not which
-    distraction (first-alert class 0.81 on those drives, Phone taken for Texting most), and the
-    rule there asks class accuracy >= 0.90 at the full window's recall. S = 6 keeps the manifest's.
-    Session 9's model, the same command and rule: 0.9 at every early step was no longer eligible (33
-    repeat alerts in 20 h against the full window's 32) and (0.97, 0.98, 0.99, 0.97, 0.96) shipped,
-    median onset -> first alert 5.76 s on validation. Session 12 gave the rule's repeat- and
-    false-alert limits a tolerance of one Poisson standard deviation of the full window's counts
-    (``early_tuning.RULE``: one count in 20 h no longer decides); on the same validation drives it
-    takes 0.9 again: median 3.85 s, class accuracy 0.903, recall 0.924 (full window 0.922), 33 repeat
-    and 44 false alerts in 20 h (full window 32 and 45)."""
+    """Capture path only. Threshold of a decision after S = 1..6 sub-windows (a preliminary alert or a revision for S <
+    6, the full window's for S = 6); a negative entry: the model manifest's min_confidence_by_steps for that S, else
+    0.9 for S < 6 and min_confidence for S = 6; 1 for an S < 6: no decision after S sub-windows (the step is not
+    computed). 0.9 before the full window was chosen on validation drives (``firmware_sim early-tune --seed 1``,
+    reports/wearable/early_tuning): the manifest's early thresholds tell a distraction from Other in single captures
+    but not which distraction (first-alert class 0.81 on those drives, Phone taken for Texting most), and the rule
+    there asks class accuracy >= 0.90 at the full window's recall. S = 6 keeps the manifest's. Session 9's model,
+    the same command and rule: 0.9 at every early step was no longer eligible (33 repeat alerts in 20 h against the
+    full window's 32) and (0.97, 0.98, 0.99, 0.97, 0.96) shipped, median onset -> first alert 5.76 s on validation.
+    Session 12 gave the rule's repeat- and false-alert limits a tolerance of one Poisson standard deviation of the
+    full window's counts (``early_tuning.RULE``: one count in 20 h no longer decides); on the same validation drives
+    it takes 0.9 again: median 3.85 s, class accuracy 0.903, recall 0.924 (full window 0.922), 33 repeat and 44
+    false alerts in 20 h (full window 32 and 45)."""
     event_hold_s: float = config.setting(5.0, config.within(0.0, 120.0, "s"))
-    """An alert event stays active until this long after the end of its last capture: a capture
-    triggered meanwhile continues it and raises no new alert. 0: every capture is its own event.
-    5 s was chosen on validation drives (``firmware_sim drive-eval --seed 1``, 5 h, full window):
-    repeat alerts 23 -> 1 at unchanged event recall (0.886); 10 s cost 0.03 of recall, 15 s 0.13. The
-    early-decision sweep (``firmware_sim early-tune``) kept it: 3 s gained 0.01 of recall at 3.6 times
-    the repeat alerts, 10 s cost 0.05 of recall."""
+    """Capture path only. An alert event stays active until this long after the end of its last capture: a capture
+    triggered meanwhile continues it and raises no new alert. 0: every capture is its own event. 5 s was chosen on
+    validation drives (``firmware_sim drive-eval --seed 1``, 5 h, full window): repeat alerts 23 -> 1 at unchanged
+    event recall (0.886); 10 s cost 0.03 of recall, 15 s 0.13. The early-decision sweep (``firmware_sim
+    early-tune``) kept it: 3 s gained 0.01 of recall at 3.6 times the repeat alerts, 10 s cost 0.05 of recall."""
     event_ends_on_other: bool = True
-    """A capture of an active event whose full window says a never-alerted class (Other: the hand
-    did something else in between) ends the event instead of extending it, so that the next
-    distraction alerts afresh rather than continuing an event opened long before (or by a false
-    alert). Chosen on development drives (``firmware_sim drive-eval --seed 5`` and ``--seed 1``,
-    10 h each): event recall +0.008 on both, in both decision modes, at unchanged repeat alerts
-    and false alerts +0.1 / 0 per hour (reports/drive_eval/development.md)."""
+    """Capture path only. A capture of an active event whose full window says a never-alerted class (Other: the hand
+    did something else in between) ends the event instead of extending it, so that the next distraction alerts
+    afresh rather than continuing an event opened long before (or by a false alert). Chosen on development drives
+    (``firmware_sim drive-eval --seed 5`` and ``--seed 1``, 10 h each): event recall +0.008 on both, in both
+    decision modes, at unchanged repeat alerts and false alerts +0.1 / 0 per hour
+    (reports/drive_eval/development.md)."""
     class_weights: tuple[float, ...] = config.setting(
         (1.0, 1.0, 1.0, 1.0, 3.0, 1.5), (f"a list of one number in [{MIN_CLASS_WEIGHT:g}, {MAX_CLASS_WEIGHT:g}] per class",
                                          lambda v: len(v) == len(CLASSES) and all(
                                              MIN_CLASS_WEIGHT <= w <= MAX_CLASS_WEIGHT for w in v)))
-    """Weights of the classes (Phone, Texting, TouchScreen, Drink, Marker, Other) the classifier's
-    probabilities are multiplied by, and renormalised, before every decision (a decision's probs and
-    confidence are the weighted ones): a prior-shift correction of a model that under-calls a class
-    on the deployment's captures. 1 everywhere: the model's own probabilities. On development drives
-    (``firmware_sim drive-eval --seed 5`` and ``--seed 1``, 10 h each) Marker was most missed, its
-    full window calling it Other (the Marker reach to the passenger seat is Other's grab_from_seat
-    with a stop at the cup holder); other classes' misses gained less than they cost in false alerts.
-    Rule: the highest mean event recall (early decisions) over both seeds with false alerts per hour
-    on each no higher than with weights 1. Session 8's model: Marker 8, Other 1.5. Refitted by the
-    same rule for session 9's model (label smoothing, rotation up to 15 degrees; Marker 1..8 x Other
-    1..1.5): Marker 3, Other 1.5, event recall +0.012 / +0.007, false alerts -0.1 / -0.4 per hour,
-    class accuracy -0.000 / -0.002 against weights 1 (reports/drive_eval/development.md, round 3).
-    Fitted on simulated drives: refit on a deployment's own validation drives."""
+    """Capture path only. Weights of the classes (Phone, Texting, TouchScreen, Drink, Marker, Other) the classifier's
+    probabilities are multiplied by, and renormalised, before every decision (a decision's probs and confidence are
+    the weighted ones): a prior-shift correction of a model that under-calls a class on the deployment's captures. 1
+    everywhere: the model's own probabilities. On development drives (``firmware_sim drive-eval --seed 5`` and
+    ``--seed 1``, 10 h each) Marker was most missed, its full window calling it Other (the Marker reach to the
+    passenger seat is Other's grab_from_seat with a stop at the cup holder); other classes' misses gained less than
+    they cost in false alerts. Rule: the highest mean event recall (early decisions) over both seeds with false
+    alerts per hour on each no higher than with weights 1. Session 8's model: Marker 8, Other 1.5. Refitted by the
+    same rule for session 9's model (label smoothing, rotation up to 15 degrees; Marker 1..8 x Other 1..1.5): Marker
+    3, Other 1.5, event recall +0.012 / +0.007, false alerts -0.1 / -0.4 per hour, class accuracy -0.000 / -0.002
+    against weights 1 (reports/drive_eval/development.md, round 3). Fitted on simulated drives: refit on a
+    deployment's own validation drives."""
     max_mean_other: float = config.setting(0.5, config.PROBABILITY)
-    """A capture that has raised no alert yet may open one after S >= ``OTHER_EVIDENCE_FROM_STEP``
-    sub-windows only if its mean probability of Other (class weights applied) over the sub-window counts
-    decided so far from that step on is at most this (1: no such check). Several steps' evidence that
-    the hand is doing something else outweighs one confident step: a false alert's Other motion keeps
-    some P(Other) at most steps, a distraction's usually loses it. With ``decision = "full_window"``
-    (or no early step computed) the mean is of the full window alone. Alerts already open
-    (confirmed, revised) are not checked. Chosen on development drives (``firmware_sim drive-eval --seed 5``
-    and ``--seed 1``, 10 h each) by a rule fixed beforehand: the largest cut in false alerts over
-    1, 0.5, 0.4, ..., 0.05 with event recall (early) not lower on either seed: 0.5, false alerts
-    2.1 -> 1.9 and 2.0 -> 1.7 per hour, recall +0.001 / 0; 0.4 and below cost recall on seed 5
+    """Capture path only. A capture that has raised no alert yet may open one after S >= ``OTHER_EVIDENCE_FROM_STEP``
+    sub-windows only if its mean probability of Other (class weights applied) over the sub-window counts decided so
+    far from that step on is at most this (1: no such check). Several steps' evidence that the hand is doing
+    something else outweighs one confident step: a false alert's Other motion keeps some P(Other) at most steps, a
+    distraction's usually loses it. With ``decision = "full_window"`` (or no early step computed) the mean is of the
+    full window alone. Alerts already open (confirmed, revised) are not checked. Chosen on development drives
+    (``firmware_sim drive-eval --seed 5`` and ``--seed 1``, 10 h each) by a rule fixed beforehand: the largest cut
+    in false alerts over 1, 0.5, 0.4, ..., 0.05 with event recall (early) not lower on either seed: 0.5, false
+    alerts 2.1 -> 1.9 and 2.0 -> 1.7 per hour, recall +0.001 / 0; 0.4 and below cost recall on seed 5
     (reports/drive_eval/development.md, round 2)."""
 
     earliest_alert_step: int = config.setting(2, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
-    """No preliminary alert or revision before this many sub-windows (the full window, S = 6, always
-    decides): the first sub-windows hold little of the motion, and a wrong early class is a false alarm.
-    2 was chosen with the thresholds above: at 0.9, S = 1 alerts are rare and tie with 2 on validation,
-    and the tie goes to the later step (int8 and fp32 agree least at S = 1)."""
+    """Capture path only. No preliminary alert or revision before this many sub-windows (the full window, S = 6, always
+    decides): the first sub-windows hold little of the motion, and a wrong early class is a false alarm. 2 was
+    chosen with the thresholds above: at 0.9, S = 1 alerts are rare and tie with 2 on validation, and the tie goes
+    to the later step (int8 and fp32 agree least at S = 1)."""
     early_agreement_steps: int = config.setting(1, ("an integer in 1..6", lambda v: 1 <= v <= N_SUBSEQ))
-    """A preliminary alert or a revision needs the same top class at this many consecutive decided
-    sub-window counts, ending at its own (1: its own step alone). One confident step may be a
-    passing shape of the motion; two that agree are less often. On validation, 2 cost 0.24 s of
-    median latency on average for 0.003 of class accuracy (a higher threshold buys it cheaper): 1."""
+    """Capture path only. A preliminary alert or a revision needs the same top class at this many consecutive decided
+    sub-window counts, ending at its own (1: its own step alone). One confident step may be a passing shape of the
+    motion; two that agree are less often. On validation, 2 cost 0.24 s of median latency on average for 0.003 of
+    class accuracy (a higher threshold buys it cheaper): 1."""
     early_min_margin: float = config.setting(0.0, config.PROBABILITY)
-    """A preliminary alert or a revision needs its top class this far (calibrated probability) above
-    the second: a confident step torn between two distractions (Phone or Texting) waits. On validation
-    the early mistakes are confident ones: 0.3 moved class accuracy by 0.003 on average: 0."""
+    """Capture path only. A preliminary alert or a revision needs its top class this far (calibrated probability) above
+    the second: a confident step torn between two distractions (Phone or Texting) waits. On validation the early
+    mistakes are confident ones: 0.3 moved class accuracy by 0.003 on average: 0."""
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_confidence <= 1.0:
@@ -225,6 +235,10 @@ class AlertPolicy:
         if configured >= 0:
             return configured
         return manifest.get(steps, EARLY_MIN_CONFIDENCE if steps < N_SUBSEQ else self.min_confidence)
+
+
+CAPTURE_DEFAULT = AlertPolicy(decision="early")
+"""The capture loop's policy when it is given none: early decisions, every other key the section's default."""
 
 
 @dataclass
@@ -343,11 +357,15 @@ class WearableLoop:
         self,
         classifier: Classifier,
         detector: DetectorConfig = DetectorConfig(),
-        policy: AlertPolicy = AlertPolicy(),
+        policy: AlertPolicy = CAPTURE_DEFAULT,
         on_decision: Callable[[Decision], None] | None = None,
         sample_rate_hz: int = SAMPLE_RATE_HZ,
         publisher: AlertPublisher | None = None,
     ):
+        if policy.decision not in CAPTURE_DECISIONS:  # the box's default is the streaming decider, not this loop
+            raise ConfigError(f"[alerts] decision = {policy.decision!r}: the capture loop (WearableLoop) decides "
+                              f"{' or '.join(map(repr, CAPTURE_DECISIONS))} only; 'stream' runs the streaming decider "
+                              "(edge_runtime.wearable.stream_decider.StreamLoop, as command.make_loop builds it)")
         self.classifier = classifier
         self.classes = list(classifier.classes)
         self.policy = policy

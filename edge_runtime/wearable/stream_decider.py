@@ -1,4 +1,4 @@
-"""The trigger-free streaming decider (issue 12): ``[alerts] decision = "stream"``.
+"""The trigger-free streaming decider (issue 12): ``[alerts] decision = "stream"``, the box's default.
 
 The capture path (:mod:`edge_runtime.wearable.loop`) waits for the detector's trigger and classifies the 7-s
 capture after it. This path needs no trigger: it keeps the last ``[stream] window_s`` of the wrist stream at
@@ -70,7 +70,7 @@ def _whole_steps(lo_s: float, hi_s: float) -> config.Check:
 @config.section("stream")
 @dataclass(frozen=True)
 class StreamParams:
-    """The trigger-free streaming decider, used when [alerts] decision = "stream" (issue 12)."""
+    """The trigger-free streaming decider, used when [alerts] decision = "stream" (the default)."""
 
     model: str = config.setting("stream-int8", ("a non-empty string", bool))
     """Manifest entry of the streaming classifier (arch stream): a name, or a precision (int8, fp32); the

@@ -7,11 +7,12 @@ Live (the default), as separate processes, the way a vehicle would run it:
    (``docs/examples/listen_alerts.py``); it prints each alert as it arrives;
 3. the wrist IMU firmware streaming MAVLink HIGHRES_IMU at a real 100 Hz on a
    pseudo-terminal (``python -m firmware_sim imu``);
-4. the edge runtime: serial line -> detector -> int8 ConvLSTM -> CAN alerts and heartbeat
+4. the edge runtime as shipped: serial line -> the int8 streaming classifier (a decision every 0.48 s on
+   the last 4 s of the stream, ``[alerts] decision = "stream"``) -> CAN alerts and heartbeat
    (``python -m edge_runtime wearable --imu serial:PATH?unsigned=yes``).
 
 Then the alerts are scored against the simulator's truth (event level), and a PNG
-shows the IMU trace with the truth, the triggers and the alerts. ``--replay`` runs
+shows the IMU trace with the truth and the alerts. ``--replay`` runs
 the same chain on a recording, as fast as it goes, in a few seconds.
 
 Then the robot side, in simulated time: the dissertation's three walks past, across and
@@ -47,7 +48,8 @@ def _run(cmd: list[str]) -> None:
 
 
 def plot_trace(t, acc, events: list[dict], decisions: list[dict], out_png: Path, threshold_mps2: float = 5.0) -> None:
-    """IMU trace (t s, acc (n, 3) m/s^2) with truth events shaded, triggers dashed, alerts red; P3 below."""
+    """IMU trace (t s, acc (n, 3) m/s^2) with truth events shaded, alerts red at their trigger (a stream alert's:
+    the first of the hops that raised it), decisions not alerted dashed; below, P3 (the capture path's detector)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -69,11 +71,11 @@ def plot_trace(t, acc, events: list[dict], decisions: list[dict], out_png: Path,
             ax1.annotate(d["label"], (d["t_alert_s"], -20), color="red", fontsize=7)
     ax1.set_ylim(-25, 25)
     ax1.set_ylabel("acceleration (m/s²)")
-    ax1.set_title("Wrist IMU with truth (shaded), triggers (dashed) and alerts (red)")
+    ax1.set_title("Wrist IMU with truth (shaded), alerts (red) and decisions not alerted (dashed), at their trigger")
     ax1.legend(loc="upper right", fontsize=7)
     ax2.plot(t, p3_series(acc[:, 0]), lw=0.6, color="k")
     ax2.axhline(threshold_mps2, color="red", lw=0.8)
-    ax2.set_ylabel("P3 (m/s²)")
+    ax2.set_ylabel("P3 (m/s²), detector")
     ax2.set_xlabel("time (s)")
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)
@@ -86,7 +88,8 @@ def _score_and_plot(out: Path, t, acc, events: list[dict], alerts: Path) -> None
     png = out / "imu_trace.png"
     plot_trace(t, acc, events, decisions, png)
     print("== scored against the simulator's truth (event level, by trigger: an alert counts for the distraction "
-          "its capture's trigger falls in, from 1 s before its start to its end)")
+          "its trigger falls in, from 1 s before its start to its end; a stream alert's trigger is the first of the "
+          "hops that raised it)")
     print(f"  distractions {s.distractions}, alerts {s.alerts}: recall {s.recall:.2f}, precision {s.precision:.2f} (by trigger), "
           f"correct class {s.label_accuracy:.2f} of matched alerts")
     (out / "score.json").write_text(json.dumps(s.as_dict(), indent=2))
@@ -97,7 +100,8 @@ def run_replay(out: Path, minutes: float, seed: int) -> None:
     py = sys.executable
     print(f"== simulated wrist IMU: a {minutes:g}-minute drive (seed {seed})", flush=True)
     _run([py, "-m", "firmware_sim", "drive", "--minutes", str(minutes), "--seed", str(seed), "--out", str(out)])
-    print("== edge runtime: detector -> int8 ConvLSTM (onnxruntime, 1 thread) -> alert policy -> CAN (virtual)", flush=True)
+    print("== edge runtime as shipped: int8 streaming classifier (onnxruntime, 1 thread; a decision every 0.48 s on the "
+          "last 4 s) -> alert rule -> CAN (virtual)", flush=True)
     alerts = out / "alerts.jsonl"
     _run([py, "-m", "edge_runtime", "wearable", "--replay", str(out / "imu.csv"), "--alerts", str(alerts),
           "--can-log", str(out / "can.log")])
@@ -174,7 +178,8 @@ def run_live(out: Path, minutes: float, seed: int) -> None:
         path = procs.first_line(imu)
         print(f"== 3. wrist IMU firmware: {minutes:g} min of driving as MAVLink at 100 Hz on {path}", flush=True)
         box.write_text(f'[can]\ninterface = "socketcand"\nchannel = "vcan0"\nhost = "127.0.0.1"\nport = {port}\n')
-        print("== 4. edge runtime: serial -> detector -> int8 ConvLSTM -> CAN (alerts + 10 Hz heartbeat)", flush=True)
+        print("== 4. edge runtime as shipped: serial -> int8 streaming classifier -> CAN (alerts + 10 Hz heartbeat)",
+              flush=True)
         rt = subprocess.run([py, "-m", "edge_runtime", "wearable", "--imu", f"serial:{path}?unsigned=yes", "--config", str(box),
                              "--alerts", str(alerts), "--can-log", str(can_log), "--quiet",
                              "--duration", str(minutes * 60 + 3)])

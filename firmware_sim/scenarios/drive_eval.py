@@ -1,7 +1,7 @@
 """``python -m firmware_sim drive-eval``: what a driver gets, on held-out simulated driving.
 
     python -m firmware_sim drive-eval --hours 10 --seed 0 --out reports/drive_eval
-        [--decision early,full_window[,stream]] [--baseline-share 0.3] [--drive-minutes 30]
+        [--decision full_window,early,stream] [--baseline-share 0.3] [--drive-minutes 30]
         [--config BOX.toml] [--assets DIR] [--model int8|fp32] [--agreement ENTRY]
 
 Simulates ``--hours`` of driving by drivers the models never saw: drives with distractions and
@@ -35,11 +35,12 @@ trigger alone, and how many distractions only the frame rule credits:
   capture), a capture that only continued an earlier event, a full window that said Other, or no
   step confident enough.
 
-``stream`` (``[alerts] decision = "stream"``, issue 12): the same replay with the streaming decider
-(:mod:`edge_runtime.wearable.stream_decider`, the model ``[stream] model`` names); its alerts have no detector
-trigger and are scored as session 21 scored its prototype (:func:`stream_scored`). ``--config BOX.toml`` with
-``decision = "stream"`` adds the mode. ``--agreement ENTRY`` then also compares the stream model with ENTRY at
-every hop.
+``stream`` (``[alerts] decision = "stream"``, the box's default, issue 12): the same replay with the streaming
+decider (:mod:`edge_runtime.wearable.stream_decider`, the model ``[stream] model`` names); its alerts have no
+detector trigger and are scored as session 21 scored its prototype (:func:`stream_scored`). It is measured by
+default beside the capture path's ``full_window`` and ``early``, unless ``--config BOX.toml`` chooses the capture
+path (``decision = "early"`` or ``"full_window"``). ``--agreement ENTRY`` then also compares the stream model with
+ENTRY at every hop.
 
 Writes ``OUT/drive_eval.json``, ``OUT/drive_eval.md`` and ``OUT/imu_trace.png`` (a distraction with
 its onset, end, the preliminary and final alert frames).
@@ -576,14 +577,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="selects the held-out drives and drivers")
     p.add_argument("--out", required=True, help="output directory (drive_eval.json, drive_eval.md, imu_trace.png)")
     p.add_argument("--decision", default=None,
-                   help="decision modes to compare, comma-separated: full_window, early, stream (default full_window,"
-                        "early, and stream when the --config file says [alerts] decision = \"stream\")")
+                   help="decision modes to compare, comma-separated: full_window, early, stream (default: full_window "
+                        "and early, the capture path's, and stream unless the --config file chooses the capture path: "
+                        "the shipped [alerts] decision is \"stream\")")
     p.add_argument("--baseline-share", type=float, default=0.3,
                    help="share of the drives that are baseline drives: Other motions, no distraction (default 0.3)")
     p.add_argument("--drive-minutes", type=positive_float, default=30.0, help="length of each drive (default 30)")
     p.add_argument("--config", metavar="BOX.toml", help="the box configuration (default: the shipped defaults)")
     p.add_argument("--assets", metavar="DIR", help="model directory with manifest.json (default: the shipped models)")
-    p.add_argument("--model", help="manifest entry: a name or a precision (default: [model] name, int8)")
+    p.add_argument("--model", help="the capture path's manifest entry: a name or a precision (default: [model] name, "
+                   "int8); the stream mode runs [stream] model")
     p.add_argument("--agreement", metavar="ENTRY",
                    help="also the top-class agreement with this manifest entry (e.g. fp32) on every capture, at "
                         "every sub-window count the model decides at; with the stream mode: the stream model's "

@@ -57,7 +57,8 @@ def test_unsigned_or_signed_by_someone_else_is_refused(signed, tmp_path):
 def test_the_wearable_refuses_tampered_models_in_one_line(signed, tmp_path, capsys):
     assets, public = signed
     box = tmp_path / "box.toml"
-    box.write_text(f'[model]\nmanifest_public_key = "{public}"\n')
+    # the stand-in assets hold a capture-path ConvLSTM only: the box decides by it
+    box.write_text(f'[alerts]\ndecision = "early"\n[model]\nmanifest_public_key = "{public}"\n')
     csv = tmp_path / "rest.csv"
     csv.write_text("t,ax,ay,az\n" + "".join(f"{i / 100:.2f},0,0,9.81\n" for i in range(300)))
     args = ["wearable", "--config", str(box), "--replay", str(csv), "--assets", str(assets)]

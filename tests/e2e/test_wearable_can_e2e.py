@@ -13,23 +13,24 @@ from edge_runtime.wearable.alerts import DBC_PATH, AlertEncoder
 pytestmark = pytest.mark.slow  # every test here starts a process
 
 
-def _wearable(csv, tmp_path, name, extra=()):
+def _wearable(csv, tmp_path, name, decision, extra=()):
     alerts = tmp_path / f"{name}.jsonl"
-    # one message per alert (the full-window decision), so alerts pair up one to one with the listener's lines;
-    # early decisions' updates across processes: tests/e2e/test_integrator_listener.py
+    # one message per alert (the shipped stream's, or the full-window decision), so alerts pair up one to one with
+    # the listener's lines; early decisions' updates across processes: tests/e2e/test_integrator_listener.py
     r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(csv), "--alerts", str(alerts),
-                        "--quiet", "--decision", "full_window", *extra], capture_output=True, text=True, timeout=60)
+                        "--quiet", "--decision", decision, *extra], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     return [json.loads(x) for x in alerts.read_text().splitlines()], r.stdout
 
 
-def test_alerts_of_a_simulated_drive_reach_an_integrator_process(hub, tmp_path):
+@pytest.mark.parametrize("decision", ["stream", "full_window"])
+def test_alerts_of_a_simulated_drive_reach_an_integrator_process(hub, tmp_path, decision):
     sim = subprocess.run([sys.executable, "-m", "firmware_sim", "drive", "--minutes", "3", "--seed", "11", "--out",
                           str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert sim.returncode == 0, sim.stderr
     csv = tmp_path / "imu.csv"
     # how many alerts to expect: the same replay on python-can's in-process virtual bus
-    offline, _ = _wearable(csv, tmp_path, "offline")
+    offline, _ = _wearable(csv, tmp_path, "offline", decision)
     expected = [d["label"] for d in offline if d["alerted"]]
     assert len(expected) >= 3
 
@@ -42,7 +43,8 @@ def test_alerts_of_a_simulated_drive_reach_an_integrator_process(hub, tmp_path):
     try:
         assert listener.stdout.readline().strip() == "ready"
         time.sleep(0.1)
-        decisions, summary = _wearable(csv, tmp_path, "live", ["--config", str(box), "--can-log", str(tmp_path / "sent.log")])
+        decisions, summary = _wearable(csv, tmp_path, "live", decision,
+                                       ["--config", str(box), "--can-log", str(tmp_path / "sent.log")])
         out, err = listener.communicate(timeout=20)
     finally:
         if listener.poll() is None:

@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -63,6 +64,11 @@ def test_bundle_contents_and_checksums(bundle):
         assert _sha(out / "assets" / e["file"]) == e["sha256"]
     assert (out / "box.toml").read_text() == (RUNTIME / "box.example.toml").read_text()
     assert bundle.wheel.name in (out / "INSTALL.md").read_text()
+    # the box decides as shipped, by the streaming classifier, and the bundle carries it
+    box = tomllib.loads((out / "box.toml").read_text())
+    shipped = next(e for e in manifest["models"] if e["name"] == box["stream"]["model"])
+    assert box["alerts"]["decision"] == "stream" and shipped["arch"] == "stream"
+    assert (out / "assets" / shipped["file"]).is_file()
 
 
 @pytest.mark.slow
@@ -243,6 +249,7 @@ def test_offline_install_gives_the_development_checkouts_alerts(bundle, tmp_path
     assert edge_main(["wearable", "--replay", str(drive / "imu.csv"), "--alerts", str(dev),
                                                  "--quiet"]) == 0
     assert _decisions(installed) == _decisions(dev) and any(d["alerted"] for d in _decisions(dev))
+    assert {d["steps"] for d in _decisions(dev)} == {0}  # the shipped box.toml's decider: stream decisions
 
 
 @pytest.mark.slow  # a venv and three interpreters

@@ -160,7 +160,8 @@ def test_held_out_drives_mix_baseline_drives_without_distractions():
 def test_the_command_writes_json_markdown_and_the_trace(tmp_path, capsys):
     assert main(["drive-eval", "--hours", "0.1", "--drive-minutes", "3", "--seed", "5", "--out", str(tmp_path)]) == 0
     report = json.loads((tmp_path / "drive_eval.json").read_text())
-    assert set(report["scores"]) == {"full_window", "early"}  # the shipped model takes partial captures
+    # the shipped decider (stream) beside the capture path's two modes (the shipped ConvLSTM takes partial captures)
+    assert set(report["scores"]) == {"full_window", "early", "stream"}
     assert all(report["scores"][m]["driving_hours"] == pytest.approx(0.1) for m in report["scores"])
     assert "| event recall |" in (tmp_path / "drive_eval.md").read_text()
     # provenance: what decided (the shipped int8 model by its int8 step model, each by its sha256) and the code
@@ -170,6 +171,7 @@ def test_the_command_writes_json_markdown_and_the_trace(tmp_path, capsys):
     sha = {e["name"]: e["sha256"] for e in load_manifest(ASSETS_DIR)["models"]}
     assert report["decision_path"] == {"model": "convlstm-int8", "sha256": sha["convlstm-int8"],
                                        "step_model": "convlstm-step-int8", "step_model_sha256": sha["convlstm-step-int8"]}
+    assert (report["stream_path"]["model"], report["stream_path"]["sha256"]) == ("stream-int8", sha["stream-int8"])
     head = git_head()
     assert report["git_commit"] == head and (head is None or len(head) == 40)
     assert f"Decisions by the step model convlstm-step-int8 (sha256 {sha['convlstm-step-int8']})" in (
@@ -185,7 +187,7 @@ def test_with_a_model_that_takes_partial_captures_both_modes_are_measured_side_b
     assets = write_assets(tmp_path / "assets", early={"steps": [1, 2, 3, 4, 5, 6]}, favour="Phone")
     out = tmp_path / "out"
     assert main(["drive-eval", "--hours", "0.1", "--drive-minutes", "3", "--seed", "5", "--assets", str(assets),
-                 "--out", str(out)]) == 0
+                 "--decision", "full_window,early", "--out", str(out)]) == 0  # these assets have no stream model
     report = json.loads((out / "drive_eval.json").read_text())
     early, full = report["scores"]["early"], report["scores"]["full_window"]
     assert report["early_steps"] == [1, 2, 3, 4, 5, 6] and early["statuses"].get("preliminary", 0) > 0

@@ -43,7 +43,9 @@ def _drive():
 
 
 def _cfg(**alerts):
-    return config.override(config.load(None), "alerts", **{"event_hold_s": 0.0, "class_weights": NEUTRAL_WEIGHTS, **alerts})
+    """The capture path's early decisions (what early-tune sweeps), with no event hold and neutral weights."""
+    return config.override(config.load(None), "alerts", **{"decision": "early", "event_hold_s": 0.0,
+                                                           "class_weights": NEUTRAL_WEIGHTS, **alerts})
 
 
 def test_decide_is_the_runtime_replay_and_the_cache_asks_the_model_once():
@@ -163,8 +165,9 @@ def test_the_detector_threshold_moves_only_for_a_clear_gain_in_time():
 
 
 def test_the_shipped_alert_policy_is_the_one_validation_chose():
-    """Fails when a shipped [alerts] or [detector] default differs from what reports/wearable/early_tuning
-    chose on validation: re-run the command it names, or ship its choice."""
+    """Fails when a shipped capture-path [alerts] or [detector] default (what ``decision = "early"`` runs) differs
+    from what reports/wearable/early_tuning chose on validation: re-run the command it names, or ship its choice.
+    The box itself decides by the streaming classifier (chosen on development drives, reports/wearable/stream_s22)."""
     import json
     from pathlib import Path
 
@@ -178,7 +181,7 @@ def test_the_shipped_alert_policy_is_the_one_validation_chose():
     assert [shipped.threshold(s, manifest) for s in range(1, 7)] == chosen["min_confidence_by_steps"]
     assert {k: getattr(shipped, k) for k in chosen if k != "min_confidence_by_steps"} == \
         {k: v for k, v in chosen.items() if k != "min_confidence_by_steps"}
-    assert shipped.decision == "early"
+    assert shipped.decision == "stream"
     assert config.load(None).detector.threshold_mps2 == report["chosen_detector_threshold_mps2"]
 
 

@@ -40,7 +40,7 @@ def decision(label="Phone", conf=0.87, alerted=True, status="alert"):
 
 def test_dbc_loads_with_version_and_labels():
     db = load_vehicle_dbc()
-    assert db.version == "1.3.0"
+    assert db.version == "1.4.0"
     alert = db.get_message_by_name("DISTRACTION_ALERT")
     status = db.get_message_by_name("WEARABLE_STATUS")
     assert (alert.frame_id, status.frame_id) == (0x3A0, 0x3A1)

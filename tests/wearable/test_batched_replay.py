@@ -79,11 +79,12 @@ def _decisions(loop, segments, block_sizes=None, rng=None):
 
 
 @pytest.mark.parametrize("policy", [
-    AlertPolicy(),
-    AlertPolicy(event_hold_s=60.0, event_ends_on_other=False),
+    AlertPolicy(decision="early"),
+    AlertPolicy(decision="early", event_hold_s=60.0, event_ends_on_other=False),
     AlertPolicy(decision="full_window", event_hold_s=20.0),
-    AlertPolicy(earliest_alert_step=1, min_confidence_by_steps=(0.6,) * 5 + (-1.0,), event_hold_s=15.0),
-], ids=["shipped", "long_events", "full_window", "eager"])
+    AlertPolicy(decision="early", earliest_alert_step=1, min_confidence_by_steps=(0.6,) * 5 + (-1.0,),
+                event_hold_s=15.0),
+], ids=["early_defaults", "long_events", "full_window", "eager"])
 def test_batched_replay_decides_what_the_live_path_decides(policy):
     rng, segments = _drive(seed=3, minutes=15)
     live = _decisions(WearableLoop(HashModel(), policy=policy), segments, block_sizes=(1,), rng=rng)

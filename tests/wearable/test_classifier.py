@@ -210,19 +210,30 @@ def test_classes_disagreeing_with_model_metadata_are_refused(assets, tmp_path):
         Engine.from_manifest(d, "int8")
 
 
-@pytest.mark.slow
-def test_wearable_cli_refuses_tampered_model_in_one_line(assets, tmp_path):
-    d = _copy(assets, tmp_path / "d")
-    (d / "convlstm.int8.onnx").write_bytes(b"\x00" * 100)
+def _assert_cli_refuses_tampered(d: Path, model_file: str, tmp_path: Path, *flags: str) -> None:
+    """``python -m edge_runtime wearable`` on the assets ``d`` with ``model_file`` overwritten: refused in one line."""
+    (d / model_file).write_bytes(b"\x00" * 100)
     csv = tmp_path / "rec.csv"
     t = np.arange(300) / 100
     rows = "\n".join(f"{ti:.2f},0.0,0.0,9.81" for ti in t)
     csv.write_text("t,ax,ay,az\n" + rows + "\n")
-    r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(csv), "--assets", str(d)],
-                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(csv), "--assets", str(d),
+                        *flags], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert r.returncode != 0
     err = r.stderr.strip()
-    assert "Traceback" not in err and "sha256 mismatch" in err and "convlstm.int8.onnx" in err
+    assert "Traceback" not in err and "sha256 mismatch" in err and model_file in err
+
+
+@pytest.mark.slow
+def test_wearable_cli_refuses_tampered_model_in_one_line(assets, tmp_path):
+    _assert_cli_refuses_tampered(_copy(assets, tmp_path / "d"), "convlstm.int8.onnx", tmp_path, "--decision", "early")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (ASSETS_DIR / "manifest.json").exists(), reason="no shipped assets")
+def test_wearable_cli_by_default_refuses_a_tampered_stream_model_in_one_line(tmp_path):
+    """The default decider loads the streaming classifier, hash-checked like the capture path's."""
+    _assert_cli_refuses_tampered(_copy(ASSETS_DIR, tmp_path / "d"), "stream.int8.onnx", tmp_path)
 
 
 @pytest.mark.skipif(not (ASSETS_DIR / "manifest.json").exists(), reason="no shipped assets")

@@ -221,6 +221,32 @@ def test_the_min_confidence_flag_is_the_full_windows_threshold_before_the_models
     assert 'decision = "full_window"' in out
 
 
+def test_the_box_decides_by_the_stream_unless_told_and_model_names_the_deciders_model(capsys):
+    """As shipped the effective configuration says decision = "stream"; --model then names the streaming
+    classifier ([stream] model), and the capture path's ConvLSTM with --decision early or full_window."""
+    import tomllib
+
+    def effective(*flags):
+        assert table.main(["wearable", *flags, "--print-config"]) == 0
+        return tomllib.loads(capsys.readouterr().out)
+
+    shipped = effective()
+    assert shipped["alerts"]["decision"] == "stream" and shipped["stream"]["model"] == "stream-int8"
+    fp32 = effective("--model", "fp32")
+    assert (fp32["stream"]["model"], fp32["model"]["name"]) == ("fp32", "int8")
+    capture = effective("--decision", "early", "--model", "fp32")
+    assert (capture["alerts"]["decision"], capture["model"]["name"], capture["stream"]["model"]) == (
+        "early", "fp32", "stream-int8")
+
+
+@pytest.mark.parametrize("flag", [["--threshold", "4.0"], ["--min-confidence", "0.7"]])
+def test_a_capture_path_flag_without_the_capture_path_is_refused_in_one_line(capsys, flag):
+    assert table.main(["wearable", *flag, "--print-config"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and flag[0] in err[0] and "--decision early" in err[0]
+    assert table.main(["wearable", *flag, "--decision", "early", "--print-config"]) == 0
+
+
 def _replayed(cfg, events, can_log):
     """Decisions (without their wall-clock compute time) and CAN frames of ``events`` driven as a replay."""
     from edge_runtime.wearable.classifier import Engine
@@ -255,7 +281,7 @@ def test_a_recording_fed_in_blocks_decides_as_sample_by_sample_and_beats_as_in_h
                 for b in blocks for i in range(0, len(b.acc_mps2), n)]
 
     cfg = command.effective_config(argparse.Namespace(config=None, assets=None, model=None, threads=None,
-                                                      min_confidence=None, decision=None, threshold=None))
+                                                      min_confidence=None, decision="early", threshold=None))
     fast, fast_frames = _replayed(cfg, blocks, tmp_path / "blocks.log")
     per_sample, _ = _replayed(cfg, split(1), tmp_path / "samples.log")
     _, piece_frames = _replayed(cfg, split(10), tmp_path / "pieces.log")
@@ -306,11 +332,12 @@ def test_a_replay_classifies_a_block_s_captures_together_and_decides_as_one_call
         return groups(self, asked)
 
     monkeypatch.setattr(Engine, "classify_capture_groups", counted)
-    assert table.main(["wearable", "--replay", str(imu), "--alerts", str(tmp_path / "a.jsonl"), "--quiet"]) == 0
+    assert table.main(["wearable", "--replay", str(imu), "--decision", "early", "--alerts", str(tmp_path / "a.jsonl"),
+                       "--quiet"]) == 0
     replayed = [json.loads(line) for line in (tmp_path / "a.jsonl").read_text().splitlines()]
     monkeypatch.undo()
     cfg = command.effective_config(argparse.Namespace(config=None, assets=None, model=None, threads=None,
-                                                      min_confidence=None, decision=None, threshold=None))
+                                                      min_confidence=None, decision="early", threshold=None))
     per_capture = []
     command.replay(cfg, _PerCapture(command._load_classifier(cfg)), acc, [lambda d: per_capture.append(d.to_json())])
     for d in replayed + per_capture:

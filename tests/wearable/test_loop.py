@@ -52,7 +52,8 @@ def test_decisions_carry_stream_times_and_the_classifier_gets_the_capture():
 def test_policy_never_alerts_other_and_flags_low_confidence():
     acc = _steps(3000, [1000])
     other = WearableLoop(Fixed("Other", 0.99)).feed(ImuBlock(0.0, acc))[0]
-    unsure = WearableLoop(Fixed("Phone", 0.4), policy=AlertPolicy(min_confidence=0.5, class_weights=NEUTRAL_WEIGHTS)).feed(ImuBlock(0.0, acc))[0]
+    unsure_policy = AlertPolicy(decision="early", min_confidence=0.5, class_weights=NEUTRAL_WEIGHTS)
+    unsure = WearableLoop(Fixed("Phone", 0.4), policy=unsure_policy).feed(ImuBlock(0.0, acc))[0]
     assert (other.alerted, other.status) == (False, "not_alerted")
     assert (unsure.alerted, unsure.status) == (False, "uncertain")
 
@@ -136,7 +137,8 @@ def test_what_the_policy_does_not_alert_never_reaches_the_publisher(label, p):
 
 def test_a_decision_is_complete_when_made_and_never_changed_afterwards():
     seen = []  # (the object an output handler got, a copy of it as it was then)
-    loop = WearableLoop(Fixed(), publisher=Publisher(goes_out=False), policy=AlertPolicy(event_hold_s=0.0),
+    loop = WearableLoop(Fixed(), publisher=Publisher(goes_out=False),
+                        policy=AlertPolicy(decision="early", event_hold_s=0.0),
                         on_decision=lambda d: seen.append((d, copy.deepcopy(d))))
     acc = _steps(9000, [1000, 2000, 5000])
     returned = loop.feed(ImuBlock(0.0, acc[:4000], rx_monotonic_s=time.monotonic()))
@@ -187,7 +189,7 @@ def Policy(**kw):
     """An early policy that alerts from S = 1 at the manifest's thresholds (else 0.9): the loop's mechanics,
     not the shipped operating point (tests/sim/test_early_tuning.py pins that one to its validation report),
     with the model's own probabilities (no class weights)."""
-    return AlertPolicy(**{"min_confidence_by_steps": (-1.0,) * 6, "earliest_alert_step": 1,
+    return AlertPolicy(**{"decision": "early", "min_confidence_by_steps": (-1.0,) * 6, "earliest_alert_step": 1,
                           "class_weights": NEUTRAL_WEIGHTS, **kw})
 
 
@@ -245,10 +247,11 @@ def test_unconfident_early_steps_wait_and_full_window_mode_decides_once():
 
 
 def test_the_shipped_operating_point_alerts_from_s2_at_its_threshold_and_waits_below_it():
-    """What the shipped [alerts] defaults do (their values are pinned to the validation report in
-    tests/sim/test_early_tuning.py): no alert at S = 1 however sure, a preliminary alert at S = 2 once
-    the step's confidence reaches the shipped threshold (just above it: the model's float32), none just below it."""
-    shipped = AlertPolicy(class_weights=NEUTRAL_WEIGHTS)
+    """What the [alerts] defaults do on the capture path with early decisions (their values are pinned to the
+    validation report in tests/sim/test_early_tuning.py): no alert at S = 1 however sure, a preliminary alert at
+    S = 2 once the step's confidence reaches the shipped threshold (just above it: the model's float32), none just
+    below it."""
+    shipped = AlertPolicy(decision="early", class_weights=NEUTRAL_WEIGHTS)
     at = {s: shipped.threshold(s, {}) for s in (2, 3)}
     assert shipped.earliest_alert_step == 2 and all(0.5 < t < 1.0 for t in at.values())
     sure = {1: ("Drink", 0.999), 2: ("Phone", at[2] + 0.001), 6: ("Phone", 0.8)}
@@ -276,7 +279,8 @@ def test_a_threshold_of_1_before_the_full_window_means_no_decision_and_no_model_
     ds, _, clf, loop = _early_run(answers, manifest_thresholds={1: 1.0})
     assert [s for s, _ in clf.seen] == [2, 3, 4, 5, 6] and loop.decision_mode == "early decisions after S = 2,3,4,5,6"
     assert _summary(ds) == [("preliminary", 3, "Phone", 0), ("confirmed", 6, "Phone", 0)]
-    ds, _, clf, loop = _early_run(answers, policy=AlertPolicy(min_confidence_by_steps=(1.0,) * 5 + (-1.0,)))
+    ds, _, clf, loop = _early_run(answers, policy=AlertPolicy(decision="early",
+                                                              min_confidence_by_steps=(1.0,) * 5 + (-1.0,)))
     assert [s for s, _ in clf.seen] == [6] and _summary(ds) == [("alert", 6, "Phone", 0)]
     assert loop.decision_mode == "full-window decisions (every S < 6 has threshold 1)"
 

@@ -27,7 +27,8 @@ def _decisions(path):
     return out
 
 
-def test_a_csv_recorded_and_replayed_decides_as_the_csv(tmp_path):
+@pytest.mark.parametrize("decision, at_least", [("early", 3), ("stream", 2)])  # the capture path, the shipped decider
+def test_a_csv_recorded_and_replayed_decides_as_the_csv(tmp_path, decision, at_least):
     from firmware_sim.devices.wrist import simulate_drive
 
     acc = simulate_drive(2.0, seed=5).acc_mps2
@@ -36,11 +37,12 @@ def test_a_csv_recorded_and_replayed_decides_as_the_csv(tmp_path):
     lines = csv.read_text().splitlines()
     csv.write_text("\n".join(lines[:8001] + lines[8301:]) + "\n")  # a 3-s gap
     imu = tmp_path / "d.imu"
-    assert table.main(["wearable", "--replay", str(csv), "--alerts", str(tmp_path / "csv.jsonl"), "--record", str(imu),
-                       "--quiet"]) == 0
-    assert table.main(["wearable", "--replay", str(imu), "--alerts", str(tmp_path / "imu.jsonl"), "--quiet"]) == 0
+    assert table.main(["wearable", "--replay", str(csv), "--decision", decision,
+                       "--alerts", str(tmp_path / "csv.jsonl"), "--record", str(imu), "--quiet"]) == 0
+    assert table.main(["wearable", "--replay", str(imu), "--decision", decision,
+                       "--alerts", str(tmp_path / "imu.jsonl"), "--quiet"]) == 0
     via_csv = _decisions(tmp_path / "csv.jsonl")
-    assert len(via_csv) >= 3 and via_csv == _decisions(tmp_path / "imu.jsonl")
+    assert len(via_csv) >= at_least and via_csv == _decisions(tmp_path / "imu.jsonl")
     stats = ReplayStats()
     blocks = list(open_replay(imu, stats))
     assert stats.gaps == 1 and stats.rows == sum(len(b.acc_mps2) for b in blocks) == len(lines) - 1 - 300

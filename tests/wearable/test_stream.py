@@ -365,7 +365,8 @@ def test_a_replay_runs_each_sub_window_of_a_capture_once(drive_acc, monkeypatch)
     """A block's captures go through the step model together: their early decisions read the states the full
     windows' steps pass through, so no sub-window of any capture is run twice (before: once more for the early
     steps of every capture that could open an event)."""
-    loop = WearableLoop(Engine.from_manifest(ASSETS_DIR, "int8"), policy=AlertPolicy())  # its load-time probes ...
+    # its load-time probes ...
+    loop = WearableLoop(Engine.from_manifest(ASSETS_DIR, "int8"), policy=AlertPolicy(decision="early"))
     rows = []  # ... are not counted: the rows each step run of the replay carries
     real = StepModel.step
     monkeypatch.setattr(StepModel, "step", lambda model, x, h, c: rows.append(len(x)) or real(model, x, h, c))
@@ -381,11 +382,12 @@ def test_the_live_loop_decides_what_the_batched_replay_decides(drive_acc, monkey
     steps instead: the same decisions."""
     spy = StepSpy(monkeypatch)
     eng = Spy() if stream else Engine.from_manifest(ASSETS_DIR, "int8", stream=False)
-    live_loop = WearableLoop(eng, policy=AlertPolicy())
+    early = AlertPolicy(decision="early")
+    live_loop = WearableLoop(eng, policy=early)
     per_feed = _steps_per_feed(live_loop, drive_acc, 1, spy)
-    live_loop = WearableLoop(eng, policy=AlertPolicy())
+    live_loop = WearableLoop(eng, policy=early)
     live = _feed(live_loop, drive_acc, 1)
-    replay = _feed(WearableLoop(Engine.from_manifest(ASSETS_DIR, "int8", stream=stream), policy=AlertPolicy()),
+    replay = _feed(WearableLoop(Engine.from_manifest(ASSETS_DIR, "int8", stream=stream), policy=early),
                    drive_acc, len(drive_acc))
     assert len(live) > 5 and live == replay
     if stream:
@@ -396,13 +398,13 @@ def test_the_live_loop_decides_what_the_batched_replay_decides(drive_acc, monkey
 
 
 def test_model_stream_reaches_the_engine_through_the_command(tmp_path):
-    """``[model] stream`` of the box config decides the engine the wearable command loads."""
+    """``[model] stream`` of the box config decides the engine the wearable command loads (the capture path's)."""
     p = argparse.ArgumentParser()
     command.add_arguments(p)
     engines = {}
     for stream in ("true", "false"):
         box = tmp_path / f"box_{stream}.toml"
-        box.write_text(f"[model]\nstream = {stream}\n")
+        box.write_text(f'[alerts]\ndecision = "early"\n[model]\nstream = {stream}\n')
         engines[stream] = command._load_classifier(command.effective_config(
             p.parse_args(["--replay", "x.csv", "--config", str(box)])))
     assert engines["true"].streaming and not engines["false"].streaming
@@ -483,8 +485,8 @@ def test_the_wearable_command_refuses_a_missing_or_foreign_step_model_in_one_lin
     d = _assets_with(tmp_path, change)
     csv = tmp_path / "rec.csv"
     csv.write_text("t,ax,ay,az\n" + "\n".join(f"{i / 100:.2f},0.0,0.0,9.81" for i in range(300)) + "\n")
-    r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(csv), "--assets", str(d)],
-                       capture_output=True, text=True, cwd=REPO_ROOT, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "edge_runtime", "wearable", "--replay", str(csv), "--assets", str(d),
+                        "--decision", "early"], capture_output=True, text=True, cwd=REPO_ROOT, timeout=120)
     err = r.stderr.strip()
     assert r.returncode == 2 and "Traceback" not in err and len(err.splitlines()) == 1
     assert "convlstm_step.int8.onnx" in err

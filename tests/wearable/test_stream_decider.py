@@ -15,7 +15,14 @@ from edge_runtime.wearable.alerts import AlertEncoder, AlertPublisher, Clock
 from edge_runtime.wearable.labels import CLASSES, OTHER
 from edge_runtime.wearable.loop import WearableLoop
 from edge_runtime.wearable.sources import ImuBlock
-from edge_runtime.wearable.stream_decider import STREAM_STEPS, Opened, StreamDecider, StreamLoop, StreamParams
+from edge_runtime.wearable.stream_decider import (
+    STREAM_STEPS,
+    Opened,
+    StreamDecider,
+    StreamLoop,
+    StreamModel,
+    StreamParams,
+)
 
 PHONE, TEXTING, I_OTHER = CLASSES.index("Phone"), CLASSES.index("Texting"), CLASSES.index(OTHER)
 DECISION_KEYS = ["t_trigger_s", "t_alert_s", "label", "confidence", "alerted", "status", "probs", "compute_us",
@@ -189,13 +196,30 @@ def test_stream_alerts_go_out_as_the_capture_paths_do_one_alertseq_per_event():
 # ---------------------------------------------------------------------------- configuration
 
 
-def test_the_default_configuration_keeps_the_capture_path():
+def test_the_default_configuration_runs_the_streaming_decider_and_the_capture_path_on_request():
     cfg = config.box_config_type()()
-    assert cfg.alerts.decision == "early"
-    assert isinstance(command.make_loop(cfg, Windows(), None), WearableLoop)
-    stream = config.override(cfg, "alerts", decision="stream")
-    loop = command.make_loop(stream, Windows(), None)
+    assert cfg.alerts.decision == "stream"
+    loop = command.make_loop(cfg, Windows(), None)
     assert isinstance(loop, StreamLoop) and loop.params == StreamParams()
+    for mode in ("early", "full_window"):
+        capture = command.make_loop(config.override(cfg, "alerts", decision=mode), Windows(), None)
+        assert isinstance(capture, WearableLoop) and capture.policy.decision == mode
+
+
+def test_the_capture_loop_refuses_the_stream_decision_and_decides_early_when_given_no_policy():
+    with pytest.raises(ConfigError, match=r"\[alerts\] decision = 'stream': the capture loop \(WearableLoop\) decides "
+                                          r"'early' or 'full_window' only"):
+        WearableLoop(Windows(), policy=config.box_config_type()().alerts)
+    assert WearableLoop(Windows()).policy.decision == "early"
+
+
+def test_the_default_configuration_loads_the_shipped_stream_model():
+    """What the box loads as shipped: the int8 streaming classifier of the manifest, for the [stream] window."""
+    cfg = config.box_config_type()()
+    model = command._load_classifier(cfg)
+    assert isinstance(model, StreamModel) and (model.name, model.precision) == ("stream-int8", "int8")
+    assert model.entry["arch"] == "stream" and model._x.shape == (1, StreamParams().window_steps, 3)
+    assert isinstance(command.make_loop(cfg, model, None), StreamLoop)
 
 
 def test_the_wearable_command_refuses_a_bad_stream_setting_in_one_line_with_status_2(tmp_path, capsys):
@@ -222,11 +246,12 @@ def test_a_stream_replay_writes_the_alerts_log_with_the_capture_paths_fields(tmp
     assert list(d) == DECISION_KEYS and d["status"] == "alert" and d["alert_seq"] == 0 and d["steps"] == 0
 
 
-def test_the_wearable_command_replays_with_the_shipped_stream_model(tmp_path, capsys):
+@pytest.mark.parametrize("flags", [[], ["--decision", "stream"]], ids=["default", "asked"])
+def test_the_wearable_command_replays_with_the_shipped_stream_model(tmp_path, capsys, flags):
     acc = _moves(3000, [(1000, 2000)])
     csv, log = tmp_path / "r.csv", tmp_path / "alerts.jsonl"
     csv.write_text("t,ax,ay,az\n" + "".join(f"{i / 100:.2f},{a:.4f},{b:.4f},{c:.4f}\n" for i, (a, b, c) in enumerate(acc)))
-    assert table.main(["wearable", "--replay", str(csv), "--decision", "stream", "--alerts", str(log), "--quiet"]) == 0
+    assert table.main(["wearable", "--replay", str(csv), *flags, "--alerts", str(log), "--quiet"]) == 0
     out = capsys.readouterr().out
     # 750 steps of 25 Hz: a decision at the 100th and every 12th after it
     assert "model stream-int8 (int8)" in out and "hops 55 (stream decisions every 0.48 s on the last 4 s" in out
