@@ -103,6 +103,7 @@ Two ways to protect people (``[zones] separation``):
 from __future__ import annotations
 
 import enum
+import itertools
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -462,7 +463,7 @@ class HeadTracker:
             pos, vel = self._x[-1], np.zeros(3)
         else:
             t = np.fromiter(self._t, float) - t_s
-            x = np.array(self._x)  # (n, 3): the values np.stack gives, with less of its checking
+            x = np.array(list(self._x))  # (n, 3): np.stack's values (np.array reads a list faster than a deque)
             # each mean once (the fit used both twice), as np.mean does it: a sum, then / the count
             t_mean, x_mean = np.add.reduce(t) / len(t), np.add.reduce(x, axis=0) / len(x)
             tc = t - t_mean
@@ -664,7 +665,8 @@ class HazardMonitor:
         self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
         persons = [np.asarray(people[wid], float) for wid in ests]
-        bodies = {wid: (person_m, centres, radii, np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]))
+        # each head velocity on the ground as three floats (the same doubles an array of them holds)
+        bodies = {wid: (person_m, centres, radii, (float(est.velocity_mps[0]), 0.0, float(est.velocity_mps[2])))
                   for (wid, est), person_m, (centres, radii) in zip(ests.items(), persons, body_spheres_of(persons))}
         # everyone now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
         seps = separations_per_shift_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps) if bodies else []
@@ -677,7 +679,7 @@ class HazardMonitor:
             d = float(sep.min())
             # moved by 0 s his spheres are where they are (c + 0 v is c, but for the sign of a zero, which no
             # clearance keeps): sep[0] is separation_m's, to the bit, while his velocity is finite
-            now = (caps, sep[0]) if np.isfinite(velocity).all() else None
+            now = (caps, sep[0]) if math.isfinite(velocity[0]) and math.isfinite(velocity[2]) else None
             self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii), now)
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
@@ -971,21 +973,25 @@ def _rpy_transform(xyz, rpy) -> np.ndarray:
 
 
 _ORIGIN_TRANSFORMS = tuple(_rpy_transform(xyz, rpy) for xyz, rpy in SAWYER_JOINT_ORIGINS)
+_EYE4 = np.eye(4)
+"""np.eye(4), made once (read-only: :func:`arm_points_m` copies it where it writes)."""
+_EYE4.setflags(write=False)
 
 
 def arm_points_m(q_rad) -> np.ndarray:
     """(10, 3) robot-frame points along the arm for joint angles ``q_rad`` (7,): the base top,
     joints j0..j6, the hand and the tool tip."""
     q = np.asarray(q_rad, float).reshape(7)
-    t = np.eye(4)
+    qs = q.tolist()  # the same doubles, for math.cos and math.sin without numpy's scalars
+    t = _EYE4  # only read (each product is a new matrix)
     pts = np.zeros((10, 3))
-    turn = np.eye(4)  # the joint's turn about its z axis, filled in per joint (the same matrices, built faster)
+    turn = _EYE4.copy()  # the joint's turn about its z axis, filled in per joint (the same matrices, built faster)
     # ndarray.dot of two C-contiguous 4 x 4 float64 matrices is the BLAS dgemm call `@` makes, without the ufunc
     # machinery's microseconds (tests/robot/test_frame_cost_s16.py pins the points to the `@` form's, to the bit)
     for k, origin in enumerate(_ORIGIN_TRANSFORMS):
         t = t.dot(origin)
         if k < 7:  # every arm joint turns about its own z axis
-            c, s_ = math.cos(q[k]), math.sin(q[k])
+            c, s_ = math.cos(qs[k]), math.sin(qs[k])
             turn[0, 0], turn[0, 1], turn[1, 0], turn[1, 1] = c, -s_, s_, c
             t = t.dot(turn)
         pts[k + 1] = t[:3, 3]
@@ -1084,8 +1090,12 @@ def enough_joints(shown) -> bool:
     least one ankle (the floor anchoring's, edge_runtime.robot.calibration), at most
     ``MAX_MISSING_JOINTS`` missing."""
     shown = np.asarray(shown, bool)
-    return bool(shown[list(REQUIRED_JOINTS)].all() and (shown[L_ANKLE] or shown[R_ANKLE])
+    return bool(shown[_REQUIRED_INDEX].all() and (shown[L_ANKLE] or shown[R_ANKLE])
                 and (~shown).sum() <= MAX_MISSING_JOINTS)
+
+
+_REQUIRED_INDEX = np.array(REQUIRED_JOINTS)
+""":data:`REQUIRED_JOINTS` as an index array (a list is converted at every indexing)."""
 
 
 MIRROR = (0, 4, 5, 6, 1, 2, 3, 7, 8, 9, 10, 14, 15, 16, 11, 12, 13)
@@ -1162,7 +1172,7 @@ def separations_per_shift_m(bodies, shifts_s, capsules) -> list[np.ndarray]:
     if len(bodies) > 1 and len({len(c) for c, _, _ in bodies}) == 1:  # whole skeletons: one (S, P, n) array
         # np.array of equal shapes: np.stack's values, without its per-array reshaping
         centres, radii = np.array([c for c, _, _ in bodies], float), np.array([r for _, r, _ in bodies], float)
-        velocities = np.array([np.asarray(v, float) for _, _, v in bodies], float)
+        velocities = np.array([v for _, _, v in bodies], float)  # arrays or tuples of 3: the same (P, 3) array
         # each moved centre is c + s v as below, elementwise the same arithmetic
         moved = centres[None] + shifts[:, None, None, None] * velocities[None, :, None, :]     # (S, P, n, 3)
         clear = point_clearance_m(moved.reshape(-1, 3), capsules).reshape(moved.shape[:3])
@@ -1260,7 +1270,8 @@ def _gathered(people) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     each person's begin (each person's spheres are contiguous)."""
     centres = np.concatenate([c for c, _ in people])
     radii = np.concatenate([r for _, r in people])
-    return centres, radii, np.cumsum([0] + [len(r) for _, r in people[:-1]])
+    # np.cumsum's integers, summed in Python (numpy's call on a list costs more than a frame's few people)
+    return centres, radii, np.array(list(itertools.accumulate([0] + [len(r) for _, r in people[:-1]])))
 
 
 def people_separations_m(people, capsules) -> np.ndarray:

@@ -220,8 +220,9 @@ def _map(c: np.ndarray, w: np.ndarray, sources: tuple | None = None, prepared=No
     filled, fin = _prepared(c) if prepared is None else prepared
     out = np.empty(c.shape[:-2] + (len(w), 3))
     out[..., :2] = np.einsum("hc,...cd->...hd", w, filled)
-    out[..., 2] = np.min(np.where(used, c[..., None, :, 2], np.inf), axis=-1)  # NaN propagates
-    out[~fin[..., sources].all(axis=-1)] = np.nan
+    out[..., 2] = np.minimum.reduce(np.where(used, c[..., None, :, 2], np.inf), axis=-1)  # np.min's; NaN propagates
+    if not fin.all():  # a keypoint not finite (every one is, in most frames: then no joint is made NaN)
+        out[~fin[..., sources].all(axis=-1)] = np.nan
     return out
 
 
@@ -693,14 +694,21 @@ def _assign(costs: dict[tuple[int, int], float]) -> dict[int, int]:
     """Detection index -> track id over the finite-cost (gated) pairs: as many pairs as
     possible, and of those the least total cost."""
     pairs = {k: c for k, c in costs.items() if math.isfinite(c)}
-    dets = sorted({d for _, d in pairs})
+    options: dict[int, list[int]] = {}  # each detection's tracks, in the pairs' order
+    for t, d in pairs:
+        options.setdefault(d, []).append(t)
+    dets = sorted(options)
     if len(dets) > MAX_EXACT_ASSIGNMENT:
         assigned: dict[int, int] = {}
         for (tid, i), _ in sorted(pairs.items(), key=lambda kv: kv[1]):
             if i not in assigned and tid not in assigned.values():
                 assigned[i] = tid
         return assigned
-    options = {d: [t for t, dd in pairs if dd == d] for d in dets}
+    if all(len(ts) == 1 for ts in options.values()) and len({ts[0] for ts in options.values()}) == len(dets):
+        # each detection within one track's gate, no track within two detections' (people apart, the usual
+        # frame): pairing them all is the only assignment with every detection paired, the search's answer (in
+        # its order: the last detection first)
+        return {d: options[d][0] for d in reversed(dets)}
     return _best_assignment(0, frozenset(), dets, options, pairs)[2]
 
 

@@ -634,9 +634,12 @@ def _usable_all(lifter: StreamingLifter, keypoints: list) -> list[tuple | None]:
     # stacked (as np.stack, cheaper); each person's H36M keypoints come from the tracker's conversion (memo)
     kp = np.array([to_h36m(arrays[i], lifter.keypoint_format) for i in which])
     ok = np.isfinite(kp[..., :2]).all(axis=-1) & (kp[..., 2] >= lifter.params.min_score)  # NaN score: False
-    any_ok = ok.any(axis=1).tolist()
     norm = maps.normalised(kp)
-    norm[~ok] = np.nan  # the rows left out stay NaN, as _usable leaves them
+    if ok.all():  # every keypoint of everyone usable (the usual frame): no row to leave out
+        any_ok = [True] * len(which)
+    else:
+        any_ok = ok.any(axis=1).tolist()
+        norm[~ok] = np.nan  # the rows left out stay NaN, as _usable leaves them
     ok &= (np.abs(norm) <= MAX_NORMALISED).all(axis=-1)
     for i, ok_i, norm_i, kept in zip(which, ok, norm, any_ok):
         out[i] = (ok_i, norm_i if kept else None)

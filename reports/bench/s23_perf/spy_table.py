@@ -1,0 +1,87 @@
+"""Where a frame's (and a tick's) time goes, line by line, from a py-spy sampling profile of prof_frame.py.
+
+py-spy samples the interpreter's stack from outside (no instrumentation: a sample costs the profiled process
+nothing), so the share of samples each line holds is the share of the time it takes, numpy's C work included (a
+numpy call's time is its calling line's). Only samples inside a frame (``_Frames.__call__``) or a control tick
+(``RobotLoop.tick``) are counted.
+
+    py-spy record -r 2000 -f raw -o RAW -- python reports/bench/s23_perf/prof_frame.py --mode plain --out X.json
+    python reports/bench/s23_perf/spy_table.py RAW [--frames N --ticks M] [--top 40]
+
+With the frame and tick counts (prof_frame's output) the shares are turned into microseconds per frame or tick.
+"""
+from __future__ import annotations
+
+import argparse
+import re
+from collections import Counter
+
+_FRAME = re.compile(r"^(?P<fn>.*?) \((?P<file>[^:()]+):(?P<line>\d+)\)$")
+
+
+def _parse(path: str):
+    for row in open(path):
+        stack, _, count = row.rstrip("\n").rpartition(" ")
+        yield stack.split(";"), int(count)
+
+
+def _where(frame: str) -> tuple[str, str, str]:
+    m = _FRAME.match(frame)
+    if not m:
+        return frame, "", ""
+    return m["fn"], m["file"].split("/")[-1], m["line"]
+
+
+def table(path: str, top: int, per: dict[str, int]) -> str:
+    kinds = {"frame": ("_Frames.__call__", "robot_cycle.py"), "tick": ("RobotLoop.tick", "loop.py")}
+    total = Counter()
+    own_line: dict[str, Counter] = {k: Counter() for k in kinds}
+    own_fn: dict[str, Counter] = {k: Counter() for k in kinds}
+    stage: dict[str, Counter] = {k: Counter() for k in kinds}
+    for frames, n in _parse(path):
+        where = [_where(f) for f in frames]
+        for kind, (fn, file) in kinds.items():
+            entry = next((i for i, (f, fl, _) in enumerate(where) if f == fn and fl == file), None)
+            if entry is None:
+                continue
+            total[kind] += n
+            f, fl, line = where[-1]
+            own_line[kind][f"{fl}:{line} {f}"] += n
+            own_fn[kind][f"{fl} {f}"] += n
+            inner = where[entry + 1:entry + 4]
+            stage[kind][" > ".join(f"{f}" for f, _, _ in inner) or "(itself)"] += n
+            break
+    out = []
+    for kind in kinds:
+        t = total[kind]
+        if not t:
+            continue
+        us = per.get(kind)
+
+        def scale(c: int, t: int = t, us: float | None = us) -> str:
+            return f"{c / t * 100:5.1f} %" + ("" if us is None else f" {c / t * us:8.1f}")
+
+        unit = "share" if kind not in per else f"share, us per {kind} (of {per[kind]:.0f} us)"
+        out.append(f"== {kind}: {t} samples ({unit})")
+        out.append("-- by the three calls below the entry point")
+        out += [f"  {scale(c)}  {k}" for k, c in stage[kind].most_common(top)]
+        out.append("-- by function (own time: its lines, the numpy calls on them included)")
+        out += [f"  {scale(c)}  {k}" for k, c in own_fn[kind].most_common(top)]
+        out.append("-- by line")
+        out += [f"  {scale(c)}  {k}" for k, c in own_line[kind].most_common(top)]
+    return "\n".join(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("raw")
+    ap.add_argument("--top", type=int, default=40)
+    ap.add_argument("--frame-us", type=float, default=0.0, help="mean CPU us per frame (prof_frame), for us figures")
+    ap.add_argument("--tick-us", type=float, default=0.0, help="mean CPU us per tick")
+    a = ap.parse_args()
+    per = {k: v for k, v in (("frame", a.frame_us), ("tick", a.tick_us)) if v}
+    print(table(a.raw, a.top, per))
+
+
+if __name__ == "__main__":
+    main()
