@@ -427,6 +427,10 @@ class HeadEstimate:
     predicted_m: np.ndarray
 
 
+_FIT_ROWS = 64
+"""Rows a :class:`HeadTracker` keeps its window's samples in at first (a 0.5 s window at 30 Hz holds 16)."""
+
+
 class HeadTracker:
     """Least-squares head tracker for one worker (see the module docstring)."""
 
@@ -436,6 +440,11 @@ class HeadTracker:
         self._t: deque[float] = deque()
         self._x: deque[np.ndarray] = deque()
         self.resets = 0
+        # the window's times and heads also as arrays, the last len(self._t) rows up to self._end: the fit reads
+        # them as one slice each (np.fromiter of the times and np.array of the heads were a fifth of a fit)
+        self._t_rows = np.empty(_FIT_ROWS)
+        self._x_rows = np.empty((_FIT_ROWS, 3))
+        self._end = 0
 
     def reset(self) -> None:
         self._t.clear()
@@ -456,14 +465,38 @@ class HeadTracker:
         while t_s - self._t[0] > self.p.window_s:
             self._t.popleft()
             self._x.popleft()
+        self._keep_rows(t_s, head)
         return self._estimate(t_s)
+
+    def _keep_rows(self, t_s: float, head: np.ndarray) -> None:
+        """The newest sample into the arrays' rows, after the window's others (the last ``len(self._t) - 1`` rows
+        written: a reset or a trim only drops the oldest); when the rows run out, the window's others are
+        copied to the front of new ones. A head that is not 3 numbers stops the rows for good (the fit then
+        reads the deques, as it did before the rows)."""
+        if self._end < 0:
+            return
+        if head.shape != (3,):
+            self._end = -1
+            return
+        n, end = len(self._t), self._end
+        if end == len(self._t_rows) or n > len(self._t_rows):
+            size = max(len(self._t_rows), 2 * n)
+            t_rows, x_rows = np.empty(size), np.empty((size, 3))
+            t_rows[:n - 1], x_rows[:n - 1] = self._t_rows[end - n + 1:end], self._x_rows[end - n + 1:end]
+            self._t_rows, self._x_rows, end = t_rows, x_rows, n - 1
+        self._t_rows[end] = t_s
+        self._x_rows[end] = head
+        self._end = end + 1
 
     def _estimate(self, t_s: float) -> HeadEstimate:
         if len(self._t) < self.p.min_samples or self._t[-1] - self._t[0] < self.p.min_span_s:
             pos, vel = self._x[-1], np.zeros(3)
         else:
-            t = np.fromiter(self._t, float) - t_s
-            x = np.array(list(self._x))  # (n, 3): np.stack's values (np.array reads a list faster than a deque)
+            n, end = len(self._t), self._end
+            if end >= 0:  # the window's rows (the same doubles as the deques hold, a C-contiguous slice of each)
+                t, x = self._t_rows[end - n:end] - t_s, self._x_rows[end - n:end]
+            else:
+                t, x = np.fromiter(self._t, float) - t_s, np.array(list(self._x))  # (n, 3): np.stack's values
             # each mean once (the fit used both twice), as np.mean does it: a sum, then / the count
             t_mean, x_mean = np.add.reduce(t) / len(t), np.add.reduce(x, axis=0) / len(x)
             tc = t - t_mean
@@ -675,7 +708,8 @@ class HazardMonitor:
             v_g = ground(est.velocity_mps)
             speed = math.sqrt(v_g.dot(v_g))  # np.linalg.norm's own arithmetic for a vector (below too)
             toward = eff_g - ground(est.position_m)
-            approach = float(v_g @ toward) / max(math.sqrt(toward.dot(toward)), 1e-9)
+            # ndarray.dot of two vectors is the dot `@` calls (numpy's DOUBLE_dot), without the ufunc machinery
+            approach = float(v_g.dot(toward)) / max(math.sqrt(toward.dot(toward)), 1e-9)
             d = float(sep.min())
             # moved by 0 s his spheres are where they are (c + 0 v is c, but for the sign of a zero, which no
             # clearance keeps): sep[0] is separation_m's, to the bit, while his velocity is finite

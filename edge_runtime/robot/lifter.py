@@ -672,7 +672,8 @@ def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray
     if any(not lf._pixel_maps().made_for(*maps.cameras, maps.params) for lf in lifters[1:]):
         return [_finish([lf], [r], pose[i:i + 1], root[i:i + 1], dt)[0]
                 for i, (lf, r) in enumerate(zip(lifters, ready))]
-    model_joints = pose.reshape(n, N_JOINTS, 3).astype(np.float64) + root.reshape(n, 1, 3)
+    # float32 + float32 added in float64 (each value converted exactly, as astype(float64) then + converts them)
+    model_joints = np.add(pose.reshape(n, N_JOINTS, 3), root.reshape(n, 1, 3), dtype=np.float64)
     finite = np.isfinite(model_joints.reshape(n, -1)).all(axis=1).tolist()
     nearest_m = model_joints[:, :, 2].min(axis=1).tolist()
     out: list = [None] * n

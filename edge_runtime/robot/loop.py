@@ -396,7 +396,7 @@ class RobotLoop:
         self._raised = False  # the last link call raised: retry at link_retry_s
         self._auto_heartbeat = link.heartbeats_itself
         self._waypoint = 0
-        self._task_motions: dict[int, Motion] = {}  # _task_motion's, per waypoint, for _task_motions_of
+        self._task_motions: dict[int, tuple] = {}  # _task_target's, per waypoint, for _task_motions_of
         self._task_motions_of: LoopParams | None = None
         self._sent_motion: Motion | None = None
         self._sent_alarm = None
@@ -788,17 +788,22 @@ class RobotLoop:
         s = self._sent_motion
         if (s is not None and s.kind is MotionKind.MOVE and s.position_m == tuple(target)
                 and self._last_effector is not None
-                and _norm3(self._last_effector - target) <= p.waypoint_tolerance_m):
+                and _norm3(self._last_effector - self._task_target(p)[1]) <= p.waypoint_tolerance_m):
             self._waypoint = (self._waypoint + 1) % len(p.task_waypoints_m)
-        # each waypoint's move made once (a frozen value, compared by value: the tick asks for it 100 times a second)
+        return self._task_target(p)[0]
+
+    def _task_target(self, p: LoopParams) -> tuple[Motion, np.ndarray]:
+        """The current waypoint's move and its position as an array, each made once per waypoint (a frozen value,
+        compared by value; an array subtracted as the waypoint's tuple would be, without converting it: the
+        control tick asks for them 100 times a second)."""
         if self._task_motions_of is not p:  # (for these parameters)
             self._task_motions, self._task_motions_of = {}, p
-        motion = self._task_motions.get(self._waypoint)
-        if motion is None:
+        made = self._task_motions.get(self._waypoint)
+        if made is None:
             target = p.task_waypoints_m[self._waypoint]
-            motion = self._task_motions[self._waypoint] = Motion(MotionKind.MOVE, _vec3(target), p.task_pitch_rad,
-                                                                 p.task_yaw_rad)
-        return motion
+            made = self._task_motions[self._waypoint] = (
+                Motion(MotionKind.MOVE, _vec3(target), p.task_pitch_rad, p.task_yaw_rad), np.array(target, float))
+        return made
 
     def _retract_again(self, decision: Decision) -> bool:
         """Retract once more when the last retraction is done, the worker has come

@@ -32,12 +32,17 @@ def _where(frame: str) -> tuple[str, str, str]:
     return m["fn"], m["file"].split("/")[-1], m["line"]
 
 
-def table(path: str, top: int, per: dict[str, int]) -> str:
+def _ours(frame: str) -> bool:
+    return "edge_runtime/" in frame or "bench/" in frame
+
+
+def table(path: str, top: int, per: dict[str, int], under: str = "") -> str:
     kinds = {"frame": ("_Frames.__call__", "robot_cycle.py"), "tick": ("RobotLoop.tick", "loop.py")}
     total = Counter()
     own_line: dict[str, Counter] = {k: Counter() for k in kinds}
     own_fn: dict[str, Counter] = {k: Counter() for k in kinds}
     stage: dict[str, Counter] = {k: Counter() for k in kinds}
+    below: dict[str, Counter] = {k: Counter() for k in kinds}
     for frames, n in _parse(path):
         where = [_where(f) for f in frames]
         for kind, (fn, file) in kinds.items():
@@ -45,9 +50,16 @@ def table(path: str, top: int, per: dict[str, int]) -> str:
             if entry is None:
                 continue
             total[kind] += n
-            f, fl, line = where[-1]
+            # the deepest of the project's own lines (numpy's and the libraries' Python wrappers count to the line
+            # that called them)
+            f, fl, line = next((w for w, full in zip(reversed(where), reversed(frames)) if _ours(full)), where[-1])
             own_line[kind][f"{fl}:{line} {f}"] += n
             own_fn[kind][f"{fl} {f}"] += n
+            if under:
+                inside = next((i for i, (g, _, _) in enumerate(where) if g == under), None)
+                if inside is None:
+                    continue
+                below[kind][f"{fl}:{line} {f}"] += n
             inner = where[entry + 1:entry + 4]
             stage[kind][" > ".join(f"{f}" for f, _, _ in inner) or "(itself)"] += n
             break
@@ -67,8 +79,11 @@ def table(path: str, top: int, per: dict[str, int]) -> str:
         out += [f"  {scale(c)}  {k}" for k, c in stage[kind].most_common(top)]
         out.append("-- by function (own time: its lines, the numpy calls on them included)")
         out += [f"  {scale(c)}  {k}" for k, c in own_fn[kind].most_common(top)]
-        out.append("-- by line")
+        out.append("-- by line (the project's own: the numpy and library calls on it included)")
         out += [f"  {scale(c)}  {k}" for k, c in own_line[kind].most_common(top)]
+        if under:
+            out.append(f"-- by line, inside {under}")
+            out += [f"  {scale(c)}  {k}" for k, c in below[kind].most_common(top)]
     return "\n".join(out)
 
 
@@ -78,9 +93,10 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=40)
     ap.add_argument("--frame-us", type=float, default=0.0, help="mean CPU us per frame (prof_frame), for us figures")
     ap.add_argument("--tick-us", type=float, default=0.0, help="mean CPU us per tick")
+    ap.add_argument("--under", default="", help="also: the lines inside this function (e.g. HazardMonitor.observe)")
     a = ap.parse_args()
     per = {k: v for k, v in (("frame", a.frame_us), ("tick", a.tick_us)) if v}
-    print(table(a.raw, a.top, per))
+    print(table(a.raw, a.top, per, a.under))
 
 
 if __name__ == "__main__":
