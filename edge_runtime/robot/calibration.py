@@ -360,7 +360,9 @@ class FloorAnchor:
         # everyone's ankle rays, and below everyone's anchored joints, in one matrix product each (a stack's
         # product is each skeleton's own, to the bit: tests/robot/test_perception_batch_s18.py)
         A, b = np.asarray(cal.A, float), np.asarray(cal.b, float)
-        mine = flat[todo]
+        # everyone's skeleton, a copy (one no caller holds: the tracks keep views of it); a copy of them all when
+        # everyone is new in this frame (the usual frame), as the gather of every row makes it
+        mine = flat.copy() if len(todo) == len(flat) else flat[todo]
         ankle_rays = (mine[:, _ANKLES] @ A.T).tolist()
         anchored = []
         for i, rays in zip(todo, ankle_rays):
