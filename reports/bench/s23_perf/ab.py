@@ -39,6 +39,13 @@ def run(tree: str, seconds: float, npz: str, out: Path) -> dict:
             "load": os.getloadavg()[0]}
 
 
+def _pairs(runs: list[dict]):
+    """(base run, mine run) of each pair."""
+    for k in sorted({r["pair"] for r in runs}):
+        side = {r["side"]: r for r in runs if r["pair"] == k}
+        yield side["base"], side["mine"]
+
+
 FIELDS = ("frame_mean", "frame_p50", "frame_p99", "cmd_mean", "cmd_p99", "tick_mean", "tick_p99")
 
 
@@ -68,6 +75,9 @@ def main() -> None:
     for side in ("base", "mine"):
         print(f"{side:22s} " + " ".join(f"{summary[side][f]:10.3f}" for f in FIELDS))
     print(f"{'mine / base':22s} " + " ".join(f"{summary['mine'][f] / summary['base'][f]:10.3f}" for f in FIELDS))
+    paired = {f: statistics.median(m[f] / b[f] for b, m in _pairs(runs)) for f in FIELDS}
+    print(f"{'paired ratio, median':22s} " + " ".join(f"{paired[f]:10.3f}" for f in FIELDS))
+    summary["paired_ratio_median"] = paired
     Path(a.out).write_text(json.dumps({"runs": runs, "median": summary, "same_digests": len(digests) == 1,
                                        "argv": sys.argv[1:]}, indent=1))
 

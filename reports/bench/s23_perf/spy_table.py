@@ -36,6 +36,27 @@ def _ours(frame: str) -> bool:
     return "edge_runtime/" in frame or "bench/" in frame
 
 
+STAGES = ("PersonTracker.update", "_usable_all", "StreamingLifter._prepare", "_lift", "_finish", "PeopleLifter.push",
+          "RobotLoop._poll_link", "Calibration.to_robot", "HeadTracker.update", "body_spheres_of",
+          "separations_per_shift_m", "HazardMonitor._speed_and_separation", "HazardMonitor.observe",
+          "RobotLoop._retract_backfires", "RobotLoop._escape", "RobotLoop._call", "RobotLoop._act",
+          "RobotLoop.feed_joints", "RobotLoop.feed_poses", "RobotLoop.feed_people", "_Frames.__call__")
+"""A frame's stages, innermost first: a sample counts to the first of them on its stack."""
+
+
+def stage_table(path: str, frame_us: float) -> str:
+    """Each stage's share of the frames' samples (and us of ``frame_us`` when given)."""
+    total, counts = 0, Counter()
+    for frames, n in _parse(path):
+        names = [_where(f)[0] for f in frames]
+        if "_Frames.__call__" not in names:
+            continue
+        total += n
+        counts[next(s for s in STAGES if s in names)] += n
+    return "\n".join(f"  {s:40s} {counts[s] / total * 100:5.1f} %" + (f" {counts[s] / total * frame_us:8.1f} us"
+                                                                        if frame_us else "") for s in STAGES)
+
+
 def table(path: str, top: int, per: dict[str, int], under: str = "") -> str:
     kinds = {"frame": ("_Frames.__call__", "robot_cycle.py"), "tick": ("RobotLoop.tick", "loop.py")}
     total = Counter()
@@ -93,10 +114,14 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=40)
     ap.add_argument("--frame-us", type=float, default=0.0, help="mean CPU us per frame (prof_frame), for us figures")
     ap.add_argument("--tick-us", type=float, default=0.0, help="mean CPU us per tick")
+    ap.add_argument("--stages", action="store_true", help="only the frame's stage shares")
     ap.add_argument("--under", default="", help="also: the lines inside this function (e.g. HazardMonitor.observe)")
     a = ap.parse_args()
     per = {k: v for k, v in (("frame", a.frame_us), ("tick", a.tick_us)) if v}
-    print(table(a.raw, a.top, per, a.under))
+    if a.stages:
+        print(stage_table(a.raw, a.frame_us))
+    else:
+        print(table(a.raw, a.top, per, a.under))
 
 
 if __name__ == "__main__":
