@@ -427,6 +427,28 @@ class HeadEstimate:
     predicted_m: np.ndarray
 
 
+def _fit_times(t: np.ndarray) -> tuple:
+    """The head fit's terms of its window's times ``t`` (from the fit's time, s): (their mean as np.mean takes it, a
+    sum then / the count; the centred times; their sum of squares as a float)."""
+    t_mean = np.add.reduce(t) / len(t)
+    tc = t - t_mean
+    return t_mean, tc, float(tc @ tc)
+
+
+def _time_terms(times: np.ndarray, t_s: float) -> tuple:
+    """:func:`_fit_times` of ``times - t_s``, remembered by the times' bytes and ``t_s``'s (every person seen in a
+    frame has the same window of times, as a rule: the second one's fit reuses the first one's terms; the bytes
+    tell signed zeros apart, as the arithmetic does)."""
+    key = (times.tobytes(), float(t_s).hex())
+    hit = _TIME_TERMS.get(key)
+    if hit is None:
+        hit = _TIME_TERMS.put(key, _fit_times(times - t_s))
+    return hit
+
+
+_TIME_TERMS: Recent[tuple] = Recent(4)
+""":func:`_time_terms` of the last few windows (read-only use: the fit only reads them)."""
+
 _FIT_ROWS = 64
 """Rows a :class:`HeadTracker` keeps its window's samples in at first (a 0.5 s window at 30 Hz holds 16)."""
 
@@ -494,13 +516,14 @@ class HeadTracker:
         else:
             n, end = len(self._t), self._end
             if end >= 0:  # the window's rows (the same doubles as the deques hold, a C-contiguous slice of each)
-                t, x = self._t_rows[end - n:end] - t_s, self._x_rows[end - n:end]
+                t_mean, tc, tt = _time_terms(self._t_rows[end - n:end], t_s)
+                x = self._x_rows[end - n:end]
             else:
                 t, x = np.fromiter(self._t, float) - t_s, np.array(list(self._x))  # (n, 3): np.stack's values
+                t_mean, tc, tt = _fit_times(t)
             # each mean once (the fit used both twice), as np.mean does it: a sum, then / the count
-            t_mean, x_mean = np.add.reduce(t) / len(t), np.add.reduce(x, axis=0) / len(x)
-            tc = t - t_mean
-            vel = tc @ (x - x_mean) / float(tc @ tc)
+            x_mean = np.add.reduce(x, axis=0) / len(x)
+            vel = tc @ (x - x_mean) / tt
             pos = x_mean - t_mean * vel  # the fitted line at t_s
             speed = math.sqrt(vel.dot(vel))  # np.linalg.norm's own arithmetic for a vector
             if speed > self.p.max_speed_mps:

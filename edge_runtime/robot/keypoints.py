@@ -591,12 +591,14 @@ class PersonTracker:
         # of bones
         kps = to_h36m_each(kps, self.keypoint_format)
         seen = _seen(kps, p.min_score)
-        enough = seen.sum(axis=1) >= p.min_joints
-        if not enough.all():
-            self.rejected += len(enough) - int(enough.sum())
-            shaped = [person for person, ok in zip(shaped, enough.tolist()) if ok]
-            kps, seen = kps[enough], seen[enough]
-        sizes = _sizes_px(kps, seen, p.min_score)
+        all_seen = bool(seen.all())  # every joint of everyone seen (the usual frame): all 17 >= min_joints of them
+        if not (all_seen and p.min_joints <= N_JOINTS):
+            enough = seen.sum(axis=1) >= p.min_joints
+            if not enough.all():
+                self.rejected += len(enough) - int(enough.sum())
+                shaped = [person for person, ok in zip(shaped, enough.tolist()) if ok]
+                kps, seen = kps[enough], seen[enough]
+        sizes = _sizes_px(kps, seen, p.min_score, all_seen)
         assigned = _assign(self._costs(kps, seen, t_s))
         out, followed = [], []
         for i, person in enumerate(shaped):
@@ -776,14 +778,15 @@ def _size_px(kp: np.ndarray, min_score: float, seen: np.ndarray | None = None) -
     return max(float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0))), 1.0)
 
 
-def _sizes_px(kps: np.ndarray, seen: np.ndarray, min_score: float) -> list[float]:
+def _sizes_px(kps: np.ndarray, seen: np.ndarray, min_score: float, all_seen: bool = False) -> list[float]:
     """:func:`_size_px` of each detection of ``kps`` (D, 17, 3), ``seen`` (D, 17) its seen joints: every bone of
     every detection in one pass (``np.vecdot`` of float64 calls the dot ``ndarray.dot`` calls, vector by vector),
-    the same numbers; a detection with fewer than two bones seen gets :func:`_size_px` itself (its box)."""
-    bone_seen = seen[:, _BONE_A] & seen[:, _BONE_B]
+    the same numbers; a detection with fewer than two bones seen gets :func:`_size_px` itself (its box).
+    ``all_seen``: the caller knows ``seen`` is all True (then so is every bone)."""
+    bone_seen = None if all_seen else seen[:, _BONE_A] & seen[:, _BONE_B]
     bones = kps[:, _BONE_A, :2] - kps[:, _BONE_B, :2]
     heights = np.sqrt(np.vecdot(bones, bones)) / _BONE_FRACTIONS
-    every = bone_seen.all()  # every bone of everyone seen (the usual frame): none to leave out
+    every = all_seen or bone_seen.all()  # every bone of everyone seen (the usual frame): none to leave out
     if not every:
         heights = np.where(bone_seen, heights, -np.inf)
     heights.sort(axis=1)  # in place (a new array already): np.sort's order without its copy

@@ -674,7 +674,8 @@ def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray
                 for i, (lf, r) in enumerate(zip(lifters, ready))]
     # float32 + float32 added in float64 (each value converted exactly, as astype(float64) then + converts them)
     model_joints = np.add(pose.reshape(n, N_JOINTS, 3), root.reshape(n, 1, 3), dtype=np.float64)
-    finite = np.isfinite(model_joints.reshape(n, -1)).all(axis=1).tolist()
+    finite = np.isfinite(model_joints)
+    finite = [True] * n if finite.all() else finite.reshape(n, -1).all(axis=1).tolist()
     nearest_m = model_joints[:, :, 2].min(axis=1).tolist()
     out: list = [None] * n
     good = []

@@ -468,8 +468,8 @@ class RobotLoop:
         # bounded by its bones from those (lifter.enough_joints; hazard.body_spheres)
         if self.zones.separation == "whole_body":
             # everyone showing every joint (the usual frame) shows enough of himself
-            enough = shaped and ((shown := np.isfinite(persons).all(axis=2)).all()
-                                 or all(enough_joints(f) for f in shown))
+            enough = shaped and (np.isfinite(persons).all()
+                                 or all(enough_joints(f) for f in np.isfinite(persons).all(axis=2)))
         else:
             enough = np.isfinite(persons[:, HEAD, :] if shaped else persons).all()
         if not valid or not shaped or not enough:

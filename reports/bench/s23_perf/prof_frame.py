@@ -14,6 +14,8 @@ inputs in the same order and must send the same commands. Three figures, none of
   pose (joints, validity), the calibrated robot-frame people, the monitor's head estimates and decisions, the arm
   joint angles and effector it judged against (wrapping the same entry points; the timings then mean nothing).
 * ``--mode plain``: the frames' and ticks' CPU time alone (no wrappers: the figure to compare two trees by).
+* ``--mode lockstep``: ``plain``, each frame and tick run when a line comes on stdin and its CPU time printed on
+  stdout (``lockstep.py`` runs two trees so, alternately, slot by slot).
 * always: a digest of every frame's decision (state, reason, distance to the bit, command, the log's per-person
   beliefs) and of every CAN frame the runtime handed to the bus (id and bytes, E2E counter and CRC included), and
   the loop's counters: two trees that print the same digests decided and sent the same.
@@ -151,6 +153,8 @@ def run(seconds: float, npz: Path, mode: str, dump: str = "") -> dict:
 
         heap.settle()  # as the bench and `python -m edge_runtime robot` do once the loop is built
         for k in _frames_and_ticks(cfg.seconds, sim, echo):
+            if mode == "lockstep":  # wait for lockstep.py's turn (outside the timed frame)
+                sys.stdin.readline()
             CUR.clear()
             p = prof and prof["tick" if k == rc.TICK else "frame"]
             if p:
@@ -160,6 +164,8 @@ def run(seconds: float, npz: Path, mode: str, dump: str = "") -> dict:
             cpu = time.thread_time() - c0
             if p:
                 p.disable()
+            if mode == "lockstep":
+                print("tick" if k == rc.TICK else "frame", cpu, flush=True)
             sent = [fid for _, fid in bus.sent]
             del bus.sent[:]
             payloads.update(repr(PAYLOADS).encode())
@@ -248,12 +254,12 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--npz", default="/tmp/perf23/workers60.npz")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--mode", choices=("stages", "cprofile", "plain", "digest"), default="stages")
+    ap.add_argument("--mode", choices=("stages", "cprofile", "plain", "digest", "lockstep"), default="stages")
     ap.add_argument("--dump", default="", help="cprofile: write DUMP.frame.prof and DUMP.tick.prof")
     args = ap.parse_args()
     out = run(args.seconds, Path(args.npz), args.mode, args.dump)
     Path(args.out).write_text(json.dumps(out))
-    print(summarize(out))
+    print(summarize(out), file=sys.stderr if args.mode == "lockstep" else sys.stdout)
 
 
 if __name__ == "__main__":
