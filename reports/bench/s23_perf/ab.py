@@ -49,15 +49,20 @@ def _pairs(runs: list[dict]):
 FIELDS = ("frame_mean", "frame_p50", "frame_p99", "cmd_mean", "cmd_p99", "tick_mean", "tick_p99")
 
 
-def main() -> None:
+def two_trees(**extra) -> argparse.Namespace:
+    """The command line of a comparison of two trees (BASE MINE --seconds --npz --out), ``extra`` options too
+    (name -> (type, default))."""
     ap = argparse.ArgumentParser()
-    ap.add_argument("base")
-    ap.add_argument("mine")
-    ap.add_argument("--pairs", type=int, default=3)
-    ap.add_argument("--seconds", type=float, default=60.0)
-    ap.add_argument("--npz", default="/tmp/perf23/workers60.npz")
+    for name in ("base", "mine"):
+        ap.add_argument(name)
+    for name, (kind, default) in {**extra, "seconds": (float, 60.0), "npz": (str, "/tmp/perf23/workers60.npz")}.items():
+        ap.add_argument(f"--{name}", type=kind, default=default)
     ap.add_argument("--out", required=True)
-    a = ap.parse_args()
+    return ap.parse_args()
+
+
+def main() -> None:
+    a = two_trees(pairs=(int, 3))
     runs = []
     tmp = Path("/tmp/perf23/ab_run.json")
     for k in range(a.pairs):

@@ -10,7 +10,6 @@ the per-slot ratios mine / base; both runs' decision digests must agree (prof_fr
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -18,6 +17,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from ab import two_trees
 
 HERE = Path(__file__).resolve().parent
 PY = "/work/main/.venv/bin/python"
@@ -45,14 +45,7 @@ def step(proc: subprocess.Popen) -> tuple[str, float] | None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("base")
-    ap.add_argument("mine")
-    ap.add_argument("--cpu", type=int, default=0)
-    ap.add_argument("--seconds", type=float, default=60.0)
-    ap.add_argument("--npz", default="/tmp/perf23/workers60.npz")
-    ap.add_argument("--out", required=True)
-    a = ap.parse_args()
+    a = two_trees(cpu=(int, 0))
     outs = {"base": "/tmp/perf23/lockstep_base.json", "mine": "/tmp/perf23/lockstep_mine.json"}
     procs = {side: start(tree, a.cpu, a.seconds, a.npz, outs[side]) for side, tree in (("base", a.base),
                                                                                        ("mine", a.mine))}
