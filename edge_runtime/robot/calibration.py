@@ -233,7 +233,7 @@ def _anchor_factor(rays: list, j: np.ndarray, A: np.ndarray, b: np.ndarray, para
     logs = np.log(np.array([drop_m / -y for _, y, _ in feet])).tolist()  # numpy's log, as before
     log_floor = logs[0] if len(logs) == 1 else (logs[0] + logs[1]) / 2  # np.mean's sum, then / n
     k = np.exp(log_floor)
-    if np.isfinite(ANCHOR_LIFTER_DEPTH_SD):  # the fusion (off as shipped: the floor rays alone, no work per frame)
+    if math.isfinite(ANCHOR_LIFTER_DEPTH_SD):  # the fusion (off as shipped: the floor rays alone, no work per frame)
         feet = np.array(feet)
         k = _nearer_to_arm(j[HIP] @ A.T, b, k, np.exp(_fused_with_lifter(log_floor, feet, drop_m)))
     # np.clip's arithmetic (min(max(k, lo), hi), a NaN k kept) on floats
@@ -360,7 +360,9 @@ class FloorAnchor:
         # everyone's ankle rays, and below everyone's anchored joints, in one matrix product each (a stack's
         # product is each skeleton's own, to the bit: tests/robot/test_perception_batch_s18.py)
         A, b = np.asarray(cal.A, float), np.asarray(cal.b, float)
-        mine = flat[todo]
+        # everyone's skeleton, a copy (one no caller holds: the tracks keep views of it); a copy of them all when
+        # everyone is new in this frame (the usual frame), as the gather of every row makes it
+        mine = flat.copy() if len(todo) == len(flat) else flat[todo]
         ankle_rays = (mine[:, _ANKLES] @ A.T).tolist()
         anchored = []
         for i, rays in zip(todo, ankle_rays):

@@ -103,6 +103,7 @@ Two ways to protect people (``[zones] separation``):
 from __future__ import annotations
 
 import enum
+import itertools
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -426,6 +427,32 @@ class HeadEstimate:
     predicted_m: np.ndarray
 
 
+def _fit_times(t: np.ndarray) -> tuple:
+    """The head fit's terms of its window's times ``t`` (from the fit's time, s): (their mean as np.mean takes it, a
+    sum then / the count; the centred times; their sum of squares as a float)."""
+    t_mean = np.add.reduce(t) / len(t)
+    tc = t - t_mean
+    return t_mean, tc, float(tc @ tc)
+
+
+def _time_terms(times: np.ndarray, t_s: float) -> tuple:
+    """:func:`_fit_times` of ``times - t_s``, remembered by the times' bytes and ``t_s``'s (every person seen in a
+    frame has the same window of times, as a rule: the second one's fit reuses the first one's terms; the bytes
+    tell signed zeros apart, as the arithmetic does)."""
+    key = (times.tobytes(), float(t_s).hex())
+    hit = _TIME_TERMS.get(key)
+    if hit is None:
+        hit = _TIME_TERMS.put(key, _fit_times(times - t_s))
+    return hit
+
+
+_TIME_TERMS: Recent[tuple] = Recent(4)
+""":func:`_time_terms` of the last few windows (read-only use: the fit only reads them)."""
+
+_FIT_ROWS = 64
+"""Rows a :class:`HeadTracker` keeps its window's samples in at first (a 0.5 s window at 30 Hz holds 16)."""
+
+
 class HeadTracker:
     """Least-squares head tracker for one worker (see the module docstring)."""
 
@@ -435,6 +462,11 @@ class HeadTracker:
         self._t: deque[float] = deque()
         self._x: deque[np.ndarray] = deque()
         self.resets = 0
+        # the window's times and heads also as arrays, the last len(self._t) rows up to self._end: the fit reads
+        # them as one slice each (np.fromiter of the times and np.array of the heads were a fifth of a fit)
+        self._t_rows = np.empty(_FIT_ROWS)
+        self._x_rows = np.empty((_FIT_ROWS, 3))
+        self._end = 0
 
     def reset(self) -> None:
         self._t.clear()
@@ -455,18 +487,43 @@ class HeadTracker:
         while t_s - self._t[0] > self.p.window_s:
             self._t.popleft()
             self._x.popleft()
+        self._keep_rows(t_s, head)
         return self._estimate(t_s)
+
+    def _keep_rows(self, t_s: float, head: np.ndarray) -> None:
+        """The newest sample into the arrays' rows, after the window's others (the last ``len(self._t) - 1`` rows
+        written: a reset or a trim only drops the oldest); when the rows run out, the window's others are
+        copied to the front of new ones. A head that is not 3 numbers stops the rows for good (the fit then
+        reads the deques, as it did before the rows)."""
+        if self._end < 0:
+            return
+        if head.shape != (3,):
+            self._end = -1
+            return
+        n, end = len(self._t), self._end
+        if end == len(self._t_rows) or n > len(self._t_rows):
+            size = max(len(self._t_rows), 2 * n)
+            t_rows, x_rows = np.empty(size), np.empty((size, 3))
+            t_rows[:n - 1], x_rows[:n - 1] = self._t_rows[end - n + 1:end], self._x_rows[end - n + 1:end]
+            self._t_rows, self._x_rows, end = t_rows, x_rows, n - 1
+        self._t_rows[end] = t_s
+        self._x_rows[end] = head
+        self._end = end + 1
 
     def _estimate(self, t_s: float) -> HeadEstimate:
         if len(self._t) < self.p.min_samples or self._t[-1] - self._t[0] < self.p.min_span_s:
             pos, vel = self._x[-1], np.zeros(3)
         else:
-            t = np.fromiter(self._t, float) - t_s
-            x = np.array(self._x)  # (n, 3): the values np.stack gives, with less of its checking
+            n, end = len(self._t), self._end
+            if end >= 0:  # the window's rows (the same doubles as the deques hold, a C-contiguous slice of each)
+                t_mean, tc, tt = _time_terms(self._t_rows[end - n:end], t_s)
+                x = self._x_rows[end - n:end]
+            else:
+                t, x = np.fromiter(self._t, float) - t_s, np.array(list(self._x))  # (n, 3): np.stack's values
+                t_mean, tc, tt = _fit_times(t)
             # each mean once (the fit used both twice), as np.mean does it: a sum, then / the count
-            t_mean, x_mean = np.add.reduce(t) / len(t), np.add.reduce(x, axis=0) / len(x)
-            tc = t - t_mean
-            vel = tc @ (x - x_mean) / float(tc @ tc)
+            x_mean = np.add.reduce(x, axis=0) / len(x)
+            vel = tc @ (x - x_mean) / tt
             pos = x_mean - t_mean * vel  # the fitted line at t_s
             speed = math.sqrt(vel.dot(vel))  # np.linalg.norm's own arithmetic for a vector
             if speed > self.p.max_speed_mps:
@@ -664,7 +721,8 @@ class HazardMonitor:
         self._coming = False
         worst = (v_full, None, math.inf)  # (allowed speed, human speed, separation) of the most restrictive
         persons = [np.asarray(people[wid], float) for wid in ests]
-        bodies = {wid: (person_m, centres, radii, np.array([est.velocity_mps[0], 0.0, est.velocity_mps[2]]))
+        # each head velocity on the ground as three floats (the same doubles an array of them holds)
+        bodies = {wid: (person_m, centres, radii, (float(est.velocity_mps[0]), 0.0, float(est.velocity_mps[2])))
                   for (wid, est), person_m, (centres, radii) in zip(ests.items(), persons, body_spheres_of(persons))}
         # everyone now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
         seps = separations_per_shift_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps) if bodies else []
@@ -673,11 +731,12 @@ class HazardMonitor:
             v_g = ground(est.velocity_mps)
             speed = math.sqrt(v_g.dot(v_g))  # np.linalg.norm's own arithmetic for a vector (below too)
             toward = eff_g - ground(est.position_m)
-            approach = float(v_g @ toward) / max(math.sqrt(toward.dot(toward)), 1e-9)
+            # ndarray.dot of two vectors is the dot `@` calls (numpy's DOUBLE_dot), without the ufunc machinery
+            approach = float(v_g.dot(toward)) / max(math.sqrt(toward.dot(toward)), 1e-9)
             d = float(sep.min())
             # moved by 0 s his spheres are where they are (c + 0 v is c, but for the sign of a zero, which no
             # clearance keeps): sep[0] is separation_m's, to the bit, while his velocity is finite
-            now = (caps, sep[0]) if np.isfinite(velocity).all() else None
+            now = (caps, sep[0]) if math.isfinite(velocity[0]) and math.isfinite(velocity[2]) else None
             self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii), now)
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
@@ -971,21 +1030,25 @@ def _rpy_transform(xyz, rpy) -> np.ndarray:
 
 
 _ORIGIN_TRANSFORMS = tuple(_rpy_transform(xyz, rpy) for xyz, rpy in SAWYER_JOINT_ORIGINS)
+_EYE4 = np.eye(4)
+"""np.eye(4), made once (read-only: :func:`arm_points_m` copies it where it writes)."""
+_EYE4.setflags(write=False)
 
 
 def arm_points_m(q_rad) -> np.ndarray:
     """(10, 3) robot-frame points along the arm for joint angles ``q_rad`` (7,): the base top,
     joints j0..j6, the hand and the tool tip."""
     q = np.asarray(q_rad, float).reshape(7)
-    t = np.eye(4)
+    qs = q.tolist()  # the same doubles, for math.cos and math.sin without numpy's scalars
+    t = _EYE4  # only read (each product is a new matrix)
     pts = np.zeros((10, 3))
-    turn = np.eye(4)  # the joint's turn about its z axis, filled in per joint (the same matrices, built faster)
+    turn = _EYE4.copy()  # the joint's turn about its z axis, filled in per joint (the same matrices, built faster)
     # ndarray.dot of two C-contiguous 4 x 4 float64 matrices is the BLAS dgemm call `@` makes, without the ufunc
     # machinery's microseconds (tests/robot/test_frame_cost_s16.py pins the points to the `@` form's, to the bit)
     for k, origin in enumerate(_ORIGIN_TRANSFORMS):
         t = t.dot(origin)
         if k < 7:  # every arm joint turns about its own z axis
-            c, s_ = math.cos(q[k]), math.sin(q[k])
+            c, s_ = math.cos(qs[k]), math.sin(qs[k])
             turn[0, 0], turn[0, 1], turn[1, 0], turn[1, 1] = c, -s_, s_, c
             t = t.dot(turn)
         pts[k + 1] = t[:3, 3]
@@ -1084,8 +1147,12 @@ def enough_joints(shown) -> bool:
     least one ankle (the floor anchoring's, edge_runtime.robot.calibration), at most
     ``MAX_MISSING_JOINTS`` missing."""
     shown = np.asarray(shown, bool)
-    return bool(shown[list(REQUIRED_JOINTS)].all() and (shown[L_ANKLE] or shown[R_ANKLE])
+    return bool(shown[_REQUIRED_INDEX].all() and (shown[L_ANKLE] or shown[R_ANKLE])
                 and (~shown).sum() <= MAX_MISSING_JOINTS)
+
+
+_REQUIRED_INDEX = np.array(REQUIRED_JOINTS)
+""":data:`REQUIRED_JOINTS` as an index array (a list is converted at every indexing)."""
 
 
 MIRROR = (0, 4, 5, 6, 1, 2, 3, 7, 8, 9, 10, 14, 15, 16, 11, 12, 13)
@@ -1162,7 +1229,7 @@ def separations_per_shift_m(bodies, shifts_s, capsules) -> list[np.ndarray]:
     if len(bodies) > 1 and len({len(c) for c, _, _ in bodies}) == 1:  # whole skeletons: one (S, P, n) array
         # np.array of equal shapes: np.stack's values, without its per-array reshaping
         centres, radii = np.array([c for c, _, _ in bodies], float), np.array([r for _, r, _ in bodies], float)
-        velocities = np.array([np.asarray(v, float) for _, _, v in bodies], float)
+        velocities = np.array([v for _, _, v in bodies], float)  # arrays or tuples of 3: the same (P, 3) array
         # each moved centre is c + s v as below, elementwise the same arithmetic
         moved = centres[None] + shifts[:, None, None, None] * velocities[None, :, None, :]     # (S, P, n, 3)
         clear = point_clearance_m(moved.reshape(-1, 3), capsules).reshape(moved.shape[:3])
@@ -1260,7 +1327,8 @@ def _gathered(people) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     each person's begin (each person's spheres are contiguous)."""
     centres = np.concatenate([c for c, _ in people])
     radii = np.concatenate([r for _, r in people])
-    return centres, radii, np.cumsum([0] + [len(r) for _, r in people[:-1]])
+    # np.cumsum's integers, summed in Python (numpy's call on a list costs more than a frame's few people)
+    return centres, radii, np.array(list(itertools.accumulate([0] + [len(r) for _, r in people[:-1]])))
 
 
 def people_separations_m(people, capsules) -> np.ndarray:

@@ -201,11 +201,27 @@ W_EYES = _weights({**_ROWS, HEAD: _head_row((C_L_EYE, C_R_EYE))})
 """The same with the head from the eyes."""
 
 
-def _sources(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(``w != 0``, (H, S) the COCO keypoints each row of ``w`` sums (its nonzero weights) padded with its first)."""
+def _sources(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(``w != 0``, (H, S) the COCO keypoints each row of ``w`` sums (its nonzero weights, in order) padded with its
+    first, (H, S) their weights padded with 0)."""
     rows = [np.flatnonzero(r) for r in w]
     n = max(len(r) for r in rows)
-    return w != 0, np.array([np.concatenate([r, np.repeat(r[:1], n - len(r))]) for r in rows])
+    weights = np.array([np.concatenate([r_w[r], np.zeros(n - len(r))]) for r, r_w in zip(rows, w)])
+    return w != 0, np.array([np.concatenate([r, np.repeat(r[:1], n - len(r))]) for r in rows]), weights
+
+
+def _weighted_sums(filled: np.ndarray, sources: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``np.einsum("hc,...cd->...hd", w, filled)`` to the bit, from ``w``'s few nonzero weights per row
+    (:func:`_sources`): numpy's einsum sums the products one after the other in c's order from +0.0 (pinned on
+    random inputs in tests/robot/test_frame_cost_s23.py), and a term of weight 0 adds a zero, which leaves such a
+    sum as it is (it is never -0.0: it starts at +0.0). So each row's nonzero terms, in order, from +0.0: the
+    same sums, in a few whole-array operations instead of einsum's per-call cost (a frame's largest single call
+    after the lifter's model)."""
+    terms = filled[..., sources, :] * weights[..., None]        # (..., H, S, 2)
+    out = terms[..., 0, :] + 0.0
+    for j in range(1, sources.shape[1]):
+        out += terms[..., j, :]
+    return out
 
 
 def _map(c: np.ndarray, w: np.ndarray, sources: tuple | None = None, prepared=None) -> np.ndarray:
@@ -216,18 +232,22 @@ def _map(c: np.ndarray, w: np.ndarray, sources: tuple | None = None, prepared=No
     gathered from its few sources instead of weighed over all 17 (an any: the same booleans). The score
     stays a min over all 17 (inf where unused): a min over only the sources could pick the other zero of
     a -0.0 / 0.0 tie. ``prepared`` is ``_prepared(c)``, when the caller maps ``c`` twice."""
-    used, sources = _sources(w) if sources is None else sources
+    used, sources, weights = _sources(w) if sources is None else sources
     filled, fin = _prepared(c) if prepared is None else prepared
     out = np.empty(c.shape[:-2] + (len(w), 3))
-    out[..., :2] = np.einsum("hc,...cd->...hd", w, filled)
-    out[..., 2] = np.min(np.where(used, c[..., None, :, 2], np.inf), axis=-1)  # NaN propagates
-    out[~fin[..., sources].all(axis=-1)] = np.nan
+    out[..., :2] = _weighted_sums(filled, sources, weights)
+    out[..., 2] = np.minimum.reduce(np.where(used, c[..., None, :, 2], np.inf), axis=-1)  # np.min's; NaN propagates
+    if fin is not None:  # a keypoint not finite (every one is, in most frames: then no joint is made NaN)
+        out[~fin[..., sources].all(axis=-1)] = np.nan
     return out
 
 
-def _prepared(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(COCO x, y with non-finite coordinates 0, whether both coordinates are finite) for :func:`_map`."""
+def _prepared(c: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(COCO x, y with non-finite coordinates 0, whether both coordinates are finite, or None when all are) for
+    :func:`_map`; both x, y arrays C-contiguous copies (np.where's layout: einsum sums them the same way)."""
     finite = np.isfinite(c[..., :2])
+    if finite.all():  # the usual frame: nothing to zero, and no joint to make NaN
+        return np.ascontiguousarray(c[..., :2]), None
     return np.where(finite, c[..., :2], 0.0), finite[..., 0] & finite[..., 1]
 
 
@@ -571,12 +591,14 @@ class PersonTracker:
         # of bones
         kps = to_h36m_each(kps, self.keypoint_format)
         seen = _seen(kps, p.min_score)
-        enough = seen.sum(axis=1) >= p.min_joints
-        if not enough.all():
-            self.rejected += len(enough) - int(enough.sum())
-            shaped = [person for person, ok in zip(shaped, enough.tolist()) if ok]
-            kps, seen = kps[enough], seen[enough]
-        sizes = _sizes_px(kps, seen, p.min_score)
+        all_seen = bool(seen.all())  # every joint of everyone seen (the usual frame): all 17 >= min_joints of them
+        if not (all_seen and p.min_joints <= N_JOINTS):
+            enough = seen.sum(axis=1) >= p.min_joints
+            if not enough.all():
+                self.rejected += len(enough) - int(enough.sum())
+                shaped = [person for person, ok in zip(shaped, enough.tolist()) if ok]
+                kps, seen = kps[enough], seen[enough]
+        sizes = _sizes_px(kps, seen, p.min_score, all_seen)
         assigned = _assign(self._costs(kps, seen, t_s))
         out, followed = [], []
         for i, person in enumerate(shaped):
@@ -618,12 +640,17 @@ class PersonTracker:
         with np.errstate(all="ignore"):  # a track not moving (dt <= 0, no joint in common) gets no velocity
             # np.mean's own arithmetic: the steps summed joint after joint (numpy adds the rows of a (n, 2) array
             # in order), then / the count, then / dt; the joints left out add -0.0, the sum's exact identity
-            step = np.where(both[..., None], kps[..., :2] - xy, -0.0).sum(axis=1)
-            v = step / n_both[:, None] / np.array(dt)[:, None]
-        velocity = np.where(moving[:, None], a * v + (1 - a) * velocity, velocity)
-        # joints not seen now keep their last position, moved with the person
-        moved = xy + velocity[:, None, :] * np.array([max(d, 0.0) for d in dt])[:, None, None]
-        new_xy = np.where(seen[..., None], kps[..., :2], moved)
+            step = kps[..., :2] - xy
+            if not both.all():  # (every joint seen now and before, in the usual frame: nothing left out)
+                step = np.where(both[..., None], step, -0.0)
+            v = step.sum(axis=1) / n_both[:, None] / np.array(dt)[:, None]
+        smoothed = a * v + (1 - a) * velocity
+        velocity = smoothed if moving.all() else np.where(moving[:, None], smoothed, velocity)
+        if seen.all():  # every joint seen now (the usual frame): each track at its detection
+            new_xy = np.ascontiguousarray(kps[..., :2])
+        else:  # joints not seen now keep their last position, moved with the person
+            moved = xy + velocity[:, None, :] * np.array([max(d, 0.0) for d in dt])[:, None, None]
+            new_xy = np.where(seen[..., None], kps[..., :2], moved)
         for tr, xy_k, velocity_k, size_px in zip(tracks, new_xy, velocity, sizes_px):
             tr.xy, tr.velocity_pxps, tr.size_px, tr.t_s = xy_k, velocity_k, size_px, t_s
 
@@ -657,7 +684,9 @@ def _pair_costs(tracks: list[tuple[int, _Track]], kps: np.ndarray, seen: np.ndar
     with np.errstate(over="ignore", invalid="ignore"):  # joints not in common may be anything: unused
         d = kps[None, :, :, :2] - pred[:, None]
         dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])  # norms2's arithmetic
-    rows = np.sort(np.where(both, dist, np.inf), axis=2).tolist()
+    rows = np.where(both, dist, np.inf)
+    rows.sort(axis=2)  # in place (a new array already): np.sort's order without its copy
+    rows = rows.tolist()
     costs = {}
     for (tid, tr), track_rows, counts in zip(tracks, rows, n_both.tolist()):
         gate = p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0)
@@ -693,14 +722,21 @@ def _assign(costs: dict[tuple[int, int], float]) -> dict[int, int]:
     """Detection index -> track id over the finite-cost (gated) pairs: as many pairs as
     possible, and of those the least total cost."""
     pairs = {k: c for k, c in costs.items() if math.isfinite(c)}
-    dets = sorted({d for _, d in pairs})
+    options: dict[int, list[int]] = {}  # each detection's tracks, in the pairs' order
+    for t, d in pairs:
+        options.setdefault(d, []).append(t)
+    dets = sorted(options)
     if len(dets) > MAX_EXACT_ASSIGNMENT:
         assigned: dict[int, int] = {}
         for (tid, i), _ in sorted(pairs.items(), key=lambda kv: kv[1]):
             if i not in assigned and tid not in assigned.values():
                 assigned[i] = tid
         return assigned
-    options = {d: [t for t, dd in pairs if dd == d] for d in dets}
+    if all(len(ts) == 1 for ts in options.values()) and len({ts[0] for ts in options.values()}) == len(dets):
+        # each detection within one track's gate, no track within two detections' (people apart, the usual
+        # frame): pairing them all is the only assignment with every detection paired, the search's answer (in
+        # its order: the last detection first)
+        return {d: options[d][0] for d in reversed(dets)}
     return _best_assignment(0, frozenset(), dets, options, pairs)[2]
 
 
@@ -742,16 +778,22 @@ def _size_px(kp: np.ndarray, min_score: float, seen: np.ndarray | None = None) -
     return max(float(np.linalg.norm(xy.max(axis=0) - xy.min(axis=0))), 1.0)
 
 
-def _sizes_px(kps: np.ndarray, seen: np.ndarray, min_score: float) -> list[float]:
+def _sizes_px(kps: np.ndarray, seen: np.ndarray, min_score: float, all_seen: bool = False) -> list[float]:
     """:func:`_size_px` of each detection of ``kps`` (D, 17, 3), ``seen`` (D, 17) its seen joints: every bone of
     every detection in one pass (``np.vecdot`` of float64 calls the dot ``ndarray.dot`` calls, vector by vector),
-    the same numbers; a detection with fewer than two bones seen gets :func:`_size_px` itself (its box)."""
-    bone_seen = seen[:, _BONE_A] & seen[:, _BONE_B]
+    the same numbers; a detection with fewer than two bones seen gets :func:`_size_px` itself (its box).
+    ``all_seen``: the caller knows ``seen`` is all True (then so is every bone)."""
+    bone_seen = None if all_seen else seen[:, _BONE_A] & seen[:, _BONE_B]
     bones = kps[:, _BONE_A, :2] - kps[:, _BONE_B, :2]
-    heights = np.where(bone_seen, np.sqrt(np.vecdot(bones, bones)) / _BONE_FRACTIONS, -np.inf)
-    second = np.sort(heights, axis=1)[:, -2]  # the second largest seen (the bones not seen sort first, -inf)
+    heights = np.sqrt(np.vecdot(bones, bones)) / _BONE_FRACTIONS
+    every = all_seen or bone_seen.all()  # every bone of everyone seen (the usual frame): none to leave out
+    if not every:
+        heights = np.where(bone_seen, heights, -np.inf)
+    heights.sort(axis=1)  # in place (a new array already): np.sort's order without its copy
+    second = heights[:, -2].tolist()  # the second largest seen (the bones not seen sort first, -inf)
+    counts = [len(_BONES)] * len(kps) if every else bone_seen.sum(axis=1).tolist()
     return [max(h, 1.0) if n >= 2 else _size_px(kps[i], min_score, seen[i])
-            for i, (n, h) in enumerate(zip(bone_seen.sum(axis=1).tolist(), second.tolist()))]
+            for i, (n, h) in enumerate(zip(counts, second))]
 
 
 # ---------------------------------------------------------------------------- cameras

@@ -634,9 +634,12 @@ def _usable_all(lifter: StreamingLifter, keypoints: list) -> list[tuple | None]:
     # stacked (as np.stack, cheaper); each person's H36M keypoints come from the tracker's conversion (memo)
     kp = np.array([to_h36m(arrays[i], lifter.keypoint_format) for i in which])
     ok = np.isfinite(kp[..., :2]).all(axis=-1) & (kp[..., 2] >= lifter.params.min_score)  # NaN score: False
-    any_ok = ok.any(axis=1).tolist()
     norm = maps.normalised(kp)
-    norm[~ok] = np.nan  # the rows left out stay NaN, as _usable leaves them
+    if ok.all():  # every keypoint of everyone usable (the usual frame): no row to leave out
+        any_ok = [True] * len(which)
+    else:
+        any_ok = ok.any(axis=1).tolist()
+        norm[~ok] = np.nan  # the rows left out stay NaN, as _usable leaves them
     ok &= (np.abs(norm) <= MAX_NORMALISED).all(axis=-1)
     for i, ok_i, norm_i, kept in zip(which, ok, norm, any_ok):
         out[i] = (ok_i, norm_i if kept else None)
@@ -669,8 +672,10 @@ def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray
     if any(not lf._pixel_maps().made_for(*maps.cameras, maps.params) for lf in lifters[1:]):
         return [_finish([lf], [r], pose[i:i + 1], root[i:i + 1], dt)[0]
                 for i, (lf, r) in enumerate(zip(lifters, ready))]
-    model_joints = pose.reshape(n, N_JOINTS, 3).astype(np.float64) + root.reshape(n, 1, 3)
-    finite = np.isfinite(model_joints.reshape(n, -1)).all(axis=1).tolist()
+    # float32 + float32 added in float64 (each value converted exactly, as astype(float64) then + converts them)
+    model_joints = np.add(pose.reshape(n, N_JOINTS, 3), root.reshape(n, 1, 3), dtype=np.float64)
+    finite = np.isfinite(model_joints)
+    finite = [True] * n if finite.all() else finite.reshape(n, -1).all(axis=1).tolist()
     nearest_m = model_joints[:, :, 2].min(axis=1).tolist()
     out: list = [None] * n
     good = []

@@ -338,7 +338,8 @@ def _measured(pose) -> np.ndarray:
     """A lifted pose's joints with its ``missing`` ones NaN (``LiftedPose.missing``: guesses, not measured); a
     stand-in pose without that flag gives its joints as they are."""
     missing = getattr(pose, "missing", None)
-    if missing is None or not np.any(missing):
+    # ndarray.any is np.any's reduction without its dispatch (a lifter's flags are an array; a stand-in's may not be)
+    if missing is None or not (missing.any() if isinstance(missing, np.ndarray) else np.any(missing)):
         return pose.joints_cam_m
     return np.where(np.asarray(missing, bool)[:, None], np.nan, pose.joints_cam_m)
 
@@ -350,6 +351,20 @@ def _rounded(v) -> list[float]:
 
 def _vec3(v) -> tuple[float, float, float]:
     return tuple(float(x) for x in np.asarray(v, float).reshape(3))
+
+
+def _norm3(v) -> float:
+    """``np.linalg.norm`` of a vector, by its own arithmetic (``sqrt(dot(v, v))``; a correctly rounded sqrt), without
+    its dispatch: the task's waypoint check runs at every control tick."""
+    v = np.asarray(v, float)
+    return math.sqrt(v.dot(v))
+
+
+def _stacked(arrays: list) -> np.ndarray:
+    """``np.stack(arrays)``: np.array of equal-shape arrays makes the same array in a third of the time (no per-array
+    checks); arrays of unequal shapes get np.stack itself (and its error)."""
+    shape = arrays[0].shape
+    return np.array(arrays) if all(a.shape == shape for a in arrays) else np.stack(arrays)
 
 
 class RobotLoop:
@@ -381,6 +396,8 @@ class RobotLoop:
         self._raised = False  # the last link call raised: retry at link_retry_s
         self._auto_heartbeat = link.heartbeats_itself
         self._waypoint = 0
+        self._task_motions: dict[int, tuple] = {}  # _task_target's, per waypoint, for _task_motions_of
+        self._task_motions_of: LoopParams | None = None
         self._sent_motion: Motion | None = None
         self._sent_alarm = None
         self._sent_runtime_state = None
@@ -389,6 +406,7 @@ class RobotLoop:
         self._retract_fallback = False
         self._retract_distance_m = math.inf
         self._retract_q0: np.ndarray | None = None  # the arm's joint angles when the retraction under way began
+        self._q0_capsules: tuple | None = None  # (_retract_q0, its capsules): _start_capsules
         self._escape_s = -math.inf  # when this level 2 last planned an escape turn (clock, s)
         self._escaping = False  # the retraction under way is an escape turn
         self._separations: Recent[tuple] = Recent(32)  # _separations_of's memory
@@ -449,7 +467,9 @@ class RobotLoop:
         # the head zones need the head; whole-body separation every joint, or enough of them that the rest is
         # bounded by its bones from those (lifter.enough_joints; hazard.body_spheres)
         if self.zones.separation == "whole_body":
-            enough = shaped and all(enough_joints(f) for f in np.isfinite(persons).all(axis=2))
+            # everyone showing every joint (the usual frame) shows enough of himself
+            enough = shaped and (np.isfinite(persons).all()
+                                 or all(enough_joints(f) for f in np.isfinite(persons).all(axis=2)))
         else:
             enough = np.isfinite(persons[:, HEAD, :] if shaped else persons).all()
         if not valid or not shaped or not enough:
@@ -488,8 +508,8 @@ class RobotLoop:
                   if not p.valid and str(p.reason or "").split(":", 1)[0] != NO_PERSON}
         if not valid:
             return self.feed_joints(None, t_in_s=t_in_s, unseen=unseen, rays=rays)
-        return self.feed_joints(np.stack([_measured(p) for _, p in valid]), ids=[pid for pid, _ in valid],
-                                t_in_s=t_in_s, observed=np.stack([p.observed for _, p in valid]), unseen=unseen,
+        return self.feed_joints(_stacked([_measured(p) for _, p in valid]), ids=[pid for pid, _ in valid],
+                                t_in_s=t_in_s, observed=_stacked([p.observed for _, p in valid]), unseen=unseen,
                                 rays=rays)
 
     def _robot_rays(self, rays: dict | None) -> dict:
@@ -606,11 +626,12 @@ class RobotLoop:
             return
         if state is not self._seen_state:  # a new report (the same one, as in most frames and ticks, gives the same)
             self._seen_state = state
+            # np.isfinite(...).all() of a few numbers, on Python floats (a new state comes 100 times a second)
             pos = np.asarray(state.ee_position_m, float)
-            if np.isfinite(pos).all():
+            if all(map(math.isfinite, pos.ravel().tolist())):
                 self._last_effector = pos.reshape(3)
             q = np.asarray(state.joint_positions_rad, float)
-            self._last_q = q.reshape(7) if q.size == 7 and np.isfinite(q).all() else None
+            self._last_q = q.reshape(7) if q.size == 7 and all(map(math.isfinite, q.ravel().tolist())) else None
             self._last_yaw = float(state.yaw_rad) if math.isfinite(state.yaw_rad) else None
         now = self.clock()
         if state.watchdog and self._sent_motion is not None and self._sent_motion.kind is MotionKind.MOVE \
@@ -767,10 +788,22 @@ class RobotLoop:
         s = self._sent_motion
         if (s is not None and s.kind is MotionKind.MOVE and s.position_m == tuple(target)
                 and self._last_effector is not None
-                and np.linalg.norm(self._last_effector - target) <= p.waypoint_tolerance_m):
+                and _norm3(self._last_effector - self._task_target(p)[1]) <= p.waypoint_tolerance_m):
             self._waypoint = (self._waypoint + 1) % len(p.task_waypoints_m)
+        return self._task_target(p)[0]
+
+    def _task_target(self, p: LoopParams) -> tuple[Motion, np.ndarray]:
+        """The current waypoint's move and its position as an array, each made once per waypoint (a frozen value,
+        compared by value; an array subtracted as the waypoint's tuple would be, without converting it: the
+        control tick asks for them 100 times a second)."""
+        if self._task_motions_of is not p:  # (for these parameters)
+            self._task_motions, self._task_motions_of = {}, p
+        made = self._task_motions.get(self._waypoint)
+        if made is None:
             target = p.task_waypoints_m[self._waypoint]
-        return Motion(MotionKind.MOVE, _vec3(target), p.task_pitch_rad, p.task_yaw_rad)
+            made = self._task_motions[self._waypoint] = (
+                Motion(MotionKind.MOVE, _vec3(target), p.task_pitch_rad, p.task_yaw_rad), np.array(target, float))
+        return made
 
     def _retract_again(self, decision: Decision) -> bool:
         """Retract once more when the last retraction is done, the worker has come
@@ -780,7 +813,7 @@ class RobotLoop:
         r = self._retract
         if r is None or r.kind is not MotionKind.RETRACT or self._last_effector is None or decision.head is None:
             return False
-        done = np.linalg.norm(self._last_effector - r.position_m) <= self.params.waypoint_tolerance_m
+        done = _norm3(self._last_effector - r.position_m) <= self.params.waypoint_tolerance_m
         closer = decision.distance_m < self._retract_distance_m - self.params.re_retract_m
         # a worker who no longer keeps coming at the retracted arm (he passes it, or stands) is waited
         # for where it is: a repeat Eq. 6 step along his walk made the hand follow a passing worker
@@ -788,7 +821,7 @@ class RobotLoop:
         if not (done and closer and decision.coming):
             return False
         nxt = self._retract_motion(decision)
-        return nxt.kind is MotionKind.RETRACT and np.linalg.norm(np.subtract(nxt.position_m, r.position_m)) > 0.05
+        return nxt.kind is MotionKind.RETRACT and _norm3(np.subtract(nxt.position_m, r.position_m)) > 0.05
 
     def _escape(self, decision: Decision) -> Motion | None:
         """whole_body: someone within ``reach_retract_m`` of an arm whose retraction (or escape turn) is
@@ -808,8 +841,7 @@ class RobotLoop:
                 or decision.distance_m > z.reach_retract_m):
             return None
         # after a retraction or turn that is done, or one that was stopped (it carried the arm toward someone)
-        if r.kind is MotionKind.RETRACT and np.linalg.norm(self._last_effector - r.position_m) \
-                > p.waypoint_tolerance_m:
+        if r.kind is MotionKind.RETRACT and _norm3(self._last_effector - r.position_m) > p.waypoint_tolerance_m:
             return None
         now = self.clock()
         if now - self._escape_s < p.escape_replan_s:
@@ -851,10 +883,19 @@ class RobotLoop:
         for k, d in enumerate(now):
             if d < reach:
                 if start is None:
-                    start = self._separations_of(people, arm_capsules(q0))
+                    start = self._separations_of(people, self._start_capsules(q0))
                 if d < start[k] - self.params.retract_backfire_m:
                     return True
         return False
+
+    def _start_capsules(self, q0: np.ndarray):
+        """:func:`arm_capsules` of ``q0``, where the retraction under way began, kept while it lasts: the same
+        capsules (the same arrays) at every check, so :meth:`_separations_of` remembers their separations from
+        the same bodies however many new arm states have gone through arm_capsules' small memory since."""
+        kept = self._q0_capsules
+        if kept is None or kept[0] is not q0:
+            kept = self._q0_capsules = (q0, arm_capsules(q0))
+        return kept[1]
 
     def _separations_of(self, people: list, caps) -> list[float]:
         """:meth:`edge_runtime.robot.hazard.HazardMonitor.people_separations_m`: the separations of everyone's body

@@ -21,10 +21,14 @@ def same(a, b):
     return a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
-def random_coco(rng, n_people, two_columns=False):
-    """Keypoints as a detector sends them: some joints NaN, some scored low, now and then exact zeros."""
+def random_coco(rng, n_people, two_columns=False, clean=False):
+    """Keypoints as a detector sends them: some joints NaN, some scored low, now and then exact zeros; ``clean``:
+    as the bench's simulated camera sends them, every joint there and scored 1 (the usual frame, session 23)."""
     kp = np.column_stack([rng.uniform(-50, 1400, (n_people * 17, 2)), rng.uniform(0, 1, n_people * 17)])
     kp = kp.reshape(n_people, 17, 3)
+    if clean:
+        kp[..., 2] = 1.0
+        return kp[..., :2] if two_columns else kp
     kp[rng.random((n_people, 17, 3)) < rng.choice([0.0, 0.03, 0.2])] = np.nan
     if rng.random() < 0.2:
         kp[rng.random((n_people, 17, 3)) < 0.1] = 0.0
@@ -98,9 +102,9 @@ class Session17Tracker(PersonTracker):
         tr.t_s = t_s
 
 
-def walkers(rng, n_frames):
+def walkers(rng, n_frames, clean=False):
     """Frames of 0-5 walkers (and now and then a wrong-shaped or near-empty detection), with dropped frames
-    and time jumps longer than a track is kept."""
+    and time jumps longer than a track is kept; ``clean``: every walker's keypoints :func:`random_coco`'s clean ones."""
     t = 0.0
     base = rng.uniform(0, 1200, (6, 2))
     velocity = rng.normal(0, 8, (6, 2))
@@ -108,7 +112,7 @@ def walkers(rng, n_frames):
         t += float(rng.choice([1 / 30, 1 / 30, 1 / 30, 2 / 30, 0.7, 3.5])) if k else 0.0
         people = []
         for w in rng.permutation(int(rng.integers(0, 6))):
-            kp = random_coco(rng, 1, two_columns=rng.random() < 0.1)[0]
+            kp = random_coco(rng, 1, two_columns=rng.random() < 0.1, clean=clean)[0]
             kp[:, :2] = base[w] + velocity[w] * k + rng.normal(0, rng.choice([2.0, 30.0]), (17, 2)) \
                 + rng.uniform(-60, 60, (17, 2))
             people.append(Person(kp, int(w)))
@@ -121,12 +125,14 @@ def walkers(rng, n_frames):
         yield t, people
 
 
-@pytest.mark.parametrize("fmt", ["coco", "h36m"])
-def test_tracker_is_session17s(fmt):
-    rng = np.random.default_rng(1801 + (fmt == "h36m"))
+@pytest.mark.parametrize("fmt, clean", [("coco", False), ("h36m", False), ("coco", True), ("h36m", True)])
+def test_tracker_is_session17s(fmt, clean):
+    """``clean``: the usual frame, every keypoint there and seen (the tracker's all-seen passes and its
+    assignment without the search, session 23)."""
+    rng = np.random.default_rng(1801 + (fmt == "h36m") + 2 * clean)
     for params in (PeopleTrackParams(), PeopleTrackParams(min_joints=3, gate=2.0, gate_growth_per_s=0.0)):
         new, old = PersonTracker(params, fmt), Session17Tracker(params, fmt)
-        for t, people in walkers(rng, 400):
+        for t, people in walkers(rng, 400, clean):
             a, b = new.update(t, copy.deepcopy(people)), old.update(t, copy.deepcopy(people))
             assert [(x.id, x.source_id) for x in a] == [(x.id, x.source_id) for x in b]
             assert list(new.tracks) == list(old.tracks)
@@ -134,16 +140,18 @@ def test_tracker_is_session17s(fmt):
                 for f in ("xy", "velocity_pxps", "size_px", "t_s"):
                     assert same(getattr(new.tracks[tid], f), getattr(old.tracks[tid], f)), (t, tid, f)
         assert (new.created, new.rejected) == (old.created, old.rejected)
-        assert old.created > 20 and old.rejected > 10
+        assert old.created > 20 and (clean or old.rejected > 10)
 
 
-def test_follow_all_is_one_by_one():
-    """Several tracks followed at once, each as when followed alone (times that go back, joints never seen)."""
-    rng = np.random.default_rng(1803)
+@pytest.mark.parametrize("clean", [False, True])
+def test_follow_all_is_one_by_one(clean):
+    """Several tracks followed at once, each as when followed alone (times that go back, joints never seen);
+    ``clean``: every joint seen now (session 23's pass for it)."""
+    rng = np.random.default_rng(1803 + 100 * clean)
     tracker = Session17Tracker(keypoint_format="h36m")
     for case in range(500):
         m = int(rng.integers(1, 5))
-        kps = random_coco(rng, m)
+        kps = random_coco(rng, m, clean=clean)
         seen = kpm._seen(kps, 0.3)
         t1 = float(rng.uniform(0, 10))
         tracks = []
@@ -181,10 +189,11 @@ def test_to_h36m_each_is_one_by_one():
         kpm.to_h36m_each(kps, "openpose")
 
 
-def test_sizes_px_is_size_px():
-    rng = np.random.default_rng(1805)
+@pytest.mark.parametrize("clean", [False, True])
+def test_sizes_px_is_size_px(clean):
+    rng = np.random.default_rng(1805 + 100 * clean)
     for case in range(1000):
-        kps = kpm.to_h36m_each(list(random_coco(rng, int(rng.integers(1, 6)))), "coco")
+        kps = kpm.to_h36m_each(list(random_coco(rng, int(rng.integers(1, 6)), clean=clean)), "coco")
         if case % 5 == 0:
             kps[..., :2] *= rng.choice([1e-3, 1e3])
         seen = kpm._seen(kps, 0.3)
@@ -324,7 +333,8 @@ def test_usable_all_is_each_ones():
             maps = _PixelMaps(camera, canonical, params)
             stub = SimpleNamespace(keypoint_format=fmt, params=params, _pixel_maps=lambda maps=maps: maps)
             for case in range(200):
-                people = list(random_coco(rng, int(rng.integers(1, 5)), two_columns=case % 9 == 0))
+                # a third of the frames clean, as the bench's: every keypoint usable (session 23's pass for it)
+                people = list(random_coco(rng, int(rng.integers(1, 5)), two_columns=case % 9 == 0, clean=case % 3 == 1))
                 if case % 4 == 0:
                     people[0][:, :2] *= rng.choice([10.0, 1e4])  # beyond MAX_NORMALISED
                 if case % 5 == 0 and people[-1].shape[1] == 3:

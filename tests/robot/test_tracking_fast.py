@@ -124,6 +124,19 @@ def test_coco_to_h36m_is_the_old_conversion():
         assert same(kpm.coco_to_h36m(kp), want), case  # the memo's copy
 
 
+def test_coco_to_h36m_of_clean_keypoints_is_the_old_conversion():
+    """The usual frame, every coordinate finite and every score 1 (session 23's shortcuts for it), and now and
+    then scores of zero of either sign."""
+    rng = np.random.default_rng(2302)
+    for case in range(1500):
+        lead = () if case % 4 else tuple(rng.integers(1, 4, rng.integers(1, 3)))
+        kp = np.nan_to_num(random_keypoints(rng, lead), nan=321.5, posinf=1e300, neginf=-1e300)
+        kp[..., 2] = np.where(rng.random(lead + (17,)) < (0.2 if case % 3 == 0 else 0.0),
+                              rng.choice([0.0, -0.0]), 1.0)
+        kpm._H36M_MEMO.clear()
+        assert same(kpm.coco_to_h36m(kp), old_coco_to_h36m(kp)), case
+
+
 def test_size_px_is_the_old_size():
     rng = np.random.default_rng(1502)
     for case in range(3000):

@@ -488,7 +488,8 @@ class CanStateAssembler:
     def feed(self, name: str, sig: dict, t_s: float) -> RobotState | None:
         f = self._fields
         if name == "ROBOT_EE_POSITION":
-            f["ee_position_m"] = np.array([sig["X"], sig["Y"], sig["Z"]]) / 1000.0
+            # each millimetre value / 1000.0 in Python: the IEEE division numpy's elementwise one is (no second array)
+            f["ee_position_m"] = np.array([sig["X"] / 1000.0, sig["Y"] / 1000.0, sig["Z"] / 1000.0])
         elif name == "ROBOT_EE_ORIENT":
             f["pitch_rad"], f["yaw_rad"], f["ee_speed_mps"] = sig["Pitch"], sig["Yaw"], sig["Speed"] / 1000.0
         elif name.startswith("ROBOT_JOINTS_"):
