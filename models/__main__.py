@@ -6,7 +6,8 @@
                --loso: one fold per subject (DIR/folds/s<K>/), scored on --test captures when given
                --within: within-subject folds (DIR/within/ when combined with --loso/--test)
             Data parallel: torchrun --nproc_per_node=2 -m models train ...
-  stream-train  --out DIR [--width 64] [--epochs 16] [--seed 0] [--subjects 20] [--cohort-seed 0] [--minutes 15]
+  stream-train  --out DIR [--width 64] [--epochs 16] [--seed 0] [--subjects 20] [--cohort-seed 0[,1...]] [--minutes 15]
+                [--sampling s21|hard]
             -> DIR/model.pt: the trigger-free streaming classifier (models/stream_train.py), trained on the
                simulated cohort's continuous streams; deterministic for a seed (one thread)
   evaluate  --checkpoint DIR/model.pt --data TEST.npz --out DIR2
@@ -57,8 +58,10 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--epochs", type=int, default=16)
     st.add_argument("--seed", type=int, default=0, help="training seed (initialisation, sampling, augmentation)")
     st.add_argument("--subjects", type=int, default=20)
-    st.add_argument("--cohort-seed", type=int, default=0, help="the simulated cohort (0: what the ConvLSTM trains on)")
+    st.add_argument("--cohort-seed", default="0",
+                    help="the simulated cohort (0: what the ConvLSTM trains on); comma-separated: several cohorts")
     st.add_argument("--minutes", type=float, default=15.0, help="minutes per simulated trial")
+    st.add_argument("--sampling", default="s21", help="window-end draw: s21 (default) or hard (models/stream_train.py)")
 
     e = sub.add_parser("evaluate", help="score a checkpoint on an NPZ")
     e.add_argument("--checkpoint", required=True)
@@ -175,10 +178,19 @@ def cmd_stream_train(a) -> int:
             raise DataError(f"{name}: must be >= 1, got {v}")
     if not a.minutes > 0:
         raise DataError(f"--minutes: must be > 0, got {a.minutes}")
-    from models.stream_train import train_stream
+    from models.stream_train import SAMPLINGS, train_stream
 
+    if a.sampling not in SAMPLINGS:
+        raise DataError(f"--sampling: one of {', '.join(SAMPLINGS)}, got {a.sampling!r}")
+    try:
+        seeds = tuple(int(v) for v in a.cohort_seed.split(","))
+    except ValueError:
+        raise DataError(f"--cohort-seed: integers separated by commas, got {a.cohort_seed!r}") from None
+    if any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
+        raise DataError(f"--cohort-seed: distinct seeds >= 0, got {a.cohort_seed!r}")
     path = train_stream(a.out, width=a.width, epochs=a.epochs, seed=a.seed, subjects=a.subjects,
-                        cohort_seed=a.cohort_seed, minutes=a.minutes, log=lambda line: print(line, flush=True))
+                        cohort_seed=seeds[0] if len(seeds) == 1 else seeds, minutes=a.minutes, sampling=a.sampling,
+                        log=lambda line: print(line, flush=True))
     print(f"wrote {path}")
     return 0
 

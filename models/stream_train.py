@@ -12,7 +12,11 @@ step of the recordings, as the box will run it. It reproduces session 21's proto
   ``AFTER_END_IGNORE_S`` after its end (the hand on its way back, the window still mostly the
   distraction); Other everywhere else.
 * Each epoch draws ``SAMPLES`` window ends: half inside distractions, a quarter within ``NEAR_OTHER_S`` of
-  an Other motion (the false alerts' source), a quarter anywhere else. The window length is drawn per
+  an Other motion (the false alerts' source), a quarter anywhere else (``sampling="s21"``, the default).
+  ``sampling="hard"`` (session 23) splits the Other half into ``HARD_SHARES``: near the Other motions that
+  session 21 found raising false alerts (``HARD_KINDS``: the passenger-seat reach looks like Marker), the
+  hand's return after a distraction (``AFTER_END_IGNORE_S`` to ``RETURN_S`` after its end, labelled Other:
+  the other source of false alerts), near any Other motion, anywhere else. The window length is drawn per
   batch in ``W_RANGE_S``: one length-agnostic model, W chosen on development drives.
 * Augmentation, per window: a rotation about a random axis by up to ``ROT_DEG`` (strap position), a gain
   in 1 +- ``GAIN``, a bias N(0, ``BIAS_MPS2``) per axis, white noise ``NOISE_MPS2``.
@@ -51,6 +55,13 @@ ROT_DEG = 25.0
 GAIN = 0.1
 BIAS_MPS2 = 0.3
 NOISE_MPS2 = 0.05
+HARD_KINDS = ("grab_from_seat", "shift_gear")
+"""Other motions behind most of stream B's false alerts on drive seed 1 (reports/wearable/stream_s21/report.md)."""
+RETURN_S = 4.0
+"""A window ending up to this long after a distraction's end still holds the hand's return."""
+SAMPLINGS = ("s21", "hard")
+HARD_SHARES = {"distraction": 0.5, "near_hard": 0.125, "returns": 0.125, "near_other": 0.125, "far_other": 0.125}
+"""``sampling="hard"``: the share of each pool in an epoch's window ends."""
 DEFAULT_WIDTH, DEFAULT_EPOCHS = 64, 16
 """Session 21's m64: width 48 for 8 epochs reached 0.870 recall at <= 1.55 false alerts / h on drive seed 1,
 width 64 for 16 epochs 0.950 (reports/wearable/stream_s21/report.md)."""
@@ -73,6 +84,21 @@ def step_labels(n_steps: int, events: list[dict]) -> tuple[np.ndarray, np.ndarra
     return y, near_other
 
 
+def hard_masks(n_steps: int, events: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """Per 25 Hz step: within ``NEAR_OTHER_S`` of an Other motion of ``HARD_KINDS``, and within the hand's
+    return after a distraction (``AFTER_END_IGNORE_S`` to ``RETURN_S`` after its end). Both only say where
+    to draw; :func:`step_labels` says what is learnt there."""
+    t_s = (np.arange(n_steps) * 4 + 3) / 100.0
+    near_hard = np.zeros(n_steps, bool)
+    returns = np.zeros(n_steps, bool)
+    for e in events:
+        if e["label"] == OTHER and e.get("kind") in HARD_KINDS:
+            near_hard |= (t_s >= e["start_s"] - NEAR_OTHER_S) & (t_s <= e["end_s"] + NEAR_OTHER_S)
+        elif e["label"] != OTHER:
+            returns |= (t_s > e["end_s"] + AFTER_END_IGNORE_S) & (t_s <= e["end_s"] + RETURN_S)
+    return near_hard, returns
+
+
 @dataclass
 class StreamSet:
     """The recordings end to end at 25 Hz, with what each step teaches and which steps may end a window."""
@@ -85,32 +111,60 @@ class StreamSet:
     far_other: np.ndarray
     """Window-end step indices of the three draws (a window never reaches back into the previous recording)."""
     hours: float
+    near_hard: np.ndarray | None = None
+    returns: np.ndarray | None = None
+    """Window-end step indices of ``sampling="hard"``'s two extra pools (Other steps only)."""
 
 
 def stream_set(recordings) -> StreamSet:
     """``recordings``: (acc_mps2 (n, 3) at 100 Hz, truth events) pairs, in order."""
-    xs, ys, nears, whole = [], [], [], []
+    xs, ys, nears, whole, hards, rets = [], [], [], [], [], []
     for acc, events in recordings:
         x25 = to25(acc)
         y, near = step_labels(len(x25), events)
+        hard, ret = hard_masks(len(x25), events)
         xs.append(x25)
         ys.append(y)
         nears.append(near)
+        hards.append(hard)
+        rets.append(ret)
         whole.append(np.arange(len(x25)) >= int(W_RANGE_S[1] / STEP_S))  # room for the longest window behind
     y, near, ok = np.concatenate(ys), np.concatenate(nears), np.concatenate(whole)
     other = ok & (y == I_OTHER)
     x25 = np.concatenate(xs)
     return StreamSet(x25, y, np.flatnonzero(ok & (y >= 0) & (y != I_OTHER)), np.flatnonzero(other & near),
-                     np.flatnonzero(other & ~near), len(x25) * STEP_S / 3600.0)
+                     np.flatnonzero(other & ~near), len(x25) * STEP_S / 3600.0,
+                     near_hard=np.flatnonzero(other & np.concatenate(hards)),
+                     returns=np.flatnonzero(other & np.concatenate(rets)))
 
 
-def cohort_recordings(subjects: int, seed: int, minutes: float):
+def cohort_recordings(subjects: int, seed: int | tuple[int, ...], minutes: float):
     """The simulated cohort's recordings as (float32 acc, events): what ``models.dataset.build_cohort_datasets``
-    windows for the capture models, kept whole."""
+    windows for the capture models, kept whole; several cohort seeds: their cohorts one after another."""
     from firmware_sim.devices.wrist import simulate_cohort  # the simulator is only needed here
 
-    for rec in simulate_cohort(n_subjects=subjects, seed=seed, minutes_per_trial=minutes):
-        yield rec.acc_mps2.astype(np.float32), [e.to_json() for e in rec.events]
+    for s in cohort_seeds(seed):
+        for rec in simulate_cohort(n_subjects=subjects, seed=s, minutes_per_trial=minutes):
+            yield rec.acc_mps2.astype(np.float32), [e.to_json() for e in rec.events]
+
+
+def cohort_seeds(seed: int | tuple[int, ...] | list[int]) -> tuple[int, ...]:
+    return (seed,) if isinstance(seed, int) else tuple(seed)
+
+
+def epoch_ends(data: StreamSet, sampling: str, rng: np.random.Generator) -> np.ndarray:
+    """One epoch's ``SAMPLES`` window ends, shuffled (module docstring: ``sampling``)."""
+    if sampling == "s21":  # the prototype's draws, in its order
+        ends = np.concatenate([rng.choice(data.distraction, SAMPLES // 2), rng.choice(data.near_other, SAMPLES // 4),
+                               rng.choice(data.far_other, SAMPLES - SAMPLES // 2 - SAMPLES // 4)])
+    elif sampling == "hard":
+        counts = {k: int(SAMPLES * v) for k, v in HARD_SHARES.items()}
+        counts["far_other"] += SAMPLES - sum(counts.values())
+        ends = np.concatenate([rng.choice(getattr(data, k), n) for k, n in counts.items()])
+    else:
+        raise ValueError(f"sampling {sampling!r}: one of {SAMPLINGS}")
+    rng.shuffle(ends)
+    return ends
 
 
 def rotations(n: int, max_deg: float, rng: np.random.Generator) -> np.ndarray:
@@ -135,7 +189,7 @@ def augment(xb: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 
 def fit_stream(data: StreamSet, *, width: int = DEFAULT_WIDTH, epochs: int = DEFAULT_EPOCHS, seed: int = 0,
-               log=print) -> tuple[StreamNet, dict]:
+               sampling: str = "s21", log=print) -> tuple[StreamNet, dict]:
     """Train a StreamNet on ``data``; returns the model in eval mode and its last epoch's loss and accuracy."""
     seed_everything(seed)
     rng = np.random.default_rng(seed)
@@ -147,9 +201,7 @@ def fit_stream(data: StreamSet, *, width: int = DEFAULT_WIDTH, epochs: int = DEF
     lengths = (int(W_RANGE_S[0] / STEP_S), int(W_RANGE_S[1] / STEP_S) + 1)
     last = {}
     for epoch in range(epochs):
-        ends = np.concatenate([rng.choice(data.distraction, SAMPLES // 2), rng.choice(data.near_other, SAMPLES // 4),
-                               rng.choice(data.far_other, SAMPLES - SAMPLES // 2 - SAMPLES // 4)])
-        rng.shuffle(ends)
+        ends = epoch_ends(data, sampling, rng)
         model.train()
         total, right, seen = 0.0, 0, 0
         for b in range(steps_per_epoch):
@@ -171,25 +223,33 @@ def fit_stream(data: StreamSet, *, width: int = DEFAULT_WIDTH, epochs: int = DEF
 
 
 def train_stream(out_dir, *, width: int = DEFAULT_WIDTH, epochs: int = DEFAULT_EPOCHS, seed: int = 0,
-                 subjects: int = 20, cohort_seed: int = 0, minutes: float = 15.0, log=print):
-    """``python -m models stream-train``: simulate the cohort, train, write OUT/model.pt; returns its path."""
-    data = stream_set(cohort_recordings(subjects, cohort_seed, minutes))
-    log(f"cohort seed {cohort_seed}: {subjects} subjects x 6 trials x {minutes:g} min, {data.hours:.1f} h; window "
-        f"ends: distraction {len(data.distraction)}, near Other {len(data.near_other)}, elsewhere {len(data.far_other)}")
-    model, last = fit_stream(data, width=width, epochs=epochs, seed=seed, log=log)
+                 subjects: int = 20, cohort_seed: int | tuple[int, ...] = 0, minutes: float = 15.0,
+                 sampling: str = "s21", log=print):
+    """``python -m models stream-train``: simulate the cohort(s), train, write OUT/model.pt; returns its path."""
+    seeds = cohort_seeds(cohort_seed)
+    data = stream_set(cohort_recordings(subjects, seeds, minutes))
+    log(f"cohort seed {','.join(map(str, seeds))}: {subjects} subjects x 6 trials x {minutes:g} min each, "
+        f"{data.hours:.1f} h; window ends: distraction {len(data.distraction)}, near Other {len(data.near_other)}, "
+        f"elsewhere {len(data.far_other)}, near {'/'.join(HARD_KINDS)} {len(data.near_hard)}, "
+        f"returns {len(data.returns)}; sampling {sampling}")
+    model, last = fit_stream(data, width=width, epochs=epochs, seed=seed, sampling=sampling, log=log)
     return save_checkpoint(out_dir, model, arch=ARCH, classes=CLASSES, seed=seed, epochs=epochs,
                            metrics={**last, "parameters": sum(p.numel() for p in model.parameters())},
-                           data={"cohort_seed": cohort_seed, "subjects": subjects, "minutes_per_trial": minutes,
-                                 "onset_ignore_s": ONSET_IGNORE_S, "after_end_ignore_s": AFTER_END_IGNORE_S,
-                                 "w_range_s": list(W_RANGE_S)})
+                           data={"cohort_seed": seeds[0] if len(seeds) == 1 else list(seeds), "subjects": subjects,
+                                 "minutes_per_trial": minutes, "onset_ignore_s": ONSET_IGNORE_S,
+                                 "after_end_ignore_s": AFTER_END_IGNORE_S, "w_range_s": list(W_RANGE_S),
+                                 "sampling": sampling})
 
 
 def training_command(meta: dict) -> str:
     """The ``python -m models stream-train`` command that rebuilds a checkpoint of :func:`train_stream`."""
     d = meta.get("data", {})
+    cs = d.get("cohort_seed")
+    seeds = ",".join(map(str, cs)) if isinstance(cs, list) else cs
+    sampling = f" --sampling {d['sampling']}" if d.get("sampling", "s21") != "s21" else ""
     return (f"python -m models stream-train --out DIR --width {meta.get('width')} --epochs {meta.get('epochs')} "
-            f"--seed {meta.get('seed')} --subjects {d.get('subjects')} --cohort-seed {d.get('cohort_seed')} "
-            f"--minutes {d.get('minutes_per_trial'):g}")
+            f"--seed {meta.get('seed')} --subjects {d.get('subjects')} --cohort-seed {seeds} "
+            f"--minutes {d.get('minutes_per_trial'):g}{sampling}")
 
 
 def load_stream_checkpoint(path) -> tuple[StreamNet, dict]:

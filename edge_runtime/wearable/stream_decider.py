@@ -76,19 +76,20 @@ class StreamParams:
     """Manifest entry of the streaming classifier (arch stream): a name, or a precision (int8, fp32); the
     assets directory, threads and signing key are [model]'s."""
     window_s: float = config.setting(4.0, _whole_steps(MIN_STEPS * STEP_S, 30.0))
-    """Seconds of the stream each decision sees (25 Hz steps). 4 s: session 21's stream B, chosen on
-    development drive seed 1 (reports/wearable/stream_s21/report.md)."""
-    hop_s: float = config.setting(0.48, _whole_steps(STEP_S, 10.0))
+    """Seconds of the stream each decision sees (25 Hz steps). 4 s, hop 0.24 s, threshold 0.8, k 3, close
+    after 1 s: session 23's operating point for its model, chosen on development drive seed 1 by a rule fixed
+    beforehand (reports/wearable/stream_s23/report.md; session 21's stream B had hop 0.48 s, threshold 0.7)."""
+    hop_s: float = config.setting(0.24, _whole_steps(STEP_S, 10.0))
     """Seconds between decisions."""
     score: str = config.setting("top", config.one_of(*SCORES))
     """A hop's score: 'top', the largest distraction probability; 'any', 1 - P(Other)."""
-    threshold: float = config.setting(0.7, config.PROBABILITY)
+    threshold: float = config.setting(0.8, config.PROBABILITY)
     """A hop counts towards an alert when its score is at least this."""
     consecutive_hops: int = config.setting(3, ("an integer in 1..100", lambda v: 1 <= v <= 100))
     """An alert event opens after this many counting hops in a row."""
     close_after_s: float = config.setting(1.0, config.within(0.0, 60.0, "s"))
     """The open event closes after this long of hops whose P(Other) is at least close_other_p (rounded up to
-    whole hops: at hop 0.48 s, 1 s is 3 hops); only then may a new alert open."""
+    whole hops: at hop 0.24 s, 1 s is 5 hops); only then may a new alert open."""
     close_other_p: float = config.setting(0.5, config.PROBABILITY)
     """P(Other) from which a hop counts towards closing the event."""
 

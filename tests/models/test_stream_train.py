@@ -92,3 +92,57 @@ def test_a_missing_checkpoint_is_a_data_error(tmp_path):
 
     with pytest.raises(DataError, match="checkpoint not found"):
         load_stream_checkpoint(tmp_path / "none")
+
+
+def test_hard_masks_mark_the_hard_other_motions_and_the_return_after_a_distraction():
+    events = [{"label": "Phone", "start_s": 10.0, "end_s": 20.0},
+              {"label": OTHER, "start_s": 40.0, "end_s": 42.0, "kind": "grab_from_seat"},
+              {"label": OTHER, "start_s": 50.0, "end_s": 52.0, "kind": "scratch_head"}]
+    near_hard, returns = stream_train.hard_masks(1500, events)
+    t = (np.arange(1500) * 4 + 3) / 100
+
+    def at(s):
+        return int(np.argmin(np.abs(t - s)))
+
+    assert near_hard[at(37.1)] and near_hard[at(44.9)] and not near_hard[at(36.9)]
+    assert not near_hard[at(51.0)]  # an Other motion of another kind is not a hard one
+    assert not returns[at(20.9)] and returns[at(21.1)] and returns[at(23.9)] and not returns[at(24.1)]
+
+
+def test_hard_sampling_draws_each_pool_by_its_share_and_s21_keeps_the_prototypes_draw(monkeypatch):
+    monkeypatch.setattr(stream_train, "SAMPLES", 800)
+    recs = _recordings()
+    for _, events in recs:
+        events[1]["kind"] = "shift_gear"
+    data = stream_set(recs)
+    assert len(data.near_hard) and len(data.returns)
+    ends = stream_train.epoch_ends(data, "hard", np.random.default_rng(0))
+    assert len(ends) == 800
+    assert np.isin(ends, data.distraction).sum() == 400
+    assert np.isin(ends, data.returns).sum() >= 100 and np.isin(ends, data.near_hard).sum() >= 100  # also drawn by
+    # the near-Other and elsewhere pools, which hold them
+    assert (data.y[ends] == I_OTHER).sum() == 400 and (data.y[data.returns] == I_OTHER).all()
+    rng = np.random.default_rng(0)
+    old = np.concatenate([rng.choice(data.distraction, 400), rng.choice(data.near_other, 200),
+                          rng.choice(data.far_other, 200)])
+    rng.shuffle(old)
+    np.testing.assert_array_equal(stream_train.epoch_ends(data, "s21", np.random.default_rng(0)), old)
+    with pytest.raises(ValueError, match="sampling"):
+        stream_train.epoch_ends(data, "neither", np.random.default_rng(0))
+
+
+def test_the_training_command_names_every_cohort_seed_and_a_non_default_sampling():
+    meta = {"width": 64, "epochs": 24, "seed": 0,
+            "data": {"subjects": 20, "cohort_seed": [0, 1], "minutes_per_trial": 15.0, "sampling": "hard"}}
+    assert stream_train.training_command(meta).endswith("--cohort-seed 0,1 --minutes 15 --sampling hard")
+    meta["data"].update(cohort_seed=0, sampling="s21")
+    assert stream_train.training_command(meta).endswith("--cohort-seed 0 --minutes 15")
+
+
+@pytest.mark.parametrize("args, field", [(["--cohort-seed", "0,x"], "--cohort-seed"),
+                                         (["--cohort-seed", "0,0"], "--cohort-seed"),
+                                         (["--sampling", "most"], "--sampling")])
+def test_stream_train_refuses_bad_cohort_seeds_and_samplings_in_one_line(tmp_path, capsys, args, field):
+    assert cli.main(["stream-train", "--out", str(tmp_path), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and field in err[0]

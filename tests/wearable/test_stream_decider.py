@@ -42,8 +42,13 @@ def _p(**by_class) -> list[float]:
 PHONE_HOP, OTHER_HOP, UNSURE_HOP = _p(Phone=0.8), _p(), _p(Phone=0.45)
 
 
+RULE_PARAMS = {"hop_s": 0.48, "threshold": 0.7}
+"""The rule's tests below are written for session 21's stream B (hop 0.48 s, threshold 0.7), not for whatever
+the section's defaults are."""
+
+
 def _run(hops, **params):
-    rule = StreamDecider(StreamParams(**params), CLASSES)
+    rule = StreamDecider(StreamParams(**{**RULE_PARAMS, **params}), CLASSES)
     return [rule.hop(0.48 * i, p) for i, p in enumerate(hops)]
 
 
@@ -138,7 +143,7 @@ def test_a_live_source_s_few_samples_decide_as_one_block():
 
 
 def test_alerts_carry_the_event_start_and_times_of_the_stream():
-    (d,) = StreamLoop(Windows()).feed(ImuBlock(100.0, _moves(3000, [(1000, 2000)])))
+    (d,) = StreamLoop(Windows(), StreamParams(**RULE_PARAMS)).feed(ImuBlock(100.0, _moves(3000, [(1000, 2000)])))
     # x moves from 110 s; hops every 0.48 s from 103.99 s; the last second's mean passes 3 m/s^2 after 0.5 s
     assert d.status == "alert" and d.alerted and d.steps == STREAM_STEPS and d.label == "Phone"
     assert d.event_start_s == d.t_trigger_s and round(d.t_alert_s - d.t_trigger_s, 3) == 0.96  # k = 3 hops
@@ -171,7 +176,7 @@ def test_stream_alerts_go_out_as_the_capture_paths_do_one_alertseq_per_event():
     rx = can.Bus(interface="virtual", channel="stream-alerts")
     pub = AlertPublisher(bus, clock=Clock.DATA)
     try:
-        loop = StreamLoop(Windows(), publisher=pub)
+        loop = StreamLoop(Windows(), StreamParams(**RULE_PARAMS), publisher=pub)
         acc = _moves(6000, [(1000, 1800), (3000, 3300), (4500, 5600)])
         decisions = []
         for i in range(0, len(acc), 500):
@@ -253,6 +258,6 @@ def test_the_wearable_command_replays_with_the_shipped_stream_model(tmp_path, ca
     csv.write_text("t,ax,ay,az\n" + "".join(f"{i / 100:.2f},{a:.4f},{b:.4f},{c:.4f}\n" for i, (a, b, c) in enumerate(acc)))
     assert table.main(["wearable", "--replay", str(csv), *flags, "--alerts", str(log), "--quiet"]) == 0
     out = capsys.readouterr().out
-    # 750 steps of 25 Hz: a decision at the 100th and every 12th after it
-    assert "model stream-int8 (int8)" in out and "hops 55 (stream decisions every 0.48 s on the last 4 s" in out
+    # 750 steps of 25 Hz: a decision at the 100th and every 6th after it (the defaults: W 4 s, hop 0.24 s)
+    assert "model stream-int8 (int8)" in out and "hops 109 (stream decisions every 0.24 s on the last 4 s" in out
     assert all(list(json.loads(line)) == DECISION_KEYS for line in log.read_text().splitlines())
