@@ -58,7 +58,7 @@ import numpy as np
 from edge_runtime.cli import CliError, positive_float
 from edge_runtime.wearable.classifier import CAPTURE_FRAMES, RESAMPLED_FRAMES, SUBSEQ_FRAMES
 from edge_runtime.wearable.detector import DetectorConfig, p3_series
-from edge_runtime.wearable.labels import DISTRACTIONS
+from edge_runtime.wearable.labels import DISTRACTIONS, OTHER
 from edge_runtime.wearable.sources import SAMPLE_RATE_HZ
 from firmware_sim.scenarios.scoring import raises_alert
 
@@ -396,6 +396,67 @@ def hop_agreement(drives, model, other, params) -> dict:
             "decisions": both.hops, "agreeing": both.same, "by_steps": "every hop"}
 
 
+HOP_ONSET_IGNORE_S, HOP_AFTER_END_IGNORE_S = 0.3, 1.0
+"""Hops scored by :func:`hop_f1`: a distraction's class from this long after its start to its end; none from its
+start to then (the hand has only just left the wheel) nor for the second after its end (the window still mostly the
+distraction); Other everywhere else. The streaming classifier's training labels (models/stream_train.py) say the same."""
+
+
+class _HopLog:
+    """A streaming decider's rule that also keeps every hop's time and top class (then answers as the rule does)."""
+
+    def __init__(self, rule):
+        self.rule, self.t_s, self.top = rule, [], []
+
+    def hop(self, t_s: float, probs):
+        self.t_s.append(t_s)
+        self.top.append(int(np.argmax(probs)))
+        return self.rule.hop(t_s, probs)
+
+    def reset(self) -> None:
+        self.rule.reset()
+
+
+def hop_truth(t_s: np.ndarray, events: list[dict], classes: list[str]) -> np.ndarray:
+    """The class index a hop ending at each ``t_s`` should report (-1: not scored; :data:`HOP_ONSET_IGNORE_S`)."""
+    y = np.full(len(t_s), classes.index(OTHER), dtype=int)
+    for e in events:
+        if e["label"] in DISTRACTIONS:
+            y[(t_s >= e["start_s"]) & (t_s <= e["end_s"] + HOP_AFTER_END_IGNORE_S)] = -1
+            y[(t_s >= e["start_s"] + HOP_ONSET_IGNORE_S) & (t_s <= e["end_s"])] = classes.index(e["label"])
+    return y
+
+
+def hop_f1(drives, model, params) -> dict:
+    """The streaming classifier's top class at every hop of the drives (what the box decides on, through the runtime's
+    streaming decider) against :func:`hop_truth`: macro-F1 over the six classes, per-class F1 and the confusion
+    matrix (rows: truth). The stream's counterpart of the capture models' macro-F1 over every capture."""
+    from edge_runtime.wearable.sources import ImuBlock
+    from edge_runtime.wearable.stream_decider import StreamLoop
+
+    classes = list(model.classes)
+    k = len(classes)
+    confusion = np.zeros((k, k), dtype=int)
+    for drive in drives:
+        loop = StreamLoop(model, params)
+        log = loop.rule = _HopLog(loop.rule)
+        loop.feed(ImuBlock(0.0, drive.acc_mps2))
+        y, top = hop_truth(np.asarray(log.t_s), drive.events, classes), np.asarray(log.top, dtype=int)
+        np.add.at(confusion, (y[y >= 0], top[y >= 0]), 1)
+    tp = np.diag(confusion).astype(float)
+    denom = confusion.sum(0) + confusion.sum(1)
+    f1 = np.divide(2 * tp, denom, out=np.full(k, np.nan), where=denom > 0)
+    present = confusion.sum(1) > 0
+    dis = [i for i, c in enumerate(classes) if c != OTHER and present[i]]
+    return {"model": model.name, "hops": int(confusion.sum()), "macro_f1": round(float(np.mean(f1[present])), 4),
+            "macro_f1_distractions": round(float(np.mean(f1[dis])), 4) if dis else None,
+            "accuracy": round(float(tp.sum() / confusion.sum()), 4) if confusion.sum() else None,
+            "per_class_f1": {c: round(float(v), 4) for c, v in zip(classes, f1) if not np.isnan(v)},
+            "classes": classes, "confusion": confusion.tolist(),
+            "truth": f"a distraction's class from {HOP_ONSET_IGNORE_S} s after its start to its end, unscored from its "
+                     f"start to then and for {HOP_AFTER_END_IGNORE_S} s after its end, Other elsewhere"}
+
+
 # ---------------------------------------------------------------------------- running
 
 
@@ -536,6 +597,11 @@ def to_markdown(report: dict) -> str:
         where = "at every hop of the drives" if c["by_steps"] == "every hop" else "on every capture and sub-window count"
         lines += ["", f"Top-class agreement {c['models'][0]} vs {c['models'][1]} {where}: "
                       f"**{c['agreement']}** over {c['decisions']} decisions (by S: {c['by_steps']})"]
+    if "hop_f1" in report:
+        h = report["hop_f1"]
+        lines += ["", f"The streaming classifier {h['model']} at every hop ({h['hops']} hops; truth: {h['truth']}): "
+                      f"**macro-F1 {h['macro_f1']}** (distractions only {h['macro_f1_distractions']}), accuracy "
+                      f"{h['accuracy']}; per class " + ", ".join(f"{c} {v}" for c, v in h["per_class_f1"].items())]
     if "step_accuracy" in report:
         lines += ["", "Top class after S sub-windows on every detector capture (class weights applied; truth: the "
                       "distraction the trigger falls in, else Other): what an alert after S sub-windows can reach", "",
@@ -591,6 +657,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also the top-class agreement with this manifest entry (e.g. fp32) on every capture, at "
                         "every sub-window count the model decides at; with the stream mode: the stream model's "
                         "with this stream entry (e.g. stream-fp32) at every hop")
+    p.add_argument("--hop-f1", action="store_true",
+                   help="also the streaming classifier's macro-F1 over every hop against the truth (the stream's "
+                        "counterpart of macro-F1 over every capture)")
     p.add_argument("--step-accuracy", action="store_true",
                    help="also the top class's accuracy after each sub-window count S on every capture (what an "
                         "alert after S sub-windows can reach)")
@@ -619,7 +688,7 @@ def cmd(a) -> int:
     print(f"drive-eval: {a.hours:g} h of held-out driving (seed {a.seed}), modes {', '.join(measured)}, model "
           f"{engine.name}" + ("" if early else " (fixed S = 6: early decisions are not measurable)"), flush=True)
     drives = held_out_drives(a.hours, a.seed, a.baseline_share, a.drive_minutes)
-    if a.agreement or a.step_accuracy:
+    if a.agreement or a.step_accuracy or a.hop_f1:
         drives = list(drives)  # walked twice
     res = evaluate(drives, engine, cfg, measured, progress=lambda line: print(line, flush=True), stream_model=stream_model)
     described = {m: ("one decision per capture at T+599 (the dissertation's)" if m == "full_window" else
@@ -634,7 +703,7 @@ def cmd(a) -> int:
             f"--{k.replace('_', '-')} {v}" for k, v in vars(a).items()
             if k in ("hours", "seed", "out", "decision", "baseline_share", "drive_minutes", "config", "assets", "model",
                      "agreement")
-            and v is not None) + (" --step-accuracy" if a.step_accuracy else ""),
+            and v is not None) + (" --step-accuracy" if a.step_accuracy else "") + (" --hop-f1" if a.hop_f1 else ""),
         "hours": a.hours, "seed": a.seed, "model": f"{engine.name} ({engine.precision})",
         "decision_path": engine.decision_path(), "git_commit": git_head(),
         "early_steps": list(engine.early_steps), "decision_modes": described,
@@ -653,6 +722,8 @@ def cmd(a) -> int:
     elif a.agreement:
         other = Engine.from_params(cfg.model, a.agreement)
         report["class_agreement"] = class_agreement(drives, engine, other, cfg.detector)
+    if a.hop_f1 and stream_model is not None:
+        report["hop_f1"] = hop_f1(drives, stream_model, cfg.stream)
     if a.step_accuracy:
         report["step_accuracy"] = step_accuracy(drives, engine, cfg.detector, cfg.alerts.class_weights)
     report["wall_s"] = round(time.perf_counter() - t_wall, 1)

@@ -298,3 +298,35 @@ def test_the_stream_mode_replays_through_the_streaming_decider_and_scores_as_ses
         score.add(Drive("d", acc, events, "distraction"), [stream_scored({**d, "t_alert_s": t_alert_s})])
         got = score.as_dict()
         assert (got["event_recall"] == 1.0, got["first_alerts_before_the_onset"]) == (credited, int(credited))
+
+
+def test_hop_truth_scores_a_distraction_after_its_onset_and_skips_the_hand_on_its_way():
+    from edge_runtime.wearable.labels import CLASSES
+    from firmware_sim.scenarios.drive_eval import hop_truth
+
+    t = np.array([29.0, 30.1, 30.4, 49.9, 50.5, 51.2])
+    y = hop_truth(t, [{"label": "Phone", "start_s": 30.0, "end_s": 50.0}, {"label": "Other", "start_s": 1, "end_s": 2}],
+                  list(CLASSES))
+    other, phone = CLASSES.index("Other"), CLASSES.index("Phone")
+    assert y.tolist() == [other, -1, phone, phone, -1, other]
+
+
+def test_hop_f1_counts_every_hop_of_the_streaming_decider_against_the_truth():
+    from edge_runtime.wearable.labels import CLASSES
+    from edge_runtime.wearable.stream_decider import StreamParams
+    from firmware_sim.scenarios.drive_eval import hop_f1
+
+    acc = np.tile(np.float32([0, 0, 9.81]), (12000, 1))
+    acc[3000:5000, 0] += 6.0  # the distraction the stand-in sees, 30-50 s
+    acc[8000:8300, 0] += 6.0  # an Other motion it takes for a phone, 80-83 s
+    events = [{"label": "Phone", "start_s": 30.0, "end_s": 50.0}, {"label": "Other", "start_s": 80.0, "end_s": 83.0}]
+    params = StreamParams()
+    got = hop_f1([Drive("d", acc, events, "distraction")], MovesOnX(), params)
+    c = np.array(got["confusion"])
+    other, phone = CLASSES.index("Other"), CLASSES.index("Phone")
+    # every decided hop is scored once but the unscored ones (from the onset for 0.3 s, the second after the end)
+    scored = round((120.0 - params.window_s) / params.hop_s) - round(1.3 / params.hop_s)
+    assert abs(got["hops"] - scored) <= 2 and c.sum() == got["hops"]
+    assert c[phone, phone] > 0 and c[other, phone] > 0  # the Other motion: Other taken for Phone
+    assert c.sum(1)[[i for i in range(len(CLASSES)) if i not in (other, phone)]].sum() == 0
+    assert 0.0 < got["macro_f1"] < 1.0 and set(got["per_class_f1"]) == {"Other", "Phone"}
