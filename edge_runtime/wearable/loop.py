@@ -124,8 +124,9 @@ class AlertPolicy:
     hop on the last seconds of the stream and sends one final alert (Status 0) per distraction ([stream],
     edge_runtime.wearable.stream_decider). Chosen over 'early' on development drives (``firmware_sim drive-eval``
     seeds 1 and 5, 20 h each: better on event recall, first-alert class, onset -> alert median and p95 and false
-    alerts per hour on both, reports/wearable/stream_s22); held-out drive seed 72 (20 h) measured the same order
-    afterwards (reports/drive_eval/fresh_seed72_stream). The capture path (the [detector]'s trigger, then the
+    alerts per hour on both, reports/wearable/stream_s22); held-out drive seeds 72 and 82 (20 h each) measured the
+    same order afterwards, and seed 92 with session 23's retrained model (reports/drive_eval/fresh_seed92: stream
+    0.975 / 0.963 / 2.32 s / 0.8 per h against early's 0.942 / 0.909 / 3.89 s / 1.2 per h). The capture path (the [detector]'s trigger, then the
     ConvLSTM on the 7-s capture): 'early', decide after each sub-window the capture's evidence allows
     (preliminary, then confirmed, revised or withdrawn), when the model accepts partial captures; 'full_window',
     one decision per capture at T+599, the dissertation's. Every other key of this section is the capture path's
