@@ -61,6 +61,12 @@ def to25(acc_mps2: np.ndarray) -> np.ndarray:
     return acc[:m].reshape(m // DOWN, DOWN, 3).mean(1)
 
 
+def step_end_s(n_steps: int) -> np.ndarray:
+    """The time (s from the recording's first raw frame) of each of ``n_steps`` 25 Hz steps' last raw frame:
+    when a decision on the window ending at that step can go out (:func:`to25`)."""
+    return (np.arange(n_steps) * DOWN + DOWN - 1) / RAW_RATE_HZ
+
+
 def windows(x25: np.ndarray, ends: np.ndarray, steps: int) -> np.ndarray:
     """The windows of ``steps`` 25 Hz steps ending at (and including) each step index of ``ends`` ->
     (N, 3, steps); an end before a whole window repeats the stream's first step in front."""

@@ -6,11 +6,12 @@ The capture models (:mod:`models.train`) learn from detector windows; this one l
 step of the recordings, as the box will run it. It reproduces session 21's prototype
 (reports/wearable/stream_s21/train.py) draw for draw, so that the same seed gives the same weights:
 
-* Labels, per window end t (the class the box should report at t): a distraction's class from
-  ``ONSET_IGNORE_S`` after its start to its end; no loss from its start to ``ONSET_IGNORE_S`` (the hand has
-  only just left the wheel, as in an Other motion: either answer there teaches the wrong one) nor for
-  ``AFTER_END_IGNORE_S`` after its end (the hand on its way back, the window still mostly the
-  distraction); Other everywhere else.
+* Labels, per window end t (the class the box should report at t):
+  :func:`firmware_sim.scenarios.scoring.class_at`, the rule drive-eval scores every hop by: a distraction's
+  class from ``ONSET_IGNORE_S`` after its start to its end; no loss from its start to ``ONSET_IGNORE_S`` (the
+  hand has only just left the wheel, as in an Other motion: either answer there teaches the wrong one) nor for
+  ``AFTER_END_IGNORE_S`` after its end (the hand on its way back, the window still mostly the distraction);
+  Other everywhere else.
 * Each epoch draws ``SAMPLES`` window ends: half inside distractions, a quarter within ``NEAR_OTHER_S`` of
   an Other motion (the false alerts' source), a quarter anywhere else (``sampling="s21"``, the default).
   ``sampling="hard"`` (session 23) splits the Other half into ``HARD_SHARES``: near the Other motions that
@@ -37,14 +38,13 @@ import torch
 from torch import nn
 
 from edge_runtime.wearable.labels import CLASSES, OTHER
-from models.stream_net import STEP_S, StreamNet, to25, width_of, windows
+from firmware_sim.scenarios.scoring import AFTER_END_IGNORE_S, NOT_SCORED, ONSET_IGNORE_S, class_at
+from models.stream_net import STEP_S, StreamNet, step_end_s, to25, width_of, windows
 from models.train import save_checkpoint, seed_everything
 
 ARCH = "stream"
-ONSET_IGNORE_S = 0.3
-AFTER_END_IGNORE_S = 1.0
 NEAR_OTHER_S = 3.0
-IGNORE = -1
+IGNORE = NOT_SCORED
 W_RANGE_S = (2.0, 4.0)
 SAMPLES = 120_000
 """Window ends per epoch."""
@@ -71,16 +71,12 @@ I_OTHER = CLASSES.index(OTHER)
 def step_labels(n_steps: int, events: list[dict]) -> tuple[np.ndarray, np.ndarray]:
     """Per 25 Hz step of a recording: the class index to learn (``IGNORE``: none) and whether it lies within
     ``NEAR_OTHER_S`` of an Other motion. ``events``: the simulator's truth (label, start_s, end_s)."""
-    t_s = (np.arange(n_steps) * 4 + 3) / 100.0  # the time of each step's last raw frame
-    y = np.full(n_steps, I_OTHER, dtype=np.int64)
+    t_s = step_end_s(n_steps)
     near_other = np.zeros(n_steps, bool)
     for e in events:
         if e["label"] == OTHER:
             near_other |= (t_s >= e["start_s"] - NEAR_OTHER_S) & (t_s <= e["end_s"] + NEAR_OTHER_S)
-    for e in events:  # after every Other motion: a distraction's span wins where they touch
-        if e["label"] != OTHER:
-            y[(t_s >= e["start_s"]) & (t_s <= e["end_s"] + AFTER_END_IGNORE_S)] = IGNORE
-            y[(t_s >= e["start_s"] + ONSET_IGNORE_S) & (t_s <= e["end_s"])] = CLASSES.index(e["label"])
+    y = class_at(t_s, events, CLASSES)
     return y, near_other
 
 
@@ -88,7 +84,7 @@ def hard_masks(n_steps: int, events: list[dict]) -> tuple[np.ndarray, np.ndarray
     """Per 25 Hz step: within ``NEAR_OTHER_S`` of an Other motion of ``HARD_KINDS``, and within the hand's
     return after a distraction (``AFTER_END_IGNORE_S`` to ``RETURN_S`` after its end). Both only say where
     to draw; :func:`step_labels` says what is learnt there."""
-    t_s = (np.arange(n_steps) * 4 + 3) / 100.0
+    t_s = step_end_s(n_steps)
     near_hard = np.zeros(n_steps, bool)
     returns = np.zeros(n_steps, bool)
     for e in events:

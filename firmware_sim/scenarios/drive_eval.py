@@ -60,7 +60,7 @@ from edge_runtime.wearable.classifier import CAPTURE_FRAMES, RESAMPLED_FRAMES, S
 from edge_runtime.wearable.detector import DetectorConfig, p3_series
 from edge_runtime.wearable.labels import DISTRACTIONS, OTHER
 from edge_runtime.wearable.sources import SAMPLE_RATE_HZ
-from firmware_sim.scenarios.scoring import raises_alert
+from firmware_sim.scenarios.scoring import AFTER_END_IGNORE_S, ONSET_IGNORE_S, class_at, raises_alert
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -396,12 +396,6 @@ def hop_agreement(drives, model, other, params) -> dict:
             "decisions": both.hops, "agreeing": both.same, "by_steps": "every hop"}
 
 
-HOP_ONSET_IGNORE_S, HOP_AFTER_END_IGNORE_S = 0.3, 1.0
-"""Hops scored by :func:`hop_f1`: a distraction's class from this long after its start to its end; none from its
-start to then (the hand has only just left the wheel) nor for the second after its end (the window still mostly the
-distraction); Other everywhere else. The streaming classifier's training labels (models/stream_train.py) say the same."""
-
-
 class _HopLog:
     """A streaming decider's rule that also keeps every hop's time and top class (then answers as the rule does)."""
 
@@ -417,19 +411,9 @@ class _HopLog:
         self.rule.reset()
 
 
-def hop_truth(t_s: np.ndarray, events: list[dict], classes: list[str]) -> np.ndarray:
-    """The class index a hop ending at each ``t_s`` should report (-1: not scored; :data:`HOP_ONSET_IGNORE_S`)."""
-    y = np.full(len(t_s), classes.index(OTHER), dtype=int)
-    for e in events:
-        if e["label"] in DISTRACTIONS:
-            y[(t_s >= e["start_s"]) & (t_s <= e["end_s"] + HOP_AFTER_END_IGNORE_S)] = -1
-            y[(t_s >= e["start_s"] + HOP_ONSET_IGNORE_S) & (t_s <= e["end_s"])] = classes.index(e["label"])
-    return y
-
-
 def hop_f1(drives, model, params) -> dict:
     """The streaming classifier's top class at every hop of the drives (what the box decides on, through the runtime's
-    streaming decider) against :func:`hop_truth`: macro-F1 over the six classes, per-class F1 and the confusion
+    streaming decider) against :func:`firmware_sim.scenarios.scoring.class_at`: macro-F1 over the six classes, per-class F1 and the confusion
     matrix (rows: truth). The stream's counterpart of the capture models' macro-F1 over every capture."""
     from edge_runtime.wearable.sources import ImuBlock
     from edge_runtime.wearable.stream_decider import StreamLoop
@@ -441,7 +425,7 @@ def hop_f1(drives, model, params) -> dict:
         loop = StreamLoop(model, params)
         log = loop.rule = _HopLog(loop.rule)
         loop.feed(ImuBlock(0.0, drive.acc_mps2))
-        y, top = hop_truth(np.asarray(log.t_s), drive.events, classes), np.asarray(log.top, dtype=int)
+        y, top = class_at(log.t_s, drive.events, classes), np.asarray(log.top, dtype=int)
         np.add.at(confusion, (y[y >= 0], top[y >= 0]), 1)
     tp = np.diag(confusion).astype(float)
     denom = confusion.sum(0) + confusion.sum(1)
@@ -453,8 +437,8 @@ def hop_f1(drives, model, params) -> dict:
             "accuracy": round(float(tp.sum() / confusion.sum()), 4) if confusion.sum() else None,
             "per_class_f1": {c: round(float(v), 4) for c, v in zip(classes, f1) if not np.isnan(v)},
             "classes": classes, "confusion": confusion.tolist(),
-            "truth": f"a distraction's class from {HOP_ONSET_IGNORE_S} s after its start to its end, unscored from its "
-                     f"start to then and for {HOP_AFTER_END_IGNORE_S} s after its end, Other elsewhere"}
+            "truth": f"a distraction's class from {ONSET_IGNORE_S} s after its start to its end, unscored from its "
+                     f"start to then and for {AFTER_END_IGNORE_S} s after its end, Other elsewhere"}
 
 
 # ---------------------------------------------------------------------------- running

@@ -15,7 +15,33 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from edge_runtime.wearable.labels import DISTRACTIONS
+import numpy as np
+
+from edge_runtime.wearable.labels import DISTRACTIONS, OTHER
+
+ONSET_IGNORE_S = 0.3
+"""A distraction's class is what a decision should say from this long after its start (before it the hand has only
+just left the wheel: neither its class nor Other is right)."""
+AFTER_END_IGNORE_S = 1.0
+"""Nor is either right for this long after its end (the hand on its way back, the window still mostly the
+distraction)."""
+NOT_SCORED = -1
+
+
+def class_at(t_s: np.ndarray, events: list[dict], classes) -> np.ndarray:
+    """The class index a decision made at each time ``t_s`` should report against the truth ``events``
+    (label, start_s, end_s): a distraction's class from :data:`ONSET_IGNORE_S` after its start to its end,
+    :data:`NOT_SCORED` from its start to then and for :data:`AFTER_END_IGNORE_S` after its end, Other elsewhere
+    (an Other motion too). The streaming classifier learns this (models/stream_train.py) and drive-eval's
+    every-hop macro-F1 scores it."""
+    classes = list(classes)
+    t_s = np.asarray(t_s, dtype=float)
+    y = np.full(len(t_s), classes.index(OTHER), dtype=np.int64)
+    for e in events:
+        if e["label"] in DISTRACTIONS:
+            y[(t_s >= e["start_s"]) & (t_s <= e["end_s"] + AFTER_END_IGNORE_S)] = NOT_SCORED
+            y[(t_s >= e["start_s"] + ONSET_IGNORE_S) & (t_s <= e["end_s"])] = classes.index(e["label"])
+    return y
 
 
 @dataclass

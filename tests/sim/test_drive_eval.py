@@ -300,17 +300,6 @@ def test_the_stream_mode_replays_through_the_streaming_decider_and_scores_as_ses
         assert (got["event_recall"] == 1.0, got["first_alerts_before_the_onset"]) == (credited, int(credited))
 
 
-def test_hop_truth_scores_a_distraction_after_its_onset_and_skips_the_hand_on_its_way():
-    from edge_runtime.wearable.labels import CLASSES
-    from firmware_sim.scenarios.drive_eval import hop_truth
-
-    t = np.array([29.0, 30.1, 30.4, 49.9, 50.5, 51.2])
-    y = hop_truth(t, [{"label": "Phone", "start_s": 30.0, "end_s": 50.0}, {"label": "Other", "start_s": 1, "end_s": 2}],
-                  list(CLASSES))
-    other, phone = CLASSES.index("Other"), CLASSES.index("Phone")
-    assert y.tolist() == [other, -1, phone, phone, -1, other]
-
-
 def test_hop_f1_counts_every_hop_of_the_streaming_decider_against_the_truth():
     from edge_runtime.wearable.labels import CLASSES
     from edge_runtime.wearable.stream_decider import StreamParams

@@ -1,4 +1,6 @@
-from firmware_sim.scenarios.scoring import score_alerts
+import numpy as np
+
+from firmware_sim.scenarios.scoring import class_at, score_alerts
 
 EVENTS = [
     {"start_s": 10.0, "end_s": 15.0, "label": "Drink"},
@@ -34,3 +36,13 @@ def test_updates_of_an_alert_are_not_new_alerts():
                  {**_d(41.0, "Texting"), "status": "alert"}, {**_d(70.5, "Marker"), "status": "withdrawn"}]
     s = score_alerts(decisions, EVENTS)
     assert (s.alerts, s.detected, s.precision) == (2, 2, 1.0)
+
+
+def test_class_at_scores_a_distraction_after_its_onset_and_skips_the_hand_on_its_way():
+    from edge_runtime.wearable.labels import CLASSES
+
+    t = np.array([29.0, 30.1, 30.4, 49.9, 50.5, 51.2])
+    y = class_at(t, [{"label": "Phone", "start_s": 30.0, "end_s": 50.0}, {"label": "Other", "start_s": 1, "end_s": 2}],
+                 CLASSES)
+    other, phone = CLASSES.index("Other"), CLASSES.index("Phone")
+    assert y.tolist() == [other, -1, phone, phone, -1, other]
