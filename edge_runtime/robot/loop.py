@@ -480,7 +480,7 @@ class RobotLoop:
             self.counters.unseen += len(unseen or ())
             effector = self.effector_m()
             decision = self.monitor.observe(t_in, dict(zip(keys, persons)), effector, self._last_q,
-                                            unseen, self._robot_rays(rays))
+                                            unseen, self._robot_rays(rays), self._backfire_start())
             # the log's per-person beliefs, made once the commands are out (they decide nothing), against the
             # effector the frame was judged with (before the command: its fallback is the last position sent)
             people = (keys, persons, effector)
@@ -866,12 +866,10 @@ class RobotLoop:
         """Has the retraction (or escape turn) under way brought the arm ``retract_backfire_m`` closer to anyone
         within the retraction's reach, by its own motion? (Everyone the monitor accounts for, at his
         last valid body, against the arm where it is now and where the retraction began.)"""
-        r, q0, q = self._retract, self._retract_q0, self._last_q
-        z = self.zones
-        if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None or z.separation != "whole_body":
+        start_caps = self._backfire_start()
+        if start_caps is None:
             return False
-        if self._retract_fallback and not self._escaping and not self.params.radial_retract_stops:
-            return False  # the straight retraction toward the base runs to its end
+        z, q = self.zones, self._last_q
         reach = z.body_retract_distance_m + z.retract_lead_s * z.lost_person_speed_mps
         people = self.monitor.people_spheres()
         if not people:
@@ -883,10 +881,23 @@ class RobotLoop:
         for k, d in enumerate(now):
             if d < reach:
                 if start is None:
-                    start = self._separations_of(people, self._start_capsules(q0))
+                    start = self._separations_of(people, start_caps)
                 if d < start[k] - self.params.retract_backfire_m:
                     return True
         return False
+
+    def _backfire_start(self):
+        """The capsules of where the retraction under way began (:meth:`_start_capsules`) when
+        :meth:`_retract_backfires` has one to check, else None. A frame hands them to the monitor, which measures
+        everyone's separation from them in its own pass (``HazardMonitor.observe``'s ``also_capsules``), so the
+        frame's backfire check finds them measured (the same numbers)."""
+        r, q0, q = self._retract, self._retract_q0, self._last_q
+        if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None \
+                or self.zones.separation != "whole_body":
+            return None
+        if self._retract_fallback and not self._escaping and not self.params.radial_retract_stops:
+            return None  # the straight retraction toward the base runs to its end
+        return self._start_capsules(q0)
 
     def _start_capsules(self, q0: np.ndarray):
         """:func:`arm_capsules` of ``q0``, where the retraction under way began, kept while it lasts: the same
