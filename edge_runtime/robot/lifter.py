@@ -122,7 +122,7 @@ from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
 from edge_runtime.core.numeric import median_columns, norms2
 from edge_runtime.core.onnx import fast_run, session_from_manifest
-from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS, PARENTS
+from edge_runtime.core.skeleton import ALL_JOINTS, HIP, JOINTS, N_JOINTS, NO_JOINTS, PARENTS
 from edge_runtime.robot.hazard import enough_joints
 from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, image_to_canonical, to_h36m
 
@@ -410,8 +410,8 @@ class StreamingLifter:
             st.resets += 1  # lost for too long: the buffer no longer describes this person's recent motion
             self.reset()
         frame = self._last_seen.astype(np.float32)
-        if why is None and observed.all():  # every joint seen (the usual frame): nothing held, aged or imputed
-            held, stale = np.zeros(N_JOINTS, bool), np.zeros(N_JOINTS, bool)
+        if why is None and (observed is ALL_JOINTS or observed.all()):
+            held = stale = NO_JOINTS  # every joint seen (the usual frame): nothing held, aged or imputed
         else:
             self._age[~observed] += steps
             held = ~observed & (self._age <= self.params.hold_frames)
@@ -464,7 +464,7 @@ class StreamingLifter:
         ok, norm = self._usable(kp) if usable is None else usable
         if norm is None:
             return ok, None
-        if ok.all():
+        if ok is ALL_JOINTS or ok.all():
             self._moved[:] = 0.0
             self._last_seen[:] = norm
             self._age[:] = 0
@@ -633,14 +633,19 @@ def _usable_all(lifter: StreamingLifter, keypoints: list) -> list[tuple | None]:
         return out
     # stacked (as np.stack, cheaper); each person's H36M keypoints come from the tracker's conversion (memo)
     kp = np.array([to_h36m(arrays[i], lifter.keypoint_format) for i in which])
-    ok = np.isfinite(kp[..., :2]).all(axis=-1) & (kp[..., 2] >= lifter.params.min_score)  # NaN score: False
+    scored = np.isfinite(kp[..., :2]).all(axis=-1) & (kp[..., 2] >= lifter.params.min_score)  # NaN score: False
     norm = maps.normalised(kp)
-    if ok.all():  # every keypoint of everyone usable (the usual frame): no row to leave out
+    # a row left out below is NaN, which no range check passes: the range is checked on the rows as they are
+    ok = scored & (np.abs(norm) <= MAX_NORMALISED).all(axis=-1)
+    if ok.all():  # every keypoint of everyone usable (the usual frame): no row to leave out, the shared mask
+        for i, norm_i in zip(which, norm):
+            out[i] = (ALL_JOINTS, norm_i)
+        return out
+    if scored.all():
         any_ok = [True] * len(which)
     else:
-        any_ok = ok.any(axis=1).tolist()
-        norm[~ok] = np.nan  # the rows left out stay NaN, as _usable leaves them
-    ok &= (np.abs(norm) <= MAX_NORMALISED).all(axis=-1)
+        any_ok = scored.any(axis=1).tolist()
+        norm[~scored] = np.nan  # the rows left out stay NaN, as _usable leaves them
     for i, ok_i, norm_i, kept in zip(which, ok, norm, any_ok):
         out[i] = (ok_i, norm_i if kept else None)
     return out
@@ -694,7 +699,7 @@ def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray
     joints = _rays_of(maps, seen, model_joints) * model_joints[..., 2:3]
     for k, i in enumerate(good):
         lf, (t_s, observed, held, missing) = lifters[i], ready[i]
-        if missing.any():
+        if missing is not NO_JOINTS and missing.any():
             # a missing joint's ray is its imputed keypoint's: the model's own joint is as good a guess
             joints[k][missing] = model_joints[k][missing]
         st = lf.stats

@@ -77,7 +77,7 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.memo import Recent
-from edge_runtime.core.skeleton import HEAD, JOINTS
+from edge_runtime.core.skeleton import HEAD, JOINTS, NO_JOINTS
 from edge_runtime.robot.hazard import (
     Decision,
     HazardMonitor,
@@ -338,8 +338,10 @@ def _measured(pose) -> np.ndarray:
     """A lifted pose's joints with its ``missing`` ones NaN (``LiftedPose.missing``: guesses, not measured); a
     stand-in pose without that flag gives its joints as they are."""
     missing = getattr(pose, "missing", None)
-    # ndarray.any is np.any's reduction without its dispatch (a lifter's flags are an array; a stand-in's may not be)
-    if missing is None or not (missing.any() if isinstance(missing, np.ndarray) else np.any(missing)):
+    # ndarray.any is np.any's reduction without its dispatch (a lifter's flags are an array; a stand-in's may not be);
+    # the shared mask of no joint needs none
+    if missing is None or missing is NO_JOINTS or not (missing.any() if isinstance(missing, np.ndarray)
+                                                        else np.any(missing)):
         return pose.joints_cam_m
     return np.where(np.asarray(missing, bool)[:, None], np.nan, pose.joints_cam_m)
 
