@@ -922,6 +922,15 @@ class HazardMonitor:
             out.append((centres, radii + grown_m))
         return out
 
+    def escape_separations_m(self, capsules) -> np.ndarray | None:
+        """whole_body: everyone's separation now (P,) from ``capsules``, as :func:`plan_escape_turn` measures it of
+        :meth:`escape_people`, when the last pose frame measured it (every one seen then, at a finite speed: his
+        radii not grown, :attr:`_Seen.clear_of`), else None: the escape plan then need not measure it again."""
+        t = self._last_pose_s
+        known = [s.known_separation_m(capsules) if s.t_s == t and math.isfinite(s.speed_mps) else None
+                 for s in self._seen.values()]
+        return np.array(known, float) if known and None not in known else None
+
     def invalid(self, t_s: float, reason: str) -> Decision:
         """A frame the lifter (or the input) marked invalid: stop."""
         self._last_pose_s = t_s
@@ -1664,7 +1673,7 @@ def turned_capsules(capsules, turn_rad: float):
     first joint (j0) turned alone, every link with it. A positive turn raises a point's bearing
     ``atan2(x, z)`` (the tool's yaw turns with it)."""
     a, b, r = capsules
-    rot = _base_rotations([turn_rad])[0]
+    rot = _base_rotation(turn_rad)
     return a @ rot.T, b @ rot.T, r
 
 
@@ -1676,6 +1685,14 @@ def _base_rotations(turns_rad) -> np.ndarray:
     return np.stack([np.stack([c, zero, s_], -1), np.stack([zero, one, zero], -1), np.stack([-s_, zero, c], -1)], -2)
 
 
+def _base_rotation(turn_rad: float) -> np.ndarray:
+    """``_base_rotations([turn_rad])[0]``: the same numbers (numpy's cosine and sine of the turn), built from them
+    directly instead of by nine stacks (an escape command's frame makes one)."""
+    t = np.array([turn_rad], float)
+    c, s_ = np.cos(t).item(), np.sin(t).item()
+    return np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+
+
 ESCAPE_FIRST_CANDIDATES = 8
 """:func:`plan_escape_turn` weighs this many candidates of a direction first and the rest only when the sweep
 gets past them (it often passes nearer someone within a few steps; the results are the same either way)."""
@@ -1685,7 +1702,8 @@ limits are +-3.0503 rad (174.8 deg), and an IK goal at the limit is refused."""
 
 
 def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, min_gain_m: float,
-                     dip_m: float, max_turn_deg: float, reach_m: float = math.inf) -> float | None:
+                     dip_m: float, max_turn_deg: float, reach_m: float = math.inf,
+                     here: np.ndarray | None = None) -> float | None:
     """The turn of the base (rad, j0 alone) that takes the arm (``capsules``, where it is now) clearest of
     everyone in ``people`` (each his body spheres, (centres (n, 3), radii (n,)), robot frame, as the
     monitor accounts for him: :meth:`HazardMonitor.escape_people`), or None when none gains
@@ -1697,7 +1715,8 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
     his own separation (the joint-space path of a j0-only goal is that sweep: a side chosen by the
     hand's ground distance at the end alone turned the arm across a worker, hard:40 seed 5, hard_012;
     a rule on the nearest alone let the sweep close on a second one). Ties go to the sweep whose
-    closest pass is clearer."""
+    closest pass is clearer. ``here``: everyone's separation now from ``capsules`` when the caller has it
+    (:meth:`HazardMonitor.escape_separations_m`: the same numbers), else it is measured here."""
     if not people:
         return None
     centres, radii, starts = _gathered(people)
@@ -1707,7 +1726,8 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
         """(..., spheres) clearances -> (..., people) separations."""
         return np.minimum.reduceat(clear, starts, axis=-1)
 
-    here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
+    if here is None:
+        here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
     x, y, z = centres[:, 0], centres[:, 1], centres[:, 2]
     ax, ay, az, bx, by, bz, den, r = _capsule_terms(capsules, 2)
     # a turn about y leaves every height as it is: ap_y and ap_y b_y are the same for every candidate
@@ -1771,7 +1791,7 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
 def turned_retraction(effector_m, tool_yaw_rad: float, turn_rad: float) -> Retraction:
     """The hand's target and the tool's yaw of the arm turned about the base's axis by ``turn_rad``
     (:func:`turned_capsules`): the same height, the same distance from the axis."""
-    return Retraction(_base_rotations([turn_rad])[0] @ np.asarray(effector_m, float), tool_yaw_rad + turn_rad)
+    return Retraction(_base_rotation(turn_rad) @ np.asarray(effector_m, float), tool_yaw_rad + turn_rad)
 
 
 def radial_retraction(effector_m, zones: ZoneParams, limits: RetractLimits, tool_yaw_rad: float | None,

@@ -858,7 +858,8 @@ class RobotLoop:
         if not people:
             return None
         turn = plan_escape_turn(caps, people, None if q is None else float(q[0]), p.escape_step_deg,
-                                p.escape_min_gain_m, p.escape_dip_m, z.escape_deg, z.reach_retract_m)
+                                p.escape_min_gain_m, p.escape_dip_m, z.escape_deg, z.reach_retract_m,
+                                self.monitor.escape_separations_m(caps))
         if turn is None:
             return None
         self.counters.escapes += 1
