@@ -427,6 +427,14 @@ class HeadEstimate:
     predicted_m: np.ndarray
 
 
+def _frozen_new(cls, **fields):
+    """``cls(**fields)`` of a frozen dataclass given every field: the same object, without the generated
+    ``__init__``'s ``object.__setattr__`` per field (which is all it does): two a person per frame."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
+
+
 def _fit_times(t: np.ndarray) -> tuple:
     """The head fit's terms of its window's times ``t`` (from the fit's time, s): (their mean as np.mean takes it, a
     sum then / the count; the centred times; their sum of squares as a float)."""
@@ -528,7 +536,7 @@ class HeadTracker:
             speed = math.sqrt(vel.dot(vel))  # np.linalg.norm's own arithmetic for a vector
             if speed > self.p.max_speed_mps:
                 vel = vel * (self.p.max_speed_mps / speed)
-        return HeadEstimate(t_s, pos, vel, pos + self.predict_s * vel)
+        return _frozen_new(HeadEstimate, t_s=t_s, position_m=pos, velocity_mps=vel, predicted_m=pos + self.predict_s * vel)
 
 
 def distance_to_effector(est: HeadEstimate, effector_m) -> float:
@@ -613,6 +621,15 @@ class _Seen:
             if known is not None and known[0] is capsules:
                 return known[1]
         return None
+
+
+def _least(values: list[float]) -> float:
+    """``float(np.min(values))`` of a few floats: the least, or NaN if any is NaN (numpy's minimum propagates it)."""
+    least = values[0]
+    for v in values[1:]:
+        if v < least or v != v:
+            least = v
+    return least
 
 
 def _head_of(person_m: np.ndarray) -> np.ndarray:
@@ -750,13 +767,15 @@ class HazardMonitor:
             toward = eff_g - ground(est.position_m)
             # ndarray.dot of two vectors is the dot `@` calls (numpy's DOUBLE_dot), without the ufunc machinery
             approach = float(v_g.dot(toward)) / max(math.sqrt(toward.dot(toward)), 1e-9)
-            d = float(sep.min())
+            sep_s = sep.tolist()
+            d = _least(sep_s)
             # moved by 0 s his spheres are where they are (c + 0 v is c, but for the sign of a zero, which no
             # clearance keeps): sep[0] is separation_m's, to the bit, while his velocity is finite
             unmoved = math.isfinite(velocity[0]) and math.isfinite(velocity[2])
-            now = (caps, sep[0]) if unmoved else None
+            now = (caps, sep_s[0]) if unmoved else None
             also_now = (also, also_seps[k]) if unmoved and also_seps is not None else None
-            self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii), now, also_now)
+            self._seen[wid] = _frozen_new(_Seen, t_s=t_s, person_m=person_m, speed_mps=speed, spheres=(centres, radii),
+                                          clear_of=now, also_clear_of=also_now)
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
             # approach speed covers over the retraction's lead. (His path over the lead instead, so that a
