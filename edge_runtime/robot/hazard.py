@@ -130,6 +130,13 @@ def ground(v) -> np.ndarray:
 _GROUND_INDEX = np.array(GROUND_AXES)
 
 
+def vector_norm(v) -> float:
+    """``float(np.linalg.norm(v))`` of a vector, by its own arithmetic (``sqrt(dot(v, v))``, a correctly rounded sqrt)
+    without its dispatch: the retraction's geometry and the loop's waypoint checks take several a frame or tick."""
+    v = np.asarray(v, float)
+    return math.sqrt(v.dot(v))
+
+
 # ----------------------------------------------------------------------------------------------
 # Configuration
 
@@ -543,7 +550,7 @@ def distance_to_effector(est: HeadEstimate, effector_m) -> float:
     """Ground-projected distance from the end effector to the nearer of the predicted and
     the current head (m)."""
     e = ground(effector_m)
-    return float(min(np.linalg.norm(ground(est.predicted_m) - e), np.linalg.norm(ground(est.position_m) - e)))
+    return min(vector_norm(ground(est.predicted_m) - e), vector_norm(ground(est.position_m) - e))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1628,7 +1635,7 @@ class Retraction:
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(v))
+    n = vector_norm(v)
     return v / n if n > 1e-9 else np.zeros_like(v)
 
 
@@ -1636,7 +1643,8 @@ def retract_direction(effector_m, est: HeadEstimate, params: ZoneParams = ZonePa
     """Eq. 6 in the robot frame: ``w1 unit(P_eff - P_head) + w2 unit(V_ground)``, on the
     ground (y = 0). A standing worker contributes no second term."""
     away = _unit(ground(effector_m) - ground(est.position_m))
-    path = _unit(ground(est.velocity_mps)) if np.linalg.norm(ground(est.velocity_mps)) > 0.2 else np.zeros(2)
+    v_g = ground(est.velocity_mps)
+    path = _unit(v_g) if vector_norm(v_g) > 0.2 else np.zeros(2)
     L = params.retract_weight_away_m * away + params.retract_weight_path_m * path
     return np.array([L[0], 0.0, L[1]])
 
@@ -1681,7 +1689,7 @@ def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: Re
     eff = np.asarray(effector_m, float)
     L = retract_direction(eff, head, zones)
     target = eff + step_outside_radius(ground(eff), ground(L), limits.min_radius_m) * L
-    r = float(np.linalg.norm(ground(target)))
+    r = vector_norm(ground(target))
     if r > limits.max_radius_m:
         target[[0, 2]] *= limits.max_radius_m / r
     return _retraction(target, limits, tool_yaw_rad, held_yaw_rad)
@@ -1819,7 +1827,7 @@ def radial_retraction(effector_m, zones: ZoneParams, limits: RetractLimits, tool
     as far as Eq. 6's step but not inside ``min_radius_m``."""
     eff = np.asarray(effector_m, float)
     g = ground(eff)
-    r = float(np.linalg.norm(g))
+    r = vector_norm(g)
     step_m = zones.retract_weight_away_m + zones.retract_weight_path_m
     new_r = min(r, max(limits.min_radius_m, min(r, limits.max_radius_m) - step_m))
     target = eff.copy()

@@ -96,6 +96,7 @@ from edge_runtime.robot.hazard import (
     radial_retraction,
     turned_retraction,
 )
+from edge_runtime.robot.hazard import vector_norm as _norm3  # the task's waypoint check runs at every control tick
 from edge_runtime.robot.rays import lifter_rays
 
 if TYPE_CHECKING:  # the caller makes the lifter (onnxruntime) and the link (python-can, pymavlink): the
@@ -353,13 +354,6 @@ def _rounded(v) -> list[float]:
 
 def _vec3(v) -> tuple[float, float, float]:
     return tuple(float(x) for x in np.asarray(v, float).reshape(3))
-
-
-def _norm3(v) -> float:
-    """``np.linalg.norm`` of a vector, by its own arithmetic (``sqrt(dot(v, v))``; a correctly rounded sqrt), without
-    its dispatch: the task's waypoint check runs at every control tick."""
-    v = np.asarray(v, float)
-    return math.sqrt(v.dot(v))
 
 
 def _stacked(arrays: list) -> np.ndarray:
