@@ -31,7 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path.cwd()))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "s23_perf"))
 
-from prof_frame import PAYLOADS, _frames_and_ticks, _record_payloads  # noqa: E402 - session 23's pieces
+from prof_frame import PAYLOADS, _frames_and_ticks, _record_payloads, bench_config  # noqa: E402 - session 23's pieces
 
 import bench.robot_cycle as rc  # noqa: E402
 import edge_runtime.robot.calibration as calmod  # noqa: E402
@@ -98,12 +98,8 @@ def _bytes(payloads: list) -> list:
 
 def run(seconds: float, npz: Path, mode: str) -> dict:
     from edge_runtime.core import heap
-    from edge_runtime.core.manifest import ASSETS_DIR, load_manifest
 
-    lifter = rc.lifter_entry(load_manifest(ASSETS_DIR)["models"])
-    if not npz.exists():
-        rc.prepare_workers(npz, seconds, lifter, 1, *rc.box_camera(rc._box()))
-    cfg = rc.RobotConfig(str(npz), seconds, "", lifter["precision"], rc._arm_posture(), simulated=True)
+    cfg = bench_config(seconds, npz)
     _record_payloads()
     if mode == "stages":
         _digest_stages()

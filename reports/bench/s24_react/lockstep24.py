@@ -21,7 +21,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "s23_perf"))
-from lockstep import step  # noqa: E402 - session 23's: one slot of a lockstep process
+from lockstep import alternate  # noqa: E402 - session 23's: two lockstep processes, slot by slot
 
 PY = "/work/main/.venv/bin/python"
 KINDS = ("speed", "alarm", "stop", "retract", "escape", "resume", "move")
@@ -47,25 +47,7 @@ def main() -> None:
     procs = {side: start(tree, a.cpu, a.seconds, a.npz, outs[side]) for side, tree in (("base", a.base),
                                                                                        ("mine", a.mine))}
     t0, load0 = time.strftime("%H:%M:%S", time.gmtime()), os.getloadavg()[0]
-    slots, i = [], 0  # (kind, base cpu, mine cpu)
-    while True:
-        order = ("base", "mine") if i % 2 == 0 else ("mine", "base")
-        got = {}
-        for side in order:
-            got[side] = step(procs[side])
-            if got[side] is None:
-                break
-        if len(got) < 2 or got[order[1]] is None:
-            break
-        assert got["base"][0] == got["mine"][0], (i, got)
-        slots.append((got["base"][0], got["base"][1], got["mine"][1]))
-        i += 1
-    for p in procs.values():
-        try:
-            p.stdin.close()
-        except BrokenPipeError:
-            pass
-        p.wait()
+    slots = alternate(procs)  # (kind, base cpu, mine cpu)
     runs = {side: json.loads(Path(o).read_text()) for side, o in outs.items()}
     same = runs["base"]["trace"] == runs["mine"]["trace"]
     kinds = [f["kind"] for f in runs["base"]["frames"]]
