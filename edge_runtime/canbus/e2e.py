@@ -11,7 +11,6 @@ behind a valid check never meets a frame it cannot decode.
 """
 from __future__ import annotations
 
-import math
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -42,49 +41,8 @@ largest single cost of a replay."""
 
 def _checked_payload(message, signals: dict) -> bytes:
     """``signals`` encoded by cantools and checked by it against the DBC (strict: every signal, in range),
-    with the alive counter and the CRC zero.
-
-    cantools' strict check only raises; it changes nothing it encodes. Signals that certainly pass it
-    (:func:`_surely_encodable`: every signal and no other, each a named value or a finite number within its DBC
-    range) are encoded without it (the same bytes; the check was half of a command frame's encoding); any other
-    goes through it, with its error."""
-    data = dict(signals, E2E_CRC=0, AliveCounter=0)
-    return message.encode(data, strict=not _surely_encodable(message, data))
-
-
-def _surely_encodable(message, data: dict) -> bool:
-    """Whether cantools' strict check certainly passes ``data`` for ``message`` (False: let it judge): the DBC's
-    signals exactly, each enumerated one given one of its names, each other a finite int or float within its
-    [minimum, maximum] (cantools allows a millionth of a step more)."""
-    rules = _ENCODE_RULES.get(id(message))
-    if rules is None or rules[0] is not message:
-        rules = _ENCODE_RULES[id(message)] = (message, _encode_rules(message))
-    names, checks = rules[1]
-    if data.keys() != names:
-        return False
-    for name, choices, lo, hi in checks:
-        v = data[name]
-        if choices is not None:
-            if type(v) is not str or v not in choices:
-                return False
-        elif type(v) not in (int, float) or not math.isfinite(v) or (lo is not None and v < lo) \
-                or (hi is not None and v > hi):
-            return False
-    return True
-
-
-def _encode_rules(message) -> tuple[frozenset, tuple]:
-    """(the names of ``message``'s signals, (name, its choices' names or None, minimum, maximum) of each); a
-    multiplexed or container message has none that pass (no signal set is its whole set)."""
-    if message.is_multiplexed() or message.is_container:
-        return frozenset({None}), ()
-    return (frozenset(s.name for s in message.signals),
-            tuple((s.name, frozenset(str(c) for c in s.choices.values()) if s.choices else None, s.minimum,
-                   s.maximum) for s in message.signals))
-
-
-_ENCODE_RULES: dict[int, tuple] = {}
-""":func:`_encode_rules` per DBC message, by identity (holding the message keeps its id unique)."""
+    with the alive counter and the CRC zero."""
+    return message.encode(dict(signals, E2E_CRC=0, AliveCounter=0), strict=True)
 
 
 class E2EProtector:
