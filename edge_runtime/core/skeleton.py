@@ -40,6 +40,8 @@ Frames (all lengths in metres):
 """
 from __future__ import annotations
 
+import numpy as np
+
 JOINTS: tuple[str, ...] = (
     "hip", "right_hip", "right_knee", "right_ankle", "left_hip", "left_knee", "left_ankle",
     "spine", "thorax", "neck_nose", "head",
@@ -55,6 +57,19 @@ JOINTS_RIGHT: tuple[int, ...] = (1, 2, 3, 14, 15, 16)
 HIP, R_HIP, R_KNEE, R_ANKLE, L_HIP, L_KNEE, L_ANKLE = range(7)
 SPINE, THORAX, NECK, HEAD = 7, 8, 9, 10
 L_SHOULDER, L_ELBOW, L_WRIST, R_SHOULDER, R_ELBOW, R_WRIST = range(11, 17)
+
+
+def _mask(value: bool) -> np.ndarray:
+    mask = np.full(N_JOINTS, value)
+    mask.setflags(write=False)
+    return mask
+
+
+NO_JOINTS = _mask(False)
+"""A read-only (17,) mask of no joint, shared: a lifted pose's ``held`` and ``missing`` when no joint is (the usual
+frame), so that a reader knows it by identity instead of a pass over it (numpy's per-call cost, at every frame)."""
+ALL_JOINTS = _mask(True)
+"""A read-only (17,) mask of every joint, shared: the joints usable and observed when all are (the usual frame)."""
 
 ROBOT_UP_AXIS = 1                 # y is up in the robot frame
 BASE_HEIGHT_M = 0.914             # top of the Sawyer base above the floor on the standard pedestal

@@ -377,7 +377,8 @@ class FloorAnchor:
             anchored.append(t)
         # cal.apply(k * joints) of each
         robot = (np.array([t.k for t in anchored])[:, None, None] * mine) @ cal.A.T + cal.b
-        roots_finite = np.isfinite(robot[:, HIP]).all(axis=1).tolist()
+        # each root's np.isfinite(...).all() on its three floats (numpy's test per element, without its calls)
+        roots_finite = [all(map(math.isfinite, root)) for root in robot[:, HIP].tolist()]
         for i, t, joints, mine_i, root_finite in zip(todo, anchored, robot, mine, roots_finite):
             out[i] = joints
             if root_finite:

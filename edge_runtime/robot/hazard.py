@@ -130,6 +130,13 @@ def ground(v) -> np.ndarray:
 _GROUND_INDEX = np.array(GROUND_AXES)
 
 
+def vector_norm(v) -> float:
+    """``float(np.linalg.norm(v))`` of a vector, by its own arithmetic (``sqrt(dot(v, v))``, a correctly rounded sqrt)
+    without its dispatch: the retraction's geometry and the loop's waypoint checks take several a frame or tick."""
+    v = np.asarray(v, float)
+    return math.sqrt(v.dot(v))
+
+
 # ----------------------------------------------------------------------------------------------
 # Configuration
 
@@ -427,6 +434,14 @@ class HeadEstimate:
     predicted_m: np.ndarray
 
 
+def _frozen_new(cls, **fields):
+    """``cls(**fields)`` of a frozen dataclass given every field: the same object, without the generated
+    ``__init__``'s ``object.__setattr__`` per field (which is all it does): two a person per frame."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
+
+
 def _fit_times(t: np.ndarray) -> tuple:
     """The head fit's terms of its window's times ``t`` (from the fit's time, s): (their mean as np.mean takes it, a
     sum then / the count; the centred times; their sum of squares as a float)."""
@@ -528,14 +543,14 @@ class HeadTracker:
             speed = math.sqrt(vel.dot(vel))  # np.linalg.norm's own arithmetic for a vector
             if speed > self.p.max_speed_mps:
                 vel = vel * (self.p.max_speed_mps / speed)
-        return HeadEstimate(t_s, pos, vel, pos + self.predict_s * vel)
+        return _frozen_new(HeadEstimate, t_s=t_s, position_m=pos, velocity_mps=vel, predicted_m=pos + self.predict_s * vel)
 
 
 def distance_to_effector(est: HeadEstimate, effector_m) -> float:
     """Ground-projected distance from the end effector to the nearer of the predicted and
     the current head (m)."""
     e = ground(effector_m)
-    return float(min(np.linalg.norm(ground(est.predicted_m) - e), np.linalg.norm(ground(est.position_m) - e)))
+    return min(vector_norm(ground(est.predicted_m) - e), vector_norm(ground(est.position_m) - e))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -602,6 +617,26 @@ class _Seen:
     clear_of: tuple | None = None
     """(capsules, separation m): his separation now from the arm's capsules his frame was judged with (read-only
     ones, :func:`arm_capsules`'s, by identity), as :func:`separation_m` gives it; None when not known so."""
+    also_clear_of: tuple | None = None
+    """The same for the other capsules his frame was asked about (:meth:`HazardMonitor.observe`'s
+    ``also_capsules``: where the retraction under way began), or None."""
+
+    def known_separation_m(self, capsules) -> float | None:
+        """His separation now from ``capsules`` when his frame measured it (:attr:`clear_of`,
+        :attr:`also_clear_of`, by the capsules' identity), else None."""
+        for known in (self.clear_of, self.also_clear_of):
+            if known is not None and known[0] is capsules:
+                return known[1]
+        return None
+
+
+def _least(values: list[float]) -> float:
+    """``float(np.min(values))`` of a few floats: the least, or NaN if any is NaN (numpy's minimum propagates it)."""
+    least = values[0]
+    for v in values[1:]:
+        if v < least or v != v:
+            least = v
+    return least
 
 
 def _head_of(person_m: np.ndarray) -> np.ndarray:
@@ -653,11 +688,15 @@ class HazardMonitor:
     # -- inputs ---------------------------------------------------------------------------
 
     def observe(self, t_s: float, people: dict[int, np.ndarray], effector_m, arm_q_rad=None,
-                unseen: dict | None = None, rays: dict | None = None) -> Decision:
+                unseen: dict | None = None, rays: dict | None = None, also_capsules=None) -> Decision:
         """A valid pose frame: update the trackers and the zone level. ``unseen``: id -> reason for
         the people the camera reports in this frame but the lifter could not lift (whole_body: each
         is judged from his last valid pose, :meth:`_lost`, and by his keypoints' rays, ``rays``: id ->
-        :class:`PersonRays`, :meth:`_unlifted`; "head": the frame is invalid)."""
+        :class:`PersonRays`, :meth:`_unlifted`; "head": the frame is invalid). ``also_capsules``
+        (whole_body, read-only capsules such as :func:`arm_capsules`' or None): another posture of the
+        arm whose separation from everyone seen the caller will ask for (:meth:`people_separations_m`:
+        the loop's backfire check, where the retraction under way began), measured in the same pass as
+        the frame's own (the same numbers as a pass of its own)."""
         unseen = dict(unseen or {})
         if unseen and self.zones.separation == "head":
             wid, why = next(iter(unseen.items()))
@@ -680,7 +719,7 @@ class HazardMonitor:
             d_exit = nearest[0]
         else:
             entry, exit_r, nearest, d_exit = self._speed_and_separation(t_s, people, ests, effector_m, arm_q_rad,
-                                                                        unseen, rays or {})
+                                                                        unseen, rays or {}, also_capsules)
         self._update_level(t_s, entry, d_exit, nearest[2], exit_r)
         if self._fault is not None and self._fault_clear.clear_for(t_s, True) >= self.zones.dwell_s:
             self._fault = None
@@ -701,7 +740,7 @@ class HazardMonitor:
         return entry, {State.LEVEL2: z.r2_m + z.hysteresis_m, State.LEVEL1: z.r1_m + z.hysteresis_m}, nearest
 
     def _speed_and_separation(self, t_s: float, people, ests: dict[int, HeadEstimate], effector_m, arm_q_rad,
-                              unseen: dict, rays: dict):
+                              unseen: dict, rays: dict, also_capsules=None):
         """Whole-body speed and separation monitoring (ISO/TS 15066). Per person: the smallest
         separation of his body now and predicted ``predict_s`` ahead (every joint moved with his
         head's velocity) from the arm's capsules; the robot speed that separation allows; and
@@ -725,19 +764,25 @@ class HazardMonitor:
         bodies = {wid: (person_m, centres, radii, (float(est.velocity_mps[0]), 0.0, float(est.velocity_mps[2])))
                   for (wid, est), person_m, (centres, radii) in zip(ests.items(), persons, body_spheres_of(persons))}
         # everyone now and predict_s ahead in one call: numpy's per-call overhead, not the arithmetic, is the cost
-        seps = separations_per_shift_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps) if bodies else []
-        for (wid, est), sep in zip(ests.items(), seps):
+        also = also_capsules if also_capsules is not caps else None
+        seps, also_seps = (_separations_m([b[1:] for b in bodies.values()], (0.0, z.predict_s), caps, also)
+                           if bodies else ([], None))
+        for k, ((wid, est), sep) in enumerate(zip(ests.items(), seps)):
             person_m, centres, radii, velocity = bodies[wid]
             v_g = ground(est.velocity_mps)
             speed = math.sqrt(v_g.dot(v_g))  # np.linalg.norm's own arithmetic for a vector (below too)
             toward = eff_g - ground(est.position_m)
             # ndarray.dot of two vectors is the dot `@` calls (numpy's DOUBLE_dot), without the ufunc machinery
             approach = float(v_g.dot(toward)) / max(math.sqrt(toward.dot(toward)), 1e-9)
-            d = float(sep.min())
+            sep_s = sep.tolist()
+            d = _least(sep_s)
             # moved by 0 s his spheres are where they are (c + 0 v is c, but for the sign of a zero, which no
             # clearance keeps): sep[0] is separation_m's, to the bit, while his velocity is finite
-            now = (caps, sep[0]) if math.isfinite(velocity[0]) and math.isfinite(velocity[2]) else None
-            self._seen[wid] = _Seen(t_s, person_m, speed, (centres, radii), now)
+            unmoved = math.isfinite(velocity[0]) and math.isfinite(velocity[2])
+            now = (caps, sep_s[0]) if unmoved else None
+            also_now = (also, also_seps[k]) if unmoved and also_seps is not None else None
+            self._seen[wid] = _frozen_new(_Seen, t_s=t_s, person_m=person_m, speed_mps=speed, spheres=(centres, radii),
+                                          clear_of=now, also_clear_of=also_now)
             allowed = z.allowed_speed_mps(d, speed)
             # he keeps coming: toward the arm faster than approach_speed_mps, and within the distance his
             # approach speed covers over the retraction's lead. (His path over the lead instead, so that a
@@ -871,11 +916,13 @@ class HazardMonitor:
 
     def people_separations_m(self, capsules) -> np.ndarray:
         """whole_body: :func:`people_separations_m` of :meth:`people_spheres` (at least one) from ``capsules``;
-        without a clearance when they are the capsules everyone's last frame judged him against (the loop's
-        backfire check asks for the arm where it is, which it was at the frame: that frame's separations)."""
+        without a clearance when they are the capsules everyone's last frame judged him against or was asked
+        about (``also_capsules``: the loop's backfire check asks for the arm where it is, which it was at the frame,
+        and where the retraction began: that frame's separations)."""
         seen = list(self._seen.values())
-        if all(s.clear_of is not None and s.clear_of[0] is capsules for s in seen):
-            return np.array([s.clear_of[1] for s in seen], float)
+        known = [s.known_separation_m(capsules) for s in seen]
+        if None not in known:
+            return np.array(known, float)
         return people_separations_m([s.spheres for s in seen], capsules)
 
     def escape_people(self, sweep_m: float) -> list[tuple[np.ndarray, np.ndarray]] | None:
@@ -900,6 +947,15 @@ class HazardMonitor:
             grown_m = max(z.lost_person_speed_mps, seen.speed_mps) * max(t - seen.t_s, 0.0)
             out.append((centres, radii + grown_m))
         return out
+
+    def escape_separations_m(self, capsules) -> np.ndarray | None:
+        """whole_body: everyone's separation now (P,) from ``capsules``, as :func:`plan_escape_turn` measures it of
+        :meth:`escape_people`, when the last pose frame measured it (every one seen then, at a finite speed: his
+        radii not grown, :attr:`_Seen.clear_of`), else None: the escape plan then need not measure it again."""
+        t = self._last_pose_s
+        known = [s.known_separation_m(capsules) if s.t_s == t and math.isfinite(s.speed_mps) else None
+                 for s in self._seen.values()]
+        return np.array(known, float) if known and None not in known else None
 
     def invalid(self, t_s: float, reason: str) -> Decision:
         """A frame the lifter (or the input) marked invalid: stop."""
@@ -1225,6 +1281,13 @@ def separations_per_shift_m(bodies, shifts_s, capsules) -> list[np.ndarray]:
     """:func:`separation_per_shift_m` of each of ``bodies`` ((centres (n, 3), radii (n,), velocity (3,)) each), in
     one clearance call for all of them (numpy's per-call overhead, not the arithmetic, is the cost of a frame's
     few people; each point's clearance is its own, whatever else is in the call)."""
+    return _separations_m(bodies, shifts_s, capsules)[0]
+
+
+def _separations_m(bodies, shifts_s, capsules, other=None) -> tuple[list[np.ndarray], list[float] | None]:
+    """(:func:`separations_per_shift_m`, and with ``other`` capsules (read-only, as :func:`arm_capsules`') each body's
+    separation from them moved by the first shift, else None): both in one clearance pass
+    (:func:`point_clearances_m`)."""
     shifts = np.asarray(shifts_s, float)
     if len(bodies) > 1 and len({len(c) for c, _, _ in bodies}) == 1:  # whole skeletons: one (S, P, n) array
         # np.array of equal shapes: np.stack's values, without its per-array reshaping
@@ -1232,16 +1295,21 @@ def separations_per_shift_m(bodies, shifts_s, capsules) -> list[np.ndarray]:
         velocities = np.array([v for _, _, v in bodies], float)  # arrays or tuples of 3: the same (P, 3) array
         # each moved centre is c + s v as below, elementwise the same arithmetic
         moved = centres[None] + shifts[:, None, None, None] * velocities[None, :, None, :]     # (S, P, n, 3)
-        clear = point_clearance_m(moved.reshape(-1, 3), capsules).reshape(moved.shape[:3])
-        return list((clear - radii[None]).min(axis=2).T)
+        clear, clear_other = point_clearances_m(moved.reshape(-1, 3), capsules, other)
+        seps = list((clear.reshape(moved.shape[:3]) - radii[None]).min(axis=2).T)
+        if clear_other is None:
+            return seps, None
+        return seps, (clear_other.reshape(moved.shape[:3])[0] - radii).min(axis=1).tolist()
     moved = [(c[None] + shifts[:, None, None] * np.asarray(v, float)[None, None]).reshape(-1, 3) for c, _, v in bodies]
-    clear = point_clearance_m(np.concatenate(moved) if len(moved) > 1 else moved[0], capsules)
-    out, k = [], 0
+    clear, clear_other = point_clearances_m(np.concatenate(moved) if len(moved) > 1 else moved[0], capsules, other)
+    out, out_other, k = [], [], 0
     for (c, r, _), m in zip(bodies, moved):
         d = clear[k:k + len(m)].reshape(len(shifts), len(c)) - r  # each sphere's own radius, per shift
         out.append(d.min(axis=1))
+        if clear_other is not None:
+            out_other.append(float((clear_other[k:k + len(c)] - r).min()))
         k += len(m)
-    return out
+    return out, (out_other if clear_other is not None else None)
 
 
 def point_clearance_m(points_m: np.ndarray, capsules) -> np.ndarray:
@@ -1250,7 +1318,34 @@ def point_clearance_m(points_m: np.ndarray, capsules) -> np.ndarray:
     return _clearance_xyz(p[:, 0], p[:, 1], p[:, 2], capsules)
 
 
-def _clearance_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, capsules) -> np.ndarray:
+def point_clearances_m(points_m: np.ndarray, capsules, other=None) -> tuple[np.ndarray, np.ndarray | None]:
+    """(:func:`point_clearance_m` of the points from ``capsules``, and from ``other`` capsules or None). Both sets
+    read-only (:func:`arm_capsules`'): they are joined and measured in one pass (a pass's cost is numpy's per-call
+    overhead more than its arithmetic), each point's clearance from each capsule its own whatever else is in the
+    pass, and each set's nearest its own minimum (exact)."""
+    if other is None:
+        return point_clearance_m(points_m, capsules), None
+    p = np.asarray(points_m, float)
+    both = _clearance_xyz(p[:, 0], p[:, 1], p[:, 2], _joined_capsules(capsules, other), split=len(capsules[2]))
+    return both[0], both[1]
+
+
+def _joined_capsules(capsules, other) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``capsules`` then ``other`` as one read-only set, the same tuple for the same two (so its clearance terms are
+    remembered as any read-only capsules' are, :func:`_capsule_terms`)."""
+    key = (id(capsules), id(other))
+    hit = _JOINED.get(key)
+    if hit is not None and hit[0] is capsules and hit[1] is other:
+        return hit[2]
+    joined = _frozen(tuple(np.concatenate([u, v]) for u, v in zip(capsules, other)))
+    return _JOINED.put(key, (capsules, other, joined))[2]  # holding both keeps their ids unique while remembered
+
+
+_JOINED: Recent[tuple] = Recent(4)
+""":func:`_joined_capsules` of the last few pairs, by the pair's identities."""
+
+
+def _clearance_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, capsules, split: int = 0) -> np.ndarray:
     """:func:`point_clearance_m` of the points (``x``, ``y``, ``z``: (N,) each).
 
     The same arithmetic as the textbook form (kept in tests/robot/test_hazard.py, which pins the two to the
@@ -1261,20 +1356,23 @@ def _clearance_xyz(x: np.ndarray, y: np.ndarray, z: np.ndarray, capsules) -> np.
 
     on one (K, N) array per coordinate, every sum of three in numpy's order ((x + y) + z): numpy's reductions
     over an axis of 3 cost ten times the arithmetic (the escape plan's 1,800 points x 9 capsules), and so do
-    its loops over a short inner axis (the capsules'), hence the capsules first and the points along the rows."""
+    its loops over a short inner axis (the capsules'), hence the capsules first and the points along the rows.
+    ``split``: the capsules before it and from it on are two sets: (2, N), each set's clearance."""
     ax, ay, az, bx, by, bz, den, r = _capsule_terms(capsules, 1)
     apx = x - ax
     apy = y - ay
     apz = z - az
     t = apx * bx
     t += apy * by
-    return _clearance_rest(apx, apy, apz, t, (bx, by, bz, den, r))
+    return _clearance_rest(apx, apy, apz, t, (bx, by, bz, den, r), split)
 
 
-def _clearance_rest(apx: np.ndarray, apy: np.ndarray, apz: np.ndarray, t: np.ndarray, terms) -> np.ndarray:
+def _clearance_rest(apx: np.ndarray, apy: np.ndarray, apz: np.ndarray, t: np.ndarray, terms,
+                    split: int = 0) -> np.ndarray:
     """:func:`_clearance_xyz` on from ``t`` = ap_x b_x + ap_y b_y: (K, ...) arrays, the capsules' ``terms`` shaped
-    to broadcast with them -> (...) (``apx``, ``apz`` and ``t`` are overwritten). ``apy`` may be broadcast (the
-    escape plan's: the same for every turn), and is not written.
+    to broadcast with them -> (...) (``apx``, ``apz`` and ``t`` are overwritten; with ``split``, (2, ...): the
+    capsules before it and from it on, each set's). ``apy`` may be broadcast (the escape plan's: the same for
+    every turn), and is not written.
 
     The operations of ``dx = apx - t bx; dy = apy - t by; dz = apz - t bz; dx * dx + dy * dy + dz * dz`` in that
     order, each into an array already there (one scratch array, not six new ones: for the escape plan's (9, 28,
@@ -1294,7 +1392,8 @@ def _clearance_rest(apx: np.ndarray, apy: np.ndarray, apz: np.ndarray, t: np.nda
     dx += dz
     np.sqrt(dx, out=dx)
     dx -= r
-    return dx.min(axis=0)
+    # each set's nearest capsule (a minimum is exact, and no clearance is -0.0: sqrt(.) - r of equal values is +0.0)
+    return np.minimum.reduceat(dx, (0, split), axis=0) if split else dx.min(axis=0)
 
 
 def _capsule_terms(capsules, dims: int) -> tuple:
@@ -1536,7 +1635,7 @@ class Retraction:
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(v))
+    n = vector_norm(v)
     return v / n if n > 1e-9 else np.zeros_like(v)
 
 
@@ -1544,7 +1643,8 @@ def retract_direction(effector_m, est: HeadEstimate, params: ZoneParams = ZonePa
     """Eq. 6 in the robot frame: ``w1 unit(P_eff - P_head) + w2 unit(V_ground)``, on the
     ground (y = 0). A standing worker contributes no second term."""
     away = _unit(ground(effector_m) - ground(est.position_m))
-    path = _unit(ground(est.velocity_mps)) if np.linalg.norm(ground(est.velocity_mps)) > 0.2 else np.zeros(2)
+    v_g = ground(est.velocity_mps)
+    path = _unit(v_g) if vector_norm(v_g) > 0.2 else np.zeros(2)
     L = params.retract_weight_away_m * away + params.retract_weight_path_m * path
     return np.array([L[0], 0.0, L[1]])
 
@@ -1589,7 +1689,7 @@ def eq6_retraction(effector_m, head: HeadEstimate, zones: ZoneParams, limits: Re
     eff = np.asarray(effector_m, float)
     L = retract_direction(eff, head, zones)
     target = eff + step_outside_radius(ground(eff), ground(L), limits.min_radius_m) * L
-    r = float(np.linalg.norm(ground(target)))
+    r = vector_norm(ground(target))
     if r > limits.max_radius_m:
         target[[0, 2]] *= limits.max_radius_m / r
     return _retraction(target, limits, tool_yaw_rad, held_yaw_rad)
@@ -1600,7 +1700,7 @@ def turned_capsules(capsules, turn_rad: float):
     first joint (j0) turned alone, every link with it. A positive turn raises a point's bearing
     ``atan2(x, z)`` (the tool's yaw turns with it)."""
     a, b, r = capsules
-    rot = _base_rotations([turn_rad])[0]
+    rot = _base_rotation(turn_rad)
     return a @ rot.T, b @ rot.T, r
 
 
@@ -1612,6 +1712,14 @@ def _base_rotations(turns_rad) -> np.ndarray:
     return np.stack([np.stack([c, zero, s_], -1), np.stack([zero, one, zero], -1), np.stack([-s_, zero, c], -1)], -2)
 
 
+def _base_rotation(turn_rad: float) -> np.ndarray:
+    """``_base_rotations([turn_rad])[0]``: the same numbers (numpy's cosine and sine of the turn), built from them
+    directly instead of by nine stacks (an escape command's frame makes one)."""
+    t = np.array([turn_rad], float)
+    c, s_ = np.cos(t).item(), np.sin(t).item()
+    return np.array([[c, 0.0, s_], [0.0, 1.0, 0.0], [-s_, 0.0, c]])
+
+
 ESCAPE_FIRST_CANDIDATES = 8
 """:func:`plan_escape_turn` weighs this many candidates of a direction first and the rest only when the sweep
 gets past them (it often passes nearer someone within a few steps; the results are the same either way)."""
@@ -1621,7 +1729,8 @@ limits are +-3.0503 rad (174.8 deg), and an IK goal at the limit is refused."""
 
 
 def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, min_gain_m: float,
-                     dip_m: float, max_turn_deg: float, reach_m: float = math.inf) -> float | None:
+                     dip_m: float, max_turn_deg: float, reach_m: float = math.inf,
+                     here: np.ndarray | None = None) -> float | None:
     """The turn of the base (rad, j0 alone) that takes the arm (``capsules``, where it is now) clearest of
     everyone in ``people`` (each his body spheres, (centres (n, 3), radii (n,)), robot frame, as the
     monitor accounts for him: :meth:`HazardMonitor.escape_people`), or None when none gains
@@ -1633,7 +1742,8 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
     his own separation (the joint-space path of a j0-only goal is that sweep: a side chosen by the
     hand's ground distance at the end alone turned the arm across a worker, hard:40 seed 5, hard_012;
     a rule on the nearest alone let the sweep close on a second one). Ties go to the sweep whose
-    closest pass is clearer."""
+    closest pass is clearer. ``here``: everyone's separation now from ``capsules`` when the caller has it
+    (:meth:`HazardMonitor.escape_separations_m`: the same numbers), else it is measured here."""
     if not people:
         return None
     centres, radii, starts = _gathered(people)
@@ -1643,7 +1753,8 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
         """(..., spheres) clearances -> (..., people) separations."""
         return np.minimum.reduceat(clear, starts, axis=-1)
 
-    here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
+    if here is None:
+        here = per_person(point_clearance_m(centres, capsules) - radii)          # (P,)
     x, y, z = centres[:, 0], centres[:, 1], centres[:, 2]
     ax, ay, az, bx, by, bz, den, r = _capsule_terms(capsules, 2)
     # a turn about y leaves every height as it is: ap_y and ap_y b_y are the same for every candidate
@@ -1707,7 +1818,7 @@ def plan_escape_turn(capsules, people, j0_rad: float | None, step_deg: float, mi
 def turned_retraction(effector_m, tool_yaw_rad: float, turn_rad: float) -> Retraction:
     """The hand's target and the tool's yaw of the arm turned about the base's axis by ``turn_rad``
     (:func:`turned_capsules`): the same height, the same distance from the axis."""
-    return Retraction(_base_rotations([turn_rad])[0] @ np.asarray(effector_m, float), tool_yaw_rad + turn_rad)
+    return Retraction(_base_rotation(turn_rad) @ np.asarray(effector_m, float), tool_yaw_rad + turn_rad)
 
 
 def radial_retraction(effector_m, zones: ZoneParams, limits: RetractLimits, tool_yaw_rad: float | None,
@@ -1716,7 +1827,7 @@ def radial_retraction(effector_m, zones: ZoneParams, limits: RetractLimits, tool
     as far as Eq. 6's step but not inside ``min_radius_m``."""
     eff = np.asarray(effector_m, float)
     g = ground(eff)
-    r = float(np.linalg.norm(g))
+    r = vector_norm(g)
     step_m = zones.retract_weight_away_m + zones.retract_weight_path_m
     new_r = min(r, max(limits.min_radius_m, min(r, limits.max_radius_m) - step_m))
     target = eff.copy()

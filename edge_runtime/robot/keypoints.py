@@ -599,7 +599,7 @@ class PersonTracker:
                 shaped = [person for person, ok in zip(shaped, enough.tolist()) if ok]
                 kps, seen = kps[enough], seen[enough]
         sizes = _sizes_px(kps, seen, p.min_score, all_seen)
-        assigned = _assign(self._costs(kps, seen, t_s))
+        assigned = _assign(self._costs(kps, seen, t_s, all_seen))
         out, followed = [], []
         for i, person in enumerate(shaped):
             tid = assigned.get(i)
@@ -614,39 +614,48 @@ class PersonTracker:
                        else replace(person, id=tid, source_id=person.id))
         if followed:
             which = [i for _, i in followed]
-            self._follow_all([tr for tr, _ in followed], kps[which], seen[which], [sizes[i] for i in which], t_s)
+            self._follow_all([tr for tr, _ in followed], kps[which], seen[which], [sizes[i] for i in which], t_s,
+                             all_seen)
         return out
 
-    def _costs(self, kps: np.ndarray, seen: np.ndarray, t_s: float) -> dict[tuple[int, int], float]:
+    def _costs(self, kps: np.ndarray, seen: np.ndarray, t_s: float, all_seen: bool = False
+               ) -> dict[tuple[int, int], float]:
         """The match cost of every (track id, detection index) pair, tracks in their order, of detections ``kps``
-        (D, 17, 3) whose joints ``seen`` (D, 17) are seen (:func:`_pair_costs`)."""
+        (D, 17, 3) whose joints ``seen`` (D, 17) are seen (:func:`_pair_costs`; ``all_seen``: all of them are)."""
         if not self.tracks or not len(kps):
             return {}
-        return _pair_costs(list(self.tracks.items()), kps, seen, t_s, self.params)
+        return _pair_costs(list(self.tracks.items()), kps, seen, t_s, self.params, all_seen)
 
     def _follow_all(self, tracks: list[_Track], kps: np.ndarray, seen: np.ndarray, sizes_px: list[float],
-                    t_s: float) -> None:
+                    t_s: float, all_seen: bool = False) -> None:
         """Move each of ``tracks`` to its detection at ``t_s`` (``kps`` (M, 17, 3), ``seen`` (M, 17), ``sizes_px``
-        their :func:`_size_px`): its smoothed image velocity from the mean step of the joints seen now and
-        before, the joints not seen now moved with it. Every track in one pass (the same numbers as one by one:
-        tests/robot/test_perception_batch_s18.py)."""
+        their :func:`_size_px`; ``all_seen``: the caller knows every joint is seen): its smoothed image velocity
+        from the mean step of the joints seen now and before, the joints not seen now moved with it. Every track
+        in one pass (the same numbers as one by one: tests/robot/test_perception_batch_s18.py)."""
         a = self.params.velocity_smoothing
         xy = np.array([tr.xy for tr in tracks])  # stacked (as np.stack, cheaper)
         velocity = np.array([tr.velocity_pxps for tr in tracks])
         dt = [t_s - tr.t_s for tr in tracks]
-        both = seen & np.isfinite(xy).all(axis=2)
-        n_both = both.sum(axis=1)
-        moving = np.array([d > 0 and n > 0 for d, n in zip(dt, n_both.tolist())])
+        # every joint seen now and before, and every track moving (the usual frame): every joint in every step, and
+        # every track gets its new velocity (a finite sum has no NaN or infinite term: xy's test in one reduction)
+        usual = all_seen and math.isfinite(xy.sum()) and min(dt) > 0
+        if not usual:
+            both = seen & np.isfinite(xy).all(axis=2)
+            n_both = both.sum(axis=1)
+            moving = np.array([d > 0 and n > 0 for d, n in zip(dt, n_both.tolist())])
         with np.errstate(all="ignore"):  # a track not moving (dt <= 0, no joint in common) gets no velocity
             # np.mean's own arithmetic: the steps summed joint after joint (numpy adds the rows of a (n, 2) array
             # in order), then / the count, then / dt; the joints left out add -0.0, the sum's exact identity
             step = kps[..., :2] - xy
-            if not both.all():  # (every joint seen now and before, in the usual frame: nothing left out)
-                step = np.where(both[..., None], step, -0.0)
-            v = step.sum(axis=1) / n_both[:, None] / np.array(dt)[:, None]
+            if usual:  # each count is all 17 joints (an integer count divides as the same float)
+                v = step.sum(axis=1) / float(seen.shape[1]) / np.array(dt)[:, None]
+            else:
+                if not both.all():
+                    step = np.where(both[..., None], step, -0.0)
+                v = step.sum(axis=1) / n_both[:, None] / np.array(dt)[:, None]
         smoothed = a * v + (1 - a) * velocity
-        velocity = smoothed if moving.all() else np.where(moving[:, None], smoothed, velocity)
-        if seen.all():  # every joint seen now (the usual frame): each track at its detection
+        velocity = smoothed if usual or moving.all() else np.where(moving[:, None], smoothed, velocity)
+        if all_seen or seen.all():  # every joint seen now (the usual frame): each track at its detection
             new_xy = np.ascontiguousarray(kps[..., :2])
         else:  # joints not seen now keep their last position, moved with the person
             moved = xy + velocity[:, None, :] * np.array([max(d, 0.0) for d in dt])[:, None, None]
@@ -656,7 +665,7 @@ class PersonTracker:
 
 
 def _pair_costs(tracks: list[tuple[int, _Track]], kps: np.ndarray, seen: np.ndarray, t_s: float,
-                p: PeopleTrackParams) -> dict[tuple[int, int], float]:
+                p: PeopleTrackParams, all_seen: bool = False) -> dict[tuple[int, int], float]:
     """The match cost of every (track id, detection index) pair of ``tracks`` ((id, track), in their order) and
     detections ``kps`` (D, 17, 3) whose joints ``seen`` (D, 17) are seen.
 
@@ -674,21 +683,26 @@ def _pair_costs(tracks: list[tuple[int, _Track]], kps: np.ndarray, seen: np.ndar
     Every pair's
     distances in one (T, D, 17) pass, and each pair's median the middle of its sorted distances (the joints
     not in common sorted last, as inf) with :func:`edge_runtime.core.numeric.median`'s arithmetic on Python
-    floats (the same IEEE operations; tests/robot/test_perception_batch_s18.py)."""
+    floats (the same IEEE operations; tests/robot/test_perception_batch_s18.py). ``all_seen``: the caller knows
+    every joint of every detection is seen."""
     ahead_s = np.array([min(t_s - tr.t_s, p.max_predict_s) for _, tr in tracks])
     # _Track.predicted of each: xy + velocity * ahead, element by element
     pred = (np.array([tr.xy for _, tr in tracks])  # stacked (as np.stack, cheaper)
             + np.array([tr.velocity_pxps for _, tr in tracks])[:, None, :] * ahead_s[:, None, None])
-    both = seen[None] & np.isfinite(pred).all(axis=2)[:, None]  # (T, D, 17)
-    n_both = both.sum(axis=2)
+    # every joint seen and predicted (the usual frame): every pair has all its joints in common (a finite sum has no
+    # NaN or infinite term: the predictions' test in one reduction)
+    every = all_seen and math.isfinite(pred.sum())
+    if not every:
+        both = seen[None] & np.isfinite(pred).all(axis=2)[:, None]  # (T, D, 17)
     with np.errstate(over="ignore", invalid="ignore"):  # joints not in common may be anything: unused
         d = kps[None, :, :, :2] - pred[:, None]
         dist = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])  # norms2's arithmetic
-    rows = np.where(both, dist, np.inf)
+    rows = dist if every else np.where(both, dist, np.inf)
     rows.sort(axis=2)  # in place (a new array already): np.sort's order without its copy
+    n_both = [[rows.shape[2]] * rows.shape[1]] * rows.shape[0] if every else both.sum(axis=2).tolist()
     rows = rows.tolist()
     costs = {}
-    for (tid, tr), track_rows, counts in zip(tracks, rows, n_both.tolist()):
+    for (tid, tr), track_rows, counts in zip(tracks, rows, n_both):
         gate = p.gate + p.gate_growth_per_s * max(t_s - tr.t_s, 0.0)
         for i, (row, count) in enumerate(zip(track_rows, counts)):
             if count < 2:

@@ -122,7 +122,7 @@ from edge_runtime import config
 from edge_runtime.core.manifest import ASSETS_DIR, PRECISIONS, ModelIntegrityError
 from edge_runtime.core.numeric import median_columns, norms2
 from edge_runtime.core.onnx import fast_run, session_from_manifest
-from edge_runtime.core.skeleton import HIP, JOINTS, N_JOINTS, PARENTS
+from edge_runtime.core.skeleton import ALL_JOINTS, HIP, JOINTS, N_JOINTS, NO_JOINTS, PARENTS
 from edge_runtime.robot.hazard import enough_joints
 from edge_runtime.robot.keypoints import FORMATS, MAX_TIMESTAMP_S, CameraModel, image_to_canonical, to_h36m
 
@@ -322,6 +322,7 @@ class StreamingLifter:
         self._run = fast_run(session, self._outputs,
                              {INPUT_NAME: np.zeros((1, self.receptive_field, N_JOINTS, 2), np.float32)}, None)
         self._batches = _symbolic_batch(session)
+        self._bindings: dict[int, tuple | None] = {}  # _bound_call's, by batch size (shared by the siblings)
         self.stats = LifterStats()
         self._period_s = 1.0 / params.frame_rate_hz
         r = self.receptive_field
@@ -410,8 +411,8 @@ class StreamingLifter:
             st.resets += 1  # lost for too long: the buffer no longer describes this person's recent motion
             self.reset()
         frame = self._last_seen.astype(np.float32)
-        if why is None and observed.all():  # every joint seen (the usual frame): nothing held, aged or imputed
-            held, stale = np.zeros(N_JOINTS, bool), np.zeros(N_JOINTS, bool)
+        if why is None and (observed is ALL_JOINTS or observed.all()):
+            held = stale = NO_JOINTS  # every joint seen (the usual frame): nothing held, aged or imputed
         else:
             self._age[~observed] += steps
             held = ~observed & (self._age <= self.params.hold_frames)
@@ -464,7 +465,7 @@ class StreamingLifter:
         ok, norm = self._usable(kp) if usable is None else usable
         if norm is None:
             return ok, None
-        if ok.all():
+        if ok is ALL_JOINTS or ok.all():
             self._moved[:] = 0.0
             self._last_seen[:] = norm
             self._age[:] = 0
@@ -515,6 +516,18 @@ class StreamingLifter:
         self._buffered_t = self._last_t
         self._frames_since_buffered = 0
 
+    def _bound_call(self, lifters: list["StreamingLifter"]) -> tuple | None:
+        """(run, input, pose, root) for a call on the windows of ``lifters`` (this frame's, ready): the session's
+        input and outputs bound once per batch size to arrays of their own (onnxruntime's IOBinding), so a call
+        neither converts its feed nor makes its outputs (about 1 % of the bench's frame: reports/bench/s24_react).
+        Made, for each batch size, on the first call's windows only if it gives exactly ``session.run``'s results
+        on them; None when it does not, or the session has no IOBinding (a stand-in): the plain call then."""
+        n = len(lifters)
+        bound = self._bindings.get(n, False)
+        if bound is False:
+            bound = self._bindings[n] = _bind(self.session, [lf.window() for lf in lifters])
+        return bound
+
     def _pixel_maps(self) -> "_PixelMaps":
         """The constants of this lifter's pixel conversions (made again if its cameras or parameters changed)."""
         m = self.__dict__.get("_maps")
@@ -551,7 +564,8 @@ class StreamingLifter:
         other.__dict__.update({k: v for k, v in self.__dict__.items()
                                if k in ("session", "entry", "params", "source", "name", "precision",
                                         "keypoint_format", "receptive_field", "canonical_camera", "camera",
-                                        "_outputs", "_run", "stats", "_period_s", "_batches", "_maps")})
+                                        "_outputs", "_run", "stats", "_period_s", "_batches", "_maps",
+                                        "_bindings")})
         r = self.receptive_field
         other._ring = np.zeros((2 * r, N_JOINTS, 2), np.float32)
         other._last_seen = np.zeros((N_JOINTS, 2), np.float64)
@@ -633,14 +647,19 @@ def _usable_all(lifter: StreamingLifter, keypoints: list) -> list[tuple | None]:
         return out
     # stacked (as np.stack, cheaper); each person's H36M keypoints come from the tracker's conversion (memo)
     kp = np.array([to_h36m(arrays[i], lifter.keypoint_format) for i in which])
-    ok = np.isfinite(kp[..., :2]).all(axis=-1) & (kp[..., 2] >= lifter.params.min_score)  # NaN score: False
+    scored = np.isfinite(kp[..., :2]).all(axis=-1) & (kp[..., 2] >= lifter.params.min_score)  # NaN score: False
     norm = maps.normalised(kp)
-    if ok.all():  # every keypoint of everyone usable (the usual frame): no row to leave out
+    # a row left out below is NaN, which no range check passes: the range is checked on the rows as they are
+    ok = scored & (np.abs(norm) <= MAX_NORMALISED).all(axis=-1)
+    if ok.all():  # every keypoint of everyone usable (the usual frame): no row to leave out, the shared mask
+        for i, norm_i in zip(which, norm):
+            out[i] = (ALL_JOINTS, norm_i)
+        return out
+    if scored.all():
         any_ok = [True] * len(which)
     else:
-        any_ok = ok.any(axis=1).tolist()
-        norm[~ok] = np.nan  # the rows left out stay NaN, as _usable leaves them
-    ok &= (np.abs(norm) <= MAX_NORMALISED).all(axis=-1)
+        any_ok = scored.any(axis=1).tolist()
+        norm[~scored] = np.nan  # the rows left out stay NaN, as _usable leaves them
     for i, ok_i, norm_i, kept in zip(which, ok, norm, any_ok):
         out[i] = (ok_i, norm_i if kept else None)
     return out
@@ -650,15 +669,48 @@ def _lift(lifter: StreamingLifter, lifters: list[StreamingLifter]) -> tuple[np.n
     """One onnxruntime call of ``lifter``'s session on the windows of ``lifters`` (each prepared for this
     frame), in order: (pose_3d (N, 1, 17, 3), root_3d (N, 1, 3), the call's time in s), counted in the
     shared :class:`LifterStats` (``inferences`` per window, ``infer_s`` per call)."""
-    # np.array of the equal-shape windows stacks them, in a third of np.stack's time (no per-call checks)
-    x = lifters[0].window()[None] if len(lifters) == 1 else np.array([lf.window() for lf in lifters])
-    t0 = time.perf_counter()
-    pose, root = lifter._run(lifter._outputs, {INPUT_NAME: x}, None)
-    dt = time.perf_counter() - t0
+    bound = lifter._bound_call(lifters)
+    if bound is not None:
+        binding, x, pose, root = bound
+        for k, lf in enumerate(lifters):
+            x[k] = lf.window()
+        t0 = time.perf_counter()
+        binding()
+        dt = time.perf_counter() - t0
+        pose, root = pose.copy(), root.copy()  # the bound arrays are the next call's too
+    else:
+        # np.array of the equal-shape windows stacks them, in a third of np.stack's time (no per-call checks)
+        x = lifters[0].window()[None] if len(lifters) == 1 else np.array([lf.window() for lf in lifters])
+        t0 = time.perf_counter()
+        pose, root = lifter._run(lifter._outputs, {INPUT_NAME: x}, None)
+        dt = time.perf_counter() - t0
     st = lifter.stats
     st.inferences += len(lifters)
     st.infer_s += dt
     return pose, root, dt
+
+
+def _bind(session, windows: list[np.ndarray]) -> tuple | None:
+    """:meth:`StreamingLifter._bound_call`'s (run, input, pose, root) for a batch of ``len(windows)``, checked on
+    ``windows`` against ``session.run``; None when the session has no IOBinding or the two differ."""
+    from edge_runtime.core.onnx import same_arrays
+
+    try:
+        io = session.io_binding()
+        x = np.array(windows, np.float32)
+        pose = np.zeros((len(windows), 1, N_JOINTS, 3), np.float32)
+        root = np.zeros((len(windows), 1, 3), np.float32)
+        # by the arrays' own memory (raw pointers: nothing copied at binding, every call reads and writes them)
+        io.bind_input(INPUT_NAME, "cpu", 0, np.float32, x.shape, x.ctypes.data)
+        io.bind_output(POSE_OUTPUT, "cpu", 0, np.float32, pose.shape, pose.ctypes.data)
+        io.bind_output(ROOT_OUTPUT, "cpu", 0, np.float32, root.shape, root.ctypes.data)
+        run = session.run_with_iobinding
+        run(io)
+        if not same_arrays([pose, root], session.run([POSE_OUTPUT, ROOT_OUTPUT], {INPUT_NAME: x})):
+            return None
+    except Exception:  # noqa: BLE001 - no (or another) IOBinding: the plain call is the contract
+        return None
+    return (lambda: run(io)), x, pose, root
 
 
 def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray, root: np.ndarray,
@@ -694,7 +746,7 @@ def _finish(lifters: list[StreamingLifter], ready: list[tuple], pose: np.ndarray
     joints = _rays_of(maps, seen, model_joints) * model_joints[..., 2:3]
     for k, i in enumerate(good):
         lf, (t_s, observed, held, missing) = lifters[i], ready[i]
-        if missing.any():
+        if missing is not NO_JOINTS and missing.any():
             # a missing joint's ray is its imputed keypoint's: the model's own joint is as good a guess
             joints[k][missing] = model_joints[k][missing]
         st = lf.stats

@@ -77,7 +77,7 @@ import numpy as np
 
 from edge_runtime import config
 from edge_runtime.core.memo import Recent
-from edge_runtime.core.skeleton import HEAD, JOINTS
+from edge_runtime.core.skeleton import HEAD, JOINTS, NO_JOINTS
 from edge_runtime.robot.hazard import (
     Decision,
     HazardMonitor,
@@ -96,6 +96,7 @@ from edge_runtime.robot.hazard import (
     radial_retraction,
     turned_retraction,
 )
+from edge_runtime.robot.hazard import vector_norm as _norm3  # the task's waypoint check runs at every control tick
 from edge_runtime.robot.rays import lifter_rays
 
 if TYPE_CHECKING:  # the caller makes the lifter (onnxruntime) and the link (python-can, pymavlink): the
@@ -338,8 +339,10 @@ def _measured(pose) -> np.ndarray:
     """A lifted pose's joints with its ``missing`` ones NaN (``LiftedPose.missing``: guesses, not measured); a
     stand-in pose without that flag gives its joints as they are."""
     missing = getattr(pose, "missing", None)
-    # ndarray.any is np.any's reduction without its dispatch (a lifter's flags are an array; a stand-in's may not be)
-    if missing is None or not (missing.any() if isinstance(missing, np.ndarray) else np.any(missing)):
+    # ndarray.any is np.any's reduction without its dispatch (a lifter's flags are an array; a stand-in's may not be);
+    # the shared mask of no joint needs none
+    if missing is None or missing is NO_JOINTS or not (missing.any() if isinstance(missing, np.ndarray)
+                                                        else np.any(missing)):
         return pose.joints_cam_m
     return np.where(np.asarray(missing, bool)[:, None], np.nan, pose.joints_cam_m)
 
@@ -351,13 +354,6 @@ def _rounded(v) -> list[float]:
 
 def _vec3(v) -> tuple[float, float, float]:
     return tuple(float(x) for x in np.asarray(v, float).reshape(3))
-
-
-def _norm3(v) -> float:
-    """``np.linalg.norm`` of a vector, by its own arithmetic (``sqrt(dot(v, v))``; a correctly rounded sqrt), without
-    its dispatch: the task's waypoint check runs at every control tick."""
-    v = np.asarray(v, float)
-    return math.sqrt(v.dot(v))
 
 
 def _stacked(arrays: list) -> np.ndarray:
@@ -480,7 +476,7 @@ class RobotLoop:
             self.counters.unseen += len(unseen or ())
             effector = self.effector_m()
             decision = self.monitor.observe(t_in, dict(zip(keys, persons)), effector, self._last_q,
-                                            unseen, self._robot_rays(rays))
+                                            unseen, self._robot_rays(rays), self._backfire_start())
             # the log's per-person beliefs, made once the commands are out (they decide nothing), against the
             # effector the frame was judged with (before the command: its fallback is the last position sent)
             people = (keys, persons, effector)
@@ -856,7 +852,8 @@ class RobotLoop:
         if not people:
             return None
         turn = plan_escape_turn(caps, people, None if q is None else float(q[0]), p.escape_step_deg,
-                                p.escape_min_gain_m, p.escape_dip_m, z.escape_deg, z.reach_retract_m)
+                                p.escape_min_gain_m, p.escape_dip_m, z.escape_deg, z.reach_retract_m,
+                                self.monitor.escape_separations_m(caps))
         if turn is None:
             return None
         self.counters.escapes += 1
@@ -866,12 +863,10 @@ class RobotLoop:
         """Has the retraction (or escape turn) under way brought the arm ``retract_backfire_m`` closer to anyone
         within the retraction's reach, by its own motion? (Everyone the monitor accounts for, at his
         last valid body, against the arm where it is now and where the retraction began.)"""
-        r, q0, q = self._retract, self._retract_q0, self._last_q
-        z = self.zones
-        if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None or z.separation != "whole_body":
+        start_caps = self._backfire_start()
+        if start_caps is None:
             return False
-        if self._retract_fallback and not self._escaping and not self.params.radial_retract_stops:
-            return False  # the straight retraction toward the base runs to its end
+        z, q = self.zones, self._last_q
         reach = z.body_retract_distance_m + z.retract_lead_s * z.lost_person_speed_mps
         people = self.monitor.people_spheres()
         if not people:
@@ -883,10 +878,23 @@ class RobotLoop:
         for k, d in enumerate(now):
             if d < reach:
                 if start is None:
-                    start = self._separations_of(people, self._start_capsules(q0))
+                    start = self._separations_of(people, start_caps)
                 if d < start[k] - self.params.retract_backfire_m:
                     return True
         return False
+
+    def _backfire_start(self):
+        """The capsules of where the retraction under way began (:meth:`_start_capsules`) when
+        :meth:`_retract_backfires` has one to check, else None. A frame hands them to the monitor, which measures
+        everyone's separation from them in its own pass (``HazardMonitor.observe``'s ``also_capsules``), so the
+        frame's backfire check finds them measured (the same numbers)."""
+        r, q0, q = self._retract, self._retract_q0, self._last_q
+        if r is None or r.kind is not MotionKind.RETRACT or q0 is None or q is None \
+                or self.zones.separation != "whole_body":
+            return None
+        if self._retract_fallback and not self._escaping and not self.params.radial_retract_stops:
+            return None  # the straight retraction toward the base runs to its end
+        return self._start_capsules(q0)
 
     def _start_capsules(self, q0: np.ndarray):
         """:func:`arm_capsules` of ``q0``, where the retraction under way began, kept while it lasts: the same

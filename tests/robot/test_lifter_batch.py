@@ -7,6 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from support.lifter import onnx_calls
 
 from bench.robot_cycle import _box, box_camera, lifter_entry
 from bench.robot_scenario import prepare_workers
@@ -41,21 +42,13 @@ def scene(tmp_path_factory):
     return camera, fmt, people, here
 
 
-def _runs(people_lifter) -> list[int]:
-    """The batch sizes of every onnxruntime call the lifter makes from now on."""
-    sizes = []
-    run = people_lifter.template._run  # the call the lifter makes (session.run or its compiled run)
-    people_lifter.template._run = lambda outs, feed, opts: sizes.append(len(feed[lm.INPUT_NAME])) or run(outs, feed, opts)
-    return sizes
-
-
 @pytest.mark.parametrize("precision", ["int8", "fp32"])
-def test_batched_people_equal_their_batch_one_calls(scene, precision):
+def test_batched_people_equal_their_batch_one_calls(scene, precision, monkeypatch):
     camera, fmt, people, here = scene
     params = replace(_box().lifter, precision=precision, threads=1)
     template = StreamingLifter.from_manifest(ASSETS_DIR, params, camera=camera, keypoint_format=fmt)
     batched, single = PeopleLifter(template), PeopleLifter(template)
-    sizes = _runs(batched)  # before the sibling below takes the template's call: both lifters' calls are counted
+    sizes = onnx_calls(batched.template, monkeypatch)  # before the sibling below takes the template's call: both lifters' calls are counted
     single.template = template.sibling()
     single.template._batches = False  # one call per person, on the same session
     windows = []

@@ -183,11 +183,12 @@ def test_tracker_ids_as_before():
     rng = np.random.default_rng(1504)
 
     class Old(PersonTracker):
-        def _costs(self, kps, seen, t_s):  # every pair's old cost, one by one (session 18 made them in one pass)
+        def _costs(self, kps, seen, t_s, all_seen=False):  # every pair's old cost, one by one (session 18 made them
+            # in one pass; all_seen: session 24's note that every joint is seen, which the old way does not use)
             return {(tid, i): old_cost(self.params, tr, kp, t_s) for tid, tr in self.tracks.items()
                     for i, kp in enumerate(kps)}
 
-        def _follow_all(self, tracks, kps, seen, sizes_px, t_s):  # one by one, the old way
+        def _follow_all(self, tracks, kps, seen, sizes_px, t_s, all_seen=False):  # one by one, the old way
             for tr, kp in zip(tracks, kps):
                 old_follow(self.params, tr, kp, t_s)
 

@@ -88,3 +88,25 @@ def random_walk_keypoints(rng, n: int, width=1280, height=720) -> np.ndarray:
     drift = np.cumsum(rng.normal(0, 4, (n, 1, 2)), axis=0) + rng.normal(0, 1.5, (n, 17, 2))
     xy = np.clip(base + drift, 0, [width - 1, height - 1])
     return np.concatenate([xy, np.full((n, 17, 1), 0.9)], axis=2)
+
+
+def onnx_calls(template, monkeypatch) -> list[int]:
+    """The batch sizes of every onnxruntime call a lifter (``template``, a StreamingLifter, and the siblings made of
+    it from now on) makes: its plain call (session.run or its compiled run) and its bound one (IOBinding, made per
+    batch size by ``edge_runtime.robot.lifter._bind``, session 24)."""
+    import edge_runtime.robot.lifter as lm
+
+    sizes = []
+    run = template._run
+    template._run = lambda outs, feed, opts: sizes.append(len(feed[lm.INPUT_NAME])) or run(outs, feed, opts)
+    bind = lm._bind
+
+    def counted(session, windows):
+        bound = bind(session, windows)
+        if bound is None:
+            return None
+        call, x, pose, root = bound
+        return (lambda: sizes.append(len(x)) or call()), x, pose, root
+
+    monkeypatch.setattr(lm, "_bind", counted)
+    return sizes

@@ -44,14 +44,10 @@ def step(proc: subprocess.Popen) -> tuple[str, float] | None:
     return kind, float(cpu)
 
 
-def main() -> None:
-    a = two_trees(cpu=(int, 0))
-    outs = {"base": "/tmp/perf23/lockstep_base.json", "mine": "/tmp/perf23/lockstep_mine.json"}
-    procs = {side: start(tree, a.cpu, a.seconds, a.npz, outs[side]) for side, tree in (("base", a.base),
-                                                                                       ("mine", a.mine))}
-    t0 = time.strftime("%H:%M:%S", time.gmtime())
-    slots = []  # (kind, base cpu, mine cpu)
-    i = 0
+def alternate(procs: dict) -> list[tuple[str, float, float]]:
+    """Run the two lockstep processes (``procs``: "base" and "mine") slot by slot, the order swapped every slot, until
+    either ends: (kind, base CPU s, mine CPU s) of each slot; both closed and waited for after."""
+    slots, i = [], 0
     while True:
         order = ("base", "mine") if i % 2 == 0 else ("mine", "base")
         got = {}
@@ -70,6 +66,16 @@ def main() -> None:
         except BrokenPipeError:
             pass
         p.wait()
+    return slots
+
+
+def main() -> None:
+    a = two_trees(cpu=(int, 0))
+    outs = {"base": "/tmp/perf23/lockstep_base.json", "mine": "/tmp/perf23/lockstep_mine.json"}
+    procs = {side: start(tree, a.cpu, a.seconds, a.npz, outs[side]) for side, tree in (("base", a.base),
+                                                                                       ("mine", a.mine))}
+    t0 = time.strftime("%H:%M:%S", time.gmtime())
+    slots = alternate(procs)
     runs = {side: json.loads(Path(o).read_text()) for side, o in outs.items()}
     commanding = [f.get("command") is not None for f in runs["base"]["frames"]]
     lines = [f"{t0}-{time.strftime('%H:%M:%S', time.gmtime())} UTC, cpu {a.cpu}, load {os.getloadavg()[0]:.2f}, "

@@ -127,13 +127,18 @@ def _record_payloads() -> None:
     ae.StampedBus.send = recorded
 
 
-def run(seconds: float, npz: Path, mode: str, dump: str = "") -> dict:
+def bench_config(seconds: float, npz: Path) -> rc.RobotConfig:
+    """The bench's robot scenario on its simulated clock (its workers made into ``npz`` when it is not there)."""
     from edge_runtime.core.manifest import ASSETS_DIR, load_manifest
 
     lifter = rc.lifter_entry(load_manifest(ASSETS_DIR)["models"])
     if not npz.exists():
         rc.prepare_workers(npz, seconds, lifter, 1, *rc.box_camera(rc._box()))
-    cfg = rc.RobotConfig(str(npz), seconds, "", lifter["precision"], rc._arm_posture(), simulated=True)
+    return rc.RobotConfig(str(npz), seconds, "", lifter["precision"], rc._arm_posture(), simulated=True)
+
+
+def run(seconds: float, npz: Path, mode: str, dump: str = "") -> dict:
+    cfg = bench_config(seconds, npz)
     _record_payloads()
     if mode == "stages":
         for owner, name, stage in STAGES:
