@@ -3,6 +3,10 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# make test runs on both cores (pytest-xdist); JOBS=0 runs it in one process. Each test file stays
+# on one worker (its module-scoped fixtures are built once), e2e/ on one (tests/README.md, "Parallel").
+JOBS   ?= 2
+PYTEST := $(PY) -m pytest -q -n $(JOBS) --dist loadfile --no-loadscope-reorder
 
 .PHONY: demo test test-fast lint venv clean assets report bench bundle fuzz aarch64-check
 
@@ -20,11 +24,11 @@ demo: $(STAMP)
 
 ## make test: lint, then the whole suite (what .ci/run runs; under 15 minutes on 2 cores)
 test: lint
-	$(PY) -m pytest -q
+	$(PYTEST)
 
 ## make test-fast: lint, then every test that starts no process (the `slow` marker; tests/README.md)
 test-fast: lint
-	$(PY) -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 ## make lint: ruff with the rules in pyproject.toml
 lint: $(STAMP)
