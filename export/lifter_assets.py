@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from edge_runtime.cli import CliError, positive_int, probability
+from edge_runtime.cli import CliError, positive_float, positive_int, probability
 from edge_runtime.core.manifest import SCHEMA_VERSION, ManifestError, load_manifest, sha256_file, write_manifest
 from export.variants import Variant
 
@@ -64,8 +64,8 @@ def add_arguments(p) -> None:
     p.add_argument("--frames-per-epoch", type=positive_int, default=None,
                    help="training windows per epoch (default: every valid training frame)")
     p.add_argument("--batch-size", type=positive_int, default=256)
-    p.add_argument("--lr-decay", type=probability, default=0.8,
-                   help="learning-rate factor after every epoch (default 0.8)")
+    p.add_argument("--lr-decay", type=positive_float, default=0.8,
+                   help="learning-rate factor after every epoch, at most 1 (default 0.8)")
     p.add_argument("--trajectory-channels", type=positive_int, default=256)
     p.add_argument("--subjects", type=positive_int, default=32, help="training subjects")
     p.add_argument("--test-subjects", type=positive_int, default=8)
@@ -618,6 +618,8 @@ def cmd(a) -> int:
 
     if not np.isfinite(a.seconds) or a.seconds < 2.0:
         raise CliError(f"--seconds: expected at least 2 s of activity per subject, got {a.seconds}")
+    if a.lr_decay > 1.0:
+        raise CliError(f"--lr-decay: expected a factor of at most 1, got {a.lr_decay}")
     sizes = _sizes(a)
     ebs = _epochs_by_size(a)
     out = Path(a.out) if a.out else DEFAULT_ASSETS
