@@ -521,7 +521,7 @@ def random_limb_key(rng: np.random.Generator, group: str) -> np.ndarray:
         hip = rng.uniform(lo[0], hi[0])
         knee = rng.uniform(max(lo[1], hip - SHANK_FROM_VERTICAL_MAX_DEG), min(hi[1], hip + SHANK_FROM_VERTICAL_MAX_DEG))
         return np.array([hip, knee])
-    while True:   # rejection: the accepted share of the shoulder box is about 80 %
+    while True:   # rejection: about 72 % of the shoulder box is accepted
         key = rng.uniform(lo, hi)
         if not group.endswith("_arm") or max(key[0], 0) + max(key[1], 0) <= SHOULDER_ELEVATION_SUM_MAX_DEG:
             return key
