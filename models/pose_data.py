@@ -188,6 +188,14 @@ def build_splits(cfg: DataConfig = DataConfig(), progress: bool = False) -> dict
     return out
 
 
+def trained_types_only(ps: PoseSet) -> PoseSet:
+    """``ps`` with only the frames of the motion types trained on (``meta["train_motions"]``) valid: the
+    held-out types' frames stay in the arrays (their neighbours' windows read them) but are never scored."""
+    names = ps.meta.get("activity_names", ACTIVITY_NAMES)
+    trained = [names.index(m) for m in ps.meta.get("train_motions", names)]
+    return dataclasses.replace(ps, valid=ps.valid & np.isin(ps.activity, trained))
+
+
 def flip(kp2d: np.ndarray, pose3d: np.ndarray, root3d: np.ndarray):
     """Mirror image augmentation (VideoPose3D's): x -> -x in the normalised image and in the camera frame,
     left and right joints swapped. Exact for the canonical camera (principal point at the centre)."""
@@ -233,7 +241,12 @@ class VariedConfig:
     rate_hz: float = 30.0
     hold_frames: int = 3
     min_score: float = 0.3                   #: the runtime's LifterParams.min_score
+    random_limbs_share: float = 0.0          #: training people whose limbs also move at random (pose-space augmentation)
     seed: int = 0
+
+    def __post_init__(self):
+        if not 0.0 <= self.random_limbs_share <= 1.0:
+            raise ValueError(f"random_limbs_share: expected 0-1, got {self.random_limbs_share!r}")
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -253,14 +266,27 @@ def varied_body(rng: np.random.Generator) -> Body:
                                         for f in LENGTH_FIELDS})
 
 
-def _scene_sequences(camera, rng, cfg: VariedConfig, people: int, noise, kinds, names) -> list[dict]:
+RANDOM_LIMBS_P_ACTIVE = 0.5
+"""Share of the time each limb group of an augmented person follows its random trajectory (set a priori, not tuned)."""
+
+
+def limb_augmenter(share: float, rng: np.random.Generator):
+    """``motion_fn`` for :func:`firmware_sim.scenarios.recording.scene`: each person, with probability
+    ``share``, gets :func:`firmware_sim.people.motions.random_limbs` on top of the scripted session.
+    Draws only from ``rng`` (its own generator), so the scene's other draws are the same with it or without."""
+    def fn(m: mo.Motion) -> mo.Motion:
+        return mo.random_limbs(m, rng, RANDOM_LIMBS_P_ACTIVE) if rng.random() < share else m
+    return fn
+
+
+def _scene_sequences(camera, rng, cfg: VariedConfig, people: int, noise, kinds, names, motion_fn=None) -> list[dict]:
     """One scene's people as training sequences: COCO detector output with occlusion, mapped to
     H36M as the runtime maps it, low scores missing, missed joints held, undistorted into the
     canonical camera and normalised; targets in the camera frame."""
     from edge_runtime.robot.keypoints import to_h36m
     from firmware_sim.scenarios.recording import scene
 
-    sc = scene(camera, rng, cfg.seconds_per_scene, people, noise, kinds, body_fn=varied_body)
+    sc = scene(camera, rng, cfg.seconds_per_scene, people, noise, kinds, body_fn=varied_body, motion_fn=motion_fn)
     out = []
     for m, kp in zip(sc["motions"], sc["keypoints"]):
         h = to_h36m(kp, "coco")
@@ -281,6 +307,10 @@ def _varied_split(n_scenes: int, camera_ids, cameras: dict, cfg: VariedConfig, r
 
     from firmware_sim.scenarios.recording import MOTIONS
 
+    # the augmentation has its own generator: validation and test (drawn after training from ``rng``)
+    # are the same scenes with it or without
+    motion_fn = (limb_augmenter(cfg.random_limbs_share, np.random.default_rng([cfg.seed, 24]))
+                 if train and cfg.random_limbs_share > 0 else None)
     parts, start, person = [], 0, person0
     for _ in tqdm(range(n_scenes), desc="simulate", unit="scene", disable=not progress, leave=False):
         c = int(rng.choice(camera_ids))
@@ -288,7 +318,7 @@ def _varied_split(n_scenes: int, camera_ids, cameras: dict, cfg: VariedConfig, r
         if train:   # a spread of detectors: real ones better and worse than REAL_DETECTOR, and the default
             noise = (cam_sim.REAL_DETECTOR.scaled(float(rng.uniform(*cfg.real_noise_scale)))
                      if rng.random() < cfg.real_noise_share else cam_sim.DetectorNoise())
-        for d in _scene_sequences(cameras[c], rng, cfg, people, noise, kinds, MOTIONS):
+        for d in _scene_sequences(cameras[c], rng, cfg, people, noise, kinds, MOTIONS, motion_fn):
             n = len(d["kp2d"])
             d.update(seq_start=np.full(n, start, np.int64), subject=np.full(n, person, np.int16),
                      camera=np.full(n, c, np.int16))
@@ -303,7 +333,10 @@ def build_varied_splits(cfg: VariedConfig = VariedConfig(), progress: bool = Fal
     splits see the cell from three disjoint pools of placements with distorted wide-angle lenses
     (:func:`firmware_sim.scenarios.recording.random_camera`); training never holds the motion
     types ``cfg.holdout_motions``, validation and test hold every type. Validation and test are
-    at REAL_DETECTOR's errors. Deterministic in ``cfg.seed``."""
+    at REAL_DETECTOR's errors. With ``cfg.random_limbs_share`` that share of the training people
+    also move their arms, trunk, neck and legs along random trajectories through their ranges of
+    motion (:func:`firmware_sim.people.motions.random_limbs`); validation and test are unchanged by
+    it. Deterministic in ``cfg.seed``."""
     from firmware_sim.scenarios.recording import MOTIONS, random_camera
 
     unknown = set(cfg.holdout_motions) - set(MOTIONS)

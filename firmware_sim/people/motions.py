@@ -25,6 +25,9 @@ The generators
 * :func:`turn` -- turning on the spot by stepping.
 * :func:`concat` -- joins motions, blending the posture across each seam.
 * :func:`random_activity` -- a random working session chaining the above (the lifter's data).
+* :func:`random_limbs` -- any of the above with its arms, trunk, neck and legs taken, part of the
+  time, along smooth random trajectories through their whole range of motion (the lifter's
+  pose-space augmentation: joint configurations no scripted motion holds).
 
 Single postures (for posture scoring) come from :class:`firmware_sim.people.human.Posture` and
 :func:`firmware_sim.people.human.joints`; :func:`work_posture` gives the posture that puts the
@@ -38,7 +41,16 @@ from typing import Sequence
 
 import numpy as np
 
-from firmware_sim.people.human import N_ANGLES, Body, angle_column, heading_towards, joints_from_angles
+from edge_runtime.core.skeleton import BASE_HEIGHT_M
+from firmware_sim.people.human import (
+    N_ANGLES,
+    ROM_DEG,
+    Body,
+    angle_column,
+    heading_towards,
+    joints_from_angles,
+    prepare_angles,
+)
 
 DEFAULT_RATE_HZ = 30.0
 SPEED_RANGE_MPS = (0.5, 2.0)      # the walking speeds the gait model covers
@@ -478,3 +490,79 @@ def random_activity(body: Body, rng: np.random.Generator, duration_s: float, rat
                                rate_hz, rng))
         total = sum(len(p) for p in parts) / rate_hz
     return concat(parts)
+
+
+# --- pose-space augmentation -------------------------------------------------------------------
+RANDOM_LIMB_GROUPS: dict[str, tuple[str, ...]] = {
+    "trunk": ("trunk_flexion_deg", "trunk_lateral_deg", "trunk_twist_deg"),
+    "neck": ("neck_flexion_deg", "neck_yaw_deg"),
+    "left_arm": ("shoulder_flexion_deg.left", "shoulder_abduction_deg.left", "elbow_flexion_deg.left"),
+    "right_arm": ("shoulder_flexion_deg.right", "shoulder_abduction_deg.right", "elbow_flexion_deg.right"),
+    "left_leg": ("hip_flexion_deg.left", "knee_flexion_deg.left"),
+    "right_leg": ("hip_flexion_deg.right", "knee_flexion_deg.right"),
+}
+"""The groups of posture angles :func:`random_limbs` takes over, each on its own schedule."""
+SHOULDER_ELEVATION_SUM_MAX_DEG = 200.0
+"""Forward and sideways raise together at most this much (their positive parts): the two angles compose
+by rotations, and both near 180 deg would turn the forearm's plane further than a shoulder rotates."""
+SHANK_FROM_VERTICAL_MAX_DEG = 80.0
+"""|hip flexion - knee flexion| at most this much: the shank points downward, so the knee stays above its
+ankle and hence above the floor (the body stands on its lower ankle)."""
+
+
+def random_limb_key(rng: np.random.Generator, group: str) -> np.ndarray:
+    """One random target posture of a :data:`RANDOM_LIMB_GROUPS` group (its angles, in the group's order):
+    uniform within each angle's range of motion (:data:`firmware_sim.people.human.ROM_DEG`), shoulders
+    within :data:`SHOULDER_ELEVATION_SUM_MAX_DEG`, legs within :data:`SHANK_FROM_VERTICAL_MAX_DEG`."""
+    names = RANDOM_LIMB_GROUPS[group]
+    lo = np.array([ROM_DEG[n.split(".")[0]][0] for n in names])
+    hi = np.array([ROM_DEG[n.split(".")[0]][1] for n in names])
+    if group.endswith("_leg"):
+        hip = rng.uniform(lo[0], hi[0])
+        knee = rng.uniform(max(lo[1], hip - SHANK_FROM_VERTICAL_MAX_DEG), min(hi[1], hip + SHANK_FROM_VERTICAL_MAX_DEG))
+        return np.array([hip, knee])
+    while True:   # rejection: about 72 % of the shoulder box is accepted
+        key = rng.uniform(lo, hi)
+        if not group.endswith("_arm") or max(key[0], 0) + max(key[1], 0) <= SHOULDER_ELEVATION_SUM_MAX_DEG:
+            return key
+
+
+def random_limbs(m: Motion, rng: np.random.Generator, p_active: float = 0.5, hold_s=(0.5, 2.0),
+                 tries: int = 10) -> Motion:
+    """``m`` with each :data:`RANDOM_LIMB_GROUPS` group blended, part of the time, into a smooth random
+    trajectory through its range of motion; placement (pelvis path, heading), labels and body kept.
+
+    Per group, every U(``hold_s``) seconds a new key: a random target posture (:func:`random_limb_key`)
+    and a blend weight, 1 with probability ``p_active``, else 0; both are interpolated with minimum jerk
+    (:func:`keyframes`), and the group's angles become ``(1 - w) scripted + w random``. The scripted and
+    the random postures are both within the ranges of motion and the joint-coupling limits above, and so
+    is every blend of the two. A draw that puts a joint below the floor (a hand through it, about one
+    frame in a thousand) is drawn again, up to ``tries`` times; then ``m`` is returned unchanged."""
+    if not 0.0 <= p_active <= 1.0:
+        raise ValueError(f"p_active: expected 0-1, got {p_active!r}")
+    floor = m.joints_m[..., 1].min() if len(m) else 0.0
+    floor = min(floor, -BASE_HEIGHT_M)
+    for _ in range(tries):
+        a = _random_limb_angles(m, rng, p_active, hold_s)
+        joints = joints_from_angles(m.body, a, m.pelvis_xz_m, m.heading_rad)
+        if joints[..., 1].min() >= floor:
+            return Motion(m.body, m.rate_hz, a, m.pelvis_xz_m, m.heading_rad, m.labels, joints)
+    return m
+
+
+def _random_limb_angles(m: Motion, rng: np.random.Generator, p_active: float, hold_s) -> np.ndarray:
+    """:func:`random_limbs`' angles (T, 15), clamped to the ranges of motion."""
+    n = len(m)
+    duration = n / m.rate_hz
+    a = m.angles_deg.copy()
+    for group, names in RANDOM_LIMB_GROUPS.items():
+        times = [0.0]
+        while times[-1] < duration:
+            times.append(times[-1] + rng.uniform(*hold_s))
+        keys = [np.append(random_limb_key(rng, group), float(rng.random() < p_active)) for _ in times]
+        track = keyframes(times, np.array(keys), m.rate_hz)
+        track = np.concatenate([track, np.repeat(track[-1:], max(0, n - len(track)), 0)])[:n]
+        cols = [angle_column(c) for c in names]
+        w = track[:, -1:]
+        a[:, cols] = (1.0 - w) * a[:, cols] + w * track[:, :-1]
+    return prepare_angles(a)       # the scripted motions' sway may leave a range by a degree; the joints clamp it

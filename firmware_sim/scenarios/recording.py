@@ -155,11 +155,15 @@ def session(body: Body, camera: Camera, rng: np.random.Generator, seconds: float
 
 
 def scene(camera: Camera, rng: np.random.Generator, seconds: float, people: int,
-          noise: DetectorNoise = REAL_DETECTOR, kinds=MOTIONS, body_fn=random_body) -> dict:
+          noise: DetectorNoise = REAL_DETECTOR, kinds=MOTIONS, body_fn=random_body, motion_fn=None) -> dict:
     """Several people's sessions seen by ``camera``: truth and COCO detector output with occlusion.
     Returns ``motions`` (one per person, T frames each), ``keypoints`` (per person (T, 17, 3)).
-    ``body_fn(rng) -> Body`` makes each person (the lifter's training varies proportions too)."""
+    ``body_fn(rng) -> Body`` makes each person (the lifter's training varies proportions too);
+    ``motion_fn(Motion) -> Motion``, when given, changes each person's session before the camera
+    sees it (the lifter's pose-space augmentation; it must draw from its own generator, not ``rng``)."""
     sessions = [session(body_fn(rng), camera, rng, seconds, kinds) for _ in range(people)]
+    if motion_fn is not None:
+        sessions = [motion_fn(s) for s in sessions]
     n = min(len(s) for s in sessions)
     sessions = [motions.Motion(s.body, s.rate_hz, s.angles_deg[:n], s.pelvis_xz_m[:n], s.heading_rad[:n],
                                s.labels[:n], s.joints_m[:n]) for s in sessions]

@@ -85,7 +85,9 @@ def test_same_seed_same_weights(shipped, tmp_path):
 @pytest.mark.parametrize("args,field", [(["--sweep", "256,x"], "--sweep"), (["--seconds", "0"], "--seconds"),
                                         (["--epochs-by-size", "1024"], "--epochs-by-size"),
                                         (["--channels", "-3"], "--channels"),
-                                        (["--data", "varied", "--holdout-motions", "juggle"], "--holdout-motions")])
+                                        (["--data", "varied", "--holdout-motions", "juggle"], "--holdout-motions"),
+                                        (["--data", "varied", "--random-limbs", "1.5"], "--random-limbs"),
+                                        (["--lr-decay", "0"], "--lr-decay"), (["--lr-decay", "1.5"], "--lr-decay")])
 def test_bad_arguments_are_one_line_errors(args, field, tmp_path):
     r = _run("--seed", "0", *args, "--out", str(tmp_path / "a"), "--report", str(tmp_path / "r"),
              "--work", str(tmp_path / "w"))

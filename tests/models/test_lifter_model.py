@@ -206,6 +206,36 @@ def test_varied_splits_hold_out_motion_types_cameras_and_people():
         build_varied_splits(VariedConfig(holdout_motions=("juggle",)))
 
 
+def test_random_limbs_change_training_people_only_and_choices_skip_held_out_types():
+    import dataclasses
+
+    from models.pose_data import VariedConfig, build_varied_splits, trained_types_only
+
+    cfg = VariedConfig(train_scenes=2, val_scenes=1, test_scenes=1, seconds_per_scene=15, train_cameras=2,
+                       eval_cameras=1, seed=4)
+    plain = build_varied_splits(cfg)
+    aug = build_varied_splits(dataclasses.replace(cfg, random_limbs_share=1.0))
+    # validation and test are the same scenes with the augmentation or without (it draws from its own generator)
+    for split in ("val", "test"):
+        for f in ("kp2d", "pose3d", "root3d", "valid", "activity", "subject", "camera"):
+            assert np.array_equal(getattr(plain[split], f), getattr(aug[split], f)), (split, f)
+    # training people move differently: their poses and keypoints, not their motion-type labels
+    assert np.array_equal(plain["train"].activity, aug["train"].activity)
+    assert np.abs(plain["train"].pose3d - aug["train"].pose3d).max() > 0.3
+    assert aug["train"].meta["config"]["random_limbs_share"] == 1.0
+    with pytest.raises(ValueError, match="random_limbs_share"):
+        VariedConfig(random_limbs_share=1.5)
+    # choices are scored on validation's trained motion types: carry and reach never count
+    val = plain["val"]
+    names = val.meta["activity_names"]
+    held = np.isin(val.activity, [names.index("carry"), names.index("reach")])
+    assert (val.valid & held).any()
+    chosen, what = la.choice_set(plain)
+    assert not (chosen.valid & held).any() and np.array_equal(chosen.valid, val.valid & ~held)
+    assert what == "val, trained motion types only (not carry, reach)"
+    assert np.array_equal(trained_types_only(val).kp2d, val.kp2d)
+
+
 def test_varied_inputs_are_the_runtimes_canonical_keypoints():
     # a perfect detector: the model input, un-normalised, is the true joints projected by the canonical
     # camera (the lens undistorted away), except where COCO -> H36M mapping builds a joint (head, spine...)

@@ -117,3 +117,61 @@ def test_random_activity_is_reproducible_and_long_enough():
     assert np.array_equal(a.joints_m, b.joints_m) and len(a) >= 60 * 30
     assert len(a) != len(c) or not np.array_equal(a.joints_m, c.joints_m)
     assert "walk" in set(a.labels) and np.isfinite(a.joints_m).all()
+
+
+TRAINED_KINDS = ("walk", "run", "turn", "stop_and_go", "bend", "crouch", "work")   # the lifter's, carry and reach out
+
+
+def _scripted_session(seed: int) -> mo.Motion:
+    from firmware_sim.scenarios.recording import random_camera, session
+
+    rng = np.random.default_rng(seed)
+    return session(BODY, random_camera(rng), rng, 60.0, kinds=TRAINED_KINDS)
+
+
+def test_random_limbs_stay_within_the_ranges_of_motion_on_a_body_that_stands():
+    from firmware_sim.people.human import rom_violations
+
+    scripted = _scripted_session(3)
+    m = mo.random_limbs(scripted, np.random.default_rng(4))
+    a = m.angles_deg
+    assert rom_violations(a) == []
+    for side in ("left", "right"):
+        raise_sum = (np.maximum(a[:, mo.angle_column(f"shoulder_flexion_deg.{side}")], 0)
+                     + np.maximum(a[:, mo.angle_column(f"shoulder_abduction_deg.{side}")], 0))
+        assert raise_sum.max() <= mo.SHOULDER_ELEVATION_SUM_MAX_DEG + 1e-9
+        shank = a[:, mo.angle_column(f"hip_flexion_deg.{side}")] - a[:, mo.angle_column(f"knee_flexion_deg.{side}")]
+        assert np.abs(shank).max() <= mo.SHANK_FROM_VERTICAL_MAX_DEG + 1e-9
+    # the same body on the same path: bones, the lower ankle on the floor, nothing below it, labels kept
+    assert np.allclose(bone_lengths(m.joints_m), bone_lengths(scripted.joints_m[0]))
+    assert _feet_on_floor(m) and m.joints_m[..., 1].min() >= FLOOR
+    assert np.array_equal(m.pelvis_xz_m, scripted.pelvis_xz_m) and np.array_equal(m.heading_rad, scripted.heading_rad)
+    assert list(m.labels) == list(scripted.labels)
+    # smooth: no angle jumps from one frame to the next (minimum-jerk keys at least 0.5 s apart)
+    step = np.abs(np.diff(a, axis=0))
+    assert np.percentile(step, 99) < 15.0 and step.max() < 60.0
+    assert np.array_equal(mo.random_limbs(scripted, np.random.default_rng(4)).joints_m, m.joints_m)
+
+
+def test_random_limbs_reach_poses_the_scripted_motions_never_hold():
+    scripted = _scripted_session(5)
+    m = mo.random_limbs(scripted, np.random.default_rng(6))
+    s, a = scripted.angles_deg, m.angles_deg
+    for name in ("shoulder_abduction_deg.left", "shoulder_flexion_deg.right", "trunk_lateral_deg",
+                 "trunk_twist_deg", "hip_flexion_deg.right"):
+        lo_a, hi_a = np.percentile(a[:, mo.angle_column(name)], [1, 99])
+        lo_s, hi_s = np.percentile(s[:, mo.angle_column(name)], [1, 99])
+        assert hi_a - lo_a > hi_s - lo_s + 40.0, name
+    # arms raised sideways above the shoulder: never in the scripted types, often with random limbs
+    ab = mo.angle_column("shoulder_abduction_deg.left")
+    assert s[:, ab].max() < 45.0 and (a[:, ab] > 90.0).mean() > 0.05
+    # each group part of the time only (p_active 0.5): its angles leave the scripted ones in some frames, not all
+    for group, names in mo.RANDOM_LIMB_GROUPS.items():
+        cols = [mo.angle_column(n) for n in names]
+        moved = (np.abs(a[:, cols] - s[:, cols]) > 5.0).any(axis=1)
+        assert 0.25 < moved.mean() < 0.95, group
+    # with nothing active the scripted motion comes back
+    still = mo.random_limbs(scripted, np.random.default_rng(6), p_active=0.0)
+    assert np.allclose(still.joints_m, scripted.joints_m)
+    with pytest.raises(ValueError, match="p_active"):
+        mo.random_limbs(scripted, np.random.default_rng(6), p_active=1.5)
