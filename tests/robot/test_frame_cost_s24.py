@@ -1,8 +1,8 @@
 """Session 24 (react24): the robot frame's cheaper forms pinned to what they replaced, to the bit, on random inputs:
 the monitor's pass that also measures where a retraction began, the escape plan's separations taken from the
 monitor, the single base rotation, the least of a few floats, frozen dataclasses made directly, a vector's norm, the
-tracker's usual-frame shortcuts and the lifter's shared masks. (The CAN encoding's: tests/canbus/test_encode_fast_s24.py;
-the whole runtime's decisions: tests/robot/test_golden_trace_s24.py.)"""
+tracker's usual-frame shortcuts and the lifter's shared masks. (The whole runtime's decisions:
+tests/robot/test_golden_trace_s24.py.)"""
 import dataclasses
 import math
 
