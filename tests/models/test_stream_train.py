@@ -131,6 +131,33 @@ def test_hard_sampling_draws_each_pool_by_its_share_and_s21_keeps_the_prototypes
         stream_train.epoch_ends(data, "neither", np.random.default_rng(0))
 
 
+def test_hard2_sampling_draws_near_each_hard_kind_by_its_weight():
+    recs = _recordings()
+    recs[0][1][1]["kind"] = "grab_from_seat"  # weight 27
+    recs[1][1][1]["kind"] = "touch_arm"  # weight 3
+    data = stream_set(recs)
+    grab, arm = data.near_kind["grab_from_seat"], data.near_kind["touch_arm"]
+    assert len(grab) and len(arm) and not len(data.near_kind["hand_to_lap"])  # no motion of that kind
+    assert (data.y[grab] == I_OTHER).all() and not np.isin(grab, arm).any()
+    draws = stream_train.kind_draws(data.near_kind, 1000)
+    assert [(len(pool), n) for pool, n in draws] == [(len(grab), 900), (len(arm), 100)]  # 27 : 3, absent kinds
+    # give their share to the present ones
+    with pytest.raises(ValueError, match="hard2"):
+        stream_train.kind_draws({k: np.array([], int) for k in data.near_kind}, 10)
+
+
+def test_hard2_epoch_holds_the_shares_of_its_pools(monkeypatch):
+    monkeypatch.setattr(stream_train, "SAMPLES", 1000)
+    recs = _recordings()
+    for _, events in recs:
+        events[1]["kind"] = "grab_from_seat"
+    data = stream_set(recs)
+    ends = stream_train.epoch_ends(data, "hard2", np.random.default_rng(0))
+    assert len(ends) == 1000 and np.isin(ends, data.distraction).sum() == 500 and (data.y[ends] == I_OTHER).sum() == 500
+    # near the hard kind: its own 200 plus what the near-Other (75) and elsewhere (100) draws land there
+    assert 200 <= np.isin(ends, data.near_kind["grab_from_seat"]).sum() <= 375
+
+
 def test_the_training_command_names_every_cohort_seed_and_a_non_default_sampling():
     meta = {"width": 64, "epochs": 24, "seed": 0,
             "data": {"subjects": 20, "cohort_seed": [0, 1], "minutes_per_trial": 15.0, "sampling": "hard"}}
