@@ -7,7 +7,7 @@
                --within: within-subject folds (DIR/within/ when combined with --loso/--test)
             Data parallel: torchrun --nproc_per_node=2 -m models train ...
   stream-train  --out DIR [--width 64] [--epochs 16] [--seed 0] [--subjects 20] [--cohort-seed 0[,1...]] [--minutes 15]
-                [--sampling s21|hard]
+                [--sampling s21|hard|hard2]
             -> DIR/model.pt: the trigger-free streaming classifier (models/stream_train.py), trained on the
                simulated cohort's continuous streams; deterministic for a seed (one thread)
   evaluate  --checkpoint DIR/model.pt --data TEST.npz --out DIR2
@@ -61,7 +61,8 @@ def _parser() -> argparse.ArgumentParser:
     st.add_argument("--cohort-seed", default="0",
                     help="the simulated cohort (0: what the ConvLSTM trains on); comma-separated: several cohorts")
     st.add_argument("--minutes", type=float, default=15.0, help="minutes per simulated trial")
-    st.add_argument("--sampling", default="s21", help="window-end draw: s21 (default) or hard (models/stream_train.py)")
+    st.add_argument("--sampling", default="s21",
+                    help="window-end draw: s21 (default), hard or hard2 (models/stream_train.py)")
 
     e = sub.add_parser("evaluate", help="score a checkpoint on an NPZ")
     e.add_argument("--checkpoint", required=True)

@@ -17,8 +17,11 @@ step of the recordings, as the box will run it. It reproduces session 21's proto
   ``sampling="hard"`` (session 23) splits the Other half into ``HARD_SHARES``: near the Other motions that
   session 21 found raising false alerts (``HARD_KINDS``: the passenger-seat reach looks like Marker), the
   hand's return after a distraction (``AFTER_END_IGNORE_S`` to ``RETURN_S`` after its end, labelled Other:
-  the other source of false alerts), near any Other motion, anywhere else. The window length is drawn per
-  batch in ``W_RANGE_S``: one length-agnostic model, W chosen on development drives.
+  the other source of false alerts), near any Other motion, anywhere else. ``sampling="hard2"`` (session 24)
+  widens the hard pool to every Other kind that still raises false alerts at a lower threshold
+  (``HARD2_KIND_WEIGHTS``, chosen on a validation cohort, reports/wearable/stream_s24/rule.md) and gives it
+  a larger share (``HARD2_SHARES``), each kind drawn by its weight. The window length is drawn per batch in
+  ``W_RANGE_S``: one length-agnostic model, W chosen on development drives.
 * Augmentation, per window: a rotation about a random axis by up to ``ROT_DEG`` (strap position), a gain
   in 1 +- ``GAIN``, a bias N(0, ``BIAS_MPS2``) per axis, white noise ``NOISE_MPS2``.
 * AdamW (weight decay 1e-3), one-cycle learning rate peaking at ``LR``, batch ``BATCH``, plain
@@ -59,9 +62,17 @@ HARD_KINDS = ("grab_from_seat", "shift_gear")
 """Other motions behind most of stream B's false alerts on drive seed 1 (reports/wearable/stream_s21/report.md)."""
 RETURN_S = 4.0
 """A window ending up to this long after a distraction's end still holds the hand's return."""
-SAMPLINGS = ("s21", "hard")
+SAMPLINGS = ("s21", "hard", "hard2")
 HARD_SHARES = {"distraction": 0.5, "near_hard": 0.125, "returns": 0.125, "near_other": 0.125, "far_other": 0.125}
 """``sampling="hard"``: the share of each pool in an epoch's window ends."""
+HARD2_KIND_WEIGHTS = {"grab_from_seat": 27, "hand_to_knee": 9, "shift_gear": 8, "hand_to_lap": 7, "adjust_vent": 6,
+                      "adjust_mirror": 4, "touch_arm": 3}
+"""``sampling="hard2"``: the Other kinds drawn near, each in proportion to its weight: session 23's c1's false
+alerts per kind on the validation cohort (cohort seed 3, not a training cohort or a drive) at threshold 0.65,
+every kind with at least 5 % of its motions raising one (reports/wearable/stream_s24/rule.md)."""
+HARD2_SHARES = {"distraction": 0.5, "near_hard": 0.2, "returns": 0.125, "near_other": 0.075, "far_other": 0.1}
+"""``sampling="hard2"``: the share of each pool in an epoch's window ends (``near_hard``: near the kinds of
+``HARD2_KIND_WEIGHTS``)."""
 DEFAULT_WIDTH, DEFAULT_EPOCHS = 64, 16
 """Session 21's m64: width 48 for 8 epochs reached 0.870 recall at <= 1.55 false alerts / h on drive seed 1,
 width 64 for 16 epochs 0.950 (reports/wearable/stream_s21/report.md)."""
@@ -80,17 +91,25 @@ def step_labels(n_steps: int, events: list[dict]) -> tuple[np.ndarray, np.ndarra
     return y, near_other
 
 
+def near_kinds(n_steps: int, events: list[dict], kinds) -> dict[str, np.ndarray]:
+    """Per Other kind of ``kinds``, per 25 Hz step: within ``NEAR_OTHER_S`` of a motion of that kind."""
+    t_s = step_end_s(n_steps)
+    near = {k: np.zeros(n_steps, bool) for k in kinds}
+    for e in events:
+        if e["label"] == OTHER and e.get("kind") in near:
+            near[e["kind"]] |= (t_s >= e["start_s"] - NEAR_OTHER_S) & (t_s <= e["end_s"] + NEAR_OTHER_S)
+    return near
+
+
 def hard_masks(n_steps: int, events: list[dict]) -> tuple[np.ndarray, np.ndarray]:
     """Per 25 Hz step: within ``NEAR_OTHER_S`` of an Other motion of ``HARD_KINDS``, and within the hand's
     return after a distraction (``AFTER_END_IGNORE_S`` to ``RETURN_S`` after its end). Both only say where
     to draw; :func:`step_labels` says what is learnt there."""
     t_s = step_end_s(n_steps)
-    near_hard = np.zeros(n_steps, bool)
+    near_hard = np.logical_or.reduce(list(near_kinds(n_steps, events, HARD_KINDS).values()))
     returns = np.zeros(n_steps, bool)
     for e in events:
-        if e["label"] == OTHER and e.get("kind") in HARD_KINDS:
-            near_hard |= (t_s >= e["start_s"] - NEAR_OTHER_S) & (t_s <= e["end_s"] + NEAR_OTHER_S)
-        elif e["label"] != OTHER:
+        if e["label"] != OTHER:
             returns |= (t_s > e["end_s"] + AFTER_END_IGNORE_S) & (t_s <= e["end_s"] + RETURN_S)
     return near_hard, returns
 
@@ -110,15 +129,20 @@ class StreamSet:
     near_hard: np.ndarray | None = None
     returns: np.ndarray | None = None
     """Window-end step indices of ``sampling="hard"``'s two extra pools (Other steps only)."""
+    near_kind: dict[str, np.ndarray] | None = None
+    """Window-end step indices near each kind of ``HARD2_KIND_WEIGHTS`` (``sampling="hard2"``; Other steps only)."""
 
 
 def stream_set(recordings) -> StreamSet:
     """``recordings``: (acc_mps2 (n, 3) at 100 Hz, truth events) pairs, in order."""
     xs, ys, nears, whole, hards, rets = [], [], [], [], [], []
+    kinds = {k: [] for k in HARD2_KIND_WEIGHTS}
     for acc, events in recordings:
         x25 = to25(acc)
         y, near = step_labels(len(x25), events)
         hard, ret = hard_masks(len(x25), events)
+        for k, m in near_kinds(len(x25), events, kinds).items():
+            kinds[k].append(m)
         xs.append(x25)
         ys.append(y)
         nears.append(near)
@@ -131,7 +155,8 @@ def stream_set(recordings) -> StreamSet:
     return StreamSet(x25, y, np.flatnonzero(ok & (y >= 0) & (y != I_OTHER)), np.flatnonzero(other & near),
                      np.flatnonzero(other & ~near), len(x25) * STEP_S / 3600.0,
                      near_hard=np.flatnonzero(other & np.concatenate(hards)),
-                     returns=np.flatnonzero(other & np.concatenate(rets)))
+                     returns=np.flatnonzero(other & np.concatenate(rets)),
+                     near_kind={k: np.flatnonzero(other & np.concatenate(m)) for k, m in kinds.items()})
 
 
 def cohort_recordings(subjects: int, seed: int | tuple[int, ...], minutes: float):
@@ -153,14 +178,29 @@ def epoch_ends(data: StreamSet, sampling: str, rng: np.random.Generator) -> np.n
     if sampling == "s21":  # the prototype's draws, in its order
         ends = np.concatenate([rng.choice(data.distraction, SAMPLES // 2), rng.choice(data.near_other, SAMPLES // 4),
                                rng.choice(data.far_other, SAMPLES - SAMPLES // 2 - SAMPLES // 4)])
-    elif sampling == "hard":
-        counts = {k: int(SAMPLES * v) for k, v in HARD_SHARES.items()}
+    elif sampling in ("hard", "hard2"):
+        counts = {k: int(SAMPLES * v) for k, v in (HARD_SHARES if sampling == "hard" else HARD2_SHARES).items()}
         counts["far_other"] += SAMPLES - sum(counts.values())
-        ends = np.concatenate([rng.choice(getattr(data, k), n) for k, n in counts.items()])
+        pools = {k: [(getattr(data, k), n)] for k, n in counts.items()}
+        if sampling == "hard2":
+            pools["near_hard"] = kind_draws(data.near_kind, counts["near_hard"])
+        ends = np.concatenate([rng.choice(pool, n) for k in counts for pool, n in pools[k]])
     else:
         raise ValueError(f"sampling {sampling!r}: one of {SAMPLINGS}")
     rng.shuffle(ends)
     return ends
+
+
+def kind_draws(near_kind: dict[str, np.ndarray], n: int) -> list[tuple[np.ndarray, int]]:
+    """``sampling="hard2"``'s near-hard draw: (pool, count) per kind of ``HARD2_KIND_WEIGHTS`` that occurs in
+    the data, the ``n`` window ends split by the kinds' weights (the rounding's remainder to the heaviest)."""
+    present = {k: w for k, w in HARD2_KIND_WEIGHTS.items() if len(near_kind.get(k, ()))}
+    if not present:
+        raise ValueError(f"sampling 'hard2': no motion of {', '.join(HARD2_KIND_WEIGHTS)} in the data")
+    total = sum(present.values())
+    counts = {k: int(n * w / total) for k, w in present.items()}
+    counts[max(present, key=present.get)] += n - sum(counts.values())
+    return [(near_kind[k], c) for k, c in counts.items()]
 
 
 def rotations(n: int, max_deg: float, rng: np.random.Generator) -> np.ndarray:
@@ -227,7 +267,8 @@ def train_stream(out_dir, *, width: int = DEFAULT_WIDTH, epochs: int = DEFAULT_E
     log(f"cohort seed {','.join(map(str, seeds))}: {subjects} subjects x 6 trials x {minutes:g} min each, "
         f"{data.hours:.1f} h; window ends: distraction {len(data.distraction)}, near Other {len(data.near_other)}, "
         f"elsewhere {len(data.far_other)}, near {'/'.join(HARD_KINDS)} {len(data.near_hard)}, "
-        f"returns {len(data.returns)}; sampling {sampling}")
+        f"returns {len(data.returns)}; near each hard2 kind "
+        f"{', '.join(f'{k} {len(v)}' for k, v in data.near_kind.items())}; sampling {sampling}")
     model, last = fit_stream(data, width=width, epochs=epochs, seed=seed, sampling=sampling, log=log)
     return save_checkpoint(out_dir, model, arch=ARCH, classes=CLASSES, seed=seed, epochs=epochs,
                            metrics={**last, "parameters": sum(p.numel() for p in model.parameters())},

@@ -50,6 +50,13 @@ def _recordings():
     return recs
 
 
+def _data_of_kinds(first: str, second: str):
+    """_recordings()' stream set, the first recording's Other motion of kind ``first``, the second's ``second``."""
+    recs = _recordings()
+    recs[0][1][1]["kind"], recs[1][1][1]["kind"] = first, second
+    return stream_set(recs)
+
+
 def test_training_is_deterministic_for_a_seed(monkeypatch):
     monkeypatch.setattr(stream_train, "SAMPLES", 512)
     data = stream_set(_recordings())
@@ -111,10 +118,7 @@ def test_hard_masks_mark_the_hard_other_motions_and_the_return_after_a_distracti
 
 def test_hard_sampling_draws_each_pool_by_its_share_and_s21_keeps_the_prototypes_draw(monkeypatch):
     monkeypatch.setattr(stream_train, "SAMPLES", 800)
-    recs = _recordings()
-    for _, events in recs:
-        events[1]["kind"] = "shift_gear"
-    data = stream_set(recs)
+    data = _data_of_kinds("shift_gear", "shift_gear")
     assert len(data.near_hard) and len(data.returns)
     ends = stream_train.epoch_ends(data, "hard", np.random.default_rng(0))
     assert len(ends) == 800
@@ -129,6 +133,27 @@ def test_hard_sampling_draws_each_pool_by_its_share_and_s21_keeps_the_prototypes
     np.testing.assert_array_equal(stream_train.epoch_ends(data, "s21", np.random.default_rng(0)), old)
     with pytest.raises(ValueError, match="sampling"):
         stream_train.epoch_ends(data, "neither", np.random.default_rng(0))
+
+
+def test_hard2_sampling_draws_near_each_hard_kind_by_its_weight():
+    data = _data_of_kinds("grab_from_seat", "touch_arm")  # weights 27 and 3
+    grab, arm = data.near_kind["grab_from_seat"], data.near_kind["touch_arm"]
+    assert len(grab) and len(arm) and not len(data.near_kind["hand_to_lap"])  # no motion of that kind
+    assert (data.y[grab] == I_OTHER).all() and not np.isin(grab, arm).any()
+    draws = stream_train.kind_draws(data.near_kind, 1000)
+    assert [(len(pool), n) for pool, n in draws] == [(len(grab), 900), (len(arm), 100)]  # 27 : 3, absent kinds
+    # give their share to the present ones
+    with pytest.raises(ValueError, match="hard2"):
+        stream_train.kind_draws({k: np.array([], int) for k in data.near_kind}, 10)
+
+
+def test_hard2_epoch_holds_the_shares_of_its_pools(monkeypatch):
+    monkeypatch.setattr(stream_train, "SAMPLES", 1000)
+    data = _data_of_kinds("grab_from_seat", "grab_from_seat")
+    ends = stream_train.epoch_ends(data, "hard2", np.random.default_rng(0))
+    assert len(ends) == 1000 and np.isin(ends, data.distraction).sum() == 500 and (data.y[ends] == I_OTHER).sum() == 500
+    # near the hard kind: its own 200 plus what the near-Other (75) and elsewhere (100) draws land there
+    assert 200 <= np.isin(ends, data.near_kind["grab_from_seat"]).sum() <= 375
 
 
 def test_the_training_command_names_every_cohort_seed_and_a_non_default_sampling():
