@@ -52,6 +52,18 @@ def fallback(points: list[dict]) -> dict | None:
     return min(ok, key=lambda q: (-q["figures"]["recall"], q["figures"]["median_s"]), default=None)
 
 
+def sweep_points(name: str, seed: int, drives: list[dict], grid: dict) -> list[dict]:
+    """Every point of ``grid`` (window_s, hop_mult, score, k, thr, off_s) scored on the cached probabilities."""
+    points = []
+    for w in grid["window_s"]:
+        z = np.load(path(name, seed, w))
+        cache = [(z[f"t{k}"], z[f"p{k}"]) for k in range(len(drives))]
+        for hop, sc, k, thr, off in itertools.product(*(grid[g] for g in ("hop_mult", "score", "k", "thr", "off_s"))):
+            pol = Policy(w, hop, sc, k, thr, off)
+            points.append({"policy": pol.__dict__, "figures": score_drives(drives, [alerts(t, p, pol) for t, p in cache])[0]})
+    return points
+
+
 def main(argv: list[str]) -> int:
     what, seed = argv[0], int(argv[3] if argv[0] == "probs" else argv[2])
     if seed not in ALLOWED_DRIVE_SEEDS:
@@ -68,13 +80,7 @@ def main(argv: list[str]) -> int:
             print(f"W {w:g}: {path(argv[2], seed, w)}", flush=True)
         return 0
     name, out = argv[1], Path(argv[3])
-    points = []
-    for w in GRID["window_s"]:
-        z = np.load(path(name, seed, w))
-        cache = [(z[f"t{k}"], z[f"p{k}"]) for k in range(len(drives))]
-        for hop, sc, k, thr, off in itertools.product(*(GRID[g] for g in ("hop_mult", "score", "k", "thr", "off_s"))):
-            pol = Policy(w, hop, sc, k, thr, off)
-            points.append({"policy": pol.__dict__, "figures": score_drives(drives, [alerts(t, p, pol) for t, p in cache])[0]})
+    points = sweep_points(name, seed, drives, GRID)
     best, fb = choose(points), fallback(points)
     out.write_text(json.dumps({"seed": seed, "model": name, "rule": choose.__doc__, "chosen": best,
                                "fallback_rule": fallback.__doc__, "fallback": fb, "points": points}, indent=1))
