@@ -399,17 +399,25 @@ def run_cycle(cfg: RobotConfig) -> _Run:
         return _cycle(cfg, clock, wait, box, feed, bus, echo, link)
 
 
+def bench_loop(link, box, feed, clock):
+    """The runtime's loop as the bench runs it: the box's sections (:func:`_box`), and the known calibration when
+    ``feed`` lifts keypoints (joints come in the robot frame otherwise). Profiling scripts and the golden trace test
+    build theirs here too, so they time and pin the loop the bench measures."""
+    from edge_runtime.robot.loop import RobotLoop
+
+    calibration = _known_calibration(box.calibration) if feed.lifter is not None else None
+    return RobotLoop(link, calibration=calibration, zones=box.zones, tracker=box.tracker, params=box.robot_loop,
+                     clock=clock)
+
+
 def _cycle(cfg: RobotConfig, clock, wait, box, feed, bus, echo, link) -> _Run:
     """:func:`run_cycle` with its bus, arm stand-in and link open."""
     from bench.arm_echo import HEARTBEAT_FRAME, command_sent_s
     from edge_runtime.core import heap
-    from edge_runtime.robot.loop import RobotLoop
 
     ids = {m.name: m.frame_id for m in link.codec.db.messages}
     heartbeat_id, mode_id = ids[HEARTBEAT_FRAME], ids["ROBOT_MODE_CMD"]
-    calibration = _known_calibration(box.calibration) if feed.lifter is not None else None
-    loop = RobotLoop(link, calibration=calibration, zones=box.zones, tracker=box.tracker, params=box.robot_loop,
-                     clock=clock)
+    loop = bench_loop(link, box, feed, clock)
     run = _Run(loop, echo, feed.what)
     live = _LiveSchedule(cfg.seconds) if cfg.schedule == "live" else None  # made (its import done) before the clock runs
     heap.settle()  # as `python -m edge_runtime robot` does once its loop is built

@@ -35,7 +35,6 @@ def golden_trace(input_npz: Path, zones: dict | None = None) -> dict:
     import bench.robot_cycle as rc
     from bench.arm_echo import HEARTBEAT_FRAME, arm_on_bus
     from edge_runtime.core.manifest import load_manifest
-    from edge_runtime.robot.loop import RobotLoop
 
     data = np.load(input_npz)
     xy = data["xy"].astype(np.float64)
@@ -58,8 +57,7 @@ def golden_trace(input_npz: Path, zones: dict | None = None) -> dict:
             return put(msg, timeout)
 
         bus.send = send
-        loop = RobotLoop(link, calibration=rc._known_calibration(box.calibration), zones=box.zones,
-                         tracker=box.tracker, params=box.robot_loop, clock=sim)
+        loop = rc.bench_loop(link, box, feed, sim)
         echo.serve(sim())
         for due, k in rc._schedule(seconds):
             sim.wait_until(due)

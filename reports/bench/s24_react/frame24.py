@@ -38,7 +38,6 @@ import edge_runtime.robot.calibration as calmod  # noqa: E402
 import edge_runtime.robot.hazard as hz  # noqa: E402
 import edge_runtime.robot.keypoints as kpmod  # noqa: E402
 import edge_runtime.robot.lifter as liftmod  # noqa: E402
-import edge_runtime.robot.loop as loopmod  # noqa: E402
 
 STAGES = hashlib.sha256()
 
@@ -109,8 +108,7 @@ def run(seconds: float, npz: Path, mode: str) -> dict:
     frames, ticks, trace = [], [], []
     with rc_arm(cfg, sim) as (bus, echo, link):
         mode_id = {m.name: m.frame_id for m in link.codec.db.messages}["ROBOT_MODE_CMD"]
-        loop = loopmod.RobotLoop(link, calibration=rc._known_calibration(box.calibration), zones=box.zones,
-                                 tracker=box.tracker, params=box.robot_loop, clock=sim)
+        loop = rc.bench_loop(link, box, feed, sim)
         heap.settle()  # as the bench and `python -m edge_runtime robot` do once the loop is built
         for k in _frames_and_ticks(cfg.seconds, sim, echo):
             if mode == "lockstep":  # wait for lockstep24.py's turn (outside the timed slot)
