@@ -318,7 +318,12 @@ def productivity(ran: list[dict]) -> dict:
     for d in walkby:
         for why, n in d.get("halt_reasons", {}).items():
             walkby_reasons[why] = walkby_reasons.get(why, 0) + n
+    state_s: dict[str, float] = {}
+    halt_s: dict[str, float] = {}
     for d in ran:
+        for total, part in ((state_s, d.get("state_s", {})), (halt_s, d.get("halt_s", {}))):
+            for name, t_s in part.items():
+                total[name] = total.get(name, 0.0) + t_s
         for w in d.get("worker_specs") or [{"kind": d["kind"]}]:
             kinds[w["kind"]] = kinds.get(w["kind"], 0) + 1
     return {
@@ -328,6 +333,8 @@ def productivity(ran: list[dict]) -> dict:
         "walkby_stops_by_reason": walkby_reasons,
         "false_stops_per_worker_hour": round(walkby_stops / walkby_h, 2) if walkby_h else None,
         "worker_kinds": kinds, "speed_changes": sum(d.get("speed_changes", 0) for d in ran),
+        "state_share": {name: round(t_s / scenario_s, 4) for name, t_s in sorted(state_s.items())} if scenario_s else {},
+        "halt_share": {name: round(t_s / scenario_s, 4) for name, t_s in sorted(halt_s.items())} if scenario_s else {},
     }
 
 

@@ -498,6 +498,9 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     head_err = []
     productive_steps, came_within, halts, prev_state = 0, False, 0, State.NORMAL
     halt_reasons: dict[str, int] = {}
+    state_steps: dict[str, int] = {}  # where the arm's time went: steps per monitor state
+    halt_steps: dict[str, int] = {}  # and the halted steps by the reason the halt began with
+    why = None
     try:
         for step in range(n_total):
             now = clock()
@@ -583,6 +586,9 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
                     halts += 1
                     why = loop.monitor.reason.split(":", 1)[0].split(" (", 1)[0]
                     halt_reasons[why] = halt_reasons.get(why, 0) + 1
+                state_steps[st.name] = state_steps.get(st.name, 0) + 1
+                if st != State.NORMAL and why is not None:
+                    halt_steps[why] = halt_steps.get(why, 0) + 1
                 prev_state = st
                 max_state = max(max_state, st) if st != State.FAULT else max_state
                 for lvl in radii:
@@ -622,6 +628,8 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
         "productive_s": round(productive_steps * dt, 3), "productive_time_share": round(productive_steps * dt
                                                                                        / scenario_s, 4),
         "came_within_protective": bool(came_within), "halts": halts, "halt_reasons": halt_reasons,
+        "state_s": {name: round(n * dt, 3) for name, n in state_steps.items()},
+        "halt_s": {name: round(n * dt, 3) for name, n in halt_steps.items()},
     }
     return RunResult(summary, np.array(trace_t), np.array(trace_head), np.array(trace_ee), np.array(trace_state),
                      reaction, head_err, np.array(trace_speed), np.array(trace_limit))
@@ -673,7 +681,7 @@ def _not_run(sc: Scenario, link: str, world: WorldParams, why: str) -> RunResult
                "head_error_m": percentiles([], 1.0, (50, 95)), "runtime_cpu_share": None, "calibration_scale": None,
                "speed_changes": 0, "scenario_s": 0.0, "worker_s": 0.0, "productive_s": 0.0,
                "productive_time_share": None, "came_within_protective": False, "halts": 0,
-               "halt_reasons": {}}
+               "halt_reasons": {}, "state_s": {}, "halt_s": {}}
     return RunResult(summary, np.empty(0), np.empty((0, 1, 2)), np.empty((0, 2)), np.empty(0, int))
 
 
