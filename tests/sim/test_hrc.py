@@ -101,6 +101,11 @@ def test_whole_body_speed_scaling_keeps_the_arm_clear_and_working_longer(front, 
     assert scaled["productive_time_share"] > head["productive_time_share"] > 0.0
     assert 0 < scaled["productive_s"] < scaled["scenario_s"] and scaled["worker_s"] == pytest.approx(
         scaled["scenario_s"], abs=0.05)
+    # the time per monitor state adds up to the scenario; NORMAL is the productive time; halted time is by reason
+    assert sum(scaled["state_s"].values()) == pytest.approx(scaled["scenario_s"], abs=0.05)
+    assert scaled["state_s"]["NORMAL"] == pytest.approx(scaled["productive_s"], abs=1e-6)
+    assert scaled["state_s"]["LEVEL2"] > 0 and "level2_retract" in scaled["halt_s"]
+    assert sum(scaled["halt_s"].values()) == pytest.approx(scaled["scenario_s"] - scaled["productive_s"], abs=0.05)
 
 
 def test_clearance_measures_to_sphere_surfaces_and_the_end_effector():
@@ -436,8 +441,12 @@ def test_productivity_counts_work_and_the_stops_of_walk_by_traffic():
           "worker_s": 10.0, "kind": "stop"},
          {"scenario_s": 10.0, "productive_s": 9.0, "false_alarms": 0, "came_within_protective": False, "halts": 1,
           "worker_s": 20.0, "kind": "pass", "worker_specs": [{"kind": "walkby"}, {"kind": "walkby"}],
-          "halt_reasons": {"person_unseen": 1}}]
+          "halt_reasons": {"person_unseen": 1}, "state_s": {"NORMAL": 9.0, "LEVEL1": 1.0},
+          "halt_s": {"person_unseen": 1.0}}]
+    d[0].update(state_s={"NORMAL": 6.0, "LEVEL2": 4.0}, halt_s={"level2_retract": 3.0, "person_unseen": 1.0})
     p = hrc.productivity(d)
+    assert p["state_share"] == {"LEVEL1": 0.05, "LEVEL2": 0.2, "NORMAL": 0.75}
+    assert p["halt_share"] == {"level2_retract": 0.15, "person_unseen": 0.1}
     assert p["productive_time_share"] == pytest.approx(0.75) and p["false_stops"] == 1
     assert p["walkby_scenarios"] == 1 and p["false_stops_per_worker_hour"] == pytest.approx(1 / (20 / 3600), rel=1e-3)
     assert p["worker_kinds"] == {"stop": 1, "walkby": 2}
