@@ -26,7 +26,7 @@ Two ways to protect people (``[zones] separation``):
   within ``reach_retract_m`` and for a person who keeps coming (toward the arm faster than
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
   ``retract_lead_s``. After a retraction the arm works again once the person has been
-  beyond both exit distances for ``dwell_s``. Someone still within ``reach_retract_m`` of a
+  beyond both exit distances for ``dwell_s`` (``scaled_dwell_s`` with speed scaling). Someone still within ``reach_retract_m`` of a
   finished (or stopped) retraction turns the arm about its base to where its whole body is clearest
   of everyone, without sweeping past anyone nearer than it is (``escape_deg``, :func:`plan_escape_turn`;
   planned again while level 2 lasts); a retraction whose joint motion carries the arm toward someone is
@@ -273,6 +273,10 @@ class ZoneParams:
     dwell_s: float = config.setting(1.0, config.NON_NEGATIVE)
     """A lower level is entered only after this long (s) beyond its exit radius, and a
     fault clears only after this long of valid frames."""
+    scaled_dwell_s: float = config.setting(1.0, config.NON_NEGATIVE)
+    """whole_body with speed scaling: ``dwell_s`` for stepping down a level (after a stop or a
+    retraction). It may be shorter: the arm resumes at the speed its separation allows, not at
+    full speed as stop-only's does, and speeds up only with ``hysteresis_m`` more separation."""
     stale_after_s: float = config.setting(0.2, ("a number in (0, 1]", lambda v: 0 < v <= 1))
     """No pose for longer than this (s) and the arm stops (reason ``pose_stale``)."""
     lost_hold_s: float = config.setting(3.0, config.NON_NEGATIVE)
@@ -1004,9 +1008,10 @@ class HazardMonitor:
         # evidence, not a second wait: resuming promptly is what SSM is for, ISO/TS 15066 5.5.4.2)
         together = z.separation == "whole_body"
         beyond = {lvl: hold.clear_for(t_s, d > exit_r[lvl]) for lvl, hold in self._below.items()} if together else {}
+        dwell_s = z.scaled_dwell_s if together and z.speed_scaling else z.dwell_s
         while self.level > entry:
             level = State.LEVEL2 if self.level == State.LEVEL2 else State.LEVEL1
-            if (beyond[level] if together else self._below[level].clear_for(t_s, d > exit_r[level])) < z.dwell_s:
+            if (beyond[level] if together else self._below[level].clear_for(t_s, d > exit_r[level])) < dwell_s:
                 break
             self.level = State.LEVEL1 if level == State.LEVEL2 else State.NORMAL
             if not together:

@@ -993,3 +993,17 @@ def test_a_lost_persons_ray_bound_beyond_what_his_track_allows_is_not_heard():
             for i in range(int((z.lost_hold_s - 0.1) * FPS))]
     assert mon2.bounds_refused == 0
     assert all(d.state == State.NORMAL for d in held)
+
+
+@pytest.mark.parametrize("scaling", [True, False])
+def test_after_a_retraction_speed_scaling_resumes_after_its_own_dwell_and_stop_only_after_dwell_s(scaling):
+    """``scaled_dwell_s`` is the wait before a speed-scaled arm works again (it resumes at the speed the
+    separation allows); stop-only, which resumes at full speed, keeps ``dwell_s``."""
+    z = replace(WHOLE_BODY, speed_scaling=scaling, dwell_s=1.0, scaled_dwell_s=0.3)
+    mon = ready_body(z, 3.0)
+    assert settle(mon, body_facing_arm(0.3), seconds=0.5).state == State.LEVEL2      # within reach: retract
+    t0 = 0.5
+    for k in range(int(2.0 * FPS)):                                       # he steps back to 3 m
+        if mon.observe(t0 + k / FPS, {0: body_facing_arm(3.0)}, EFF).state == State.NORMAL:
+            break
+    assert k / FPS == pytest.approx(z.scaled_dwell_s if scaling else z.dwell_s, abs=1.5 / FPS)
