@@ -273,7 +273,7 @@ class ZoneParams:
     dwell_s: float = config.setting(1.0, config.NON_NEGATIVE)
     """A lower level is entered only after this long (s) beyond its exit radius, and a
     fault clears only after this long of valid frames."""
-    scaled_dwell_s: float = config.setting(1.0, config.NON_NEGATIVE)
+    scaled_dwell_s: float = config.setting(0.5, config.NON_NEGATIVE)
     """whole_body with speed scaling: ``dwell_s`` for stepping down a level (after a stop or a
     retraction). It may be shorter: the arm resumes at the speed its separation allows, not at
     full speed as stop-only's does, and speeds up only with ``hysteresis_m`` more separation."""

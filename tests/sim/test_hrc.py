@@ -282,13 +282,13 @@ def test_a_new_lifter_model_voids_the_validation(tmp_path):
     assert hrc.safety_sha256(box, tmp_path) != hrc.safety_sha256(box)
 
 
-PENDING_REVALIDATION: dict = {"zones": {"scaled_dwell_s": 1.0}}
+PENDING_REVALIDATION: dict = {}
 """Shipped defaults changed (or keys added) since reports/hrc/validated.json, whose re-validation (the hrc suites
 on a fresh seed) is still to run; empty when the shipped defaults are the measured ones. (Session 10 listed
 ``[calibration] method = "pnp"`` here; its validation on seed 11 failed and the default went back. Session 12
 measured the escape turn's keys on fresh seed 17; session 13 ``pnp`` again, on fresh seed 19; session 14
 ``[zones] stop_time_scales = true``; session 20 ``[robot_loop] retract_max_radius_m = 0.45``, on fresh seed 25;
-session 21 ``[robot_loop] radial_retract_stops = false``, on fresh seed 31. Session 25 added ``[zones] scaled_dwell_s``.)"""
+session 21 ``[robot_loop] radial_retract_stops = false``, on fresh seed 31. session 25 ``[zones] scaled_dwell_s = 0.5``, on fresh seed 35.)"""
 
 
 VALIDATED_MODULE_CONSTANTS = {
