@@ -5,6 +5,8 @@ monitor and the loop onto the CAN link with the bench's arm stand-in answering, 
 in every frame (state, reason, kind of command) and the frames it put on the bus (their ids, in order) must stay as
 recorded, each frame's distance within ``DISTANCE_TOL_UM``: a change meant to make a frame cheaper must not change a
 decision (reports/bench/s24_react/report.md). A change meant to change decisions regenerates it, and says so.
+Session 25 regenerated the trace (the same keypoints) for ``[zones] scaled_dwell_s = 0.5``: the speed-scaled arm
+resumes sooner after a retraction (95 NORMAL frames of 300 against 60; reports/hrc/s25_share/README.md).
 
 The recording keeps the command bytes and distances to a micrometre (what session 24's equivalence check compared on
 one machine), but this test does not ask for them bit for bit: onnxruntime's int8 kernels and numpy's vector code
