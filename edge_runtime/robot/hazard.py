@@ -26,8 +26,8 @@ Two ways to protect people (``[zones] separation``):
   within ``reach_retract_m`` and for a person who keeps coming (toward the arm faster than
   ``approach_speed_mps``) within ``body_retract_distance_m`` + his approach speed x
   ``retract_lead_s``. After a retraction the arm works again once the person has been
-  beyond both exit distances for ``dwell_s`` (``scaled_dwell_s`` with speed scaling). Someone still within ``reach_retract_m`` of a
-  finished (or stopped) retraction turns the arm about its base to where its whole body is clearest
+  beyond both exit distances for ``dwell_s`` (``scaled_dwell_s`` with speed scaling). Someone
+  still within ``reach_retract_m`` of a finished (or stopped) retraction turns the arm about its base to where its whole body is clearest
   of everyone, without sweeping past anyone nearer than it is (``escape_deg``, :func:`plan_escape_turn`;
   planned again while level 2 lasts); a retraction whose joint motion carries the arm toward someone is
   replaced (:class:`edge_runtime.robot.loop.RobotLoop`, ``retract_backfire_m``).

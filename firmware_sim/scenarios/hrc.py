@@ -52,6 +52,7 @@ import argparse
 import hashlib
 import json
 import sys
+from collections import Counter
 from dataclasses import asdict, fields, replace
 from pathlib import Path
 
@@ -318,12 +319,10 @@ def productivity(ran: list[dict]) -> dict:
     for d in walkby:
         for why, n in d.get("halt_reasons", {}).items():
             walkby_reasons[why] = walkby_reasons.get(why, 0) + n
-    state_s: dict[str, float] = {}
-    halt_s: dict[str, float] = {}
+    state_s, halt_s = Counter(), Counter()  # seconds per monitor state, and halted seconds by reason
     for d in ran:
-        for total, part in ((state_s, d.get("state_s", {})), (halt_s, d.get("halt_s", {}))):
-            for name, t_s in part.items():
-                total[name] = total.get(name, 0.0) + t_s
+        state_s.update(d.get("state_s", {}))
+        halt_s.update(d.get("halt_s", {}))
         for w in d.get("worker_specs") or [{"kind": d["kind"]}]:
             kinds[w["kind"]] = kinds.get(w["kind"], 0) + 1
     return {

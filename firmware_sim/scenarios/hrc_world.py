@@ -496,9 +496,9 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     trace_t, trace_head, trace_ee, trace_state, trace_speed, trace_limit = [], [], [], [], [], []
     frame_s = tick_s = 0.0  # wall-clock time inside the runtime (per-frame calls, ticks)
     head_err = []
-    productive_steps, came_within, halts, prev_state = 0, False, 0, State.NORMAL
+    came_within, halts, prev_state = False, 0, State.NORMAL
     halt_reasons: dict[str, int] = {}
-    state_steps: dict[str, int] = {}  # where the arm's time went: steps per monitor state
+    state_steps: dict[str, int] = {}  # where the arm's time went: steps per monitor state (NORMAL: productive)
     halt_steps: dict[str, int] = {}  # and the halted steps by the reason the halt began with
     why = None
     try:
@@ -581,7 +581,6 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
                     false_alarms.append(false)
                 prev_level = level
                 st = loop.monitor.state
-                productive_steps += st == State.NORMAL
                 if st != State.NORMAL and prev_state == State.NORMAL:  # a halt, and the runtime's reason
                     halts += 1
                     why = loop.monitor.reason.split(":", 1)[0].split(" (", 1)[0]
@@ -611,6 +610,7 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
     delays = {lvl.name: (None if true_enter[lvl] is None or act_at[lvl] is None
                          else round(act_at[lvl] - true_enter[lvl], 3)) for lvl in radii}
     scenario_s = (n_total - n_pre) * dt
+    productive_s = state_steps.get(State.NORMAL.name, 0) * dt
     worker_s = float(present.sum() * dt)
     summary = {
         **sc.describe(), "link": link, "runtime": runtime, "perception": percepts[0].name if percepts else "none",
@@ -625,8 +625,7 @@ def run_scenario(sc: Scenario, link: str = "can", runtime: bool = True, percepti
         "runtime_cpu_share": round((frame_s + tick_s) / max(n_total * dt, 1e-9), 5),
         "calibration_scale": None if calibration is None else round(calibration.scale, 4),
         "scenario_s": round(scenario_s, 3), "worker_s": round(worker_s, 3),
-        "productive_s": round(productive_steps * dt, 3), "productive_time_share": round(productive_steps * dt
-                                                                                       / scenario_s, 4),
+        "productive_s": round(productive_s, 3), "productive_time_share": round(productive_s / scenario_s, 4),
         "came_within_protective": bool(came_within), "halts": halts, "halt_reasons": halt_reasons,
         "state_s": {name: round(n * dt, 3) for name, n in state_steps.items()},
         "halt_s": {name: round(n * dt, 3) for name, n in halt_steps.items()},
